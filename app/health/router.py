@@ -1,0 +1,46 @@
+"""`/healthz` (process alive), `/readyz` (database reachable, schema at head), `/metrics`."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Request, Response
+from fastapi.responses import JSONResponse
+from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
+from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.ext.asyncio import AsyncEngine
+
+from app.migrate import current_revision, head_revision
+
+router = APIRouter(tags=["operations"])
+
+
+@router.get("/healthz")
+async def healthz() -> dict[str, str]:
+    """The process is alive and serving."""
+    return {"status": "ok"}
+
+
+@router.get("/readyz", responses={503: {"description": "database unreachable or not migrated"}})
+async def readyz(request: Request) -> JSONResponse:
+    """Ready when the database answers and its schema is at the migrations' head."""
+    engine: AsyncEngine = request.app.state.engine
+    head = head_revision()
+    try:
+        async with engine.connect() as connection:
+            current = await connection.run_sync(current_revision)
+    except (SQLAlchemyError, OSError) as error:
+        reason = str(error).strip().splitlines()[0] if str(error).strip() else "unreachable"
+        return JSONResponse(
+            {"status": "unavailable", "reason": f"database: {reason}"}, status_code=503
+        )
+    if current != head:
+        return JSONResponse(
+            {"status": "unavailable", "reason": f"schema at {current}, migrations at {head}"},
+            status_code=503,
+        )
+    return JSONResponse({"status": "ready", "schema": current})
+
+
+@router.get("/metrics", response_class=Response)
+async def metrics() -> Response:
+    """Prometheus text exposition of this process's counters and histograms."""
+    return Response(generate_latest(), media_type=CONTENT_TYPE_LATEST)

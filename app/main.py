@@ -1,0 +1,82 @@
+"""The FastAPI application: API, dashboard and the in-process schedule (maintenance, planner)."""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from apscheduler.schedulers.asyncio import AsyncIOScheduler
+from fastapi import FastAPI
+from sqlalchemy.ext.asyncio import async_sessionmaker
+
+from app.core.config import Settings, SettingsError, get_settings
+from app.core.db import make_async_engine
+from app.health.router import router as health_router
+from app.maintenance import maintain_async
+
+log = logging.getLogger(__name__)
+
+MAINTENANCE_PERIOD_S = 3600
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the application for the database named in the settings."""
+    settings = settings or get_settings()
+    if settings.database_url is None:
+        raise SettingsError(
+            "SMOOTHFLEET_DATABASE_URL: the server process needs it (the smoothfleet CLI sets it "
+            "to the embedded PostgreSQL when you run `smoothfleet serve`)"
+        )
+    database_url = settings.database_url
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        engine = make_async_engine(
+            database_url,
+            pool_size=settings.db_pool_size,
+            connect_timeout_s=settings.db_connect_timeout_s,
+            statement_timeout_s=settings.db_statement_timeout_s,
+        )
+        app.state.engine = engine
+        app.state.sessionmaker = async_sessionmaker(engine, expire_on_commit=False)
+        scheduler = AsyncIOScheduler(timezone="UTC")
+        app.state.scheduler = scheduler
+
+        async def run_maintenance() -> None:
+            try:
+                async with engine.begin() as connection:
+                    result = await maintain_async(
+                        connection,
+                        ahead_days=settings.ping_partitions_ahead_days,
+                        retention_days=settings.ping_retention_days,
+                    )
+                log.info("maintenance: %s", result)
+            except Exception:
+                log.exception("maintenance pass failed; the next one retries")
+
+        await run_maintenance()
+        scheduler.add_job(
+            run_maintenance,
+            "interval",
+            seconds=MAINTENANCE_PERIOD_S,
+            id="maintenance",
+            max_instances=1,
+            coalesce=True,
+        )
+        scheduler.start()
+        try:
+            yield
+        finally:
+            scheduler.shutdown(wait=False)
+            await engine.dispose()
+
+    app = FastAPI(
+        title="smoothfleet",
+        version="1",
+        summary="Traffic-smoothing fleet: pings, INRIX feed, speed plans, fleet health.",
+        lifespan=lifespan,
+    )
+    app.state.settings = settings
+    app.include_router(health_router)
+    return app

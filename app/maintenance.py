@@ -1,0 +1,43 @@
+"""Housekeeping of the warehouse: ping partitions ahead of time, old ones dropped.
+
+Runs at server start-up, every hour inside the server, and on `smoothfleet db maintain`.
+The SQL functions it calls are defined in migration 0001.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sqlalchemy import Connection, text
+from sqlalchemy.ext.asyncio import AsyncConnection
+
+ENSURE_SQL = text(
+    "SELECT ensure_ping_partitions(current_date - 1, current_date + CAST(:ahead AS integer))"
+)
+RETENTION_SQL = text(
+    "SELECT drop_ping_partitions_before(current_date - CAST(:keep_days AS integer))"
+)
+
+
+@dataclass(frozen=True)
+class MaintenanceResult:
+    """Partitions created and dropped by one pass."""
+
+    partitions_created: int
+    partitions_dropped: int
+
+
+def maintain(connection: Connection, *, ahead_days: int, retention_days: int) -> MaintenanceResult:
+    """Create the coming days' ping partitions and drop those past retention."""
+    created = connection.execute(ENSURE_SQL, {"ahead": ahead_days}).scalar_one()
+    dropped = connection.execute(RETENTION_SQL, {"keep_days": retention_days}).scalar_one()
+    return MaintenanceResult(int(created), int(dropped))
+
+
+async def maintain_async(
+    connection: AsyncConnection, *, ahead_days: int, retention_days: int
+) -> MaintenanceResult:
+    """The same pass on the server's asynchronous engine."""
+    return await connection.run_sync(
+        lambda sync: maintain(sync, ahead_days=ahead_days, retention_days=retention_days)
+    )

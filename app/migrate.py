@@ -1,0 +1,59 @@
+"""Programmatic Alembic: `smoothfleet db upgrade|downgrade`, `/readyz` and the tests use it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Connection, Engine, text
+
+import migrations
+
+MIGRATIONS_DIR = Path(migrations.__file__).parent
+
+
+def alembic_config(url: str | None = None) -> Config:
+    """An Alembic config pointing at the packaged migrations."""
+    config = Config(str(MIGRATIONS_DIR / "alembic.ini"))
+    config.set_main_option("script_location", str(MIGRATIONS_DIR))
+    if url is not None:
+        config.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
+    return config
+
+
+def head_revision() -> str:
+    """The single head of the migration history."""
+    heads = ScriptDirectory.from_config(alembic_config()).get_heads()
+    if len(heads) != 1:
+        raise RuntimeError(f"migrations have {len(heads)} heads: {', '.join(heads)}")
+    return heads[0]
+
+
+def current_revision(connection: Connection) -> str | None:
+    """The revision the database is at (None for an empty database)."""
+    return MigrationContext.configure(connection).get_current_revision()
+
+
+# Replicas starting together migrate once: the others wait on this lock, then find nothing to do.
+MIGRATION_LOCK_SQL = text("SELECT pg_advisory_xact_lock(hashtext('smoothfleet-migrations'))")
+
+
+def upgrade(engine: Engine, revision: str = "head") -> None:
+    """Migrate the database up to `revision`, all steps in one transaction."""
+    with engine.begin() as connection:
+        connection.execute(MIGRATION_LOCK_SQL)
+        config = alembic_config()
+        config.attributes["connection"] = connection
+        command.upgrade(config, revision)
+
+
+def downgrade(engine: Engine, revision: str) -> None:
+    """Migrate the database down to `revision` ("base" empties it), in one transaction."""
+    with engine.begin() as connection:
+        connection.execute(MIGRATION_LOCK_SQL)
+        config = alembic_config()
+        config.attributes["connection"] = connection
+        command.downgrade(config, revision)

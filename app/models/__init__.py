@@ -1,0 +1,29 @@
+"""The star schema in one place: dimensions, facts, access."""
+
+from app.models.access import ApiToken, OpsUser
+from app.models.base import Base
+from app.models.dimensions import Corridor, I24Segment, InrixSegment, Vehicle
+from app.models.facts import (
+    InrixEstimate,
+    PlanRun,
+    SpeedPlan,
+    VehicleObservation,
+    VehiclePing,
+    VehicleStatus,
+)
+
+__all__ = [
+    "ApiToken",
+    "Base",
+    "Corridor",
+    "I24Segment",
+    "InrixEstimate",
+    "InrixSegment",
+    "OpsUser",
+    "PlanRun",
+    "SpeedPlan",
+    "Vehicle",
+    "VehicleObservation",
+    "VehiclePing",
+    "VehicleStatus",
+]

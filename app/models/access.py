@@ -1,0 +1,68 @@
+"""Who may call the API and the dashboard: bearer tokens and ops users (secrets stored hashed)."""
+
+from __future__ import annotations
+
+from datetime import datetime
+
+from sqlalchemy import (
+    BigInteger,
+    CheckConstraint,
+    DateTime,
+    ForeignKey,
+    Identity,
+    Integer,
+    Text,
+    text,
+)
+from sqlalchemy.orm import Mapped, mapped_column
+
+from app.models.base import Base, created_at_column
+
+
+class ApiToken(Base):
+    """A bearer token: vehicle (bound to one vehicle), feed (third-party ingest) or ops (role).
+
+    Only the SHA-256 of the token is stored: tokens are 256-bit random strings, so a fast hash is
+    enough, and lookups by hash need no per-row salt.
+    """
+
+    __tablename__ = "api_token"
+    __table_args__ = (
+        CheckConstraint("kind IN ('vehicle', 'feed', 'ops')", name="token_kind"),
+        CheckConstraint(
+            "role IS NULL OR role IN ('viewer', 'operator', 'admin')", name="role_kind"
+        ),
+        CheckConstraint("(kind = 'vehicle') = (vehicle_id IS NOT NULL)", name="vehicle_binding"),
+        CheckConstraint("(kind = 'ops') = (role IS NOT NULL)", name="ops_role"),
+        {"comment": "One row per issued bearer token; token_hash = sha256(token) hex."},
+    )
+
+    token_id: Mapped[int] = mapped_column(BigInteger, Identity(), primary_key=True)
+    kind: Mapped[str] = mapped_column(Text)
+    role: Mapped[str | None] = mapped_column(Text)
+    vehicle_id: Mapped[str | None] = mapped_column(
+        ForeignKey("dim_vehicle.vehicle_id", ondelete="CASCADE"), index=True
+    )
+    name: Mapped[str] = mapped_column(Text, server_default=text("''"))
+    token_hash: Mapped[str] = mapped_column(Text, unique=True)
+    created_at: Mapped[datetime] = created_at_column()
+    revoked_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    last_used_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+
+
+class OpsUser(Base):
+    """A person who logs into the dashboard (viewer, operator or admin)."""
+
+    __tablename__ = "ops_user"
+    __table_args__ = (
+        CheckConstraint("role IN ('viewer', 'operator', 'admin')", name="role_kind"),
+        {"comment": "One row per dashboard user; password_hash is a salted scrypt hash."},
+    )
+
+    username: Mapped[str] = mapped_column(Text, primary_key=True)
+    password_hash: Mapped[str] = mapped_column(Text)
+    role: Mapped[str] = mapped_column(Text)
+    failed_logins: Mapped[int] = mapped_column(Integer, server_default=text("0"))
+    last_failed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    last_login_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    created_at: Mapped[datetime] = created_at_column()

@@ -1,0 +1,1 @@
+"""Vehicles: the roster, their assignments and (later) their pings, status and config."""

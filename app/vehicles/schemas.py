@@ -1,0 +1,58 @@
+"""The roster row: what `smoothfleet vehicles add|import` and the seed accept."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+# Which controllers can drive which actuation (paper: MicroAccel on acceleration-actuated cars,
+# its ACC set-point variant on button-actuated ones; `simple` works on both).
+CONTROLLER_ACTUATIONS: dict[str, frozenset[str]] = {
+    "simple": frozenset({"acc", "accel"}),
+    "microaccel": frozenset({"accel"}),
+    "microaccel_acc": frozenset({"acc"}),
+}
+
+
+class RosterRow(BaseModel):
+    """One vehicle of the fleet roster."""
+
+    model_config = ConfigDict(extra="forbid", str_strip_whitespace=True)
+
+    vehicle_id: str = Field(pattern=r"^[A-Za-z0-9_-]{1,32}$")
+    vin: str = Field(pattern=r"^[A-HJ-NPR-Z0-9]{17}$")
+    make: str = Field(min_length=1)
+    model: str = Field(min_length=1)
+    year: int = Field(ge=1990, le=2100)
+    actuation: Literal["acc", "accel"]
+    corridor_id: str = Field(min_length=1)
+    route: str = Field(min_length=1)
+    assigned_lane: int = Field(ge=1)
+    controller_name: str
+    controller_params: dict[str, Any] = Field(default_factory=dict)
+
+    @field_validator("controller_params", mode="before")
+    @classmethod
+    def _params_from_json(cls, value: object) -> object:
+        if value is None or value == "":
+            return {}
+        if isinstance(value, str):
+            try:
+                return json.loads(value)
+            except json.JSONDecodeError as error:
+                raise ValueError(f"not valid JSON ({error.msg})") from None
+        return value
+
+    @model_validator(mode="after")
+    def _controller_fits_actuation(self) -> RosterRow:
+        actuations = CONTROLLER_ACTUATIONS.get(self.controller_name)
+        if actuations is None:
+            known = ", ".join(sorted(CONTROLLER_ACTUATIONS))
+            raise ValueError(f"controller_name {self.controller_name!r} is not one of {known}")
+        if self.actuation not in actuations:
+            raise ValueError(
+                f"controller {self.controller_name!r} cannot drive actuation {self.actuation!r}"
+            )
+        return self

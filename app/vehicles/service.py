@@ -1,0 +1,101 @@
+"""Roster operations: list, add, import from CSV (one transaction, all rows or none)."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from pydantic import ValidationError
+from sqlalchemy import select
+from sqlalchemy.dialects.postgresql import insert
+from sqlalchemy.orm import Session
+
+from app.models import Corridor, Vehicle
+from app.vehicles.schemas import RosterRow
+
+
+class RosterError(ValueError):
+    """A roster row is wrong; the message names the row and the field."""
+
+
+def _first_error(error: ValidationError) -> str:
+    detail = error.errors()[0]
+    field = ".".join(str(part) for part in detail.get("loc", ()))
+    message = str(detail.get("msg", "invalid")).removeprefix("Value error, ")
+    return f"{field}: {message}" if field else message
+
+
+def parse_roster_csv(path: Path) -> list[RosterRow]:
+    """Read and validate a roster CSV; raise RosterError naming the first bad row (1 = header)."""
+    try:
+        handle = path.open(newline="", encoding="utf-8-sig")
+    except OSError as error:
+        raise RosterError(f"{path}: {error.strerror}") from None
+    with handle:
+        reader = csv.DictReader(handle)
+        expected = set(RosterRow.model_fields)
+        header = set(reader.fieldnames or ())
+        missing = sorted(expected - header - {"controller_params"})
+        if missing:
+            raise RosterError(f"{path.name} row 1: missing column(s) {', '.join(missing)}")
+        unknown = sorted(header - expected)
+        if unknown:
+            raise RosterError(f"{path.name} row 1: unknown column(s) {', '.join(unknown)}")
+        rows = []
+        for number, record in enumerate(reader, start=2):
+            if None in record:
+                raise RosterError(f"{path.name} row {number}: more fields than the header")
+            try:
+                rows.append(RosterRow.model_validate(record))
+            except ValidationError as error:
+                raise RosterError(f"{path.name} row {number}: {_first_error(error)}") from None
+    return rows
+
+
+def _check_against_corridors(session: Session, rows: Sequence[RosterRow], label: str) -> None:
+    rows_found = session.execute(select(Corridor.corridor_id, Corridor.lanes)).all()
+    lanes = {row[0]: row[1] for row in rows_found}
+    seen_ids: set[str] = set()
+    seen_vins: set[str] = set()
+    for number, row in enumerate(rows, start=2):
+        where = f"{label} row {number}"
+        if row.corridor_id not in lanes:
+            raise RosterError(f"{where}: corridor_id {row.corridor_id!r} is not a known corridor")
+        if row.assigned_lane > lanes[row.corridor_id]:
+            raise RosterError(
+                f"{where}: assigned_lane {row.assigned_lane} is beyond the "
+                f"{lanes[row.corridor_id]} lanes of {row.corridor_id}"
+            )
+        if row.vehicle_id in seen_ids:
+            raise RosterError(f"{where}: vehicle_id {row.vehicle_id} appears twice")
+        if row.vin in seen_vins:
+            raise RosterError(f"{where}: vin {row.vin} appears twice")
+        seen_ids.add(row.vehicle_id)
+        seen_vins.add(row.vin)
+
+
+def upsert_vehicles(
+    session: Session, rows: Sequence[RosterRow], *, update_existing: bool, label: str = "roster"
+) -> int:
+    """Write the rows; existing vehicles are updated or left alone. Returns rows written."""
+    _check_against_corridors(session, rows, label)
+    if not rows:
+        return 0
+    statement = insert(Vehicle).values([row.model_dump() for row in rows])
+    if update_existing:
+        columns = {
+            name: statement.excluded[name]
+            for name in RosterRow.model_fields
+            if name != "vehicle_id"
+        }
+        statement = statement.on_conflict_do_update(index_elements=["vehicle_id"], set_=columns)
+    else:
+        statement = statement.on_conflict_do_nothing(index_elements=["vehicle_id"])
+    result = session.execute(statement.returning(Vehicle.vehicle_id))
+    return len(result.all())
+
+
+def list_vehicles(session: Session) -> Iterable[Vehicle]:
+    """The roster in id order."""
+    return session.scalars(select(Vehicle).order_by(Vehicle.vehicle_id)).all()

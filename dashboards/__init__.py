@@ -1,0 +1,1 @@
+"""The operators' dashboard (piStatus-style fleet health) and analysts' pages."""

@@ -1,0 +1,1 @@
+"""Alembic migrations: the only way the warehouse schema is created or changed."""

@@ -1,0 +1,180 @@
+"""The command line: one clear line for every expected failure, nothing half-written."""
+
+from __future__ import annotations
+
+import hashlib
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import httpx
+import psutil
+import pytest
+from sqlalchemy import Engine, text
+
+from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
+
+ROSTER_HEADER = (
+    "vehicle_id,vin,make,model,year,actuation,corridor_id,route,assigned_lane,"
+    "controller_name,controller_params\n"
+)
+
+
+def write_roster(path: Path, *rows: str) -> Path:
+    path.write_text(ROSTER_HEADER + "".join(row + "\n" for row in rows))
+    return path
+
+
+def vehicle_count(engine: Engine) -> int:
+    with engine.connect() as connection:
+        return int(connection.execute(text("SELECT count(*) FROM dim_vehicle")).scalar_one())
+
+
+def test_seed_then_list(database_url: str, engine: Engine) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    seeded = run_cli("seed", env=env)
+    assert seeded.returncode == 0, seeded.stderr
+    assert "100 vehicles" in seeded.stdout
+    listed = run_cli("vehicles", "list", env=env)
+    assert listed.returncode == 0
+    assert "SF-100" in listed.stdout
+    assert vehicle_count(engine) == 100
+
+
+def test_import_with_a_bad_row_names_it_and_writes_nothing(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        "SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,1,microaccel_acc,{}",
+        "SF-202,JN8BT3BB3PW906498,Nissan,Rogue,2023,acc,I-24-WB,A,2,microaccel,{}",
+    )
+    result = run_cli(
+        "vehicles", "import", str(roster), env=cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    )
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1
+    assert "fleet.csv row 3" in lines[0]
+    assert "cannot drive actuation 'acc'" in lines[0]
+    assert vehicle_count(seeded_engine) == 100
+
+
+def test_import_refused_by_the_database_is_one_transaction(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    # The second row reuses SF-001's VIN under a new id: the unique VIN refuses it, so the
+    # first (valid) row must not stay behind either.
+    with seeded_engine.connect() as connection:
+        taken_vin = connection.execute(
+            text("SELECT vin FROM dim_vehicle WHERE vehicle_id = 'SF-001'")
+        ).scalar_one()
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        "SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,1,microaccel_acc,{}",
+        f"SF-202,{taken_vin},Nissan,Rogue,2023,acc,I-24-WB,A,2,microaccel_acc,{{}}",
+    )
+    result = run_cli(
+        "vehicles", "import", str(roster), env=cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    )
+    assert result.returncode == 1
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert f"Key (vin)=({taken_vin}) already exists" in result.stderr
+    assert vehicle_count(seeded_engine) == 100
+
+
+def test_tokens_are_printed_once_and_stored_hashed(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    result = run_cli("tokens", "create", "--role", "vehicle", "--vehicle", "SF-007", env=env)
+    assert result.returncode == 0, result.stderr
+    token = result.stdout.strip()
+    assert token.startswith("sf_")
+    assert len(token) > 40
+    with seeded_engine.connect() as connection:
+        stored = connection.execute(
+            text("SELECT token_hash, kind, vehicle_id FROM api_token")
+        ).one()
+    assert tuple(stored) == (hashlib.sha256(token.encode()).hexdigest(), "vehicle", "SF-007")
+    assert token not in stored[0]
+    unknown = run_cli("tokens", "create", "--role", "vehicle", "--vehicle", "NOPE", env=env)
+    assert unknown.returncode == 1
+    assert unknown.stderr.strip() == "smoothfleet: error: tokens create: unknown vehicle NOPE"
+
+
+@pytest.mark.parametrize(
+    ("env", "expected"),
+    [
+        (
+            {"SMOOTHFLEET_DATABASE_URL": "postgresql://nobody@127.0.0.1:1/none"},
+            "cannot reach the database at 127.0.0.1:1/none",
+        ),
+        ({"SMOOTHFLEET_DATABASE_URL": "mysql://x@y/z"}, "SMOOTHFLEET_DATABASE_URL: must be"),
+        ({"SMOOTHFLEET_PORT": "eighty"}, "SMOOTHFLEET_PORT:"),
+    ],
+)
+def test_a_wrong_setting_is_one_line_naming_it(env: dict[str, str], expected: str) -> None:
+    result = run_cli("seed", env=cli_env(**env))
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert expected in lines[0]
+
+
+def test_a_taken_port_is_one_line(database_url: str) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = run_cli(
+            "serve", "--port", str(port), env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+        )
+    assert result.returncode == 1
+    assert result.stderr.strip() == (
+        f"smoothfleet: error: port {port} on 127.0.0.1 is already in use "
+        "(choose another with --port or SMOOTHFLEET_PORT)"
+    )
+
+
+def postgres_processes(pgdata: Path) -> list[psutil.Process]:
+    found = []
+    for process in psutil.process_iter(["name", "cmdline"]):
+        cmdline = process.info.get("cmdline") or []
+        if process.info.get("name") == "postgres" and str(pgdata) in " ".join(cmdline):
+            found.append(process)
+    return found
+
+
+@pytest.mark.slow
+def test_embedded_database_serves_and_stops_on_sigterm(tmp_path: Path) -> None:
+    data_dir = tmp_path / "data"
+    port = free_port()
+    env = cli_env(SMOOTHFLEET_DATA_DIR=str(data_dir), SMOOTHFLEET_PORT=str(port))
+    log = (tmp_path / "serve.log").open("w")
+    server = subprocess.Popen(
+        [*smoothfleet_command(), "serve"], env=env, stdout=log, stderr=subprocess.STDOUT
+    )
+    try:
+        base = f"http://127.0.0.1:{port}"
+        wait_until_ready(base)
+        assert httpx.get(f"{base}/healthz").json() == {"status": "ok"}
+        assert httpx.get(f"{base}/readyz").json()["status"] == "ready"
+        assert "python_gc_objects_collected_total" in httpx.get(f"{base}/metrics").text
+        assert postgres_processes(data_dir / "pgdata")
+    finally:
+        server.send_signal(signal.SIGTERM)
+        server.wait(timeout=60)
+        log.close()
+    assert server.returncode == 128 + signal.SIGTERM, (tmp_path / "serve.log").read_text()
+    deadline = time.monotonic() + 20
+    while postgres_processes(data_dir / "pgdata") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not postgres_processes(data_dir / "pgdata"), "embedded PostgreSQL left running"
+    # The data directory is kept between runs: a second command finds the schema in place.
+    again = run_cli("db", "url", env=env)
+    assert again.returncode == 0
+    assert "/smoothfleet" in again.stdout
+    assert (data_dir / "pgdata" / "PG_VERSION").exists()

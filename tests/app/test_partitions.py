@@ -1,0 +1,87 @@
+"""Ping partitions exist ahead of time; rows never fail for want of one; retention drops days."""
+
+from __future__ import annotations
+
+from datetime import UTC, date, datetime, time, timedelta
+
+import pytest
+from sqlalchemy import Engine, text
+from sqlalchemy.exc import IntegrityError
+
+from app.maintenance import maintain
+
+INSERT_PING = text(
+    "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps) "
+    "VALUES ('SF-001', :ts, 36.0, -86.6, 25.0)"
+)
+
+
+def partition_of(engine: Engine, ts: datetime) -> str:
+    with engine.connect() as connection:
+        return str(
+            connection.execute(
+                text(
+                    "SELECT tableoid::regclass::text FROM fact_vehicle_ping "
+                    "WHERE vehicle_id = 'SF-001' AND ts = :ts"
+                ),
+                {"ts": ts},
+            ).scalar_one()
+        )
+
+
+def noon(day: date) -> datetime:
+    return datetime.combine(day, time(12), tzinfo=UTC)
+
+
+def test_pings_for_tomorrow_and_the_day_after_insert_without_a_manual_step(
+    seeded_engine: Engine,
+) -> None:
+    today = datetime.now(UTC).date()
+    for ahead in (1, 2):
+        ts = noon(today + timedelta(days=ahead))
+        with seeded_engine.begin() as connection:
+            connection.execute(INSERT_PING, {"ts": ts})
+        day = (today + timedelta(days=ahead)).strftime("%Y%m%d")
+        assert partition_of(seeded_engine, ts) == f"fact_vehicle_ping_p{day}"
+
+
+def test_a_ping_beyond_the_partitions_is_kept_and_later_moved_to_its_day(
+    seeded_engine: Engine,
+) -> None:
+    far = datetime.now(UTC).date() + timedelta(days=40)
+    ts = noon(far)
+    with seeded_engine.begin() as connection:
+        connection.execute(INSERT_PING, {"ts": ts})
+    assert partition_of(seeded_engine, ts) == "fact_vehicle_ping_default"
+    with seeded_engine.begin() as connection:
+        result = maintain(connection, ahead_days=45, retention_days=90)
+    assert result.partitions_created >= 30
+    assert partition_of(seeded_engine, ts) == f"fact_vehicle_ping_p{far:%Y%m%d}"
+
+
+def test_retention_drops_whole_days_past_the_window(seeded_engine: Engine) -> None:
+    old_day = datetime.now(UTC).date() - timedelta(days=10)
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("SELECT ensure_ping_partitions(CAST(:day AS date), CAST(:day AS date))"),
+            {"day": old_day},
+        )
+        connection.execute(INSERT_PING, {"ts": noon(old_day)})
+        connection.execute(INSERT_PING, {"ts": noon(datetime.now(UTC).date())})
+    with seeded_engine.begin() as connection:
+        result = maintain(connection, ahead_days=7, retention_days=5)
+    assert result.partitions_dropped == 1
+    with seeded_engine.connect() as connection:
+        remaining = connection.execute(text("SELECT count(*) FROM fact_vehicle_ping")).scalar_one()
+    assert remaining == 1
+
+
+def test_a_duplicate_vehicle_and_ts_is_refused_by_the_database(seeded_engine: Engine) -> None:
+    ts = noon(datetime.now(UTC).date())
+    with seeded_engine.begin() as connection:
+        connection.execute(INSERT_PING, {"ts": ts})
+    with (
+        pytest.raises(IntegrityError, match="duplicate key value violates unique constraint"),
+        seeded_engine.begin() as c,
+    ):
+        c.execute(INSERT_PING, {"ts": ts})

@@ -1,0 +1,1 @@
+"""Helpers shared by the test suites: databases, live servers, subprocess CLI."""

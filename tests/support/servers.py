@@ -1,0 +1,87 @@
+"""Real servers for tests: uvicorn in a thread, or `smoothfleet serve` as a process."""
+
+from __future__ import annotations
+
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+import uvicorn
+
+from app.core.config import load_settings
+from app.main import create_app
+
+
+def free_port() -> int:
+    """A TCP port nobody listens on right now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+@contextmanager
+def live_server(database_url: str, **settings: Any) -> Iterator[str]:
+    """The real app on a real socket (uvicorn in a thread); yields its base URL."""
+    app = create_app(load_settings(database_url=database_url, **settings))
+    port = free_port()
+    server = uvicorn.Server(
+        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on")
+    )
+    thread = threading.Thread(target=server.run, name="live-server", daemon=True)
+    thread.start()
+    deadline = time.monotonic() + 30
+    while not server.started:
+        if not thread.is_alive() or time.monotonic() > deadline:
+            raise RuntimeError("live server did not start")
+        time.sleep(0.02)
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.should_exit = True
+        thread.join(timeout=30)
+
+
+def cli_env(**extra: str) -> dict[str, str]:
+    """The environment for running the CLI in a subprocess (no inherited SMOOTHFLEET_*)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("SMOOTHFLEET_")}
+    env.update(extra)
+    return env
+
+
+def smoothfleet_command() -> list[str]:
+    """How to invoke the installed CLI from this interpreter."""
+    script = Path(sys.executable).parent / "smoothfleet"
+    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+
+
+def run_cli(
+    *args: str, env: dict[str, str], timeout: float = 120
+) -> subprocess.CompletedProcess[str]:
+    """Run `smoothfleet ARGS...` and capture its output."""
+    return subprocess.run(
+        [*smoothfleet_command(), *args], env=env, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def wait_until_ready(base_url: str, timeout_s: float = 60) -> None:
+    """Poll /readyz until it answers 200."""
+    deadline = time.monotonic() + timeout_s
+    last: object = None
+    while time.monotonic() < deadline:
+        try:
+            response = httpx.get(f"{base_url}/readyz", timeout=2)
+            if response.status_code == 200:
+                return
+            last = response.text
+        except httpx.HTTPError as error:
+            last = error
+        time.sleep(0.1)
+    raise TimeoutError(f"{base_url} not ready: {last}")
