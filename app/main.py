@@ -12,6 +12,7 @@ from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
+from app.core.errors import install_error_handlers
 from app.health.router import router as health_router
 from app.maintenance import maintain_async
 
@@ -78,5 +79,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.settings = settings
+    install_error_handlers(app)
     app.include_router(health_router)
     return app
