@@ -1,0 +1,417 @@
+"""The analytics views against hand-worked values (paper: Results, energy model sidebar).
+
+Each test writes a small drive as the API's ping payloads and checks the view's figures against
+numbers worked by hand in the comments.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Callable, Iterator
+from datetime import UTC, date, datetime, timedelta
+from typing import Any
+
+import pandas as pd
+import pytest
+from sqlalchemy import Connection, Engine, text
+
+from app import analytics
+from tests.support.fleet import drive, ping, seed_geometry, store_pings_sql
+
+# A 10 s box boundary (Unix time divisible by 10) on the morning of the paper's first day.
+T0 = datetime(2022, 11, 16, 13, 0, 0, tzinfo=UTC)
+
+Store = Callable[[list[dict[str, Any]]], None]
+
+
+@pytest.fixture
+def connection(seeded_engine: Engine) -> Iterator[Connection]:
+    with seeded_engine.connect() as connection:
+        yield connection
+
+
+@pytest.fixture
+def store(seeded_engine: Engine) -> Store:
+    """Write ping payloads the way the server stores them."""
+
+    def write(pings: list[dict[str, Any]]) -> None:
+        with seeded_engine.begin() as connection:
+            store_pings_sql(connection, pings)
+
+    return write
+
+
+def fuel(connection: Connection, speed: float, accel: float, grade: float = 0.0) -> float:
+    return float(
+        connection.execute(
+            text("SELECT analytics.fuel_rate_g_per_s(:v, :a, :g)"),
+            {"v": speed, "a": accel, "g": grade},
+        ).scalar_one()
+    )
+
+
+# --- energy model ------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("speed", "accel", "grade", "expected"),
+    [
+        # C(20) = 0.146320 + 0.012179*20 + 2.74326e-5*20^3 = 0.146320 + 0.243581 + 0.219461
+        (20.0, 0.0, 0.0, 0.6093612764209571),
+        # C(10) = 0.146320 + 0.121790 + 0.027433
+        (10.0, 0.0, 0.0, 0.2955426958611346),
+        # C(10) + P(10)*1 + Q(10)*1^2 = 0.295543 + 0.700131 + 0.260904
+        (10.0, 1.0, 0.0, 1.2565771700477703),
+        # Braking at 10 m/s: C + P*(-2) < 0 and v > vc, so the floor is 0.
+        (10.0, -2.0, 0.0, 0.0),
+        # Braking at 3 m/s (v <= vc = 5.98): the floor is beta.
+        (3.0, -2.0, 0.0, 0.013111753095302022),
+        # Uphill 1 %: C(10) + Z(10)*0.01 = 0.295543 + (1.494008 + 12.718496)*0.01
+        (10.0, 0.0, 0.01, 0.2955426958611346 + 0.14212503720844846),
+    ],
+)
+def test_fuel_rate_follows_the_papers_polynomial(
+    connection: Connection, speed: float, accel: float, grade: float, expected: float
+) -> None:
+    assert fuel(connection, speed, accel, grade) == pytest.approx(expected, rel=1e-12)
+
+
+# --- Edie boxes --------------------------------------------------------------------------------
+
+
+def test_edie_box_with_two_vehicles(connection: Connection, store: Store) -> None:
+    # Vehicle A: 10 pings at 20 m/s from x = 1010 m (to 1190 m); vehicle B: 10 pings at 10 m/s
+    # from x = 1020 m. Both stay in the box [T0, T0 + 10 s) x [1000 m, 1200 m).
+    store(drive("SF-001", T0, 1010.0, 20.0, 10, accel_mps2=0.0))
+    store(drive("SF-002", T0, 1020.0, 10.0, 10, accel_mps2=0.0))
+
+    boxes = analytics.read_view(connection, "edie_boxes")
+
+    assert len(boxes) == 1
+    box = boxes.iloc[0]
+    assert box["t_start"] == pd.Timestamp(T0)
+    assert box["x_start_m"] == 1000.0
+    assert box["postmile_start"] == pytest.approx(1000.0 / 1609.344)
+    assert box["vehicles"] == 2
+    assert box["pings"] == 20
+    # Each ping stands for 1 s (the next ping's gap; the last one the nominal second).
+    assert box["time_s"] == pytest.approx(20.0)
+    assert box["distance_m"] == pytest.approx(10 * 20.0 + 10 * 10.0)
+    fuel_g = 10 * 0.6093612764209571 + 10 * 0.2955426958611346  # = 9.0490397 g
+    assert box["fuel_g"] == pytest.approx(fuel_g, rel=1e-9)
+    area = 10.0 * 200.0  # h_t * h_x in s*m
+    assert box["density_veh_per_m"] == pytest.approx(20.0 / area)  # 0.01 veh/m = 10 veh/km
+    assert box["flow_veh_per_s"] == pytest.approx(300.0 / area)  # 0.15 veh/s = 540 veh/h
+    assert box["fuel_rate_density_g_per_s_m"] == pytest.approx(fuel_g / area, rel=1e-9)
+    assert box["speed_mps"] == pytest.approx(15.0)  # u = q / rho
+    assert box["fuel_rate_per_vehicle_g_per_s"] == pytest.approx(fuel_g / 20.0, rel=1e-9)
+    assert box["fuel_per_distance_g_per_m"] == pytest.approx(fuel_g / 300.0, rel=1e-9)
+
+
+def test_edie_splits_a_drive_across_boxes_in_time_and_space(
+    connection: Connection, store: Store
+) -> None:
+    # 15 pings at 25 m/s from x = 1010 m: t = 0..7 s lie in [1000, 1200) m (x <= 1185 m),
+    # t = 8, 9 s in [1200, 1400) m, and t = 10..14 s in the next 10 s box, still [1200, 1400).
+    store(drive("SF-003", T0, 1010.0, 25.0, 15, accel_mps2=0.0))
+
+    boxes = analytics.read_view(connection, "edie_boxes")
+
+    found = {
+        (int((row.t_start - pd.Timestamp(T0)).total_seconds()), row.x_start_m): row.pings
+        for row in boxes.itertuples()
+    }
+    assert found == {(0, 1000.0): 8, (0, 1200.0): 2, (10, 1200.0): 5}
+    assert boxes["distance_m"].sum() == pytest.approx(15 * 25.0)
+
+
+def test_edie_acceleration_from_speed_differences_when_the_ping_has_none(
+    connection: Connection, store: Store
+) -> None:
+    # 10 m/s then 11 m/s one second later: a = 1 m/s^2 for the first second, then the last ping
+    # (no successor) counts as 0 m/s^2. Fuel = f(10, 1) + f(11, 0).
+    store(
+        [
+            ping("SF-004", T0, 1010.0, 10.0),
+            ping("SF-004", T0 + timedelta(seconds=1), 1020.5, 11.0),
+        ]
+    )
+
+    box = analytics.read_view(connection, "edie_boxes").iloc[0]
+
+    expected = 1.2565771700477703 + fuel(connection, 11.0, 0.0)
+    assert box["fuel_g"] == pytest.approx(expected, rel=1e-6)
+
+
+def test_edie_does_not_bridge_long_gaps(connection: Connection, store: Store) -> None:
+    # Two pings 8 s apart (the car lost its fix): each counts one nominal second, not 8 s.
+    store(
+        [
+            ping("SF-005", T0, 1010.0, 20.0),
+            ping("SF-005", T0 + timedelta(seconds=8), 1170.0, 20.0),
+        ]
+    )
+
+    box = analytics.read_view(connection, "edie_boxes").iloc[0]
+
+    assert box["time_s"] == pytest.approx(2.0)
+
+
+def test_edie_field_function_takes_other_box_sizes_and_a_window(
+    connection: Connection, store: Store
+) -> None:
+    store(drive("SF-001", T0, 1010.0, 20.0, 10, accel_mps2=0.0))
+    store(drive("SF-001", T0 + timedelta(hours=1), 1010.0, 20.0, 10, accel_mps2=0.0))
+
+    field = analytics.edie_field(
+        connection, T0, T0 + timedelta(minutes=30), h_t_s=60.0, h_x_m=1000.0
+    )
+
+    assert len(field) == 1
+    assert field.iloc[0]["x_start_m"] == 1000.0
+    assert field.iloc[0]["density_veh_per_m"] == pytest.approx(10.0 / (60.0 * 1000.0))
+    with pytest.raises(ValueError, match="h_t_s > 0"):
+        analytics.edie_field(connection, T0, T0 + timedelta(minutes=1), h_t_s=0.0)
+
+
+# --- engagement --------------------------------------------------------------------------------
+
+
+def engaged_drive(
+    vehicle_id: str, start: datetime, pings: int, engaged: int
+) -> list[dict[str, Any]]:
+    """`pings` pings on the corridor, the first `engaged` with the controller engaged."""
+    return [
+        ping(
+            vehicle_id,
+            start + timedelta(seconds=second),
+            2000.0 + 20.0 * second,
+            20.0,
+            acc_engaged=True,
+            controller_engaged=second < engaged,
+        )
+        for second in range(pings)
+    ]
+
+
+def test_engagement_share_per_vehicle_and_pooled_per_day(
+    connection: Connection, store: Store
+) -> None:
+    # Day 1: A 10 of 20 pings engaged (50 %), B 9 of 30 (30 %); pooled 19 / 50 = 38 %
+    # (the paper's 11/16 figure; the mean of the two shares would be 40 %).
+    # Day 2: A 16 of 20, B 23 of 30: pooled 39 / 50 = 78 % (the paper's 11/17 figure).
+    day2 = T0 + timedelta(days=1)
+    store(engaged_drive("SF-001", T0, 20, 10))
+    store(engaged_drive("SF-002", T0, 30, 9))
+    store(engaged_drive("SF-001", day2, 20, 16))
+    store(engaged_drive("SF-002", day2, 30, 23))
+    # A fix 2 km off the road is not time on the corridor and does not count.
+    off_road = ping("SF-001", T0 + timedelta(minutes=5), 3000.0, 20.0, controller_engaged=False)
+    off_road["lat"] += 0.02
+    store([off_road])
+
+    per_vehicle = analytics.read_view(connection, "engagement_daily")
+    fleet = analytics.read_view(connection, "engagement_fleet_daily")
+
+    first = per_vehicle[per_vehicle["day"] == date(2022, 11, 16)].set_index("vehicle_id")
+    assert first.loc["SF-001", "pings"] == 20
+    assert first.loc["SF-001", "engagement_share"] == pytest.approx(0.5)
+    assert first.loc["SF-002", "engagement_share"] == pytest.approx(0.3)
+    assert first.loc["SF-002", "acc_engaged_share"] == pytest.approx(1.0)
+    shares = fleet.set_index("day")["engagement_share"]
+    assert shares[date(2022, 11, 16)] == pytest.approx(0.38)
+    assert shares[date(2022, 11, 17)] == pytest.approx(0.78)
+    assert list(fleet["vehicles"]) == [2, 2]
+
+
+# --- ping rate and latency ---------------------------------------------------------------------
+
+
+def test_ping_rate_and_latency_per_vehicle_hour(
+    seeded_engine: Engine, connection: Connection, store: Store
+) -> None:
+    # SF-001: 10 pings 1 s apart -> 9 intervals in 9 s = 1 Hz. SF-002: 5 pings 2 s apart -> 0.5 Hz.
+    store(drive("SF-001", T0, 1010.0, 20.0, 10))
+    store(
+        [ping("SF-002", T0 + timedelta(seconds=2 * i), 1010.0 + 40.0 * i, 20.0) for i in range(5)]
+    )
+    # Received 2 s after their GPS time except the last of SF-001, which waited 30 s in the spool.
+    with seeded_engine.begin() as writer:
+        writer.execute(text("UPDATE fact_vehicle_ping SET received_at = ts + interval '2 s'"))
+        writer.execute(
+            text(
+                "UPDATE fact_vehicle_ping SET received_at = ts + interval '30 s' "
+                "WHERE vehicle_id = 'SF-001' AND ts = :last"
+            ),
+            {"last": T0 + timedelta(seconds=9)},
+        )
+
+    rates = analytics.read_view(connection, "ping_rate_hourly").set_index("vehicle_id")
+    fleet = analytics.read_view(connection, "fleet_ping_hourly")
+
+    assert rates.loc["SF-001", "ping_rate_hz"] == pytest.approx(1.0)
+    assert rates.loc["SF-002", "ping_rate_hz"] == pytest.approx(0.5)
+    assert rates.loc["SF-001", "latency_p50_s"] == pytest.approx(2.0)
+    assert rates.loc["SF-001", "latency_max_s"] == pytest.approx(30.0)
+    assert rates.loc["SF-001", "latency_mean_s"] == pytest.approx((9 * 2.0 + 30.0) / 10)
+    assert rates.loc["SF-001", "hour"] == pd.Timestamp(T0)
+    assert fleet.iloc[0]["pings"] == 15
+    assert fleet.iloc[0]["vehicles"] == 2
+    assert fleet.iloc[0]["pings_per_s"] == pytest.approx(15 / 3600)
+
+
+# --- INRIX latency -----------------------------------------------------------------------------
+
+
+def test_inrix_latency_per_snapshot(seeded_engine: Engine, connection: Connection) -> None:
+    # One snapshot of three segments measured at T0, received 180 s later (the paper's ~3 min).
+    with seeded_engine.begin() as writer:
+        writer.execute(
+            text(
+                "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, received_at, "
+                "speed_mps, score) SELECT corridor_id, xd_code, :measured, :received, 20 + seq, 30 "
+                "FROM dim_inrix_segment WHERE seq <= 3"
+            ),
+            {"measured": T0, "received": T0 + timedelta(seconds=180)},
+        )
+
+    latency = analytics.read_view(connection, "inrix_latency")
+
+    assert len(latency) == 1
+    assert latency.iloc[0]["segments"] == 3
+    assert latency.iloc[0]["realtime_segments"] == 3
+    assert latency.iloc[0]["latency_s"] == pytest.approx(180.0)
+    assert latency.iloc[0]["mean_speed_mps"] == pytest.approx(22.0)  # (21 + 22 + 23) / 3
+
+
+# --- plan adherence ----------------------------------------------------------------------------
+
+
+def segment_at(x_m: float) -> dict[str, Any]:
+    from app.seed import seed_corridor_document
+
+    for segment in seed_corridor_document()["i24_segments"]:
+        if segment["start_x_m"] <= x_m < segment["end_x_m"]:
+            return dict(segment)
+    raise AssertionError(f"no segment at {x_m}")
+
+
+def publish_plan(engine: Engine, targets: dict[tuple[int, int], float]) -> int:
+    """A published plan with the given (lane, segment id) -> target speed rows."""
+    with engine.begin() as writer:
+        plan_id = int(
+            writer.execute(
+                text(
+                    "INSERT INTO plan_run (corridor_id, status, algorithm, started_at, "
+                    "published_at, valid_until) VALUES ('I-24-WB', 'published', 'test', :t, :t, "
+                    ":t + interval '3 min') RETURNING plan_id"
+                ),
+                {"t": T0 - timedelta(seconds=30)},
+            ).scalar_one()
+        )
+        writer.execute(
+            text(
+                "INSERT INTO fact_speed_planner (corridor_id, plan_id, lane, i24_segment_id, "
+                "target_speed_mps) VALUES ('I-24-WB', :plan_id, :lane, :segment, :target)"
+            ),
+            [
+                {"plan_id": plan_id, "lane": lane, "segment": segment, "target": target}
+                for (lane, segment), target in targets.items()
+            ],
+        )
+    return plan_id
+
+
+def test_plan_adherence_compares_speed_with_the_target_where_the_car_was(
+    seeded_engine: Engine, connection: Connection, store: Store
+) -> None:
+    segment = segment_at(5000.0)
+    middle = (segment["start_x_m"] + segment["end_x_m"]) / 2
+    plan_id = publish_plan(
+        seeded_engine, {(2, segment["i24_segment_id"]): 20.0, (3, segment["i24_segment_id"]): 25.0}
+    )
+    # Lane 2 (SF-002's assigned lane, no lane in the ping): speeds 18, 22, 25 against 20 m/s.
+    store(
+        [
+            ping(
+                "SF-002",
+                T0 + timedelta(seconds=i),
+                middle,
+                speed,
+                plan_id=plan_id,
+                controller_engaged=i < 2,
+            )
+            for i, speed in enumerate([18.0, 22.0, 25.0])
+        ]
+    )
+    # A ping reporting lane 3 is compared with lane 3's target; one without a plan is left out.
+    store([ping("SF-001", T0, middle, 24.0, plan_id=plan_id, lane=3)])
+    store([ping("SF-003", T0, middle, 24.0)])
+
+    detail = analytics.read_view(connection, "plan_adherence")
+    daily = analytics.read_view(connection, "plan_adherence_daily").set_index("vehicle_id")
+
+    assert sorted(detail["vehicle_id"]) == ["SF-001", "SF-002", "SF-002", "SF-002"]
+    sf001 = detail[detail["vehicle_id"] == "SF-001"].iloc[0]
+    assert (sf001["lane"], sf001["target_speed_mps"], sf001["speed_error_mps"]) == (3, 25.0, -1.0)
+    assert sf001["plan_age_s"] == pytest.approx(30.0)
+    # Errors -2, +2, +5: mean 5/3, mean |e| 3, RMS sqrt((4 + 4 + 25) / 3) = sqrt(11).
+    assert daily.loc["SF-002", "pings"] == 3
+    assert daily.loc["SF-002", "mean_speed_error_mps"] == pytest.approx(5 / 3)
+    assert daily.loc["SF-002", "mean_abs_speed_error_mps"] == pytest.approx(3.0)
+    assert daily.loc["SF-002", "rms_speed_error_mps"] == pytest.approx(math.sqrt(11))
+    assert daily.loc["SF-002", "engaged_mean_abs_speed_error_mps"] == pytest.approx(2.0)
+
+
+# --- app.analytics: registry, windows, CSV ------------------------------------------------------
+
+
+def test_every_view_of_the_schema_is_registered(connection: Connection) -> None:
+    names = set(
+        connection.execute(
+            text("SELECT table_name FROM information_schema.views WHERE table_schema = 'analytics'")
+        ).scalars()
+    )
+    assert names == set(analytics.VIEWS)
+
+
+@pytest.mark.parametrize("name", sorted(analytics.VIEWS))
+def test_every_view_answers_on_an_empty_database(connection: Connection, name: str) -> None:
+    frame = analytics.read_view(connection, name)
+    assert frame.empty
+    assert len(frame.columns) >= 3
+
+
+def test_read_view_filters_by_time_and_vehicle(connection: Connection, store: Store) -> None:
+    store(engaged_drive("SF-001", T0, 10, 5))
+    store(engaged_drive("SF-002", T0 + timedelta(days=1), 10, 5))
+
+    later = analytics.read_view(connection, "engagement_daily", since=T0 + timedelta(days=1))
+    one = analytics.read_view(connection, "engagement_daily", vehicle_id="SF-001")
+    window = analytics.read_view(connection, "edie_boxes", since=T0, until=T0 + timedelta(hours=1))
+
+    assert list(later["vehicle_id"]) == ["SF-002"]
+    assert list(one["day"]) == [date(2022, 11, 16)]
+    assert set(window["t_start"].dt.date) == {date(2022, 11, 16)}
+    with pytest.raises(analytics.UnknownView, match="choose one of: edie_boxes"):
+        analytics.read_view(connection, "pings; DROP TABLE dim_vehicle")
+    with pytest.raises(analytics.UnknownView, match="no vehicle_id"):
+        analytics.read_view(connection, "fleet_ping_hourly", vehicle_id="SF-001")
+
+
+def test_export_csv_writes_a_header_and_iso_times(connection: Connection, store: Store) -> None:
+    store(drive("SF-001", T0, 1010.0, 20.0, 3))
+    out = io.StringIO()
+
+    rows = analytics.export_csv(connection, "ping_rate_hourly", out)
+
+    lines = out.getvalue().splitlines()
+    assert rows == 1
+    assert lines[0].startswith("vehicle_id,hour,pings,")
+    assert lines[1].startswith("SF-001,2022-11-16T13:00:00.000000+0000,3,")
+
+
+def test_seed_geometry_round_trips_positions() -> None:
+    lat, lon = seed_geometry().position(5000.0)
+    assert seed_geometry().locate(lat, lon).x_m[0] == pytest.approx(5000.0, abs=0.01)
