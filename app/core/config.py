@@ -47,6 +47,11 @@ class Settings(BaseSettings):
     ping_retention_days: int = Field(90, ge=1, le=36500)
     ping_partitions_ahead_days: int = Field(7, ge=1, le=366)
     ping_max_future_s: float = Field(300.0, ge=0)
+    # Ingest: concurrent group-commit writes per process, and how long a process trusts its
+    # cached roster (vehicle -> corridor) and token lookups (revocation delay).
+    ingest_write_concurrency: int = Field(2, ge=1, le=32)
+    roster_cache_ttl_s: float = Field(30.0, gt=0, le=3600)
+    token_cache_ttl_s: float = Field(5.0, ge=0, le=300)
 
     # Speed planner
     planner_period_s: float = Field(60.0, gt=0, le=3600)
@@ -62,6 +67,44 @@ class Settings(BaseSettings):
     agent_status_period_s: float = Field(10.0, gt=0)
     agent_plan_poll_s: float = Field(5.0, gt=0)
     agent_stale_plan_after_s: float = Field(180.0, gt=0)
+
+    # Fleet readiness (piStatus checks): (amber, red) per check. Ages, backlog and temperature
+    # turn amber/red above their thresholds; disk, CAN rate and satellites below theirs.
+    readiness_ping_age_s: tuple[float, float] = (5.0, 60.0)
+    readiness_status_age_s: tuple[float, float] = (30.0, 60.0)
+    readiness_plan_age_s: tuple[float, float] = (90.0, 180.0)
+    readiness_spool_backlog: tuple[int, int] = (120, 1800)
+    readiness_cpu_temp_c: tuple[float, float] = (70.0, 80.0)
+    readiness_disk_free_mb: tuple[float, float] = (2000.0, 500.0)
+    readiness_can_msgs_per_s: tuple[float, float] = (200.0, 20.0)
+    readiness_gps_satellites: tuple[int, int] = (6, 4)
+    readiness_agent_version: str | None = None  # the version every car should run (None: any)
+
+    # Dashboard
+    dashboard_session_max_age_s: float = Field(43200.0, gt=0)
+    dashboard_refresh_s: float = Field(5.0, gt=0)
+
+    @field_validator(
+        "readiness_ping_age_s",
+        "readiness_status_age_s",
+        "readiness_plan_age_s",
+        "readiness_spool_backlog",
+        "readiness_cpu_temp_c",
+    )
+    @classmethod
+    def _red_above_amber(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not value[0] < value[1]:
+            raise ValueError("give [amber, red] with amber below red")
+        return value
+
+    @field_validator(
+        "readiness_disk_free_mb", "readiness_can_msgs_per_s", "readiness_gps_satellites"
+    )
+    @classmethod
+    def _red_below_amber(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not value[0] > value[1]:
+            raise ValueError("give [amber, red] with amber above red")
+        return value
 
     @field_validator("database_url")
     @classmethod

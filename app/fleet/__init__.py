@@ -1,0 +1,1 @@
+"""Fleet operations: health of every vehicle (piStatus readiness) and its assignment."""
