@@ -1,0 +1,174 @@
+"""Real I-24 drives (10 Hz) that lead the simulated platoons, and the INRIX minutes recorded
+alongside two of them. Reading files happens here and nowhere else in the simulator.
+
+The data (../shared/data/README.md) is the CIRCLES instrumented RAV4 on I-24 near Nashville:
+`Time` in unix seconds at 0.1 s steps, `Velocity` in km/h. A drive is replayed from its speed
+alone: positions are the trapezoidal integral of the speed, so the leader's position, speed and
+acceleration are consistent with each other (GPS distance is noisier than the wheel speed).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+DriveKind = Literal["shockwave", "freeflow"]
+
+KMH_PER_MPS = 3.6
+# The recorder logs at 10 Hz; a step further than this from 0.1 s is a gap in the recording.
+STEP_S = 0.1
+STEP_TOLERANCE_S = 0.011
+# A drive is free flow when even its slowest moments stay fast: its 2nd speed percentile at or
+# above 20 m/s (72 km/h, 45 mph). Every drive below that has at least one real slowdown wave.
+FREEFLOW_MIN_SPEED_MPS = 20.0
+FREEFLOW_PERCENTILE = 2.0
+
+
+class DriveError(ValueError):
+    """A drive file that cannot be replayed; the message names the file and what is wrong."""
+
+
+@dataclass(frozen=True)
+class Drive:
+    """One real drive: the leader's speed every `dt_s` seconds from `start_unix_s`."""
+
+    name: str
+    dt_s: float
+    start_unix_s: float
+    speed_mps: FloatArray
+
+    @property
+    def steps(self) -> int:
+        """Number of time steps after the first sample."""
+        return len(self.speed_mps) - 1
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the drive in seconds."""
+        return self.steps * self.dt_s
+
+    @property
+    def position_m(self) -> FloatArray:
+        """Distance driven since the first sample (trapezoidal integral of the speed)."""
+        increments = 0.5 * (self.speed_mps[1:] + self.speed_mps[:-1]) * self.dt_s
+        return np.concatenate([[0.0], np.cumsum(increments)])
+
+    @property
+    def accel_mps2(self) -> FloatArray:
+        """Acceleration over each step (forward difference; the last step repeats)."""
+        diff = np.diff(self.speed_mps) / self.dt_s
+        return np.concatenate([diff, diff[-1:]])
+
+    @property
+    def kind(self) -> DriveKind:
+        """`freeflow` when the drive never slows into a wave, else `shockwave`."""
+        slow = float(np.percentile(self.speed_mps, FREEFLOW_PERCENTILE))
+        return "freeflow" if slow >= FREEFLOW_MIN_SPEED_MPS else "shockwave"
+
+    def slice(self, start_s: float, duration_s: float) -> Drive:
+        """A part of the drive (for short tests); the name says which part."""
+        first = int(round(start_s / self.dt_s))
+        last = first + int(round(duration_s / self.dt_s))
+        if first < 0 or last > self.steps or last <= first:
+            raise DriveError(
+                f"{self.name}: slice {start_s}+{duration_s} s is outside the drive "
+                f"(0-{self.duration_s:.1f} s)"
+            )
+        return Drive(
+            name=f"{self.name}[{start_s:g}s+{duration_s:g}s]",
+            dt_s=self.dt_s,
+            start_unix_s=self.start_unix_s + first * self.dt_s,
+            speed_mps=self.speed_mps[first : last + 1].copy(),
+        )
+
+
+def drive_from_speeds(name: str, speed_mps: FloatArray, dt_s: float = STEP_S) -> Drive:
+    """A synthetic drive (e.g. a constant-speed leader) from a speed series."""
+    speeds = np.asarray(speed_mps, dtype=np.float64)
+    if speeds.ndim != 1 or len(speeds) < 2:
+        raise DriveError(f"{name}: a drive needs at least two speed samples")
+    if not np.all(np.isfinite(speeds)) or np.any(speeds < 0):
+        raise DriveError(f"{name}: speeds must be finite and not negative")
+    return Drive(name=name, dt_s=dt_s, start_unix_s=0.0, speed_mps=speeds)
+
+
+def load_drive(path: Path) -> Drive:
+    """Read a drive CSV (`Time` in unix s, `Velocity` in km/h) and check it can be replayed."""
+    if not path.is_file():
+        raise DriveError(f"{path}: no such drive file")
+    try:
+        table = pd.read_csv(path, usecols=["Time", "Velocity"])
+    except ValueError as error:
+        raise DriveError(f"{path}: {error}") from None
+    time_s = table["Time"].to_numpy(dtype=np.float64)
+    speed_kmh = table["Velocity"].to_numpy(dtype=np.float64)
+    if len(time_s) < 2:
+        raise DriveError(f"{path}: fewer than two samples")
+    bad = ~np.isfinite(time_s) | ~np.isfinite(speed_kmh) | (speed_kmh < 0)
+    if np.any(bad):
+        row = int(np.argmax(bad)) + 2  # 1-based, after the header line
+        raise DriveError(f"{path} row {row}: Time and Velocity must be finite, speed >= 0")
+    steps = np.diff(time_s)
+    off = np.abs(steps - STEP_S) > STEP_TOLERANCE_S
+    if np.any(off):
+        row = int(np.argmax(off)) + 3
+        raise DriveError(
+            f"{path} row {row}: time step {steps[np.argmax(off)]:.3f} s, expected {STEP_S} s "
+            "(a gap in the recording)"
+        )
+    name = path.parent.name if path.name == "trajectory.csv" else path.stem
+    return Drive(
+        name=name, dt_s=STEP_S, start_unix_s=float(time_s[0]), speed_mps=speed_kmh / KMH_PER_MPS
+    )
+
+
+def load_drives(directory: Path) -> list[Drive]:
+    """Every drive CSV of a directory, in name order."""
+    files = sorted(directory.glob("*.csv"))
+    if not files:
+        raise DriveError(f"{directory}: no drive CSV files")
+    return [load_drive(path) for path in files]
+
+
+@dataclass(frozen=True)
+class InrixRecording:
+    """INRIX speeds recorded during a drive: one row per minute, one column per segment.
+
+    `segment_start_m` is in the frame of the I-24 reference line (../shared/data/geo), and
+    `time_s` is relative to the drive's first sample (negative: minutes before the drive).
+    """
+
+    segment_start_m: FloatArray
+    time_s: FloatArray
+    speed_mps: FloatArray
+    score: FloatArray
+
+
+def load_inrix_recording(directory: Path) -> InrixRecording:
+    """Read segments.json, speed.csv and confidence.csv of a trajectories_with_inrix folder."""
+    try:
+        starts = np.asarray(json.loads((directory / "segments.json").read_text()), dtype=float)
+        speed = pd.read_csv(directory / "speed.csv", skipinitialspace=True)
+        score = pd.read_csv(directory / "confidence.csv", skipinitialspace=True)
+    except (OSError, ValueError) as error:
+        raise DriveError(f"{directory}: {error}") from None
+    speeds = speed.drop(columns="time").to_numpy(dtype=np.float64)
+    scores = score.drop(columns="time").to_numpy(dtype=np.float64)
+    if speeds.shape[1] != len(starts) or scores.shape != speeds.shape:
+        raise DriveError(
+            f"{directory}: {len(starts)} segments but speed.csv has {speeds.shape[1]} columns"
+        )
+    return InrixRecording(
+        segment_start_m=starts,
+        time_s=speed["time"].to_numpy(dtype=np.float64),
+        speed_mps=speeds,
+        score=scores,
+    )

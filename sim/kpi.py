@@ -1,0 +1,148 @@
+"""Key performance indicators of a simulation, as the paper's section "Candidate Controller
+Selection" defines them, plus comfort and safety figures.
+
+All functions take arrays with one row per time step and one column per vehicle and are pure.
+The KPIs of a platoon run cover the simulated vehicles (AVs and humans): the leader replays a
+measured drive that is the same in every run, so it is the boundary condition, not an outcome.
+
+- fuel economy: total distance of all vehicles / total fuel of all vehicles, in mpg (paper eq.);
+- throughput: vehicles crossing a point per hour, averaged over five equi-spaced points (for a
+  finite platoon: (n - 1) vehicles over the time between the first and the last crossing);
+- network speed: total distance / total driving time;
+- comfort: RMS acceleration and RMS jerk; safety: minimum gap and minimum time-to-collision.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.energy import METRES_PER_MILE, RAV4_2019, FuelModel
+from sim.platoon import PlatoonRun
+
+FloatArray = NDArray[np.float64]
+
+THROUGHPUT_POINTS = 5
+SECONDS_PER_HOUR = 3600.0
+
+
+@dataclass(frozen=True)
+class Kpis:
+    """The KPIs of one run (see the module docstring for definitions)."""
+
+    fuel_economy_mpg: float
+    throughput_vph: float
+    network_speed_mps: float
+    accel_rms_mps2: float
+    jerk_rms_mps3: float
+    min_gap_m: float
+    min_ttc_s: float
+    collisions: int
+    gap_violations: int
+
+    def as_dict(self) -> dict[str, float]:
+        """Field name -> value, for tables and CSV rows."""
+        return {name: float(value) for name, value in asdict(self).items()}
+
+
+def fuel_economy_mpg(
+    position_m: FloatArray, speed_mps: FloatArray, dt_s: float, model: FuelModel = RAV4_2019
+) -> float:
+    """Miles per gallon of all vehicles together (paper eq. for fuel economy).
+
+    Each step k contributes f(v_k, a_k) dt, a_k being the acceleration applied over the step.
+    """
+    accel = np.diff(speed_mps, axis=0) / dt_s
+    fuel_g = float(model.fuel_rate_gps(speed_mps[:-1], accel).sum() * dt_s)
+    distance_m = float((position_m[-1] - position_m[0]).sum())
+    if fuel_g <= 0:
+        raise ValueError("no fuel was burnt: fuel economy is undefined")
+    return (distance_m / METRES_PER_MILE) / (fuel_g * model.gallons_per_gram)
+
+
+def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> FloatArray:
+    """When each vehicle passes `point_m` (linear between steps; positions never decrease)."""
+    time_s = np.arange(position_m.shape[0]) * dt_s
+    return np.array(
+        [np.interp(point_m, position_m[:, column], time_s) for column in range(position_m.shape[1])]
+    )
+
+
+def throughput_at_vph(position_m: FloatArray, dt_s: float, point_m: float) -> float:
+    """Vehicles per hour over `point_m`: (n - 1) over the spread of their crossing times."""
+    n = position_m.shape[1]
+    if n < 2:
+        raise ValueError("throughput needs at least two vehicles")
+    if not (position_m[0].max() <= point_m <= position_m[-1].min()):
+        raise ValueError(f"not every vehicle passes {point_m:.0f} m during the run")
+    times = crossing_times_s(position_m, dt_s, point_m)
+    spread = float(times.max() - times.min())
+    if spread <= 0:
+        raise ValueError(f"all vehicles cross {point_m:.0f} m at once: throughput undefined")
+    return float((n - 1) / spread * SECONDS_PER_HOUR)
+
+
+def measurement_points_m(position_m: FloatArray, count: int = THROUGHPUT_POINTS) -> FloatArray:
+    """`count` equi-spaced interior points of the stretch every vehicle drives through."""
+    first = float(position_m[0].max())
+    last = float(position_m[-1].min())
+    if last <= first:
+        raise ValueError("the vehicles share no stretch of road: the drive is too short")
+    points: FloatArray = np.linspace(first, last, count + 2)[1:-1]
+    return points
+
+
+def throughput_vph(position_m: FloatArray, dt_s: float, count: int = THROUGHPUT_POINTS) -> float:
+    """Average throughput over `count` equi-spaced measurement points (paper's definition)."""
+    points = measurement_points_m(position_m, count)
+    return float(np.mean([throughput_at_vph(position_m, dt_s, p) for p in points]))
+
+
+def network_speed_mps(position_m: FloatArray, dt_s: float) -> float:
+    """Total distance of all vehicles over their total driving time."""
+    distance = float((position_m[-1] - position_m[0]).sum())
+    driving_time = (position_m.shape[0] - 1) * dt_s * position_m.shape[1]
+    return float(distance / driving_time)
+
+
+def accel_rms_mps2(speed_mps: FloatArray, dt_s: float) -> float:
+    """Root mean square of the accelerations applied at every step by every vehicle."""
+    accel = np.diff(speed_mps, axis=0) / dt_s
+    return float(np.sqrt(np.mean(accel**2)))
+
+
+def jerk_rms_mps3(speed_mps: FloatArray, dt_s: float) -> float:
+    """Root mean square of the change of acceleration per second."""
+    jerk = np.diff(speed_mps, n=2, axis=0) / (dt_s * dt_s)
+    return float(np.sqrt(np.mean(jerk**2))) if jerk.size else 0.0
+
+
+def min_time_to_collision_s(
+    gap_m: FloatArray, speed_mps: FloatArray, lead_speed_mps: FloatArray
+) -> float:
+    """Smallest gap / closing speed over the moments a vehicle closes in (inf if none does)."""
+    closing = speed_mps - lead_speed_mps
+    approaching = closing > 0
+    if not approaching.any():
+        return float("inf")
+    return float((gap_m[approaching] / closing[approaching]).min())
+
+
+def platoon_kpis(run: PlatoonRun, model: FuelModel = RAV4_2019) -> Kpis:
+    """The KPIs of a platoon run over its simulated vehicles (columns 1..N-1)."""
+    position = run.position_m[:, 1:]
+    speed = run.speed_mps[:, 1:]
+    gaps = run.gap_m
+    return Kpis(
+        fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),
+        throughput_vph=throughput_vph(position, run.dt_s),
+        network_speed_mps=network_speed_mps(position, run.dt_s),
+        accel_rms_mps2=accel_rms_mps2(speed, run.dt_s),
+        jerk_rms_mps3=jerk_rms_mps3(speed, run.dt_s),
+        min_gap_m=float(gaps.min()),
+        min_ttc_s=min_time_to_collision_s(gaps, speed, run.speed_mps[:, :-1]),
+        collisions=run.collisions,
+        gap_violations=run.gap_violations,
+    )

@@ -1,0 +1,82 @@
+"""Reading the real drives: units, positions, scenario kind, and clear errors for bad files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.drives import DriveError, load_drive, load_drives, load_inrix_recording
+
+HEADER = "Time,Velocity\n"
+
+
+def test_the_six_shared_drives(shared_dir: Path) -> None:
+    drives = load_drives(shared_dir / "data" / "trajectories")
+    assert len(drives) == 6
+    kinds = {drive.name[:19]: drive.kind for drive in drives}
+    # the two drives that never slow below 22 m/s are free flow; the rest have waves
+    assert kinds == {
+        "2021-03-08-22-35-14": "shockwave",
+        "2021-03-09-13-35-04": "freeflow",
+        "2021-03-12-22-20-57": "shockwave",
+        "2021-04-05-21-39-05": "shockwave",
+        "2021-04-07-12-33-03": "freeflow",
+        "2021-04-19-22-09-19": "shockwave",
+    }
+    for drive in drives:
+        assert drive.dt_s == 0.1
+        # each covers the same I-24 section: 13.09-13.10 km by GPS, about 1 % less by the
+        # integrated wheel speed
+        assert drive.position_m[-1] == pytest.approx(12_950, rel=0.005)
+
+
+def test_speed_is_read_in_kmh_and_integrated(tmp_path: Path) -> None:
+    path = tmp_path / "drive.csv"
+    path.write_text(HEADER + "100.0,36\n100.1,36\n100.2,72\n")
+    drive = load_drive(path)
+    np.testing.assert_allclose(drive.speed_mps, [10.0, 10.0, 20.0])
+    # trapezoids: 1.0 m, then (10 + 20) / 2 x 0.1 = 1.5 m
+    np.testing.assert_allclose(drive.position_m, [0.0, 1.0, 2.5])
+    np.testing.assert_allclose(drive.accel_mps2, [0.0, 100.0, 100.0])
+    assert drive.duration_s == pytest.approx(0.2)
+
+
+def test_a_gap_in_the_recording_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "gappy.csv"
+    path.write_text(HEADER + "100.0,36\n100.1,36\n100.9,36\n")
+    with pytest.raises(DriveError, match=r"gappy.csv row 4: time step 0.800 s"):
+        load_drive(path)
+
+
+def test_a_missing_speed_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "holes.csv"
+    path.write_text(HEADER + "100.0,36\n100.1,\n")
+    with pytest.raises(DriveError, match=r"holes.csv row 3"):
+        load_drive(path)
+
+
+def test_a_file_without_the_columns_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "other.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(DriveError, match="other.csv"):
+        load_drive(path)
+
+
+def test_slices_for_short_runs(shared_dir: Path) -> None:
+    drive = load_drives(shared_dir / "data" / "trajectories")[0]
+    part = drive.slice(100.0, 60.0)
+    assert part.steps == 600
+    np.testing.assert_allclose(part.speed_mps, drive.speed_mps[1000:1601])
+    with pytest.raises(DriveError, match="outside the drive"):
+        drive.slice(500.0, 100.0)
+
+
+def test_inrix_minutes_beside_a_drive(shared_dir: Path) -> None:
+    folder = next((shared_dir / "data" / "trajectories_with_inrix").iterdir())
+    recording = load_inrix_recording(folder)
+    assert recording.speed_mps.shape == (len(recording.time_s), 21)
+    assert np.all(np.diff(recording.time_s) == pytest.approx(60.0))
+    assert recording.time_s[0] < 0  # the minutes before the drive are there too
+    assert load_drive(folder / "trajectory.csv").name == folder.name

@@ -1,0 +1,106 @@
+"""KPIs on hand-built cases: two cars whose every number can be worked out on paper."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.kpi import (
+    accel_rms_mps2,
+    fuel_economy_mpg,
+    jerk_rms_mps3,
+    measurement_points_m,
+    min_time_to_collision_s,
+    network_speed_mps,
+    platoon_kpis,
+    throughput_at_vph,
+    throughput_vph,
+)
+from sim.platoon import PlatoonRun
+
+# Two cars at 10 m/s, 15 m apart (front bumpers), for 2 s in steps of 1 s.
+POSITIONS = np.array([[0.0, -15.0], [10.0, -5.0], [20.0, 5.0]])
+SPEEDS = np.full((3, 2), 10.0)
+# Fuel rate at 10 m/s, a = 0: C(10) = 0.295542696 g/s (see test_energy)
+C_10 = 0.295542696
+
+
+def test_fuel_economy_of_two_cruising_cars() -> None:
+    # fuel: 2 cars x 2 s x 0.295542696 g/s = 1.182170784 g = 1.182170784 x 1.268 / 3600 gal
+    #     = 4.1638682e-4 gal; distance: 2 x 20 m = 40 m = 0.024854848 mi
+    # -> 59.691725 mpg
+    assert fuel_economy_mpg(POSITIONS, SPEEDS, 1.0) == pytest.approx(59.691725, rel=1e-6)
+
+
+def test_fuel_economy_counts_acceleration_over_its_step() -> None:
+    # car A speeds up 10 -> 11 m/s over step 0 (a = 1), then cruises at 11; car B cruises at 10
+    positions = np.array([[0.0, -15.0], [10.5, -5.0], [21.5, 5.0]])
+    speeds = np.array([[10.0, 10.0], [11.0, 10.0], [11.0, 10.0]])
+    # fuel: f(10, 1) + f(11, 0) + 2 f(10, 0)
+    #     = 1.256577170 + 0.316801929 + 0.591085392 = 2.164464491 g = 7.6237249e-4 gal
+    # distance: 21.5 + 20 = 41.5 m = 0.025786904 mi -> 33.824547 mpg
+    assert fuel_economy_mpg(positions, speeds, 1.0) == pytest.approx(33.824547, rel=1e-6)
+
+
+def test_throughput_of_two_cars_1_5_s_apart() -> None:
+    # every point is crossed by the second car 1.5 s after the first: 1 / 1.5 s = 2400 veh/h
+    assert throughput_at_vph(POSITIONS, 1.0, 2.0) == pytest.approx(2400.0)
+    # the common stretch is 0..5 m; five equi-spaced interior points
+    np.testing.assert_allclose(
+        measurement_points_m(POSITIONS), [5 / 6, 10 / 6, 2.5, 20 / 6, 25 / 6]
+    )
+    assert throughput_vph(POSITIONS, 1.0) == pytest.approx(2400.0)
+
+
+def test_throughput_refuses_a_point_not_every_car_reaches() -> None:
+    with pytest.raises(ValueError, match="not every vehicle passes 12 m"):
+        throughput_at_vph(POSITIONS, 1.0, 12.0)
+
+
+def test_network_speed_is_total_distance_over_total_time() -> None:
+    # one car stands still for 2 s, the other drives 20 m: 20 m / 4 s = 5 m/s
+    positions = np.array([[0.0, -15.0], [10.0, -15.0], [20.0, -15.0]])
+    assert network_speed_mps(positions, 1.0) == pytest.approx(5.0)
+    assert network_speed_mps(POSITIONS, 1.0) == pytest.approx(10.0)
+
+
+def test_comfort_acceleration_and_jerk() -> None:
+    # accelerations per step: car A 1, -1; car B 0, 0 -> RMS sqrt(2/4) = 0.707107
+    # jerk: car A (-1 - 1) / 1 s = -2, car B 0 -> RMS sqrt(4/2) = 1.414214
+    speeds = np.array([[10.0, 10.0], [11.0, 10.0], [10.0, 10.0]])
+    assert accel_rms_mps2(speeds, 1.0) == pytest.approx(np.sqrt(0.5))
+    assert jerk_rms_mps3(speeds, 1.0) == pytest.approx(np.sqrt(2.0))
+    assert accel_rms_mps2(SPEEDS, 1.0) == 0.0
+
+
+def test_time_to_collision_only_when_closing_in() -> None:
+    gaps = np.array([[10.0], [8.0]])
+    follower = np.array([[12.0], [10.0]])
+    leader = np.array([[10.0], [10.0]])
+    # closing at 2 m/s with 10 m left: 5 s; the second moment is not closing
+    assert min_time_to_collision_s(gaps, follower, leader) == pytest.approx(5.0)
+    assert min_time_to_collision_s(gaps, leader, follower) == float("inf")
+
+
+def test_platoon_kpis_cover_the_simulated_cars_not_the_leader() -> None:
+    # leader far ahead and standing still (it would wreck every KPI if it were counted)
+    leader = np.array([[1000.0], [1000.0], [1000.0]])
+    run = PlatoonRun(
+        drive_name="hand-built",
+        dt_s=1.0,
+        is_av=np.array([False, True, False]),
+        position_m=np.hstack([leader, POSITIONS]),
+        speed_mps=np.hstack([np.zeros((3, 1)), SPEEDS]),
+        vehicle_length_m=5.0,
+        gap_violation_m=1.0,
+    )
+    kpis = platoon_kpis(run)
+    assert kpis.fuel_economy_mpg == pytest.approx(59.691725, rel=1e-6)
+    assert kpis.throughput_vph == pytest.approx(2400.0)
+    assert kpis.network_speed_mps == pytest.approx(10.0)
+    assert kpis.accel_rms_mps2 == 0.0
+    # car B is 15 m behind car A's front bumper: gap 10 m, no one closes in on the car ahead
+    # except car A on the standing leader: (1000 - 20 - 5) m / 10 m/s = 97.5 s
+    assert kpis.min_gap_m == pytest.approx(10.0)
+    assert kpis.min_ttc_s == pytest.approx(97.5)
+    assert kpis.collisions == 0

@@ -1,0 +1,142 @@
+"""The platoon simulator: waves grow behind a real stop-and-go leader, not behind a steady one,
+and unsafe driving is reported, never hidden."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.drives import drive_from_speeds, load_drive
+from sim.idm import I24_IDM, equilibrium_gap_m
+from sim.platoon import (
+    VEHICLE_LENGTH_M,
+    AvObservation,
+    platoon_roles,
+    roles_for_penetration,
+    simulate_platoon,
+)
+
+STOP_AND_GO = "trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+
+
+def dip(base: float, low: float, seconds: float = 300.0) -> np.ndarray:
+    """A leader at `base` that slows to `low` once (over about 20 s), then recovers."""
+    t = np.arange(0.0, seconds, 0.1)
+    bump = np.exp(-(((t - 60.0) / 10.0) ** 2))
+    return base - (base - low) * bump
+
+
+class Constant:
+    """An AV that requests the same acceleration whatever happens (an unsafe controller)."""
+
+    def __init__(self, accel: float) -> None:
+        self.accel = accel
+        self.seen: list[AvObservation] = []
+
+    def accel_mps2(self, observation: AvObservation) -> float:
+        self.seen.append(observation)
+        return self.accel
+
+
+def test_constant_speed_leader_makes_no_wave() -> None:
+    leader = drive_from_speeds("steady", np.full(1200, 25.0))
+    run = simulate_platoon(leader, platoon_roles(humans=24, avs=0))
+    np.testing.assert_allclose(run.speed_mps, 25.0, atol=1e-9)
+    gaps = run.gap_m
+    np.testing.assert_allclose(gaps, float(equilibrium_gap_m(I24_IDM, 25.0)), atol=1e-6)
+    assert run.collisions == 0
+    assert run.gap_violations == 0
+
+
+def test_string_unstable_platoon_grows_a_wave() -> None:
+    # congested speeds, where the I-24 IDM is string-unstable
+    leader = drive_from_speeds("dip", dip(10.0, 7.0))
+    run = simulate_platoon(leader, platoon_roles(humans=24, avs=0))
+    drop = 10.0 - run.speed_mps.min(axis=0)
+    # the leader's 3 m/s dip deepens from car to car down the platoon
+    assert drop[0] == pytest.approx(3.0)
+    assert np.all(np.diff(drop) > 0)
+    assert drop[-1] > 1.15 * drop[0]
+
+
+def test_real_stop_and_go_drive_whole(shared_dir: Path) -> None:
+    drive = load_drive(shared_dir / "data" / STOP_AND_GO)
+    run = simulate_platoon(drive, platoon_roles(humans=24, avs=0))
+    assert run.position_m.shape == (drive.steps + 1, 25)
+    np.testing.assert_allclose(run.position_m[:, 0], drive.position_m)
+    assert np.all(run.speed_mps >= 0.0)
+    assert np.all(np.diff(run.position_m, axis=0) >= 0.0)
+    # IDM humans behind a real leader: no crash, and the waves reach the tail stronger
+    assert run.collisions == 0
+    assert run.speed_mps[:, -1].std() > run.speed_mps[:, 0].std()
+
+
+def test_followers_start_at_equilibrium_behind_the_leader() -> None:
+    leader = drive_from_speeds("steady", np.full(20, 20.0))
+    run = simulate_platoon(leader, platoon_roles(humans=3, avs=0))
+    spacing = float(equilibrium_gap_m(I24_IDM, 20.0)) + VEHICLE_LENGTH_M
+    np.testing.assert_allclose(run.position_m[0], [0.0, -spacing, -2 * spacing, -3 * spacing])
+
+
+def test_av_observes_its_gap_and_leader_and_its_request_is_applied() -> None:
+    leader = drive_from_speeds("steady", np.full(11, 20.0))
+    policy = Constant(0.5)
+    run = simulate_platoon(leader, platoon_roles(humans=2, avs=1), [policy])
+    first = policy.seen[0]
+    assert first.speed_mps == 20.0
+    assert first.lead_speed_mps == 20.0
+    assert first.gap_m == pytest.approx(float(equilibrium_gap_m(I24_IDM, 20.0)))
+    assert [o.time_s for o in policy.seen[:3]] == pytest.approx([0.0, 0.1, 0.2])
+    # 10 steps of 0.5 m/s^2
+    assert run.speed_mps[-1, 1] == pytest.approx(20.5)
+    np.testing.assert_allclose(run.accel_mps2[:-1, 1], 0.5)
+
+
+def test_collision_is_recorded_not_clipped() -> None:
+    leader = drive_from_speeds("brake", np.concatenate([np.full(50, 20.0), np.zeros(300)]))
+    reckless = Constant(0.0)  # never brakes
+    run = simulate_platoon(leader, platoon_roles(humans=1, avs=1), [reckless])
+    assert run.collisions >= 1
+    crash = next(event for event in run.events if event.kind == "collision")
+    assert crash.vehicle == 1
+    assert crash.min_gap_m < -10.0  # it drove on through the leader: nothing was clipped
+    assert 0.5 < crash.first_time_s < 10.0
+
+
+def test_gap_violation_without_contact_is_reported() -> None:
+    leader = drive_from_speeds("steady", np.full(400, 10.0))
+
+    class Tailgater:
+        def accel_mps2(self, observation: AvObservation) -> float:
+            # an overdamped gap controller aiming at 0.5 m behind the leader
+            closing = observation.lead_speed_mps - observation.speed_mps
+            return 0.2 * (observation.gap_m - 0.5) + 1.0 * closing
+
+    run = simulate_platoon(leader, platoon_roles(humans=0, avs=1), [Tailgater()])
+    assert run.collisions == 0
+    assert run.gap_violations == 1
+    assert 0.0 < run.events[0].min_gap_m < 1.0
+
+
+def test_av_placement_by_penetration() -> None:
+    roles = roles_for_penetration(25, 0.08)
+    assert roles.sum() == 2
+    assert roles[0]
+    assert platoon_roles(humans=24, avs=1).tolist() == [True] + [False] * 24
+    assert roles_for_penetration(25, 0.0).sum() == 0
+    with pytest.raises(ValueError, match="between 0 and 1"):
+        roles_for_penetration(25, 1.5)
+
+
+def test_policy_count_must_match_the_avs() -> None:
+    leader = drive_from_speeds("steady", np.full(20, 20.0))
+    with pytest.raises(ValueError, match="2 AVs in the platoon but 1 policies"):
+        simulate_platoon(leader, platoon_roles(humans=2, avs=2), [Constant(0.0)])
+
+
+def test_non_finite_request_is_refused() -> None:
+    leader = drive_from_speeds("steady", np.full(20, 20.0))
+    with pytest.raises(ValueError, match="non-finite"):
+        simulate_platoon(leader, platoon_roles(humans=0, avs=1), [Constant(float("nan"))])
