@@ -10,11 +10,17 @@ from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from fastapi import FastAPI
 from sqlalchemy.ext.asyncio import async_sessionmaker
 
+from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
 from app.core.errors import install_error_handlers
+from app.core.metrics import RequestMetrics
+from app.corridors.router import router as corridors_router
+from app.feeds.router import router as feeds_router
 from app.health.router import router as health_router
+from app.ingest import ingest_running
 from app.maintenance import maintain_async
+from app.vehicles.router import router as vehicles_router
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +73,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
         scheduler.start()
         try:
-            yield
+            async with ingest_running(app, engine, settings):
+                yield
         finally:
             scheduler.shutdown(wait=False)
             await engine.dispose()
@@ -80,5 +87,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     install_error_handlers(app)
+    app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(RequestMetrics)
     app.include_router(health_router)
+    app.include_router(vehicles_router)
+    app.include_router(corridors_router)
+    app.include_router(feeds_router)
     return app

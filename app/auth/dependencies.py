@@ -1,0 +1,74 @@
+"""FastAPI dependencies: 401 without a valid bearer token, 403 for a role that may not act.
+
+Roles (../shared/interfaces.md): `vehicle` (bound to one vehicle_id), `feed` (third-party data),
+ops `viewer` < `operator` < `admin`. What each endpoint allows is stated where it is declared.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import Annotated
+
+from fastapi import Depends, HTTPException, Request
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from app.auth.tokens import Principal, TokenCache
+from app.core.config import Settings
+from app.core.security import TokenRole
+
+bearer_scheme = HTTPBearer(auto_error=False, description="A smoothfleet API token (sf_...).")
+
+CHALLENGE = {"WWW-Authenticate": "Bearer"}
+
+
+def token_cache(request: Request) -> TokenCache:
+    """The process's token cache, made on first use from the app's engine and settings."""
+    state = request.app.state
+    cache: TokenCache | None = getattr(state, "token_cache", None)
+    if cache is None:
+        settings: Settings = state.settings
+        cache = TokenCache(state.engine, settings.token_cache_ttl_s)
+        state.token_cache = cache
+    return cache
+
+
+async def authenticate(
+    request: Request,
+    credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(bearer_scheme)],
+) -> Principal:
+    """The caller's principal; 401 when the token is missing, malformed, unknown or revoked."""
+    if credentials is None:
+        raise HTTPException(401, "missing bearer token (Authorization: Bearer <token>)", CHALLENGE)
+    principal = await token_cache(request).principal(credentials.credentials)
+    if principal is None:
+        raise HTTPException(401, "invalid or revoked token", CHALLENGE)
+    # Kept on the request for what runs later (per-token rate limits, access logs).
+    request.state.principal = principal
+    return principal
+
+
+def allow(*roles: TokenRole) -> Callable[..., Awaitable[Principal]]:
+    """A dependency admitting only the given roles (403 for any other valid token)."""
+    allowed = frozenset(roles)
+    needed = " or ".join(roles)
+
+    async def admitted(principal: Annotated[Principal, Depends(authenticate)]) -> Principal:
+        if principal.role not in allowed:
+            raise HTTPException(403, f"a {principal.role} token may not do this (needs {needed})")
+        return principal
+
+    return admitted
+
+
+AuthDep = Annotated[Principal, Depends(authenticate)]
+"""Any valid token."""
+ViewerDep = Annotated[Principal, Depends(allow("viewer", "operator", "admin"))]
+"""Any ops token (read-only operations)."""
+OperatorDep = Annotated[Principal, Depends(allow("operator", "admin"))]
+"""Operators and admins (changing assignments)."""
+AdminDep = Annotated[Principal, Depends(allow("admin"))]
+"""Admins only."""
+PingWriterDep = Annotated[Principal, Depends(allow("vehicle", "operator", "admin"))]
+"""Who may post pings and status reports (a vehicle token only for its own vehicle)."""
+FeedWriterDep = Annotated[Principal, Depends(allow("feed", "admin"))]
+"""Who may post third-party feed data."""

@@ -1,0 +1,115 @@
+"""Who a bearer token belongs to, looked up by its SHA-256 and cached for a few seconds.
+
+Tokens are 256-bit random strings stored as sha256 hex (app.core.security), so the lookup is by
+the hash of what the client presented. The cache is keyed by that hash too: an attacker cannot
+steer the hash's bytes, so neither the index lookup nor the dict lookup leaks anything about a
+stored token through timing; the stored hash is still compared with `hmac.compare_digest`.
+
+Revocation: setting `api_token.revoked_at` takes effect in every server process within
+`token_cache_ttl_s` (default 5 s), the life of a cache entry; unknown tokens are cached as
+refused for the same time, so guessing costs no database round trip per request.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sqlalchemy import text
+from sqlalchemy.ext.asyncio import AsyncEngine
+
+from app.core.security import TokenRole, hash_token
+
+# Looks a token up and notes its use at most once a minute (not on every ping).
+LOOKUP_SQL = text(
+    """
+    WITH found AS (
+        SELECT token_id, kind, role, vehicle_id, token_hash
+        FROM api_token
+        WHERE token_hash = :token_hash AND revoked_at IS NULL
+    ), touched AS (
+        UPDATE api_token SET last_used_at = now()
+        WHERE token_id IN (SELECT token_id FROM found)
+          AND (last_used_at IS NULL OR last_used_at < now() - interval '60 seconds')
+    )
+    SELECT token_id, kind, role, vehicle_id, token_hash FROM found
+    """
+)
+
+# Bounds the memory a flood of random tokens can take; the cache is simply emptied when full.
+MAX_CACHED_TOKENS = 10_000
+
+
+@dataclass(frozen=True, slots=True)
+class Principal:
+    """The holder of a valid token: its role and, for a vehicle token, its vehicle."""
+
+    token_id: int
+    role: TokenRole
+    vehicle_id: str | None
+
+    def may_report_for(self, vehicle_id: str) -> bool:
+        """A vehicle token reports only for its own vehicle; operators and admins for any."""
+        if self.role == "vehicle":
+            return self.vehicle_id == vehicle_id
+        return self.role in ("operator", "admin")
+
+
+class TokenCache:
+    """Token hash -> principal (or refusal), each entry kept `ttl_s` seconds."""
+
+    def __init__(
+        self,
+        engine: AsyncEngine,
+        ttl_s: float,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._engine = engine
+        self._ttl_s = ttl_s
+        self._clock = clock
+        self._entries: dict[str, tuple[float, Principal | None]] = {}
+        self._pending: dict[str, asyncio.Future[Principal | None]] = {}
+
+    async def principal(self, token: str) -> Principal | None:
+        """The principal of a presented token, or None if it is unknown or revoked."""
+        token_hash = hash_token(token)
+        entry = self._entries.get(token_hash)
+        if entry is not None and entry[0] > self._clock():
+            return entry[1]
+        pending = self._pending.get(token_hash)
+        if pending is not None:
+            return await asyncio.shield(pending)
+        future: asyncio.Future[Principal | None] = asyncio.get_running_loop().create_future()
+        self._pending[token_hash] = future
+        try:
+            found = await self._lookup(token_hash)
+        except asyncio.CancelledError:
+            future.cancel()
+            raise
+        except Exception as error:
+            future.set_exception(error)
+            future.exception()  # marks it retrieved when nobody else waits on it
+            raise
+        finally:
+            del self._pending[token_hash]
+        future.set_result(found)
+        if len(self._entries) >= MAX_CACHED_TOKENS:
+            self._entries.clear()
+        self._entries[token_hash] = (self._clock() + self._ttl_s, found)
+        return found
+
+    def forget(self) -> None:
+        """Drop every cached entry (the next request of each token looks it up again)."""
+        self._entries.clear()
+
+    async def _lookup(self, token_hash: str) -> Principal | None:
+        async with self._engine.begin() as connection:
+            row = (await connection.execute(LOOKUP_SQL, {"token_hash": token_hash})).first()
+        if row is None or not hmac.compare_digest(row.token_hash, token_hash):
+            return None
+        role: TokenRole = row.kind if row.kind in ("vehicle", "feed") else row.role
+        return Principal(token_id=int(row.token_id), role=role, vehicle_id=row.vehicle_id)

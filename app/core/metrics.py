@@ -1,0 +1,74 @@
+"""Prometheus metrics of the API (served at /metrics) and the middleware timing requests.
+
+Metrics are module-level, registered once per process. Labels are bounded: routes are the
+declared path templates (unmatched paths share one label) and outcomes are fixed words.
+"""
+
+from __future__ import annotations
+
+import time
+
+from prometheus_client import Counter, Histogram
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
+
+PINGS = Counter(
+    "smoothfleet_pings",
+    "Pings received, by outcome (accepted, duplicate, rejected, refused = 403 request).",
+    ["outcome"],
+)
+STATUS_REPORTS = Counter(
+    "smoothfleet_status_reports", "piStatus reports received, by outcome.", ["outcome"]
+)
+INRIX_SEGMENTS = Counter(
+    "smoothfleet_inrix_segments",
+    "INRIX segment readings received, by outcome (stored, duplicate, unknown).",
+    ["outcome"],
+)
+REQUEST_SECONDS = Histogram(
+    "smoothfleet_http_request_duration_seconds",
+    "Time from request start to the end of the response, by route and status.",
+    ["method", "route", "status"],
+    buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0),
+)
+PING_GROUP_ROWS = Histogram(
+    "smoothfleet_ping_group_rows",
+    "Pings per group-commit statement.",
+    buckets=(1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000, 10000, 20000),
+)
+PING_GROUP_SECONDS = Histogram(
+    "smoothfleet_ping_group_write_seconds",
+    "Time to write and commit one group of pings.",
+    buckets=(0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 5.0),
+)
+
+UNMATCHED_ROUTE = "unmatched"
+
+
+class RequestMetrics:
+    """ASGI middleware observing every HTTP request's duration under its route template."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        started = time.perf_counter()
+        status = 500
+
+        async def send_noting_status(message: Message) -> None:
+            nonlocal status
+            if message["type"] == "http.response.start":
+                status = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_noting_status)
+        finally:
+            # The router stores the matched route in the (shared) scope.
+            route = scope.get("route")
+            template = getattr(route, "path", None) or UNMATCHED_ROUTE
+            REQUEST_SECONDS.labels(scope["method"], template, str(status)).observe(
+                time.perf_counter() - started
+            )

@@ -1,0 +1,1 @@
+"""Third-party feeds: the INRIX segment-speed feed (endpoint, poller, recorded replays)."""

@@ -1,0 +1,141 @@
+"""The INRIX segment-speed response as the provider sends it, and its readings in SI units.
+
+Accepted as is: `result.segmentspeeds[]` each with a `timestamp` and `segments[]` holding
+`code`, `type`, `speed`, `average`, `reference` (mph), `travelTimeMinutes`, `score` (30
+real-time, 20 mixed, 10 historical), `c-Value` (0-100), `segmentClosed` and `subSegments`
+(ignored). Unknown fields are ignored. A set without a timestamp takes the response's
+`createdDate`; a timestamp without a zone is UTC (the provider's clock).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+MPS_PER_MPH = 0.44704  # exact: 1 mph = 1609.344 m / 3600 s
+S_PER_MINUTE = 60.0
+
+
+class InrixFormatError(ValueError):
+    """The document is not an INRIX segment-speed response; the message says where."""
+
+
+def _as_utc(value: datetime | None) -> datetime | None:
+    if value is not None and value.tzinfo is None:
+        return value.replace(tzinfo=UTC)
+    return value
+
+
+class InrixSegment(BaseModel):
+    """One segment's reading (mph, as the provider sends it)."""
+
+    model_config = ConfigDict(extra="ignore", allow_inf_nan=False, populate_by_name=True)
+
+    code: str = Field(min_length=1, max_length=64)
+    type: str | None = None
+    speed: float | None = Field(None, ge=0, le=250)
+    average: float | None = Field(None, ge=0, le=250)
+    reference: float | None = Field(None, ge=0, le=250)
+    travel_time_minutes: float | None = Field(None, alias="travelTimeMinutes", ge=0)
+    score: int | None = Field(None, ge=0, le=100)
+    c_value: float | None = Field(None, alias="c-Value", ge=0, le=100)
+    segment_closed: bool = Field(False, alias="segmentClosed")
+
+
+class InrixSegmentSet(BaseModel):
+    """Readings of one provider timestamp."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    timestamp: datetime | None = None
+    segments: list[InrixSegment]
+
+    _utc = field_validator("timestamp")(_as_utc)
+
+
+class InrixResult(BaseModel):
+    """The `result` member of a response."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    segmentspeeds: list[InrixSegmentSet]
+
+
+class InrixResponse(BaseModel):
+    """A segment-speed response as returned by the provider."""
+
+    model_config = ConfigDict(extra="ignore", populate_by_name=True)
+
+    result: InrixResult
+    created_date: datetime | None = Field(None, alias="createdDate")
+
+    _utc = field_validator("created_date")(_as_utc)
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentReading:
+    """One segment's reading in SI units, ready for fact_inrix_estimate."""
+
+    xd_code: str
+    measured_at: datetime
+    speed_mps: float | None
+    average_speed_mps: float | None
+    reference_speed_mps: float | None
+    travel_time_s: float | None
+    score: int | None
+    c_value: float | None
+    is_closed: bool
+
+
+def _mps(mph: float | None) -> float | None:
+    return None if mph is None else mph * MPS_PER_MPH
+
+
+def parse_response(document: Any) -> InrixResponse:
+    """The provider response in `document` (parsed JSON); InrixFormatError if it is not one."""
+    try:
+        return InrixResponse.model_validate(document)
+    except ValidationError as error:
+        first = error.errors(include_url=False)[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise InrixFormatError(
+            f"not an INRIX segment-speed response: {where}: {first['msg']}"
+        ) from None
+
+
+def readings(document: Any) -> list[SegmentReading]:
+    """The readings of a provider response (parsed JSON) in SI units."""
+    return readings_of(parse_response(document))
+
+
+def readings_of(response: InrixResponse) -> list[SegmentReading]:
+    """The response's readings, converted from mph and minutes to SI units."""
+    found: list[SegmentReading] = []
+    for number, segment_set in enumerate(response.result.segmentspeeds):
+        measured_at = segment_set.timestamp or response.created_date
+        if measured_at is None:
+            raise InrixFormatError(
+                f"result.segmentspeeds.{number}: no timestamp (and no createdDate)"
+            )
+        for segment in segment_set.segments:
+            found.append(
+                SegmentReading(
+                    xd_code=segment.code,
+                    measured_at=measured_at,
+                    speed_mps=_mps(segment.speed),
+                    average_speed_mps=_mps(segment.average),
+                    reference_speed_mps=_mps(segment.reference),
+                    travel_time_s=(
+                        None
+                        if segment.travel_time_minutes is None
+                        else segment.travel_time_minutes * S_PER_MINUTE
+                    ),
+                    score=segment.score,
+                    c_value=segment.c_value,
+                    is_closed=segment.segment_closed,
+                )
+            )
+    return found

@@ -1,0 +1,94 @@
+"""Store INRIX readings in fact_inrix_estimate: known codes only, nothing twice.
+
+Shared by `POST /api/v1/feeds/inrix`, `smoothfleet inrix poll` and `smoothfleet inrix replay`.
+A code missing from dim_inrix_segment is counted and reported, not stored. A resent snapshot
+finds its (corridor, code, measured_at) keys taken and stores nothing (ON CONFLICT DO NOTHING).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from datetime import datetime, timedelta
+
+from sqlalchemy import select
+from sqlalchemy.dialects.postgresql import insert
+from sqlalchemy.ext.asyncio import AsyncSession
+
+from app.core import metrics
+from app.feeds.inrix import SegmentReading
+from app.models import InrixEstimate, InrixSegment
+
+# Enough of the unknown codes to act on; the count covers them all.
+MAX_UNKNOWN_LISTED = 100
+
+
+@dataclass(frozen=True)
+class StoreResult:
+    """What became of a snapshot's readings."""
+
+    accepted: int
+    duplicates: int
+    unknown_codes: int
+    unknown: list[str]
+    measured_at: list[datetime]
+
+
+async def store_readings(
+    session: AsyncSession, readings: Sequence[SegmentReading], received_at: datetime
+) -> StoreResult:
+    """Store the readings of known segments; count the rest. The caller commits."""
+    codes = sorted({reading.xd_code for reading in readings})
+    corridor_of = dict(
+        (
+            await session.execute(
+                select(InrixSegment.xd_code, InrixSegment.corridor_id).where(
+                    InrixSegment.xd_code.in_(codes)
+                )
+            )
+        ).tuples()
+    )
+    known = [reading for reading in readings if reading.xd_code in corridor_of]
+    unknown = sorted({reading.xd_code for reading in readings} - set(corridor_of))
+    accepted = 0
+    if known:
+        statement = (
+            insert(InrixEstimate)
+            .values(
+                [
+                    {
+                        "corridor_id": corridor_of[reading.xd_code],
+                        "xd_code": reading.xd_code,
+                        "measured_at": reading.measured_at,
+                        "received_at": received_at,
+                        "speed_mps": reading.speed_mps,
+                        "average_speed_mps": reading.average_speed_mps,
+                        "reference_speed_mps": reading.reference_speed_mps,
+                        "travel_time_s": reading.travel_time_s,
+                        "score": reading.score,
+                        "c_value": reading.c_value,
+                        "is_closed": reading.is_closed,
+                    }
+                    for reading in known
+                ]
+            )
+            .on_conflict_do_nothing(index_elements=["corridor_id", "xd_code", "measured_at"])
+            .returning(InrixEstimate.xd_code)
+        )
+        accepted = len((await session.execute(statement)).all())
+    unknown_readings = len(readings) - len(known)
+    metrics.INRIX_SEGMENTS.labels("stored").inc(accepted)
+    metrics.INRIX_SEGMENTS.labels("duplicate").inc(len(known) - accepted)
+    metrics.INRIX_SEGMENTS.labels("unknown").inc(unknown_readings)
+    return StoreResult(
+        accepted=accepted,
+        duplicates=len(known) - accepted,
+        unknown_codes=unknown_readings,
+        unknown=unknown[:MAX_UNKNOWN_LISTED],
+        measured_at=sorted({reading.measured_at for reading in readings}),
+    )
+
+
+def shifted(readings: Sequence[SegmentReading], by: timedelta) -> list[SegmentReading]:
+    """The readings with their provider timestamps moved by `by` (replaying old data as new)."""
+    return [replace(reading, measured_at=reading.measured_at + by) for reading in readings]

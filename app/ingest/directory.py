@@ -1,0 +1,113 @@
+"""What ingest must know about the fleet, cached per process: vehicle -> corridor -> geometry.
+
+Every ping needs its vehicle's corridor (lanes, map-matching geometry); asking the database per
+ping would double the work of the hot path, so the directory is loaded once and refreshed every
+`roster_cache_ttl_s`. A vehicle added to the roster is seen at once: an unknown vehicle_id makes
+the next request reload the directory (at most once per `MIN_RELOAD_INTERVAL_S`, so a stream of
+bad ids cannot turn into a stream of queries).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable, Collection
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from sqlalchemy import text
+from sqlalchemy.ext.asyncio import AsyncEngine
+
+from vehicle_agent.corridor import CorridorGeometry
+
+MIN_RELOAD_INTERVAL_S = 2.0
+
+VEHICLES_SQL = text("SELECT vehicle_id, corridor_id FROM dim_vehicle")
+CORRIDORS_SQL = text("SELECT corridor_id, lanes FROM dim_corridor")
+SEGMENTS_SQL = text(
+    "SELECT corridor_id, start_x_m, end_x_m, start_lat, start_lon, end_lat, end_lon "
+    "FROM dim_i24_segment ORDER BY corridor_id, start_x_m"
+)
+
+
+@dataclass(frozen=True)
+class CorridorInfo:
+    """A corridor's lane count and its geometry (None when it has no sub-segments yet)."""
+
+    corridor_id: str
+    lanes: int
+    geometry: CorridorGeometry | None
+
+    def x_m(self, lat: NDArray[np.float64], lon: NDArray[np.float64]) -> list[float | None]:
+        """Map-matched positions of the fixes; None where a fix is off the corridor."""
+        if self.geometry is None:
+            return [None] * len(lat)
+        located = self.geometry.locate(lat, lon)
+        return [
+            float(x) if on else None
+            for x, on in zip(located.x_m.tolist(), located.on_corridor.tolist(), strict=True)
+        ]
+
+
+@dataclass(frozen=True)
+class FleetDirectory:
+    """A snapshot of the roster and corridors."""
+
+    vehicle_corridor: dict[str, str] = field(default_factory=dict)
+    corridors: dict[str, CorridorInfo] = field(default_factory=dict)
+
+    def corridor_of(self, vehicle_id: str) -> CorridorInfo | None:
+        """The corridor a known vehicle drives, or None for an unknown vehicle."""
+        corridor_id = self.vehicle_corridor.get(vehicle_id)
+        return None if corridor_id is None else self.corridors.get(corridor_id)
+
+
+class FleetDirectoryCache:
+    """Loads the directory on demand and keeps it `ttl_s` seconds."""
+
+    def __init__(
+        self, engine: AsyncEngine, ttl_s: float, *, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self._engine = engine
+        self._ttl_s = ttl_s
+        self._clock = clock
+        self._directory: FleetDirectory | None = None
+        self._loaded_at = -float("inf")
+        self._lock = asyncio.Lock()
+
+    async def directory(self, vehicle_ids: Collection[str] = ()) -> FleetDirectory:
+        """A fresh enough directory that knows `vehicle_ids` if the roster does."""
+        current = self._directory
+        now = self._clock()
+        if current is not None and now - self._loaded_at < self._ttl_s:
+            unknown = any(v not in current.vehicle_corridor for v in vehicle_ids)
+            if not unknown or now - self._loaded_at < MIN_RELOAD_INTERVAL_S:
+                return current
+        async with self._lock:
+            # Another request may have reloaded while this one waited for the lock.
+            if self._directory is not None and self._loaded_at >= now:
+                return self._directory
+            self._directory = await self._load()
+            self._loaded_at = self._clock()
+            return self._directory
+
+    async def _load(self) -> FleetDirectory:
+        async with self._engine.connect() as connection:
+            vehicles = (await connection.execute(VEHICLES_SQL)).all()
+            corridors = (await connection.execute(CORRIDORS_SQL)).all()
+            segments = (await connection.execute(SEGMENTS_SQL)).mappings().all()
+        by_corridor: dict[str, list[dict[str, float]]] = {}
+        for segment in segments:
+            by_corridor.setdefault(segment["corridor_id"], []).append(dict(segment))
+        infos = {}
+        for corridor_id, lanes in corridors:
+            pieces = by_corridor.get(corridor_id)
+            geometry = (
+                CorridorGeometry.from_segments(corridor_id, int(lanes), pieces) if pieces else None
+            )
+            infos[corridor_id] = CorridorInfo(corridor_id, int(lanes), geometry)
+        return FleetDirectory(
+            vehicle_corridor={str(row.vehicle_id): str(row.corridor_id) for row in vehicles},
+            corridors=infos,
+        )

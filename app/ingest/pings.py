@@ -1,0 +1,204 @@
+"""From a request body to rows: parse, check the token's authority, validate item by item.
+
+Pure functions over the parsed body and a fleet directory snapshot (no I/O), so every rule of
+ingest is testable on its own and the hot path allocates no ORM objects.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from typing import NamedTuple
+
+import orjson
+from pydantic import ValidationError
+
+from app.auth import Principal
+from app.ingest.directory import CorridorInfo, FleetDirectory
+from app.vehicles.schemas import MAX_PINGS_PER_BATCH, Ping
+
+REQUIRED_FIELDS = ("vehicle_id", "ts", "lat", "lon", "speed_mps")
+
+
+class BodyError(ValueError):
+    """The body is not a ping or a batch at all (answered 422)."""
+
+
+class ForeignVehicle(PermissionError):
+    """A vehicle token posted a ping of another vehicle (answered 403, nothing stored)."""
+
+
+class PingRow(NamedTuple):
+    """A validated ping in fact_vehicle_ping's column order, with its corridor for map-matching."""
+
+    vehicle_id: str
+    ts: datetime
+    received_at: datetime
+    lat: float
+    lon: float
+    speed_mps: float
+    accel_mps2: float | None
+    heading_deg: float | None
+    lane: int | None
+    is_acc_engaged: bool | None
+    is_controller_engaged: bool | None
+    controller: str | None
+    acc_speed_setting_mph: float | None
+    acc_gap_setting: int | None
+    is_lead_present: bool | None
+    lead_distance_m: float | None
+    lead_rel_speed_mps: float | None
+    plan_id: int | None
+    corridor: CorridorInfo
+
+
+@dataclass(frozen=True)
+class Rejected:
+    """A ping refused on its own: its index in the request and why."""
+
+    index: int
+    error: str
+
+
+@dataclass(frozen=True)
+class TimeWindow:
+    """The accepted range of `ts`: not older than retention, not too far in the future."""
+
+    earliest: datetime
+    latest: datetime
+    retention_days: int
+    max_future_s: float
+
+    @classmethod
+    def around(cls, now: datetime, *, retention_days: int, max_future_s: float) -> TimeWindow:
+        """The window for a request received at `now`."""
+        return cls(
+            earliest=now - timedelta(days=retention_days),
+            latest=now + timedelta(seconds=max_future_s),
+            retention_days=retention_days,
+            max_future_s=max_future_s,
+        )
+
+
+def parse_body(body: bytes) -> list[object]:
+    """The items of a body holding one ping or `{"pings": [...]}`; BodyError otherwise."""
+    try:
+        document = orjson.loads(body)
+    except orjson.JSONDecodeError as error:
+        raise BodyError(f"body is not JSON: {error}") from None
+    if not isinstance(document, dict):
+        raise BodyError('body must be a ping object or {"pings": [...]}')
+    if "pings" in document:
+        items = document["pings"]
+        if not isinstance(items, list):
+            raise BodyError('"pings" must be a list of ping objects')
+        if len(items) > MAX_PINGS_PER_BATCH:
+            raise BodyError(
+                f"a batch holds at most {MAX_PINGS_PER_BATCH} pings, this one has {len(items)}"
+            )
+        return items
+    if not any(name in document for name in REQUIRED_FIELDS):
+        raise BodyError(
+            'body is neither a ping (vehicle_id, ts, lat, lon, speed_mps) nor {"pings": [...]}'
+        )
+    return [document]
+
+
+def check_authority(items: Sequence[object], principal: Principal) -> None:
+    """Refuse the whole request if a vehicle token carries another vehicle's ping."""
+    if principal.role != "vehicle":
+        return
+    for item in items:
+        if isinstance(item, dict):
+            vehicle_id = item.get("vehicle_id")
+            if vehicle_id is not None and vehicle_id != principal.vehicle_id:
+                raise ForeignVehicle(
+                    f"this token belongs to vehicle {principal.vehicle_id} and may not post "
+                    f"pings of {vehicle_id!r}; nothing of this request was stored"
+                )
+
+
+def _describe(error: ValidationError) -> str:
+    first = error.errors(include_url=False)[0]
+    where = ".".join(str(part) for part in first["loc"])
+    message = first["msg"].removeprefix("Value error, ")
+    return f"{where}: {message}" if where else message
+
+
+def validate_items(
+    items: Sequence[object],
+    directory: FleetDirectory,
+    window: TimeWindow,
+    received_at: datetime,
+) -> tuple[list[PingRow], list[Rejected]]:
+    """Rows for the good items and a rejection (index, reason) for each bad one."""
+    rows: list[PingRow] = []
+    rejected: list[Rejected] = []
+    for index, item in enumerate(items):
+        if not isinstance(item, dict):
+            rejected.append(Rejected(index, "a ping must be a JSON object"))
+            continue
+        try:
+            ping = Ping.model_validate(item)
+        except ValidationError as error:
+            rejected.append(Rejected(index, _describe(error)))
+            continue
+        corridor = directory.corridor_of(ping.vehicle_id)
+        if corridor is None:
+            rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}"))
+            continue
+        if ping.lane is not None and ping.lane > corridor.lanes:
+            rejected.append(
+                Rejected(
+                    index,
+                    f"lane {ping.lane} is outside the {corridor.lanes} lanes of "
+                    f"{corridor.corridor_id}",
+                )
+            )
+            continue
+        if ping.ts > window.latest:
+            rejected.append(
+                Rejected(index, f"ts is more than {window.max_future_s:g} s in the future")
+            )
+            continue
+        if ping.ts < window.earliest:
+            rejected.append(
+                Rejected(
+                    index, f"ts is older than the {window.retention_days}-day retention window"
+                )
+            )
+            continue
+        rows.append(
+            PingRow(
+                ping.vehicle_id,
+                ping.ts,
+                received_at,
+                ping.lat,
+                ping.lon,
+                ping.speed_mps,
+                ping.accel_mps2,
+                ping.heading_deg,
+                ping.lane,
+                ping.acc_engaged,
+                ping.controller_engaged,
+                ping.controller,
+                ping.acc_speed_setting_mph,
+                ping.acc_gap_setting,
+                ping.lead_present,
+                ping.lead_distance_m,
+                ping.lead_rel_speed_mps,
+                ping.plan_id,
+                corridor,
+            )
+        )
+    return rows, rejected
+
+
+def vehicle_ids(items: Sequence[object]) -> set[str]:
+    """The string vehicle_ids named in the items (to make sure the directory knows them)."""
+    return {
+        item["vehicle_id"]
+        for item in items
+        if isinstance(item, dict) and isinstance(item.get("vehicle_id"), str)
+    }

@@ -1,0 +1,89 @@
+"""The ping ingest: body -> checks -> group-committed rows -> the request's counts."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+from dataclasses import dataclass
+from datetime import datetime
+
+from fastapi import FastAPI, Request
+from sqlalchemy.ext.asyncio import AsyncEngine
+
+from app.auth import Principal
+from app.core import metrics
+from app.core.config import Settings
+from app.ingest.directory import FleetDirectoryCache
+from app.ingest.pings import (
+    ForeignVehicle,
+    Rejected,
+    TimeWindow,
+    check_authority,
+    parse_body,
+    validate_items,
+    vehicle_ids,
+)
+from app.ingest.writer import PingWriter
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """One request's answer: rows committed, duplicates, per-item rejections."""
+
+    accepted: int
+    duplicates: int
+    rejected: list[Rejected]
+
+
+@dataclass(frozen=True)
+class Ingest:
+    """The process's ingest machinery: the fleet directory and the ping writer."""
+
+    directory: FleetDirectoryCache
+    writer: PingWriter
+    retention_days: int
+    max_future_s: float
+
+    async def pings(self, body: bytes, principal: Principal, received_at: datetime) -> IngestResult:
+        """Store the body's good pings; BodyError (422) or ForeignVehicle (403) refuse it all."""
+        items = parse_body(body)
+        try:
+            check_authority(items, principal)
+        except ForeignVehicle:
+            metrics.PINGS.labels("refused").inc(len(items))
+            raise
+        directory = await self.directory.directory(vehicle_ids(items))
+        window = TimeWindow.around(
+            received_at, retention_days=self.retention_days, max_future_s=self.max_future_s
+        )
+        rows, rejected = validate_items(items, directory, window, received_at)
+        outcome = await self.writer.write(rows)
+        metrics.PINGS.labels("accepted").inc(outcome.accepted)
+        metrics.PINGS.labels("duplicate").inc(outcome.duplicates)
+        metrics.PINGS.labels("rejected").inc(len(rejected))
+        return IngestResult(outcome.accepted, outcome.duplicates, rejected)
+
+
+@asynccontextmanager
+async def ingest_running(
+    app: FastAPI, engine: AsyncEngine, settings: Settings
+) -> AsyncIterator[None]:
+    """Run the ingest machinery for the app's lifetime (app.state.ingest)."""
+    writer = PingWriter(engine, concurrency=settings.ingest_write_concurrency)
+    app.state.ingest = Ingest(
+        directory=FleetDirectoryCache(engine, settings.roster_cache_ttl_s),
+        writer=writer,
+        retention_days=settings.ping_retention_days,
+        max_future_s=settings.ping_max_future_s,
+    )
+    writer.start()
+    try:
+        yield
+    finally:
+        await writer.stop()
+
+
+def ingest_of(request: Request) -> Ingest:
+    """The app's ingest machinery."""
+    ingest: Ingest = request.app.state.ingest
+    return ingest

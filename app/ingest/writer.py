@@ -1,0 +1,199 @@
+"""Group commit for pings: many requests' rows in one INSERT, each answered after the commit.
+
+Requests hand their validated rows to the process's PingWriter and wait. The writer takes
+everything queued, writes it with one statement (app.ingest.sql) in one transaction, commits,
+and only then tells each request how many of its rows were inserted and how many were
+duplicates. Up to `concurrency` groups are in flight at once: while one group is being written
+the next one collects, so under load a group holds many requests and at low load a lone ping
+is written at once (no timer adds latency).
+
+Duplicates are counted per request, also across requests of one group: the first occurrence of
+a (vehicle_id, ts) in the group is the one sent to the database, later ones are duplicates at
+once; a sent row the database did not insert (ON CONFLICT DO NOTHING) was already stored.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.ext.asyncio import AsyncEngine
+
+from app.core import metrics
+from app.ingest.pings import PingRow
+from app.ingest.sql import INSERT_PINGS, PING_COLUMNS
+
+log = logging.getLogger(__name__)
+
+# Rows per statement: big enough to amortise the round trip, small enough that one group's
+# parameters stay a few MB and a statement takes well under the statement timeout.
+MAX_GROUP_ROWS = 20_000
+_LANE = PingRow._fields.index("lane")
+_ROW_FIELDS = len(PingRow._fields) - 1  # every field but `corridor` is a column
+
+
+class WriterStopped(RuntimeError):
+    """The server is shutting down; the request's rows were not written."""
+
+
+@dataclass(frozen=True, slots=True)
+class WriteOutcome:
+    """What happened to one request's rows."""
+
+    accepted: int
+    duplicates: int
+
+
+@dataclass(slots=True)
+class _Submission:
+    rows: Sequence[PingRow]
+    answer: asyncio.Future[WriteOutcome]
+
+
+class PingWriter:
+    """The per-process writer of fact_vehicle_ping."""
+
+    def __init__(
+        self, engine: AsyncEngine, *, concurrency: int = 2, max_group_rows: int = MAX_GROUP_ROWS
+    ) -> None:
+        self._engine = engine
+        self._max_group_rows = max_group_rows
+        self._slots = asyncio.Semaphore(concurrency)
+        self._queue: asyncio.Queue[_Submission] = asyncio.Queue()
+        self._flushes: set[asyncio.Task[None]] = set()
+        self._runner: asyncio.Task[None] | None = None
+
+    def start(self) -> None:
+        """Start collecting groups (inside the running event loop)."""
+        if self._runner is None:
+            self._runner = asyncio.create_task(self._run(), name="ping-writer")
+
+    async def stop(self) -> None:
+        """Finish the groups in flight, then refuse what is still queued."""
+        if self._runner is not None:
+            self._runner.cancel()
+            await asyncio.gather(self._runner, return_exceptions=True)
+            self._runner = None
+        await asyncio.gather(*self._flushes, return_exceptions=True)
+        while not self._queue.empty():
+            submission = self._queue.get_nowait()
+            if not submission.answer.done():
+                submission.answer.set_exception(WriterStopped("server shutting down"))
+
+    async def write(self, rows: Sequence[PingRow]) -> WriteOutcome:
+        """Write the rows; returns once the transaction holding them has committed."""
+        if not rows:
+            return WriteOutcome(0, 0)
+        if self._runner is None:
+            raise WriterStopped("server shutting down")
+        answer: asyncio.Future[WriteOutcome] = asyncio.get_running_loop().create_future()
+        self._queue.put_nowait(_Submission(rows, answer))
+        return await answer
+
+    async def _run(self) -> None:
+        while True:
+            await self._slots.acquire()
+            try:
+                group = [await self._queue.get()]
+            except asyncio.CancelledError:
+                self._slots.release()
+                raise
+            size = len(group[0].rows)
+            while size < self._max_group_rows and not self._queue.empty():
+                submission = self._queue.get_nowait()
+                group.append(submission)
+                size += len(submission.rows)
+            task = asyncio.create_task(self._flush(group))
+            self._flushes.add(task)
+            task.add_done_callback(self._flushes.discard)
+
+    async def _flush(self, group: list[_Submission]) -> None:
+        try:
+            await self._answer(group)
+        finally:
+            self._slots.release()
+
+    async def _answer(self, group: list[_Submission]) -> None:
+        try:
+            outcomes = await self._write_group(group)
+        except IntegrityError as error:
+            if len(group) == 1:
+                _fail(group, error)
+                return
+            # A row the checks let through was refused (e.g. its vehicle was just removed from
+            # the roster): write each request alone so that only its own request fails.
+            log.warning("group of %d requests refused; writing them one by one", len(group))
+            for submission in group:
+                await self._answer([submission])
+            return
+        except Exception as error:  # every waiting request gets it (outages become 503)
+            _fail(group, error)
+            return
+        for submission, outcome in zip(group, outcomes, strict=True):
+            if not submission.answer.done():
+                submission.answer.set_result(outcome)
+
+    async def _write_group(self, group: list[_Submission]) -> list[WriteOutcome]:
+        sent: list[PingRow] = []
+        owner: list[int] = []
+        duplicates = [0] * len(group)
+        seen: set[tuple[str, datetime]] = set()
+        for number, submission in enumerate(group):
+            for row in submission.rows:
+                key = (row.vehicle_id, row.ts)
+                if key in seen:
+                    duplicates[number] += 1
+                    continue
+                seen.add(key)
+                sent.append(row)
+                owner.append(number)
+        started = time.perf_counter()
+        parameters = _column_arrays(sent)
+        async with self._engine.connect() as connection:
+            result = await connection.exec_driver_sql(INSERT_PINGS, parameters)
+            inserted = {(row.vehicle_id, row.ts) for row in result}
+            await connection.commit()
+        metrics.PING_GROUP_ROWS.observe(len(sent))
+        metrics.PING_GROUP_SECONDS.observe(time.perf_counter() - started)
+        accepted = [0] * len(group)
+        for row, number in zip(sent, owner, strict=True):
+            if (row.vehicle_id, row.ts) in inserted:
+                accepted[number] += 1
+            else:
+                duplicates[number] += 1
+        return [WriteOutcome(a, d) for a, d in zip(accepted, duplicates, strict=True)]
+
+
+def _fail(group: Sequence[_Submission], error: Exception) -> None:
+    for submission in group:
+        if not submission.answer.done():
+            submission.answer.set_exception(error)
+
+
+def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
+    """x_m of each row on its vehicle's corridor (vectorised per corridor)."""
+    x_m: list[float | None] = [None] * len(rows)
+    by_corridor: dict[str, list[int]] = {}
+    for position, row in enumerate(rows):
+        by_corridor.setdefault(row.corridor.corridor_id, []).append(position)
+    for positions in by_corridor.values():
+        corridor = rows[positions[0]].corridor
+        lat = np.fromiter((rows[p].lat for p in positions), dtype=np.float64, count=len(positions))
+        lon = np.fromiter((rows[p].lon for p in positions), dtype=np.float64, count=len(positions))
+        for position, value in zip(positions, corridor.x_m(lat, lon), strict=True):
+            x_m[position] = value
+    return x_m
+
+
+def _column_arrays(rows: Sequence[PingRow]) -> dict[str, Any]:
+    """The statement's parameters: one list per column."""
+    columns: list[Any] = [list(values) for values in zip(*rows, strict=True)][:_ROW_FIELDS]
+    columns.insert(_LANE + 1, _map_match(rows))
+    return {name: values for (name, _), values in zip(PING_COLUMNS, columns, strict=True)}
