@@ -14,13 +14,11 @@ from pydantic import (
     model_validator,
 )
 
-# Which controllers can drive which actuation (paper: MicroAccel on acceleration-actuated cars,
-# its ACC set-point variant on button-actuated ones; `simple` works on both).
-CONTROLLER_ACTUATIONS: dict[str, frozenset[str]] = {
-    "simple": frozenset({"acc", "accel"}),
-    "microaccel": frozenset({"accel"}),
-    "microaccel_acc": frozenset({"acc"}),
-}
+from vehicle_agent.controllers import controller_actuations
+
+# Which controllers can drive which actuation, from the vehicle agent's controller registry (the
+# single source of truth: a controller added there is accepted here).
+CONTROLLER_ACTUATIONS: dict[str, frozenset[str]] = controller_actuations()
 
 
 class RosterRow(BaseModel):

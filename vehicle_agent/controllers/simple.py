@@ -1,0 +1,96 @@
+"""Simple: follow the plan's target speed at the vehicle's position, bounded (paper: "a
+hand-designed logic-based controller that largely adheres to the Speed Planner suggestion").
+
+On `acc` cars the speed setting is the target itself (the stock ACC keeps the gap). On `accel`
+cars the stock ACC is out of the loop, so the command is the bounded target term together with
+MicroAccel's safety term whenever the make measures the leader: min(a_target, a_safe).
+"""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from vehicle_agent.controllers.base import (
+    MAX_GAP_SETTING,
+    MIN_GAP_SETTING,
+    AccelCommand,
+    AccSetPoint,
+    Action,
+    Actuation,
+    Controller,
+    Observation,
+)
+from vehicle_agent.controllers.microaccel import (
+    LeadAccelEstimator,
+    safe_speed,
+    safe_speed_rate,
+    safety_accel,
+    target_accel,
+)
+from vehicle_agent.units import mps_to_mph
+
+
+class SimpleParams(BaseModel):
+    """Simple controller parameters."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
+    k: float = Field(0.5, gt=0, le=5)
+    max_accel_mps2: float = Field(1.0, gt=0, le=1.5)
+    min_accel_mps2: float = Field(-2.0, lt=0, ge=-3)
+    # Safety term parameters (see MicroAccelParams).
+    standstill_gap_m: float = Field(5.0, ge=0, le=50)
+    lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
+    safety_min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
+    # Added to the target on acc cars (mph), e.g. to offset a speedometer bias.
+    speed_offset_mph: float = Field(0.0, ge=-10, le=10)
+    gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+
+
+class SimpleController(Controller):
+    """Target speed follower for both actuations."""
+
+    name = "simple"
+
+    def __init__(self, actuation: Actuation, params: SimpleParams) -> None:
+        super().__init__(actuation)
+        self.params = params
+        self.lead_accel = LeadAccelEstimator(0.5)
+
+    def reset(self) -> None:
+        """Forget the leader's speed history."""
+        self.lead_accel.reset()
+
+    def step(self, observation: Observation) -> Action:
+        """The target as a set point, or the bounded target acceleration."""
+        params = self.params
+        if self.actuation == "acc":
+            requested = mps_to_mph(observation.target_speed_mps) + params.speed_offset_mph
+            return AccSetPoint(round(requested), params.gap_setting, requested_speed_mph=requested)
+        command = target_accel(observation.speed_mps, observation.target_speed_mps, params.k)
+        if observation.has_lead_state:
+            rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
+            lead_speed = max(observation.speed_mps + rel, 0.0)
+            lead_accel = self.lead_accel.update(observation.time_s, lead_speed)
+            v_safe = safe_speed(
+                float(observation.lead_distance_m),  # type: ignore[arg-type]
+                lead_speed,
+                standstill_gap_m=params.standstill_gap_m,
+                min_accel_mps2=params.safety_min_accel_mps2,
+                lead_min_accel_mps2=params.lead_min_accel_mps2,
+            )
+            rate = safe_speed_rate(
+                v_safe,
+                rel,
+                lead_speed,
+                lead_accel,
+                min_accel_mps2=params.safety_min_accel_mps2,
+                lead_min_accel_mps2=params.lead_min_accel_mps2,
+            )
+            command = min(command, safety_accel(observation.speed_mps, v_safe, rate, params.k))
+            return AccelCommand(
+                min(max(command, params.safety_min_accel_mps2), params.max_accel_mps2)
+            )
+        self.lead_accel.reset()
+        return AccelCommand(min(max(command, params.min_accel_mps2), params.max_accel_mps2))

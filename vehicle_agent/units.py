@@ -1,0 +1,22 @@
+"""Unit conversions the car needs: US ACC set speeds move in whole mph, CAN speaks km/h."""
+
+from __future__ import annotations
+
+# Exact by definition (1 mile = 1609.344 m).
+MPS_PER_MPH = 0.44704
+MPS_PER_KPH = 1.0 / 3.6
+
+
+def mph_to_mps(speed_mph: float) -> float:
+    """Miles per hour to metres per second."""
+    return speed_mph * MPS_PER_MPH
+
+
+def mps_to_mph(speed_mps: float) -> float:
+    """Metres per second to miles per hour."""
+    return speed_mps / MPS_PER_MPH
+
+
+def kph_to_mps(speed_kph: float) -> float:
+    """Kilometres per hour to metres per second."""
+    return speed_kph * MPS_PER_KPH
