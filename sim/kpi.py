@@ -130,14 +130,25 @@ def min_time_to_collision_s(
     return float((gap_m[approaching] / closing[approaching]).min())
 
 
-def platoon_kpis(run: PlatoonRun, model: FuelModel = RAV4_2019) -> Kpis:
-    """The KPIs of a platoon run over its simulated vehicles (columns 1..N-1)."""
+def platoon_kpis(
+    run: PlatoonRun, model: FuelModel = RAV4_2019, *, throughput_point_m: float | None = None
+) -> Kpis:
+    """The KPIs of a platoon run over its simulated vehicles (columns 1..N-1).
+
+    Throughput is the average over five equi-spaced points, or, given `throughput_point_m`,
+    the flow over that one point (the bottleneck's: just downstream of the region).
+    """
     position = run.position_m[:, 1:]
     speed = run.speed_mps[:, 1:]
     gaps = run.gap_m
+    throughput = (
+        throughput_vph(position, run.dt_s)
+        if throughput_point_m is None
+        else throughput_at_vph(position, run.dt_s, throughput_point_m)
+    )
     return Kpis(
         fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),
-        throughput_vph=throughput_vph(position, run.dt_s),
+        throughput_vph=throughput,
         network_speed_mps=network_speed_mps(position, run.dt_s),
         accel_rms_mps2=accel_rms_mps2(speed, run.dt_s),
         jerk_rms_mps3=jerk_rms_mps3(speed, run.dt_s),
