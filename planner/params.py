@@ -1,0 +1,92 @@
+"""Every knob of the Speed Planner, validated, and stored with each plan (plan_run.params).
+
+Defaults follow the paper and ../shared/reference where they name a value (15 km/h congestion
+waves, 60 s ping window, 60 mph / 4 mph bottleneck test, 4 of the last 5 cycles, -0.1 m/s^2 ramp,
+0.8 floor); the rest were checked on the real drives of ../shared/data (docs/planner.md).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from planner.inputs import MPH
+
+
+class InvalidParams(ValueError):
+    """Planner parameters that make no sense; the message names the parameter."""
+
+
+class PlannerParams(BaseModel):
+    """Parameters of all six steps; stage variants are chosen by registry name."""
+
+    model_config = ConfigDict(frozen=True, extra="forbid")
+
+    # Step 1 - INRIX prediction.
+    predictor: str = "wave_trend"
+    max_inrix_age_s: float = Field(600.0, gt=0, description="older INRIX is no estimate at all")
+    inrix_history_s: float = Field(900.0, gt=0, description="how far back the history reaches")
+    wave_speed_mps: float = Field(
+        15 / 3.6, ge=0, le=15, description="speed at which changes travel upstream (15 km/h)"
+    )
+    trend_snapshots: int = Field(
+        3, ge=2, le=30, description="snapshots (the newest included) the trend is fitted over"
+    )
+    trend_weight: float = Field(0.5, ge=0, le=1, description="share of the trend extrapolated")
+    trend_damping_s: float = Field(120.0, gt=0, description="time constant the trend fades with")
+
+    # Step 2 - fusion with the fleet's observations.
+    fuser: str = "precedence"
+    ping_window_s: float = Field(60.0, gt=0, le=600)
+    correction_length_m: float = Field(
+        300.0, ge=0, description="distance over which an observation corrects unobserved cells"
+    )
+    other_lane_weight: float = Field(
+        0.5, ge=0, le=1, description="weight of an observation for the corridor's other lanes"
+    )
+
+    # Step 3 - forward kernel smoothing (paper eq. for the desired speed profile).
+    kernel: str = "uniform"
+    window_m: float = Field(1500.0, gt=0, le=20_000, description="w, the estimation window")
+    quadrature_step_m: float = Field(10.0, gt=0, le=100)
+
+    # Step 4 - bottleneck identification.
+    bottleneck_finder: str = "speed_rise"
+    slow_speed_mps: float = Field(60 * MPH, gt=0, description="at or below: a slow region")
+    min_rise_mps: float = Field(4 * MPH, gt=0, description="rise downstream that marks a head")
+    rise_distance_m: float = Field(500.0, gt=0, description="downstream distance of that rise")
+    standing_cycles: int = Field(5, ge=1, le=60, description="recent cycles looked at")
+    standing_required: int = Field(4, ge=1, le=60, description="cycles a standing one is seen in")
+    match_distance_m: float = Field(300.0, ge=0, description="same bottleneck if this close")
+    cycle_period_s: float = Field(60.0, gt=0, description="the schedule's period")
+
+    # Step 5 - buffer design.
+    buffer_designer: str = "queue_storage"
+    buffer_speed_margin_mps: float = Field(2.0, ge=0, description="above the slowest queue speed")
+    ramp_decel_mps2: float = Field(0.1, gt=0, le=2, description="gentle approach to the buffer")
+    floor_fraction: float = Field(0.8, ge=0, le=1, description="target >= this x smoothed speed")
+
+    @model_validator(mode="after")
+    def _standing_within_cycles(self) -> PlannerParams:
+        if self.standing_required > self.standing_cycles:
+            raise ValueError(
+                f"standing_required ({self.standing_required}) cannot exceed standing_cycles "
+                f"({self.standing_cycles})"
+            )
+        return self
+
+    @classmethod
+    def parse(cls, values: dict[str, Any] | None) -> PlannerParams:
+        """Validate user-given parameters, raising InvalidParams with one line naming the field."""
+        try:
+            return cls.model_validate(values or {})
+        except ValidationError as error:
+            first = error.errors()[0]
+            name = ".".join(str(part) for part in first.get("loc", ())) or "params"
+            message = str(first.get("msg", "invalid")).removeprefix("Value error, ")
+            raise InvalidParams(f"planner parameter {name}: {message}") from None
+
+    def stored(self) -> dict[str, Any]:
+        """The parameters as stored with a plan (JSON-ready)."""
+        return self.model_dump(mode="json")

@@ -1,0 +1,104 @@
+"""The paper's six-step publication sequence over arrays, without a database.
+
+    1 predict INRIX past its latency   -> planner.predict   (lane-averaged, per sub-segment)
+    2 fuse the fleet's observations    -> planner.fuse      (lane-level TSE)
+    3 forward kernel smoothing         -> planner.smooth    (desired speed profile)
+    4 bottleneck identification        -> planner.bottlenecks
+    5 buffer design                    -> planner.buffers
+    6 publish                          -> planner.warehouse (the database edge)
+
+`plan_speeds` runs a registered algorithm (planner.algorithms) on `PlannerInputs` and returns a
+`Plan`; the simulator calls it with simulated traffic, the warehouse with the database's.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.bottlenecks import FINDERS, standing_bottlenecks
+from planner.buffers import Buffer
+from planner.fuse import FUSERS
+from planner.inputs import BoolArray, CorridorGrid, FloatArray, InrixHistory, LaneObservations
+from planner.params import PlannerParams
+from planner.predict import PREDICTORS, usable_history
+from planner.smooth import KERNELS, forward_kernel_smooth
+
+
+@dataclass(frozen=True)
+class PlannerInputs:
+    """Everything one planner cycle reads.
+
+    `previous_smoothed` are the smoothed lane profiles of the recent cycles, newest first (the
+    memory that tells a standing bottleneck from a moving wave).
+    """
+
+    grid: CorridorGrid
+    inrix: InrixHistory
+    observations: LaneObservations
+    now_s: float
+    previous_smoothed: Sequence[FloatArray] = field(default_factory=tuple)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A computed plan: targets per lane and sub-segment, and what they were made from."""
+
+    algorithm: str
+    params: PlannerParams
+    inrix_as_of_s: float
+    tse_mps: FloatArray
+    smoothed_mps: FloatArray
+    target_mps: FloatArray
+    is_buffer: BoolArray
+    bottleneck_candidates: BoolArray
+    standing_bottlenecks: BoolArray
+    buffers: tuple[Buffer, ...] = ()
+
+
+def enhance_tse(inputs: PlannerInputs, params: PlannerParams) -> tuple[FloatArray, float]:
+    """Steps 1-2: the lane-level TSE and the time of the newest INRIX snapshot used."""
+    history = usable_history(inputs.inrix, inputs.now_s, params)
+    predictor = PREDICTORS.get(params.predictor)
+    prior = predictor(history, inputs.grid.center_x_m, inputs.now_s, params)
+    fuser = FUSERS.get(params.fuser)
+    tse = fuser(prior, inputs.observations, inputs.grid, params)
+    return tse, float(history.measured_at_s[-1])
+
+
+def smooth_tse(tse_mps: FloatArray, grid: CorridorGrid, params: PlannerParams) -> FloatArray:
+    """Step 3: the forward kernel average with the configured kernel and window."""
+    kernel = KERNELS.get(params.kernel)
+    return forward_kernel_smooth(tse_mps, grid, kernel, params.window_m, params.quadrature_step_m)
+
+
+def identify_bottlenecks(
+    smoothed_mps: FloatArray, inputs: PlannerInputs, params: PlannerParams
+) -> tuple[BoolArray, BoolArray]:
+    """Step 4: this cycle's candidate heads and those standing over the recent cycles."""
+    finder = FINDERS.get(params.bottleneck_finder)
+    current = finder(smoothed_mps, inputs.grid, params)
+    previous = [
+        finder(np.asarray(earlier, dtype=np.float64), inputs.grid, params)
+        for earlier in inputs.previous_smoothed[: params.standing_cycles - 1]
+    ]
+    return current, standing_bottlenecks(current, previous, inputs.grid, params)
+
+
+def clip_to_legal_range(target_mps: FloatArray, grid: CorridorGrid) -> FloatArray:
+    """Every target within the corridor's legal range (dim_corridor)."""
+    clipped: FloatArray = np.clip(target_mps, grid.min_target_speed_mps, grid.speed_limit_mps)
+    return clipped
+
+
+def plan_speeds(
+    inputs: PlannerInputs,
+    algorithm: str = "kernel_smooth_buffer",
+    params: PlannerParams | None = None,
+) -> Plan:
+    """Run a registered algorithm; raises NoInrixEstimate when INRIX is missing or stale."""
+    from planner.algorithms import ALGORITHMS
+
+    return ALGORITHMS.get(algorithm)(inputs, params or PlannerParams())
