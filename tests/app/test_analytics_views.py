@@ -1,7 +1,7 @@
 """The analytics views against hand-worked values (paper: Results, energy model sidebar).
 
-Each test writes a small drive as the API's ping payloads and checks the view's figures against
-numbers worked by hand in the comments.
+Each test posts a small drive through the real ingest API (pings, status, INRIX feed) and
+checks the view's figures against numbers worked by hand in the comments.
 """
 
 from __future__ import annotations
@@ -9,18 +9,24 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Callable, Iterator
-from datetime import UTC, date, datetime, timedelta
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
+import httpx
 import pandas as pd
 import pytest
 from sqlalchemy import Connection, Engine, text
 
 from app import analytics
-from tests.support.fleet import drive, ping, seed_geometry, store_pings_sql
+from tests.support.fleet import drive, ping, post_inrix, post_pings, seed_geometry
+from tests.support.servers import live_server
+from tests.support.tokens import issue
 
-# A 10 s box boundary (Unix time divisible by 10) on the morning of the paper's first day.
-T0 = datetime(2022, 11, 16, 13, 0, 0, tzinfo=UTC)
+# A whole hour two days back: a 10 s box boundary, inside the ping retention window, and with a
+# whole UTC day after it for the second day of the engagement test.
+T0 = datetime.now(UTC).replace(minute=0, second=0, microsecond=0) - timedelta(days=2)
+DAY1 = T0.date()
+DAY2 = DAY1 + timedelta(days=1)
 
 Store = Callable[[list[dict[str, Any]]], None]
 
@@ -32,12 +38,23 @@ def connection(seeded_engine: Engine) -> Iterator[Connection]:
 
 
 @pytest.fixture
-def store(seeded_engine: Engine) -> Store:
-    """Write ping payloads the way the server stores them."""
+def api(seeded_database_url: str, seeded_engine: Engine) -> Iterator[tuple[httpx.Client, str]]:
+    """A client of the real app on this test's database, and an admin token."""
+    token = issue(seeded_engine, "admin")
+    with (
+        live_server(seeded_database_url) as base,
+        httpx.Client(base_url=base, timeout=30) as client,
+    ):
+        yield client, token
+
+
+@pytest.fixture
+def store(api: tuple[httpx.Client, str]) -> Store:
+    """Post ping payloads through the ingest API."""
+    client, token = api
 
     def write(pings: list[dict[str, Any]]) -> None:
-        with seeded_engine.begin() as connection:
-            store_pings_sql(connection, pings)
+        post_pings(client, token, pings)
 
     return write
 
@@ -214,14 +231,14 @@ def test_engagement_share_per_vehicle_and_pooled_per_day(
     per_vehicle = analytics.read_view(connection, "engagement_daily")
     fleet = analytics.read_view(connection, "engagement_fleet_daily")
 
-    first = per_vehicle[per_vehicle["day"] == date(2022, 11, 16)].set_index("vehicle_id")
+    first = per_vehicle[per_vehicle["day"] == DAY1].set_index("vehicle_id")
     assert first.loc["SF-001", "pings"] == 20
     assert first.loc["SF-001", "engagement_share"] == pytest.approx(0.5)
     assert first.loc["SF-002", "engagement_share"] == pytest.approx(0.3)
     assert first.loc["SF-002", "acc_engaged_share"] == pytest.approx(1.0)
     shares = fleet.set_index("day")["engagement_share"]
-    assert shares[date(2022, 11, 16)] == pytest.approx(0.38)
-    assert shares[date(2022, 11, 17)] == pytest.approx(0.78)
+    assert shares[DAY1] == pytest.approx(0.38)
+    assert shares[DAY2] == pytest.approx(0.78)
     assert list(fleet["vehicles"]) == [2, 2]
 
 
@@ -229,60 +246,78 @@ def test_engagement_share_per_vehicle_and_pooled_per_day(
 
 
 def test_ping_rate_and_latency_per_vehicle_hour(
-    seeded_engine: Engine, connection: Connection, store: Store
+    connection: Connection, api: tuple[httpx.Client, str]
 ) -> None:
     # SF-001: 10 pings 1 s apart -> 9 intervals in 9 s = 1 Hz. SF-002: 5 pings 2 s apart -> 0.5 Hz.
-    store(drive("SF-001", T0, 1010.0, 20.0, 10))
-    store(
-        [ping("SF-002", T0 + timedelta(seconds=2 * i), 1010.0 + 40.0 * i, 20.0) for i in range(5)]
+    # Both uploads come as one spooled batch a minute later: every ping of a batch gets the same
+    # received_at, so SF-001's latencies are (received - T) - 0..9 s: median and mean 4.5 s below
+    # the largest.
+    client, token = api
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(seconds=60)
+    sent_after = datetime.now(UTC)
+    post_pings(client, token, drive("SF-001", start, 1010.0, 20.0, 10))
+    sent_before = datetime.now(UTC)
+    post_pings(
+        client,
+        token,
+        [
+            ping("SF-002", start + timedelta(seconds=2 * i), 1010.0 + 40.0 * i, 20.0)
+            for i in range(5)
+        ],
     )
-    # Received 2 s after their GPS time except the last of SF-001, which waited 30 s in the spool.
-    with seeded_engine.begin() as writer:
-        writer.execute(text("UPDATE fact_vehicle_ping SET received_at = ts + interval '2 s'"))
-        writer.execute(
-            text(
-                "UPDATE fact_vehicle_ping SET received_at = ts + interval '30 s' "
-                "WHERE vehicle_id = 'SF-001' AND ts = :last"
-            ),
-            {"last": T0 + timedelta(seconds=9)},
-        )
 
-    rates = analytics.read_view(connection, "ping_rate_hourly").set_index("vehicle_id")
+    rates = analytics.read_view(connection, "ping_rate_hourly")
     fleet = analytics.read_view(connection, "fleet_ping_hourly")
 
-    assert rates.loc["SF-001", "ping_rate_hz"] == pytest.approx(1.0)
-    assert rates.loc["SF-002", "ping_rate_hz"] == pytest.approx(0.5)
-    assert rates.loc["SF-001", "latency_p50_s"] == pytest.approx(2.0)
-    assert rates.loc["SF-001", "latency_max_s"] == pytest.approx(30.0)
-    assert rates.loc["SF-001", "latency_mean_s"] == pytest.approx((9 * 2.0 + 30.0) / 10)
-    assert rates.loc["SF-001", "hour"] == pd.Timestamp(T0)
-    assert fleet.iloc[0]["pings"] == 15
-    assert fleet.iloc[0]["vehicles"] == 2
-    assert fleet.iloc[0]["pings_per_s"] == pytest.approx(15 / 3600)
+    by_vehicle = rates.groupby("vehicle_id")["pings"].sum()
+    assert dict(by_vehicle) == {"SF-001": 10, "SF-002": 5}
+    sf001 = rates[rates["vehicle_id"] == "SF-001"]
+    if len(sf001) == 1:  # (the drive did not straddle an hour boundary)
+        row = sf001.iloc[0]
+        assert row["ping_rate_hz"] == pytest.approx(1.0)
+        assert row["latency_p50_s"] == pytest.approx(row["latency_max_s"] - 4.5)
+        assert row["latency_mean_s"] == pytest.approx(row["latency_max_s"] - 4.5)
+        assert row["hour"] == pd.Timestamp(start).floor("h")
+    sf002 = rates[rates["vehicle_id"] == "SF-002"]
+    if len(sf002) == 1:
+        assert sf002.iloc[0]["ping_rate_hz"] == pytest.approx(0.5)
+    longest = rates["latency_max_s"].max()
+    assert (sent_after - start).total_seconds() <= longest
+    assert longest <= (sent_before - start).total_seconds() + 5.0
+    assert fleet["pings"].sum() == 15
+    assert fleet["vehicles"].max() == 2
+    assert fleet["pings_per_s"].sum() == pytest.approx(15 / 3600)
 
 
 # --- INRIX latency -----------------------------------------------------------------------------
 
 
-def test_inrix_latency_per_snapshot(seeded_engine: Engine, connection: Connection) -> None:
-    # One snapshot of three segments measured at T0, received 180 s later (the paper's ~3 min).
-    with seeded_engine.begin() as writer:
-        writer.execute(
-            text(
-                "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, received_at, "
-                "speed_mps, score) SELECT corridor_id, xd_code, :measured, :received, 20 + seq, 30 "
-                "FROM dim_inrix_segment WHERE seq <= 3"
-            ),
-            {"measured": T0, "received": T0 + timedelta(seconds=180)},
+def test_inrix_latency_per_snapshot(
+    connection: Connection, api: tuple[httpx.Client, str], seeded_engine: Engine
+) -> None:
+    # One snapshot of three segments measured 180 s ago (the paper's ~3 min INRIX delay), at
+    # 44.7, 49.2 and 53.7 mph = 19.98, 21.99, 24.01 m/s (1 mph = 0.44704 m/s): mean 21.99 m/s.
+    client, token = api
+    with seeded_engine.connect() as reader:
+        codes = list(
+            reader.execute(
+                text("SELECT xd_code FROM dim_inrix_segment ORDER BY seq LIMIT 3")
+            ).scalars()
         )
+    measured = datetime.now(UTC).replace(microsecond=0) - timedelta(seconds=180)
+    before = datetime.now(UTC)
+    post_inrix(client, token, measured, dict(zip(codes, [44.7, 49.2, 53.7], strict=True)))
+    after = datetime.now(UTC)
 
     latency = analytics.read_view(connection, "inrix_latency")
 
     assert len(latency) == 1
-    assert latency.iloc[0]["segments"] == 3
-    assert latency.iloc[0]["realtime_segments"] == 3
-    assert latency.iloc[0]["latency_s"] == pytest.approx(180.0)
-    assert latency.iloc[0]["mean_speed_mps"] == pytest.approx(22.0)  # (21 + 22 + 23) / 3
+    row = latency.iloc[0]
+    assert row["segments"] == 3
+    assert row["realtime_segments"] == 3
+    assert (before - measured).total_seconds() <= row["latency_s"]
+    assert row["latency_s"] <= (after - measured).total_seconds()
+    assert row["mean_speed_mps"] == pytest.approx((44.7 + 49.2 + 53.7) / 3 * 0.44704, rel=1e-6)
 
 
 # --- plan adherence ----------------------------------------------------------------------------
@@ -392,8 +427,8 @@ def test_read_view_filters_by_time_and_vehicle(connection: Connection, store: St
     window = analytics.read_view(connection, "edie_boxes", since=T0, until=T0 + timedelta(hours=1))
 
     assert list(later["vehicle_id"]) == ["SF-002"]
-    assert list(one["day"]) == [date(2022, 11, 16)]
-    assert set(window["t_start"].dt.date) == {date(2022, 11, 16)}
+    assert list(one["day"]) == [DAY1]
+    assert set(window["t_start"].dt.date) == {DAY1}
     with pytest.raises(analytics.UnknownView, match="choose one of: edie_boxes"):
         analytics.read_view(connection, "pings; DROP TABLE dim_vehicle")
     with pytest.raises(analytics.UnknownView, match="no vehicle_id"):
@@ -409,7 +444,7 @@ def test_export_csv_writes_a_header_and_iso_times(connection: Connection, store:
     lines = out.getvalue().splitlines()
     assert rows == 1
     assert lines[0].startswith("vehicle_id,hour,pings,")
-    assert lines[1].startswith("SF-001,2022-11-16T13:00:00.000000+0000,3,")
+    assert lines[1].startswith(f"SF-001,{T0:%Y-%m-%dT%H}:00:00.000000+0000,3,")
 
 
 def test_seed_geometry_round_trips_positions() -> None:

@@ -11,10 +11,10 @@ from datetime import datetime, timedelta
 from functools import lru_cache
 from typing import Any
 
-from sqlalchemy import Connection, insert
+import httpx
 
-from app.models import VehiclePing
 from app.seed import seed_corridor_document
+from tests.support.tokens import bearer
 from vehicle_agent.corridor import CorridorGeometry
 
 CORRIDOR = "I-24-WB"
@@ -65,21 +65,43 @@ def drive(
     ]
 
 
-def store_pings_sql(connection: Connection, pings: list[dict[str, Any]]) -> None:
-    """Store ping payloads as rows, map-matched like the server does (until ingest lands)."""
-    geometry = seed_geometry()
-    located = geometry.locate([p["lat"] for p in pings], [p["lon"] for p in pings])
-    rows = []
-    for payload, x_m, on in zip(pings, located.x_m, located.on_corridor, strict=True):
-        row = {RENAMED.get(name, name): value for name, value in payload.items()}
-        row["ts"] = datetime.fromisoformat(payload["ts"])
-        row["x_m"] = float(x_m) if on else None
-        rows.append(row)
-    connection.execute(insert(VehiclePing), rows)
+def post_pings(client: httpx.Client, token: str, pings: list[dict[str, Any]]) -> None:
+    """Post pings through the ingest API in batches; every one must be accepted."""
+    for first in range(0, len(pings), 1000):
+        batch = pings[first : first + 1000]
+        response = client.post("/api/v1/pings", json={"pings": batch}, headers=bearer(token))
+        assert response.status_code == 200, response.text
+        assert response.json()["accepted"] == len(batch), response.text
 
 
-RENAMED = {
-    "acc_engaged": "is_acc_engaged",
-    "controller_engaged": "is_controller_engaged",
-    "lead_present": "is_lead_present",
-}
+def post_status(client: httpx.Client, token: str, vehicle_id: str, **report: Any) -> None:
+    """Post one piStatus report (`ts` as a datetime) through the API."""
+    body = {
+        name: value.isoformat() if isinstance(value, datetime) else value
+        for name, value in report.items()
+    }
+    response = client.post(
+        f"/api/v1/vehicles/{vehicle_id}/status", json=body, headers=bearer(token)
+    )
+    assert response.status_code == 200, response.text
+
+
+def post_inrix(
+    client: httpx.Client, token: str, measured_at: datetime, speeds_mph: dict[str, float]
+) -> None:
+    """Post one INRIX snapshot (segment code -> speed in mph, real-time score) via the feed API."""
+    document = {
+        "result": {
+            "segmentspeeds": [
+                {
+                    "timestamp": measured_at.isoformat(),
+                    "segments": [
+                        {"code": code, "type": "XDS", "speed": speed, "score": 30}
+                        for code, speed in speeds_mph.items()
+                    ],
+                }
+            ]
+        }
+    }
+    response = client.post("/api/v1/feeds/inrix", json=document, headers=bearer(token))
+    assert response.status_code == 200, response.text
