@@ -7,7 +7,9 @@ times are seconds since the Unix epoch.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,6 +59,22 @@ class CorridorGrid:
                 f"corridor {self.corridor_id}: legal range must satisfy 0 < min target "
                 f"({self.min_target_speed_mps}) < speed limit ({self.speed_limit_mps})"
             )
+
+    @classmethod
+    def from_rows(
+        cls, corridor: Mapping[str, Any], sub_segments: Sequence[Mapping[str, Any]]
+    ) -> CorridorGrid:
+        """From dim_corridor and dim_i24_segment rows (or the seed file's, same columns)."""
+        ordered = sorted(sub_segments, key=lambda row: float(row["start_x_m"]))
+        return cls(
+            corridor_id=str(corridor["corridor_id"]),
+            lanes=int(corridor["lanes"]),
+            start_x_m=np.array([float(row["start_x_m"]) for row in ordered]),
+            end_x_m=np.array([float(row["end_x_m"]) for row in ordered]),
+            segment_ids=np.array([int(row["i24_segment_id"]) for row in ordered]),
+            speed_limit_mps=float(corridor["speed_limit_mps"]),
+            min_target_speed_mps=float(corridor["min_target_speed_mps"]),
+        )
 
     @property
     def cells(self) -> int:

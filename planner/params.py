@@ -40,7 +40,7 @@ class PlannerParams(BaseModel):
     fuser: str = "precedence"
     ping_window_s: float = Field(60.0, gt=0, le=600)
     correction_length_m: float = Field(
-        300.0, ge=0, description="distance over which an observation corrects unobserved cells"
+        100.0, ge=0, description="distance over which an observation corrects unobserved cells"
     )
     other_lane_weight: float = Field(
         0.5, ge=0, le=1, description="weight of an observation for the corridor's other lanes"
