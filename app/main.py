@@ -17,6 +17,7 @@ from app.core.errors import install_error_handlers
 from app.core.metrics import RequestMetrics
 from app.corridors.router import router as corridors_router
 from app.feeds.router import router as feeds_router
+from app.fleet.router import router as fleet_router
 from app.health.router import router as health_router
 from app.ingest import ingest_running
 from app.maintenance import maintain_async
@@ -93,4 +94,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(vehicles_router)
     app.include_router(corridors_router)
     app.include_router(feeds_router)
+    app.include_router(fleet_router)
     return app

@@ -105,3 +105,29 @@ def post_inrix(
     }
     response = client.post("/api/v1/feeds/inrix", json=document, headers=bearer(token))
     assert response.status_code == 200, response.text
+
+
+def healthy_status(
+    ts: datetime, controller: str = "microaccel_acc", **changes: Any
+) -> dict[str, Any]:
+    """A piStatus report that passes every readiness check (fields overridden by `changes`)."""
+    report: dict[str, Any] = {
+        "ts": ts,
+        "agent_version": "1.0.0",
+        "uptime_s": 3600.0,
+        "can_ok": True,
+        "can_msgs_per_s": 1800.0,
+        "gps_fix": True,
+        "gps_satellites": 11,
+        "acc_available": True,
+        "controller": controller,
+        "controller_running": True,
+        "plan_age_s": 12.0,
+        "spool_backlog": 0,
+        "disk_free_mb": 12000.0,
+        "cpu_temp_c": 55.0,
+        "ups_on_battery": False,
+        "server_rtt_ms": 80.0,
+    }
+    report.update(changes)
+    return report

@@ -1,0 +1,238 @@
+"""Operations API bodies: the fleet with readiness, and assignment and maintenance changes.
+
+Field names follow the vehicle-facing API (`acc_engaged`, `gps_fix`, ...) rather than the
+warehouse columns (`is_acc_engaged`, `has_gps_fix`), so a status reads the same in and out.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.fleet.service import FleetCounts, FleetEntry
+
+
+class ControllerAssignment(BaseModel):
+    """A controller by name with its parameters."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, examples=["microaccel_acc"])
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class AssignmentIn(BaseModel):
+    """What a vehicle should drive: lane, route and controller (all three, PUT semantics)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    lane: int = Field(ge=1, le=12, description="Lane numbered from 1 at the left (median side).")
+    route: str = Field(min_length=1, max_length=64)
+    controller: ControllerAssignment
+
+
+class AssignmentOut(AssignmentIn):
+    """The vehicle's assignment after the change."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    vehicle_id: str
+    corridor_id: str
+    updated_at: datetime
+
+
+class MaintenanceIn(BaseModel):
+    """Take a vehicle out of service (or put it back), with a note saying why."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    in_maintenance: bool
+    note: str | None = Field(None, max_length=500)
+
+
+class MaintenanceOut(MaintenanceIn):
+    """The vehicle's maintenance state after the change."""
+
+    vehicle_id: str
+
+
+class PingOut(BaseModel):
+    """A vehicle's newest ping."""
+
+    ts: datetime
+    received_at: datetime
+    age_s: float
+    speed_mps: float
+    x_m: float | None
+    postmile: float | None
+    lane: int | None
+    acc_engaged: bool | None
+    controller_engaged: bool | None
+    controller: str | None
+    plan_id: int | None
+
+
+class StatusOut(BaseModel):
+    """A vehicle's newest piStatus report."""
+
+    ts: datetime
+    received_at: datetime
+    age_s: float
+    agent_version: str | None
+    uptime_s: float | None
+    can_ok: bool | None
+    can_msgs_per_s: float | None
+    gps_fix: bool | None
+    gps_satellites: int | None
+    acc_available: bool | None
+    controller: str | None
+    controller_running: bool | None
+    plan_id: int | None
+    plan_age_s: float | None
+    spool_backlog: int | None
+    disk_free_mb: float | None
+    cpu_temp_c: float | None
+    ups_on_battery: bool | None
+    server_rtt_ms: float | None
+
+
+class CheckOut(BaseModel):
+    """One readiness check."""
+
+    name: str
+    label: str
+    level: Literal["green", "amber", "red", "unknown"]
+    value: str
+    detail: str
+
+
+class FleetVehicleOut(BaseModel):
+    """A vehicle, its assignment, last ping, last status, checks and verdict."""
+
+    vehicle_id: str
+    make: str
+    model: str
+    year: int
+    actuation: str
+    corridor_id: str
+    route: str
+    assigned_lane: int
+    controller: ControllerAssignment
+    active: bool
+    in_maintenance: bool
+    maintenance_note: str | None
+    last_ping: PingOut | None
+    last_status: StatusOut | None
+    checks: list[CheckOut]
+    verdict: Literal["cleared", "not cleared", "maintenance", "inactive"]
+    cleared: bool
+    problems: list[str]
+
+
+class FleetCountsOut(BaseModel):
+    """Counts over the vehicles listed."""
+
+    vehicles: int
+    cleared: int
+    not_cleared: int
+    maintenance: int
+    inactive: int
+    reporting: int
+    engaged: int
+
+
+class FleetOut(BaseModel):
+    """The fleet at `generated_at`."""
+
+    generated_at: datetime
+    counts: FleetCountsOut
+    vehicles: list[FleetVehicleOut]
+
+
+def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
+    """The API view of a fleet entry."""
+    vehicle = entry.vehicle
+    ping = entry.last_ping
+    status = entry.last_status
+    return FleetVehicleOut(
+        vehicle_id=vehicle.vehicle_id,
+        make=vehicle.make,
+        model=vehicle.model,
+        year=vehicle.year,
+        actuation=vehicle.actuation,
+        corridor_id=vehicle.corridor_id,
+        route=vehicle.route,
+        assigned_lane=vehicle.assigned_lane,
+        controller=ControllerAssignment(
+            name=vehicle.controller_name, params=dict(vehicle.controller_params)
+        ),
+        active=vehicle.is_active,
+        in_maintenance=vehicle.is_in_maintenance,
+        maintenance_note=vehicle.maintenance_note,
+        last_ping=None
+        if ping is None
+        else PingOut(
+            ts=ping.ts,
+            received_at=ping.received_at,
+            age_s=(now - ping.ts).total_seconds(),
+            speed_mps=ping.speed_mps,
+            x_m=ping.x_m,
+            postmile=entry.postmile,
+            lane=ping.lane,
+            acc_engaged=ping.is_acc_engaged,
+            controller_engaged=ping.is_controller_engaged,
+            controller=ping.controller,
+            plan_id=ping.plan_id,
+        ),
+        last_status=None
+        if status is None
+        else StatusOut(
+            ts=status.ts,
+            received_at=status.received_at,
+            age_s=(now - status.ts).total_seconds(),
+            agent_version=status.agent_version,
+            uptime_s=status.uptime_s,
+            can_ok=status.is_can_ok,
+            can_msgs_per_s=status.can_msgs_per_s,
+            gps_fix=status.has_gps_fix,
+            gps_satellites=status.gps_satellites,
+            acc_available=status.is_acc_available,
+            controller=status.controller,
+            controller_running=status.is_controller_running,
+            plan_id=status.plan_id,
+            plan_age_s=status.plan_age_s,
+            spool_backlog=status.spool_backlog,
+            disk_free_mb=status.disk_free_mb,
+            cpu_temp_c=status.cpu_temp_c,
+            ups_on_battery=status.is_ups_on_battery,
+            server_rtt_ms=status.server_rtt_ms,
+        ),
+        checks=[
+            CheckOut(
+                name=check.name,
+                label=check.label,
+                level=check.level,
+                value=check.value,
+                detail=check.detail,
+            )
+            for check in entry.readiness.checks
+        ],
+        verdict=entry.readiness.verdict,
+        cleared=entry.readiness.is_cleared,
+        problems=list(entry.readiness.problems),
+    )
+
+
+def counts_out(counts: FleetCounts) -> FleetCountsOut:
+    """The API view of the counts."""
+    return FleetCountsOut(
+        vehicles=counts.vehicles,
+        cleared=counts.cleared,
+        not_cleared=counts.not_cleared,
+        maintenance=counts.maintenance,
+        inactive=counts.inactive,
+        reporting=counts.reporting,
+        engaged=counts.engaged,
+    )

@@ -1,0 +1,312 @@
+"""The fleet's state for operators: every vehicle with its last ping, last status and readiness;
+changing a vehicle's assignment or maintenance flag. No HTTP here (API and dashboard share it).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import Select, select, true
+from sqlalchemy.ext.asyncio import AsyncSession
+from sqlalchemy.orm import aliased
+
+from app.fleet.readiness import (
+    CHECK_NAMES,
+    LastPing,
+    LastStatus,
+    Readiness,
+    Thresholds,
+    VehicleFacts,
+    assess,
+)
+from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
+from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+
+log = logging.getLogger(__name__)
+
+METRES_PER_MILE = 1609.344
+# The newest ping is looked for in this window first, so the query touches only the last days'
+# ping partitions; vehicles silent for longer are looked up again without the bound.
+RECENT_PING_WINDOW = timedelta(days=2)
+
+STATUS_FIELDS = tuple(
+    name for name in LastStatus.__dataclass_fields__ if name not in ("ts", "received_at")
+)
+
+
+class VehicleNotFound(LookupError):
+    """No vehicle with this id in the roster."""
+
+
+class AssignmentError(ValueError):
+    """An assignment the vehicle cannot take; the message says which field and why."""
+
+
+@dataclass(frozen=True)
+class FleetEntry:
+    """One vehicle as operators see it."""
+
+    vehicle: Vehicle
+    corridor_lanes: int
+    postmile_at_start: float
+    last_ping: LastPing | None
+    last_status: LastStatus | None
+    readiness: Readiness
+
+    @property
+    def postmile(self) -> float | None:
+        """Postmile of the last ping, if it was on the corridor."""
+        if self.last_ping is None or self.last_ping.x_m is None:
+            return None
+        return self.postmile_at_start + self.last_ping.x_m / METRES_PER_MILE
+
+    def has_problem(self, problem: str) -> bool:
+        """Whether the vehicle matches a problem filter (see PROBLEM_FILTERS)."""
+        if problem == "not-cleared":
+            return not self.readiness.is_cleared
+        if problem == "maintenance":
+            return self.vehicle.is_in_maintenance
+        if problem == "amber":
+            return any(check.level == "amber" for check in self.readiness.checks)
+        if problem in CHECK_NAMES:
+            return self.readiness.level_of(problem) in ("amber", "red")
+        raise ValueError(f"unknown problem filter {problem!r}")
+
+
+PROBLEM_FILTERS: dict[str, str] = {
+    "not-cleared": "not cleared",
+    "amber": "any amber check",
+    "maintenance": "in maintenance",
+    **{name: f"{name} amber or red" for name in CHECK_NAMES},
+}
+
+
+@dataclass(frozen=True)
+class FleetCounts:
+    """The numbers at the top of the fleet page."""
+
+    vehicles: int
+    cleared: int
+    not_cleared: int
+    maintenance: int
+    inactive: int
+    reporting: int
+    engaged: int
+
+
+def count(entries: Sequence[FleetEntry]) -> FleetCounts:
+    """Counts over the given entries (reporting = status check not red)."""
+    verdicts = Counter(entry.readiness.verdict for entry in entries)
+    return FleetCounts(
+        vehicles=len(entries),
+        cleared=verdicts["cleared"],
+        not_cleared=verdicts["not cleared"],
+        maintenance=verdicts["maintenance"],
+        inactive=verdicts["inactive"],
+        reporting=sum(entry.readiness.level_of("status") != "red" for entry in entries),
+        engaged=sum(
+            entry.readiness.level_of("ping") != "red"
+            and entry.last_ping is not None
+            and bool(entry.last_ping.is_controller_engaged)
+            for entry in entries
+        ),
+    )
+
+
+def select_entries(
+    entries: Iterable[FleetEntry],
+    *,
+    route: str | None = None,
+    make: str | None = None,
+    problem: str | None = None,
+) -> list[FleetEntry]:
+    """The entries matching every given filter."""
+    if problem is not None and problem not in PROBLEM_FILTERS:
+        raise ValueError(f"unknown problem filter {problem!r}")
+    return [
+        entry
+        for entry in entries
+        if (route is None or entry.vehicle.route == route)
+        and (make is None or entry.vehicle.make == make)
+        and (problem is None or entry.has_problem(problem))
+    ]
+
+
+def _to_last_ping(ping: VehiclePing | None) -> LastPing | None:
+    if ping is None:
+        return None
+    return LastPing(
+        ts=ping.ts,
+        received_at=ping.received_at,
+        speed_mps=float(ping.speed_mps),
+        x_m=None if ping.x_m is None else float(ping.x_m),
+        lane=ping.lane,
+        is_acc_engaged=ping.is_acc_engaged,
+        is_controller_engaged=ping.is_controller_engaged,
+        controller=ping.controller,
+        plan_id=ping.plan_id,
+    )
+
+
+def _to_last_status(status: VehicleStatus | None) -> LastStatus | None:
+    if status is None:
+        return None
+    values: dict[str, Any] = {name: getattr(status, name) for name in STATUS_FIELDS}
+    return LastStatus(ts=status.ts, received_at=status.received_at, **values)
+
+
+def _latest_query(
+    recent_since: datetime | None, vehicle_ids: Sequence[str] | None
+) -> Select[Vehicle, int, float, VehiclePing, VehicleStatus]:
+    ping_query = select(VehiclePing).where(VehiclePing.vehicle_id == Vehicle.vehicle_id)
+    if recent_since is not None:
+        ping_query = ping_query.where(VehiclePing.ts >= recent_since)
+    last_ping = aliased(
+        VehiclePing, ping_query.order_by(VehiclePing.ts.desc()).limit(1).lateral("last_ping")
+    )
+    last_status = aliased(
+        VehicleStatus,
+        select(VehicleStatus)
+        .where(VehicleStatus.vehicle_id == Vehicle.vehicle_id)
+        .order_by(VehicleStatus.ts.desc())
+        .limit(1)
+        .lateral("last_status"),
+    )
+    query = (
+        select(Vehicle, Corridor.lanes, Corridor.postmile_at_start, last_ping, last_status)
+        .join(Corridor, Corridor.corridor_id == Vehicle.corridor_id)
+        .outerjoin(last_ping, true())
+        .outerjoin(last_status, true())
+        .order_by(Vehicle.vehicle_id)
+    )
+    if vehicle_ids is not None:
+        query = query.where(Vehicle.vehicle_id.in_(vehicle_ids))
+    return query
+
+
+async def fleet(
+    session: AsyncSession,
+    now: datetime,
+    limits: Thresholds,
+    *,
+    vehicle_id: str | None = None,
+) -> list[FleetEntry]:
+    """Every vehicle (or one) with its last ping, last status and readiness, in id order."""
+    ids = None if vehicle_id is None else [vehicle_id]
+    rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, ids))).all()
+    silent = [row[0].vehicle_id for row in rows if row[3] is None]
+    older: dict[str, VehiclePing | None] = {}
+    if silent:
+        for row in (await session.execute(_latest_query(None, silent))).all():
+            older[row[0].vehicle_id] = row[3]
+    entries = []
+    for vehicle, lanes, postmile_at_start, ping_row, status_row in rows:
+        last_ping = _to_last_ping(
+            ping_row if ping_row is not None else older.get(vehicle.vehicle_id)
+        )
+        last_status = _to_last_status(status_row)
+        facts = VehicleFacts(
+            vehicle_id=vehicle.vehicle_id,
+            assigned_controller=vehicle.controller_name,
+            is_active=vehicle.is_active,
+            is_in_maintenance=vehicle.is_in_maintenance,
+            last_ping=last_ping,
+            last_status=last_status,
+        )
+        entries.append(
+            FleetEntry(
+                vehicle=vehicle,
+                corridor_lanes=int(lanes),
+                postmile_at_start=float(postmile_at_start),
+                last_ping=last_ping,
+                last_status=last_status,
+                readiness=assess(facts, now, limits),
+            )
+        )
+    return entries
+
+
+async def vehicle_entry(
+    session: AsyncSession, vehicle_id: str, now: datetime, limits: Thresholds
+) -> FleetEntry:
+    """One vehicle's entry, or VehicleNotFound."""
+    entries = await fleet(session, now, limits, vehicle_id=vehicle_id)
+    if not entries:
+        raise VehicleNotFound(vehicle_id)
+    return entries[0]
+
+
+async def _vehicle_for_update(session: AsyncSession, vehicle_id: str) -> Vehicle:
+    vehicle = await session.scalar(
+        select(Vehicle).where(Vehicle.vehicle_id == vehicle_id).with_for_update()
+    )
+    if vehicle is None:
+        raise VehicleNotFound(vehicle_id)
+    return vehicle
+
+
+async def change_assignment(
+    session: AsyncSession,
+    vehicle_id: str,
+    *,
+    lane: int,
+    route: str,
+    controller_name: str,
+    controller_params: dict[str, Any],
+    changed_by: str,
+) -> Vehicle:
+    """Give a vehicle a new lane, route and controller (the car picks it up with its config)."""
+    vehicle = await _vehicle_for_update(session, vehicle_id)
+    lanes = await session.scalar(
+        select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
+    )
+    if lanes is None or not 1 <= lane <= lanes:
+        raise AssignmentError(f"lane: {vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}")
+    route = route.strip()
+    if not route:
+        raise AssignmentError("route: must not be empty")
+    actuations = CONTROLLER_ACTUATIONS.get(controller_name)
+    if actuations is None:
+        known = ", ".join(sorted(CONTROLLER_ACTUATIONS))
+        raise AssignmentError(f"controller: {controller_name!r} is not one of {known}")
+    if vehicle.actuation not in actuations:
+        raise AssignmentError(
+            f"controller: {controller_name} cannot drive {vehicle.vehicle_id}, whose actuation is "
+            f"{vehicle.actuation!r}"
+        )
+    vehicle.assigned_lane = lane
+    vehicle.route = route
+    vehicle.controller_name = controller_name
+    vehicle.controller_params = controller_params
+    await session.flush()
+    log.info(
+        "assignment of %s changed by %s: lane %s, route %s, controller %s",
+        vehicle_id,
+        changed_by,
+        lane,
+        route,
+        controller_name,
+    )
+    return vehicle
+
+
+async def set_maintenance(
+    session: AsyncSession,
+    vehicle_id: str,
+    *,
+    in_maintenance: bool,
+    note: str | None,
+    changed_by: str,
+) -> Vehicle:
+    """Take a vehicle out of (or back into) service; a note says why."""
+    vehicle = await _vehicle_for_update(session, vehicle_id)
+    vehicle.is_in_maintenance = in_maintenance
+    vehicle.maintenance_note = (note or "").strip() or None
+    await session.flush()
+    log.info("maintenance of %s set to %s by %s", vehicle_id, in_maintenance, changed_by)
+    return vehicle

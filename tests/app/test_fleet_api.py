@@ -1,0 +1,202 @@
+"""GET /api/v1/fleet and PUT .../assignment, .../maintenance on the real server."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import httpx
+import pytest
+from sqlalchemy import Engine
+
+from tests.support.fleet import drive, healthy_status, post_pings, post_status
+from tests.support.servers import live_server
+from tests.support.tokens import bearer, issue
+
+
+class Api:
+    """A client on the live server and one token per role."""
+
+    def __init__(self, client: httpx.Client, engine: Engine) -> None:
+        self.client = client
+        self.tokens = {
+            role: issue(engine, role)  # type: ignore[arg-type]
+            for role in ("viewer", "operator", "admin", "feed")
+        }
+        self.tokens["vehicle"] = issue(engine, "vehicle", "SF-001")
+
+    def get(self, path: str, role: str = "viewer", **params: Any) -> httpx.Response:
+        return self.client.get(path, params=params, headers=bearer(self.tokens[role]))
+
+    def put(self, path: str, body: object, role: str = "operator") -> httpx.Response:
+        return self.client.put(path, json=body, headers=bearer(self.tokens[role]))
+
+
+@pytest.fixture
+def api(seeded_database_url: str, seeded_engine: Engine) -> Iterator[Api]:
+    with live_server(seeded_database_url) as base, httpx.Client(base_url=base, timeout=30) as c:
+        yield Api(c, seeded_engine)
+
+
+def vehicle(fleet: dict[str, Any], vehicle_id: str) -> dict[str, Any]:
+    (found,) = [v for v in fleet["vehicles"] if v["vehicle_id"] == vehicle_id]
+    return found
+
+
+def checks(entry: dict[str, Any]) -> dict[str, str]:
+    return {check["name"]: check["level"] for check in entry["checks"]}
+
+
+def report_healthy(api: Api, vehicle_id: str, *, status_age_s: float = 2.0) -> None:
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        api.client,
+        api.tokens["admin"],
+        drive(vehicle_id, now - timedelta(seconds=3), 2000.0, 25.0, 3, controller_engaged=True),
+    )
+    post_status(
+        api.client,
+        api.tokens["admin"],
+        vehicle_id,
+        **healthy_status(now - timedelta(seconds=status_age_s)),
+    )
+
+
+def test_the_fleet_needs_an_ops_token(api: Api) -> None:
+    assert api.client.get("/api/v1/fleet").status_code == 401
+    assert api.get("/api/v1/fleet", role="vehicle").status_code == 403
+    assert api.get("/api/v1/fleet", role="feed").status_code == 403
+
+
+def test_a_fleet_never_heard_from_is_listed_and_not_cleared(api: Api) -> None:
+    response = api.get("/api/v1/fleet")
+
+    assert response.status_code == 200
+    fleet = response.json()
+    assert fleet["counts"]["vehicles"] == 100
+    assert fleet["counts"]["cleared"] == 0
+    assert fleet["counts"]["not_cleared"] == 100
+    first = vehicle(fleet, "SF-001")
+    assert first["last_ping"] is None
+    assert first["last_status"] is None
+    assert checks(first)["status"] == "red"
+    assert "last status: no status report received" in first["problems"]
+
+
+def test_a_reporting_car_is_cleared_and_turns_red_when_its_status_goes_stale(api: Api) -> None:
+    report_healthy(api, "SF-001")
+
+    fresh = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+
+    assert fresh["verdict"] == "cleared"
+    assert set(checks(fresh).values()) == {"green"}
+    assert fresh["last_ping"]["controller_engaged"] is True
+    assert fresh["last_ping"]["postmile"] == pytest.approx((2000.0 + 50.0) / 1609.344, abs=1e-3)
+    assert fresh["last_status"]["gps_satellites"] == 11
+    counts = api.get("/api/v1/fleet").json()["counts"]
+    assert (counts["cleared"], counts["reporting"], counts["engaged"]) == (1, 1, 1)
+
+    # The car falls silent: its newest report is now 90 s old (red from 60 s).
+    report_healthy(api, "SF-002", status_age_s=90.0)
+    stale = vehicle(api.get("/api/v1/fleet").json(), "SF-002")
+    assert checks(stale)["status"] == "red"
+    assert stale["verdict"] == "not cleared"
+
+
+def test_fleet_filters_by_route_make_and_problem(api: Api) -> None:
+    report_healthy(api, "SF-001")
+    everyone = api.get("/api/v1/fleet").json()["vehicles"]
+    route_a = [v for v in everyone if v["route"] == "A"]
+    toyotas = [v for v in everyone if v["make"] == "Toyota"]
+
+    assert len(api.get("/api/v1/fleet", route="A").json()["vehicles"]) == len(route_a)
+    assert len(api.get("/api/v1/fleet", make="Toyota").json()["vehicles"]) == len(toyotas)
+    not_cleared = api.get("/api/v1/fleet", problem="not-cleared").json()
+    assert not_cleared["counts"]["vehicles"] == 99
+    assert "SF-001" not in {v["vehicle_id"] for v in not_cleared["vehicles"]}
+    bad = api.get("/api/v1/fleet", problem="everything")
+    assert bad.status_code == 422
+    assert "problem must be one of" in bad.json()["detail"]
+
+
+def test_an_empty_roster_is_an_empty_fleet(database_url: str, engine: Engine) -> None:
+    with live_server(database_url) as base, httpx.Client(base_url=base) as client:
+        token = issue(engine, "viewer")
+        fleet = client.get("/api/v1/fleet", headers=bearer(token)).json()
+    assert fleet["vehicles"] == []
+    assert fleet["counts"]["vehicles"] == 0
+
+
+ASSIGNMENT = {"lane": 3, "route": "B", "controller": {"name": "simple", "params": {"gain": 0.5}}}
+
+
+def test_an_operator_changes_an_assignment_and_the_car_gets_it_in_its_config(api: Api) -> None:
+    response = api.put("/api/v1/vehicles/SF-001/assignment", ASSIGNMENT)
+
+    assert response.status_code == 200, response.text
+    answer = response.json()
+    assert (answer["lane"], answer["route"], answer["controller"]) == (
+        3,
+        "B",
+        {"name": "simple", "params": {"gain": 0.5}},
+    )
+    config = api.client.get(
+        "/api/v1/vehicles/SF-001/config", headers=bearer(api.tokens["vehicle"])
+    ).json()
+    assert config["assigned_lane"] == 3
+    assert config["route"] == "B"
+    assert config["controller"]["name"] == "simple"
+    listed = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert listed["assigned_lane"] == 3
+
+
+def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
+    response = api.put("/api/v1/vehicles/SF-001/assignment", ASSIGNMENT, role="viewer")
+    assert response.status_code == 403
+    assert "viewer" in response.json()["detail"]
+    assert vehicle(api.get("/api/v1/fleet").json(), "SF-001")["assigned_lane"] == 1
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ({**ASSIGNMENT, "lane": 5}, "lane: I-24-WB has lanes 1 to 4, not 5"),
+        (
+            {**ASSIGNMENT, "controller": {"name": "microaccel"}},
+            "controller: microaccel cannot drive SF-001, whose actuation is 'acc'",
+        ),
+        ({**ASSIGNMENT, "controller": {"name": "pid"}}, "controller: 'pid' is not one of"),
+    ],
+)
+def test_an_assignment_the_car_cannot_take_is_refused_with_the_field(
+    api: Api, body: dict[str, Any], message: str
+) -> None:
+    response = api.put("/api/v1/vehicles/SF-001/assignment", body)
+    assert response.status_code == 422
+    assert message in response.json()["detail"]
+
+
+def test_assignment_of_an_unknown_vehicle_is_404(api: Api) -> None:
+    response = api.put("/api/v1/vehicles/SF-999/assignment", ASSIGNMENT)
+    assert response.status_code == 404
+    assert response.json()["detail"] == "unknown vehicle SF-999"
+
+
+def test_an_incomplete_assignment_is_422(api: Api) -> None:
+    response = api.put("/api/v1/vehicles/SF-001/assignment", {"lane": 2})
+    assert response.status_code == 422
+
+
+def test_a_car_in_maintenance_is_not_cleared_until_it_is_back(api: Api) -> None:
+    report_healthy(api, "SF-001")
+    taken = api.put(
+        "/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": True, "note": "CAN harness loose"}
+    )
+    assert taken.status_code == 200
+    listed = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert (listed["verdict"], listed["maintenance_note"]) == ("maintenance", "CAN harness loose")
+    assert api.get("/api/v1/fleet", problem="maintenance").json()["counts"]["maintenance"] == 1
+
+    api.put("/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": False})
+    assert vehicle(api.get("/api/v1/fleet").json(), "SF-001")["verdict"] == "cleared"
