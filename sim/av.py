@@ -1,0 +1,142 @@
+"""Automated vehicles in the simulator, driven by the real vehicle-agent controllers.
+
+`AgentPolicy` builds the controller's `Observation` each step from what the car would sense
+(paper Table 2: the RAV4 measures the leader's gap and relative speed; the Rogue and the XT5
+only the "minicar" flag) and the plan's target at its position, calls the very controller object
+the agent runs (`vehicle_agent.controllers.build_controller`), and turns its action into the
+acceleration the car makes: an `accel` car makes the commanded acceleration; an `acc` car hands
+its set points to a stock-ACC model (`StockAcc`), which decides the acceleration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, Protocol
+
+from sim.platoon import AvObservation
+from vehicle_agent.controllers import (
+    AccelCommand,
+    AccSetPoint,
+    Controller,
+    Observation,
+    TargetProfile,
+    build_controller,
+)
+
+# The cars' radar reports a leader within about 80-100 m (paper Table 2, "minicar").
+RADAR_RANGE_M = 100.0
+# The agent pings once per second; at 10 Hz that is every 10th step.
+PING_EVERY_STEPS = 10
+STEP_S = 0.1
+
+
+class PlanSource(Protocol):
+    """Where an AV gets its plan and where its pings go (the server, or its simulation)."""
+
+    def profile(self, time_s: float) -> TargetProfile:
+        """The plan the vehicle holds at `time_s`."""
+        ...
+
+    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
+        """A ping from the vehicle."""
+        ...
+
+
+class StockAcc(Protocol):
+    """A car's own ACC: set points in, the acceleration it makes out."""
+
+    def accel_mps2(
+        self,
+        set_point: AccSetPoint,
+        time_s: float,
+        speed_mps: float,
+        gap_m: float | None,
+        lead_speed_mps: float | None,
+    ) -> float:
+        """The acceleration the stock ACC makes this step."""
+        ...
+
+    @property
+    def speed_setting_mph(self) -> float | None:
+        """The set speed the car shows now (what the agent reads back from CAN)."""
+        ...
+
+    @property
+    def gap_setting(self) -> int | None:
+        """The gap bars the car shows now."""
+        ...
+
+
+class AgentPolicy:
+    """An AV policy that runs a vehicle-agent controller behind the simulated sensors."""
+
+    def __init__(
+        self,
+        controller: Controller,
+        plan: PlanSource,
+        *,
+        senses_lead_state: bool,
+        stock_acc: StockAcc | None = None,
+    ) -> None:
+        if controller.actuation == "acc" and stock_acc is None:
+            raise ValueError(
+                f"controller {controller.name} drives an ACC: a stock-ACC model is needed"
+            )
+        self.controller = controller
+        self.plan = plan
+        self.senses_lead_state = senses_lead_state
+        self.stock_acc = stock_acc
+        self._step = 0
+
+    def accel_mps2(self, observation: AvObservation) -> float:
+        """Sense, decide with the agent's controller, actuate."""
+        time_s = observation.time_s
+        if self._step % PING_EVERY_STEPS == 0:
+            self.plan.record_ping(time_s, observation.position_m, observation.speed_mps)
+        self._step += 1
+        profile = self.plan.profile(time_s)
+        lead_present = observation.gap_m <= RADAR_RANGE_M
+        measured = lead_present and self.senses_lead_state
+        rel_speed = observation.lead_speed_mps - observation.speed_mps
+        action = self.controller.step(
+            Observation(
+                time_s=time_s,
+                speed_mps=observation.speed_mps,
+                target_speed_mps=profile.at(observation.position_m),
+                position_m=observation.position_m,
+                target=profile,
+                lead_present=lead_present,
+                lead_distance_m=observation.gap_m if measured else None,
+                lead_rel_speed_mps=rel_speed if measured else None,
+                acc_speed_setting_mph=self.stock_acc.speed_setting_mph if self.stock_acc else None,
+                acc_gap_setting=self.stock_acc.gap_setting if self.stock_acc else None,
+            )
+        )
+        if isinstance(action, AccelCommand):
+            return action.accel_mps2
+        assert self.stock_acc is not None  # checked at construction for acc controllers
+        return self.stock_acc.accel_mps2(
+            action,
+            time_s,
+            observation.speed_mps,
+            observation.gap_m if lead_present else None,
+            observation.lead_speed_mps if lead_present else None,
+        )
+
+
+def agent_policy(
+    controller_name: str,
+    actuation: str,
+    plan: PlanSource,
+    params: Mapping[str, Any] | None = None,
+    *,
+    stock_acc: StockAcc | None = None,
+) -> AgentPolicy:
+    """A policy around a controller built exactly as the agent builds it from its config."""
+    controller = build_controller(controller_name, actuation, params)
+    return AgentPolicy(
+        controller,
+        plan,
+        senses_lead_state=actuation == "accel",
+        stock_acc=stock_acc,
+    )

@@ -1,0 +1,142 @@
+"""The Speed Planner in the simulation loop, run as the server runs it.
+
+Every `period_s` (60 s) of simulated time the real planner (`planner.plan_speeds`, the same
+registered algorithm and parameters as the server's) is fed what the server would have: the
+INRIX minutes it has received by then (simulated by `sim.traffic`, ~3 minutes late) and the
+fleet's pings of the last ping window (the simulated AVs post one per second, like the agent).
+The AVs read the newest plan as a `TargetProfile` shifted by the wave speed times the plan's
+age, the agent's lookup.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner import (
+    CorridorGrid,
+    InrixHistory,
+    LaneObservations,
+    PlannerInputs,
+    PlannerParams,
+    plan_speeds,
+)
+from sim.drives import Drive
+from sim.traffic import INRIX_LATENCY_S, InrixFeed, inrix_snapshots, segment_bounds
+from vehicle_agent.controllers import TargetProfile
+
+FloatArray = NDArray[np.float64]
+
+PLANNER_PERIOD_S = 60.0
+PING_PERIOD_S = 1.0
+# The simulated road: sub-segments of 100 m (as the seed corridor's), one lane (a platoon), and
+# the seed corridor's legal target range (70 mph limit, 20 mph lowest target).
+CELL_M = 100.0
+SIM_LANE = 1
+SPEED_LIMIT_MPS = 31.2928
+MIN_TARGET_SPEED_MPS = 8.9408
+# The road simulated reaches this far behind the drive's start (the platoon's tail starts up to
+# ~1.6 km back) and this far past its end (the smoothing window looks ahead up to 2 km).
+ROAD_BEFORE_M = 3000.0
+ROAD_AFTER_M = 3000.0
+
+
+def simulated_grid(drive: Drive) -> CorridorGrid:
+    """The planner's sub-segments along the simulated road (the drive's own frame)."""
+    start = -ROAD_BEFORE_M
+    end = float(drive.position_m[-1]) + ROAD_AFTER_M
+    edges = np.arange(start, end + CELL_M, CELL_M)
+    return CorridorGrid(
+        corridor_id=f"sim:{drive.name}",
+        lanes=1,
+        start_x_m=edges[:-1],
+        end_x_m=edges[1:],
+        segment_ids=np.arange(1, len(edges), dtype=np.int64),
+        speed_limit_mps=SPEED_LIMIT_MPS,
+        min_target_speed_mps=MIN_TARGET_SPEED_MPS,
+    )
+
+
+def simulated_inrix(drive: Drive, params: PlannerParams) -> InrixFeed:
+    """The drive's simulated INRIX: from before the planner's history window to the drive's end."""
+    bounds = segment_bounds(-ROAD_BEFORE_M, float(drive.position_m[-1]) + ROAD_AFTER_M)
+    lead_in = params.inrix_history_s + INRIX_LATENCY_S
+    first = -math.ceil(lead_in / 60.0) * 60.0
+    return inrix_snapshots(drive, bounds, first, drive.duration_s)
+
+
+@dataclass
+class SimulatedPlanner:
+    """One corridor's planner schedule over simulated time; the AVs share it."""
+
+    algorithm: str
+    params: PlannerParams
+    grid: CorridorGrid
+    feed: InrixFeed
+    period_s: float = PLANNER_PERIOD_S
+    plans_run: int = 0
+    _ping_time: list[float] = field(default_factory=list)
+    _ping_x: list[float] = field(default_factory=list)
+    _ping_speed: list[float] = field(default_factory=list)
+    _previous_smoothed: deque[FloatArray] = field(default_factory=deque)
+    _target: FloatArray | None = None
+    _published_at_s: float = -math.inf
+
+    @classmethod
+    def for_drive(
+        cls, drive: Drive, algorithm: str, params: Mapping[str, Any] | None = None
+    ) -> SimulatedPlanner:
+        """A planner over the drive's simulated road and INRIX, with validated parameters."""
+        checked = PlannerParams.parse(dict(params or {}))
+        return cls(algorithm, checked, simulated_grid(drive), simulated_inrix(drive, checked))
+
+    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
+        """An AV's ping (the agent posts one per second)."""
+        self._ping_time.append(time_s)
+        self._ping_x.append(x_m)
+        self._ping_speed.append(speed_mps)
+
+    def profile(self, time_s: float) -> TargetProfile:
+        """The plan the AVs hold at `time_s`, shifted for its age as the agent does."""
+        if time_s >= self._published_at_s + self.period_s or self._target is None:
+            self._run(math.floor(time_s / self.period_s) * self.period_s)
+        assert self._target is not None  # _run publishes or raises
+        age = time_s - self._published_at_s
+        return TargetProfile(
+            x_m=self.grid.center_x_m,
+            target_speed_mps=self._target,
+            shift_m=self.params.wave_speed_mps * age,
+        )
+
+    def _run(self, now_s: float) -> None:
+        visible = self.feed.visible_rows(now_s)
+        history = InrixHistory(
+            self.feed.measured_at_s[visible],
+            self.feed.speed_mps[visible],
+            self.feed.segment_center_x_m,
+        )
+        times = np.asarray(self._ping_time)
+        window = (times > now_s - self.params.ping_window_s) & (times <= now_s)
+        observations = LaneObservations.from_pings(
+            self.grid,
+            np.full(int(window.sum()), SIM_LANE),
+            np.asarray(self._ping_x)[window],
+            np.asarray(self._ping_speed)[window],
+        )
+        plan = plan_speeds(
+            PlannerInputs(self.grid, history, observations, now_s, tuple(self._previous_smoothed)),
+            self.algorithm,
+            self.params,
+        )
+        self._previous_smoothed.appendleft(plan.smoothed_mps)
+        while len(self._previous_smoothed) > self.params.standing_cycles:
+            self._previous_smoothed.pop()
+        self._target = plan.target_mps[SIM_LANE - 1]
+        self._published_at_s = now_s
+        self.plans_run += 1

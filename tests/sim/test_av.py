@@ -1,0 +1,137 @@
+"""The simulated AVs run the vehicle agent's own controller objects, fed by the real planner."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.av import RADAR_RANGE_M, AgentPolicy, agent_policy
+from sim.drives import drive_from_speeds, load_drive
+from sim.kpi import platoon_kpis
+from sim.plans import SimulatedPlanner
+from sim.platoon import AvObservation, platoon_roles, simulate_platoon
+from vehicle_agent.controllers import (
+    CONTROLLERS,
+    AccelCommand,
+    Controller,
+    Observation,
+    TargetProfile,
+    build_controller,
+)
+from vehicle_agent.controllers.microaccel import MicroAccelController
+
+STOP_AND_GO = "trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+
+
+class FixedPlan:
+    """A plan of 20 m/s everywhere, and a record of the pings it was sent."""
+
+    def __init__(self) -> None:
+        self.pings: list[tuple[float, float, float]] = []
+
+    def profile(self, time_s: float) -> TargetProfile:
+        return TargetProfile(np.array([0.0, 1e5]), np.array([20.0, 20.0]))
+
+    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
+        self.pings.append((time_s, x_m, speed_mps))
+
+
+def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
+    plan = FixedPlan()
+    policy = agent_policy("microaccel", "accel", plan, {"k": 0.4})
+    assert isinstance(policy.controller, MicroAccelController)
+    assert policy.controller.params.k == 0.4
+    twin = build_controller("microaccel", "accel", {"k": 0.4})
+    for step, (gap, lead) in enumerate([(40.0, 24.0), (39.6, 23.0), (39.0, 22.0)]):
+        sensed = AvObservation(step * 0.1, 1000.0 + step, 25.0, gap, lead)
+        expected = twin.step(
+            Observation(
+                time_s=step * 0.1,
+                speed_mps=25.0,
+                target_speed_mps=20.0,
+                position_m=1000.0 + step,
+                target=plan.profile(0.0),
+                lead_present=True,
+                lead_distance_m=gap,
+                lead_rel_speed_mps=lead - 25.0,
+            )
+        )
+        assert policy.accel_mps2(sensed) == expected.accel_mps2  # type: ignore[union-attr]
+    assert plan.pings == [(0.0, 1000.0, 25.0)]  # one ping per second
+
+
+class Recording(Controller):
+    """Records what it is shown and asks for nothing."""
+
+    name = "recording"
+
+    def __init__(self) -> None:
+        super().__init__("accel")
+        self.seen: list[Observation] = []
+
+    def step(self, observation: Observation) -> AccelCommand:
+        self.seen.append(observation)
+        return AccelCommand(0.0)
+
+
+def test_a_leader_beyond_radar_range_is_not_seen() -> None:
+    controller = Recording()
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=True)
+    policy.accel_mps2(AvObservation(0.0, 0.0, 25.0, RADAR_RANGE_M + 1.0, 25.0))
+    policy.accel_mps2(AvObservation(0.1, 2.5, 25.0, RADAR_RANGE_M - 1.0, 24.0))
+    far, near = controller.seen
+    assert far.lead_present is False
+    assert far.lead_distance_m is None
+    assert near.lead_present is True
+    assert near.lead_distance_m == RADAR_RANGE_M - 1.0
+    assert near.lead_rel_speed_mps == pytest.approx(-1.0)
+
+
+def test_an_acc_car_senses_only_the_minicar_flag() -> None:
+    controller = Recording()
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=False)
+    policy.accel_mps2(AvObservation(0.0, 0.0, 25.0, 30.0, 24.0))
+    assert controller.seen[0].lead_present is True
+    assert controller.seen[0].lead_distance_m is None
+    assert controller.seen[0].lead_rel_speed_mps is None
+
+
+def test_acc_controllers_need_a_stock_acc_model() -> None:
+    with pytest.raises(ValueError, match="stock-ACC model"):
+        agent_policy("microaccel_acc", "acc", FixedPlan())
+
+
+def test_every_registered_controller_can_be_built_for_the_simulator() -> None:
+    for name, spec in CONTROLLERS.items():
+        if "accel" in spec.actuations:
+            assert isinstance(agent_policy(name, "accel", FixedPlan()), AgentPolicy)
+
+
+def test_planner_runs_every_minute_and_the_plan_ages() -> None:
+    steady = drive_from_speeds("steady", np.full(3001, 25.0))
+    planner = SimulatedPlanner.for_drive(steady, "kernel_smooth")
+    first = planner.profile(0.0)
+    assert planner.plans_run == 1
+    # steady 25 m/s traffic: the plan says 25 m/s everywhere
+    np.testing.assert_allclose(first.target_speed_mps, 25.0, atol=1e-6)
+    later = planner.profile(59.9)
+    assert planner.plans_run == 1
+    assert later.shift_m == pytest.approx(59.9 * 15 / 3.6)
+    planner.profile(60.0)
+    assert planner.plans_run == 2
+
+
+def test_one_av_smooths_a_real_stop_and_go_slice(shared_dir: Path) -> None:
+    drive = load_drive(shared_dir / "data" / STOP_AND_GO).slice(300.0, 300.0)
+    humans = simulate_platoon(drive, platoon_roles(humans=24, avs=0))
+    planner = SimulatedPlanner.for_drive(drive, "kernel_smooth")
+    policy = agent_policy("microaccel", "accel", planner)
+    mixed = simulate_platoon(drive, platoon_roles(humans=24, avs=1), [policy])
+    assert mixed.collisions == 0
+    assert planner.plans_run == 5
+    # the AV damps the waves: better fuel economy and smoother driving behind it
+    assert platoon_kpis(mixed).fuel_economy_mpg > platoon_kpis(humans).fuel_economy_mpg
+    assert platoon_kpis(mixed).accel_rms_mps2 < platoon_kpis(humans).accel_rms_mps2
+    assert mixed.speed_mps[:, -1].std() < humans.speed_mps[:, -1].std()
