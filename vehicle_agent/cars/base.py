@@ -1,0 +1,115 @@
+"""Reading the car: one interface every make implements, and the decoded state it produces.
+
+A make module says which DBC messages carry what the agent needs (paper Table 2), how often the
+car sends them, where their counters are, and how to turn their signals into a `CarReading`. It
+also builds the one kind of frame the agent sends that make (ACC button presses or acceleration
+requests). `CarStateReader` (state.py) does the bookkeeping common to all makes.
+"""
+
+from __future__ import annotations
+
+import enum
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import ClassVar
+
+from vehicle_agent.codec import Checksum
+from vehicle_agent.controllers import Actuation
+
+Signals = Mapping[str, float]
+
+
+class CruiseButton(enum.Enum):
+    """The ACC buttons the agent reads (driver activity) or presses (plus, minus, gap)."""
+
+    PLUS = "plus"  # resume / accelerate: +1 mph a press, +5 mph held
+    MINUS = "minus"  # set / coast: -1 mph a press, -5 mph held
+    GAP = "gap"  # cycles the three gap settings
+    CANCEL = "cancel"
+    MAIN = "main"
+
+
+# A message the car must keep sending: missing for STALE_PERIODS periods makes the state invalid.
+STALE_PERIODS = 10
+
+
+@dataclass(frozen=True)
+class MessageRule:
+    """How the agent checks one watched message."""
+
+    period_s: float  # the car's nominal sending period
+    counter_signal: str | None = None
+    counter_modulo: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class CarReading:
+    """What one make's signals say, before freshness is judged (SI units, mph for settings)."""
+
+    speed_mps: float
+    acc_available: bool
+    acc_engaged: bool
+    acc_speed_setting_mph: float | None
+    acc_gap_setting: int | None
+    lead_present: bool
+    lead_distance_m: float | None = None
+    lead_rel_speed_mps: float | None = None
+    brake_pressed: bool = False
+    gas_pressed: bool = False
+    buttons: frozenset[CruiseButton] = field(default_factory=frozenset)
+
+
+@dataclass(frozen=True, slots=True)
+class CarState:
+    """The car at one instant: its reading, and whether every input was fresh and well formed."""
+
+    time_s: float
+    valid: bool
+    problem: str | None
+    reading: CarReading | None
+
+    @property
+    def speed_mps(self) -> float | None:
+        """Ego speed, or None before the first complete reading."""
+        return None if self.reading is None else self.reading.speed_mps
+
+
+class CarInterface(ABC):
+    """One make: its DBC, the messages read, and the frames the agent may send."""
+
+    key: ClassVar[str]
+    make: ClassVar[str]
+    model: ClassVar[str]
+    years: ClassVar[tuple[int, ...]]
+    dbc_name: ClassVar[str]
+    actuation: ClassVar[Actuation]
+    messages: ClassVar[dict[str, MessageRule]]
+    checksums: ClassVar[dict[str, Checksum]] = {}
+    # The one message the agent sends, and how often it sends it while commanding.
+    command_message: ClassVar[str]
+    command_period_s: ClassVar[float]
+    command_counter_signal: ClassVar[str | None] = None
+    command_counter_modulo: ClassVar[int] = 0
+
+    @abstractmethod
+    def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
+        """The reading from the latest signals of every watched message."""
+
+    def button_signals(
+        self, button: CruiseButton | None, latest: Mapping[str, Signals]
+    ) -> dict[str, float]:
+        """Signals of the command message pressing `button` (None: all released)."""
+        raise NotImplementedError(f"{self.key} is not actuated by ACC buttons")
+
+    def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
+        """Signals of the command message requesting `accel_mps2`."""
+        raise NotImplementedError(f"{self.key} is not actuated by acceleration requests")
+
+    def commanded_accel(self, signals: Signals) -> float:
+        """The acceleration a decoded command frame requests (accel makes)."""
+        raise NotImplementedError(f"{self.key} is not actuated by acceleration requests")
+
+    def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
+        """The buttons a decoded command frame presses (button makes)."""
+        raise NotImplementedError(f"{self.key} is not actuated by ACC buttons")

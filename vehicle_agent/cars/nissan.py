@@ -1,0 +1,101 @@
+"""2023 Nissan Rogue on opendbc's `nissan_x_trail_2017` DBC (actuation `acc`: button presses).
+
+Read: wheel speeds (km/h, the mean of four), PRO_PILOT (cruise main on, ACC activated, 4-bit
+counter), PROPILOT_HUD (set speed in mph on US cars, follow distance 1-3 bars, lead car icon =
+the "minicar"), CRUISE_THROTTLE (the steering-wheel buttons, brake and gas; 2-bit counter). No
+lead distance or relative speed (paper Table 2). Sent: CRUISE_THROTTLE with RES (+) or SET (-) or
+the follow-distance button, the other signals copied from the car's latest frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import ClassVar
+
+from vehicle_agent.cars.base import (
+    CarInterface,
+    CarReading,
+    CruiseButton,
+    MessageRule,
+    Signals,
+)
+from vehicle_agent.controllers import Actuation
+from vehicle_agent.units import kph_to_mps
+
+# Accelerator position above which the driver is pressing the gas (raw 0..1023 counts).
+GAS_PRESSED_COUNTS = 3
+
+BUTTON_SIGNALS = {
+    CruiseButton.PLUS: "RES_BUTTON",
+    CruiseButton.MINUS: "SET_BUTTON",
+    CruiseButton.GAP: "FOLLOW_DISTANCE_BUTTON",
+    CruiseButton.CANCEL: "CANCEL_BUTTON",
+    CruiseButton.MAIN: "PROPILOT_BUTTON",
+}
+
+
+class NissanRogue(CarInterface):
+    """The paper's majority car."""
+
+    key = "nissan_rogue"
+    make = "Nissan"
+    model = "Rogue"
+    years = (2023,)
+    dbc_name = "nissan_x_trail_2017"
+    actuation: ClassVar[Actuation] = "acc"
+    messages: ClassVar[dict[str, MessageRule]] = {
+        "WHEEL_SPEEDS_FRONT": MessageRule(0.02),
+        "WHEEL_SPEEDS_REAR": MessageRule(0.02),
+        "PRO_PILOT": MessageRule(0.05, "COUNTER", 16),
+        "PROPILOT_HUD": MessageRule(0.1),
+        "CRUISE_THROTTLE": MessageRule(0.05, "COUNTER", 4),
+    }
+    command_message = "CRUISE_THROTTLE"
+    command_period_s = 0.05
+    command_counter_signal = "COUNTER"
+    command_counter_modulo = 4
+
+    def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
+        """Wheel speeds, cruise state, HUD set points and driver inputs."""
+        front, rear = signals["WHEEL_SPEEDS_FRONT"], signals["WHEEL_SPEEDS_REAR"]
+        speed_kph = (
+            front["WHEEL_SPEED_FL"]
+            + front["WHEEL_SPEED_FR"]
+            + rear["WHEEL_SPEED_RL"]
+            + rear["WHEEL_SPEED_RR"]
+        ) / 4.0
+        pilot, hud, throttle = (
+            signals["PRO_PILOT"],
+            signals["PROPILOT_HUD"],
+            signals["CRUISE_THROTTLE"],
+        )
+        engaged = bool(pilot["CRUISE_ACTIVATED"])
+        gap = int(hud["FOLLOW_DISTANCE"])
+        set_speed = float(hud["SET_SPEED"])
+        return CarReading(
+            speed_mps=kph_to_mps(speed_kph),
+            acc_available=bool(pilot["CRUISE_ON"]),
+            acc_engaged=engaged,
+            acc_speed_setting_mph=set_speed if engaged and set_speed > 0 else None,
+            acc_gap_setting=gap if 1 <= gap <= 3 else None,
+            lead_present=bool(hud["LEAD_CAR"]),
+            brake_pressed=bool(throttle["USER_BRAKE_PRESSED"]),
+            gas_pressed=throttle["GAS_PEDAL"] > GAS_PRESSED_COUNTS,
+            buttons=frozenset(b for b, name in BUTTON_SIGNALS.items() if throttle[name]),
+        )
+
+    def button_signals(
+        self, button: CruiseButton | None, latest: Mapping[str, Signals]
+    ) -> dict[str, float]:
+        """The car's latest CRUISE_THROTTLE with only `button` pressed."""
+        values = dict(latest.get("CRUISE_THROTTLE", {}))
+        for name in BUTTON_SIGNALS.values():
+            values[name] = 0
+        if button is not None:
+            values[BUTTON_SIGNALS[button]] = 1
+        values["NO_BUTTON_PRESSED"] = 0 if button is not None else 1
+        return values
+
+    def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
+        """Buttons set in a CRUISE_THROTTLE frame."""
+        return frozenset(b for b, name in BUTTON_SIGNALS.items() if signals.get(name))

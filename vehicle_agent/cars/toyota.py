@@ -1,0 +1,93 @@
+"""2020-21 Toyota RAV4 on opendbc's `toyota_nodsu_pt` DBC (actuation `accel`).
+
+Read (the signals the field team used, README of ../shared/data/can): SPEED (km/h, checksum),
+PCM_CRUISE (ACC active, gas released; checksum), PCM_CRUISE_2 (main on, brake pressed;
+checksum), PCM_CRUISE_SM (UI set speed in mph, distance lines 1-3), LEAD_INFO (radar lead distance
+and relative speed; checksum). The RAV4 is the make that measures the leader (paper Table 2); a
+distance of 252 m or more, or 0, means no leader, the field team's convention for "none".
+Sent: ACC_CONTROL with ACCEL_CMD at ~30 Hz (checksum). The RAV4 has no button actuation, so a
+change of the set speed or the distance lines is the driver's doing.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import ClassVar
+
+from vehicle_agent.cars.base import (
+    CarInterface,
+    CarReading,
+    MessageRule,
+    Signals,
+)
+from vehicle_agent.codec import Checksum, ToyotaChecksum
+from vehicle_agent.controllers import Actuation
+from vehicle_agent.units import kph_to_mps
+
+NO_LEAD_DISTANCE_M = 252.0
+
+_CHECKSUM = ToyotaChecksum()
+
+
+class ToyotaRav4(CarInterface):
+    """TSS2 RAV4 without a separate DSU."""
+
+    key = "toyota_rav4"
+    make = "Toyota"
+    model = "RAV4"
+    years = (2020, 2021)
+    dbc_name = "toyota_nodsu_pt"
+    actuation: ClassVar[Actuation] = "accel"
+    messages: ClassVar[dict[str, MessageRule]] = {
+        "SPEED": MessageRule(0.02),
+        "PCM_CRUISE": MessageRule(1 / 30),
+        "PCM_CRUISE_2": MessageRule(1 / 30),
+        "PCM_CRUISE_SM": MessageRule(0.1),
+        "LEAD_INFO": MessageRule(0.05),
+    }
+    checksums: ClassVar[dict[str, Checksum]] = dict.fromkeys(
+        ("SPEED", "PCM_CRUISE", "PCM_CRUISE_2", "LEAD_INFO", "ACC_CONTROL"), _CHECKSUM
+    )
+    command_message = "ACC_CONTROL"
+    command_period_s = 1 / 30
+
+    def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
+        """Speed, cruise state, set points, radar lead and pedals."""
+        cruise, cruise_2, ui = (
+            signals["PCM_CRUISE"],
+            signals["PCM_CRUISE_2"],
+            signals["PCM_CRUISE_SM"],
+        )
+        lead = signals["LEAD_INFO"]
+        distance = float(lead["LEAD_LONG_DIST"])
+        present = 0.0 < distance < NO_LEAD_DISTANCE_M
+        engaged = bool(cruise["CRUISE_ACTIVE"])
+        lines = int(ui["DISTANCE_LINES"])
+        set_speed = float(ui["UI_SET_SPEED"])
+        return CarReading(
+            speed_mps=kph_to_mps(float(signals["SPEED"]["SPEED"])),
+            acc_available=bool(cruise_2["MAIN_ON"]),
+            acc_engaged=engaged,
+            acc_speed_setting_mph=set_speed if engaged and set_speed > 0 else None,
+            acc_gap_setting=lines if 1 <= lines <= 3 else None,
+            lead_present=present,
+            lead_distance_m=distance if present else None,
+            lead_rel_speed_mps=float(lead["LEAD_REL_SPEED"]) if present else None,
+            brake_pressed=bool(cruise_2["BRAKE_PRESSED"]),
+            gas_pressed=not cruise["GAS_RELEASED"],
+        )
+
+    def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
+        """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted."""
+        return {
+            "ACCEL_CMD": accel_mps2,
+            "ACC_TYPE": 1,
+            "ALLOW_LONG_PRESS": 1,
+            "PERMIT_BRAKING": 1,
+            "RELEASE_STANDSTILL": 1,
+            "CANCEL_REQ": 0,
+        }
+
+    def commanded_accel(self, signals: Signals) -> float:
+        """ACCEL_CMD of a decoded ACC_CONTROL frame."""
+        return float(signals["ACCEL_CMD"])

@@ -1,0 +1,125 @@
+"""Car state from CAN frames: decode, check, keep the latest of each watched message, judge
+freshness. Common to every make; the make's `CarInterface` says what the signals mean.
+
+A watched message is usable when its last good frame is younger than 10 periods, and no bad
+frame of it arrived since (a wrong length, checksum or counter marks the state invalid until the
+next good frame). Frames of ids the make does not watch are counted and ignored: a car's bus
+carries many messages the agent has no use for, and the bus filters keep most of them out.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import can
+
+from vehicle_agent.cars import STALE_PERIODS, CarInterface, CarState, MessageRule
+from vehicle_agent.codec import Codec, FrameError
+from vehicle_agent.logs import ThrottledLog
+
+log = logging.getLogger(__name__)
+
+# Plausible ego speed range (m/s): beyond it a decoded value is garbage.
+MAX_PLAUSIBLE_SPEED_MPS = 90.0
+
+
+@dataclass
+class CanStats:
+    """Frame counters for telemetry and tests."""
+
+    frames: int = 0
+    used: int = 0
+    unknown_ids: int = 0
+    errors: Counter[str] = field(default_factory=Counter)
+
+
+class CarStateReader:
+    """Turns the frames of one make into `CarState` snapshots."""
+
+    def __init__(self, car: CarInterface, codec: Codec) -> None:
+        self.car = car
+        self.codec = codec
+        self._rules: dict[int, tuple[str, MessageRule]] = {
+            codec.frame_id(name): (name, rule) for name, rule in car.messages.items()
+        }
+        self.latest: dict[str, dict[str, float]] = {}
+        self._received_at: dict[str, float] = {}
+        self._last_counter: dict[str, int] = {}
+        self._problems: dict[str, str] = {}
+        self._unknown_seen: set[int] = set()
+        self.stats = CanStats()
+        self._log = ThrottledLog(log)
+
+    @property
+    def watched_ids(self) -> list[int]:
+        """Arbitration ids of the watched messages (for the bus filters)."""
+        return sorted(self._rules)
+
+    def can_filters(self) -> list[dict[str, int | bool]]:
+        """python-can filters passing only the watched standard ids."""
+        return [
+            {"can_id": frame_id, "can_mask": 0x7FF, "extended": False}
+            for frame_id in self.watched_ids
+        ]
+
+    def ingest(self, frame: can.Message, time_s: float) -> None:
+        """Fold one received frame in (bad frames are counted, logged and not used)."""
+        self.stats.frames += 1
+        entry = self._rules.get(frame.arbitration_id)
+        if entry is None or frame.is_extended_id:
+            self.stats.unknown_ids += 1
+            if frame.arbitration_id not in self._unknown_seen:
+                self._unknown_seen.add(frame.arbitration_id)
+                log.info("ignoring CAN id %#x (not a watched message)", frame.arbitration_id)
+            return
+        name, rule = entry
+        if frame.is_error_frame or frame.is_remote_frame:
+            self._refuse(name, "decode", f"{name}: error or remote frame")
+            return
+        try:
+            _, signals = self.codec.decode(frame.arbitration_id, frame.data)
+        except FrameError as error:
+            self._refuse(name, error.kind, str(error))
+            return
+        if rule.counter_signal is not None:
+            counter = int(signals[rule.counter_signal])
+            last = self._last_counter.get(name)
+            self._last_counter[name] = counter
+            received = self._received_at.get(name)
+            recent = received is not None and time_s - received <= STALE_PERIODS * rule.period_s
+            if last is not None and recent and counter != (last + 1) % rule.counter_modulo:
+                self._refuse(name, "counter", f"{name}: counter {counter} after {last}")
+                return
+        self.latest[name] = signals
+        self._received_at[name] = time_s
+        self._problems.pop(name, None)
+        self.stats.used += 1
+
+    def _refuse(self, name: str, kind: str, message: str) -> None:
+        self.stats.errors[kind] += 1
+        self._problems[name] = message
+        self._log.warning(kind, f"bad CAN frame ({kind}): {message}")
+
+    def snapshot(self, time_s: float) -> CarState:
+        """The car now; invalid (with the first problem found) unless every input is fresh."""
+        for name, rule in self.car.messages.items():
+            received = self._received_at.get(name)
+            if received is None:
+                return CarState(time_s, False, f"{name} not received yet", None)
+            age = time_s - received
+            if age > STALE_PERIODS * rule.period_s:
+                return CarState(time_s, False, f"{name} missing for {age:.2f} s", None)
+            problem = self._problems.get(name)
+            if problem is not None:
+                return CarState(time_s, False, problem, None)
+        try:
+            reading = self.car.interpret(self.latest)
+        except (KeyError, ValueError, TypeError) as error:
+            return CarState(time_s, False, f"cannot interpret signals: {error}", None)
+        speed = reading.speed_mps
+        if not (math.isfinite(speed) and 0.0 <= speed <= MAX_PLAUSIBLE_SPEED_MPS):
+            return CarState(time_s, False, f"implausible speed {speed} m/s", None)
+        return CarState(time_s, True, None, reading)
