@@ -1,0 +1,56 @@
+"""Step 2: the fleet's lane observations take precedence over INRIX (paper, TSE Enhancement)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from planner.fuse import FUSERS
+from planner.inputs import LaneObservations
+from planner.params import PlannerParams
+from tests.planner.grids import uniform_grid
+
+PRIOR = np.full(5, 30.0)
+
+
+def observed(lane: int, cell: int, *pairs: tuple[float, int]) -> LaneObservations:
+    """Observations of one cell: (mean speed, ping count) per vehicle."""
+    return LaneObservations(
+        lane=[lane] * len(pairs),
+        cell=[cell] * len(pairs),
+        mean_speed_mps=[speed for speed, _ in pairs],
+        ping_count=[count for _, count in pairs],
+    )
+
+
+def test_without_observations_every_lane_is_the_prior() -> None:
+    tse = FUSERS.get("precedence")(
+        PRIOR, LaneObservations(), uniform_grid(5, lanes=3), PlannerParams()
+    )
+    assert tse.shape == (3, 5)
+    assert np.all(tse == 30.0)
+
+
+def test_a_driven_cell_takes_the_ping_weighted_fleet_speed() -> None:
+    grid = uniform_grid(5, lanes=2)
+    params = PlannerParams(correction_length_m=0.0, other_lane_weight=0.5)
+    tse = FUSERS.get("precedence")(PRIOR, observed(1, 2, (20.0, 10), (24.0, 30)), grid, params)
+    assert tse[0, 2] == pytest.approx(23.0)  # (10 x 20 + 30 x 24) / 40
+    # The other lane at the same cell: prior + w r / (1 + w), r = -7, w = 0.5.
+    assert tse[1, 2] == pytest.approx(30.0 - 3.5 / 1.5)
+    # With no correction length, other cells keep the prior.
+    assert tse[0, [0, 1, 3, 4]].tolist() == [30.0] * 4
+
+
+def test_an_observation_corrects_its_neighbours_fading_with_distance() -> None:
+    grid = uniform_grid(5)
+    params = PlannerParams(correction_length_m=100.0)
+    tse = FUSERS.get("precedence")(PRIOR, observed(1, 2, (23.0, 60)), grid, params)
+    near = math.exp(-1.0)  # 100 m away
+    far = math.exp(-2.0)  # 200 m away
+    assert tse[0, 1] == pytest.approx(30.0 - 7.0 * near / (1 + near))
+    assert tse[0, 3] == pytest.approx(30.0 - 7.0 * near / (1 + near))
+    assert tse[0, 0] == pytest.approx(30.0 - 7.0 * far / (1 + far))
+    assert tse[0, 2] == 23.0

@@ -1,0 +1,75 @@
+"""Step 1: INRIX resampled to the sub-segments and carried past its latency."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from planner.inputs import InrixHistory
+from planner.params import PlannerParams
+from planner.predict import PREDICTORS, NoInrixEstimate, usable_history
+
+CENTERS = np.array([0.0, 1000.0, 2000.0])
+
+
+def test_latest_interpolates_between_segment_centres() -> None:
+    history = InrixHistory([0.0], [[30.0, 10.0, 20.0]], CENTERS)
+    at = np.array([-500.0, 500.0, 1250.0, 2500.0])
+    predicted = PREDICTORS.get("latest")(history, at, 60.0, PlannerParams())
+    # Constant beyond the end centres, linear between them.
+    assert predicted.tolist() == pytest.approx([30.0, 20.0, 12.5, 20.0])
+
+
+def test_wave_trend_carries_the_recent_change_upstream() -> None:
+    # Segment 3 slows by 6 m/s a minute; the newest snapshot is 180 s old at now = 300 s.
+    history = InrixHistory(
+        [0.0, 60.0, 120.0], [[30.0, 30.0, 30.0], [30.0, 30.0, 24.0], [30.0, 30.0, 18.0]], CENTERS
+    )
+    params = PlannerParams(wave_speed_mps=15 / 3.6, trend_weight=0.5, trend_damping_s=120.0)
+    predicted = PREDICTORS.get("wave_trend")(history, CENTERS, 300.0, params)
+    # slope -0.1 m/s/s at 2000 m; damped horizon D = 120 (1 - e^-1.5) = 93.224 s;
+    # the change seen at x + 750 m is the one arriving at x.
+    damped = 120 * (1 - math.exp(-1.5))
+    assert predicted[0] == pytest.approx(30.0)  # slope at 750 m is 0
+    assert predicted[1] == pytest.approx(30.0 + 0.5 * damped * -0.075)  # slope at 1750 m
+    assert predicted[2] == pytest.approx(18.0 + 0.5 * damped * -0.1)  # 13.339
+
+
+def test_wave_trend_with_one_snapshot_is_the_snapshot() -> None:
+    history = InrixHistory([0.0], [[30.0, 10.0, 20.0]], CENTERS)
+    predicted = PREDICTORS.get("wave_trend")(history, CENTERS, 200.0, PlannerParams())
+    assert predicted.tolist() == [30.0, 10.0, 20.0]
+
+
+def test_a_missing_reading_keeps_the_segments_previous_speed() -> None:
+    history = InrixHistory([0.0, 60.0], [[30.0, 12.0, 20.0], [31.0, np.nan, 21.0]], CENTERS)
+    usable = usable_history(history, 90.0, PlannerParams())
+    assert usable.speed_mps[-1].tolist() == [31.0, 12.0, 21.0]
+
+
+def test_a_segment_never_read_takes_its_neighbours_speed() -> None:
+    history = InrixHistory([0.0], [[30.0, np.nan, 20.0]], CENTERS)
+    assert usable_history(history, 60.0, PlannerParams()).speed_mps[0].tolist() == [
+        30.0,
+        25.0,
+        20.0,
+    ]
+
+
+def test_stale_inrix_is_no_estimate() -> None:
+    history = InrixHistory([0.0], [[30.0, 30.0, 30.0]], CENTERS)
+    with pytest.raises(NoInrixEstimate, match="newest INRIX is 601 s old"):
+        usable_history(history, 601.0, PlannerParams(max_inrix_age_s=600))
+
+
+def test_snapshots_from_the_future_are_not_used() -> None:
+    history = InrixHistory([0.0, 120.0], [[30.0, 30.0, 30.0], [5.0, 5.0, 5.0]], CENTERS)
+    assert usable_history(history, 60.0, PlannerParams()).speed_mps.tolist() == [[30.0] * 3]
+
+
+def test_no_reading_at_all_is_no_estimate() -> None:
+    history = InrixHistory([0.0], [[np.nan, np.nan, np.nan]], CENTERS)
+    with pytest.raises(NoInrixEstimate, match="no INRIX reading"):
+        usable_history(history, 10.0, PlannerParams())
