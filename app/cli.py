@@ -39,6 +39,7 @@ from app.core.db import (
 from app.core.security import TOKEN_ROLES, issue_token
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
+from sim.commands import sim
 
 console = Console()
 
@@ -332,6 +333,9 @@ def _with_overrides(**overrides: object) -> Settings:
     if not given:
         return settings()
     return load_settings(**given)
+
+
+cli.add_command(sim)
 
 
 # --- entry point ---------------------------------------------------------------------------

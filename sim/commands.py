@@ -1,0 +1,154 @@
+"""`smoothfleet sim ...`: run the candidate evaluation on the real drives from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+from sim.drives import DriveError, load_drives
+from sim.evaluate import ControllerVariant, evaluate
+from sim.report import best_pair, markdown_table, summary_table, write_csv, write_heatmap
+from sim.scenarios import SCENARIOS, scenario_cases
+
+# Wide enough for the evaluation table when the output is a file or a pipe.
+console = Console(width=max(Console().width, 160))
+
+# ../shared beside the clone (README): the real drives the evaluation replays.
+SHARED_DRIVES = Path(__file__).resolve().parents[2] / "shared" / "data" / "trajectories"
+DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel")
+
+
+@click.group("sim")
+def sim() -> None:
+    """Simulate platoons on real I-24 drives: evaluate planners x controllers."""
+
+
+def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
+    try:
+        return [ControllerVariant.parse(text) for text in texts or DEFAULT_CONTROLLERS]
+    except ValueError as error:
+        raise click.BadParameter(str(error), param_hint="--controller") from None
+
+
+def _planner_params(text: str) -> dict[str, Any]:
+    try:
+        params = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise click.BadParameter(f"not JSON: {error}", param_hint="--planner-params") from None
+    if not isinstance(params, dict):
+        raise click.BadParameter("must be a JSON object", param_hint="--planner-params")
+    return params
+
+
+@sim.command("evaluate")
+@click.option(
+    "--drives",
+    "drives_dir",
+    type=click.Path(path_type=Path),
+    default=SHARED_DRIVES,
+    show_default=True,
+    help="Folder of real drive CSVs (10 Hz).",
+)
+@click.option(
+    "--scenario",
+    "scenarios",
+    multiple=True,
+    type=click.Choice(sorted(SCENARIOS)),
+    help="Scenario to run (repeatable; default: all).",
+)
+@click.option(
+    "--planner",
+    "planners",
+    multiple=True,
+    help="Planner algorithm (repeatable; default: every registered one).",
+)
+@click.option(
+    "--controller",
+    "controllers",
+    multiple=True,
+    help='Controller variant NAME:ACTUATION[:JSON params], e.g. microaccel:accel:{"k":0.4} '
+    f"(repeatable; default: {', '.join(DEFAULT_CONTROLLERS)}).",
+)
+@click.option("--planner-params", default="{}", help="Planner parameters as JSON.")
+@click.option("--humans", default=24, show_default=True, type=click.IntRange(1, 1000))
+@click.option("--avs", default=1, show_default=True, type=click.IntRange(1, 100))
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(path_type=Path),
+    default=Path("sim_results"),
+    show_default=True,
+    help="Where evaluation.csv, heatmap.png and summary.md go.",
+)
+def evaluate_command(
+    drives_dir: Path,
+    scenarios: tuple[str, ...],
+    planners: tuple[str, ...],
+    controllers: tuple[str, ...],
+    planner_params: str,
+    humans: int,
+    avs: int,
+    out_dir: Path,
+) -> None:
+    """Baseline (all human) and every planner x controller over the scenarios."""
+    from planner import ALGORITHMS
+
+    variants = _controller_variants(controllers)
+    chosen_planners = list(planners) or ALGORITHMS.names()
+    unknown = [name for name in chosen_planners if name not in ALGORITHMS]
+    if unknown:
+        raise click.BadParameter(
+            f"unknown planner {', '.join(unknown)} (known: {', '.join(ALGORITHMS.names())})",
+            param_hint="--planner",
+        )
+    params = _planner_params(planner_params)
+    try:
+        drives = load_drives(drives_dir)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    cases = scenario_cases(list(scenarios) or list(SCENARIOS), drives)
+    total = len(cases) * (1 + len(chosen_planners) * len(variants))
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
+        task = progress.add_task("simulating", total=total)
+
+        def advance(label: str) -> None:
+            progress.update(task, advance=1, description=label[:60])
+
+        try:
+            evaluation = evaluate(
+                cases,
+                chosen_planners,
+                variants,
+                humans=humans,
+                avs=avs,
+                planner_params=params,
+                progress=advance,
+            )
+        except ValueError as error:
+            raise click.ClickException(str(error)) from None
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_csv(evaluation, out_dir / "evaluation.csv")
+    write_heatmap(evaluation, out_dir / "heatmap.png")
+    (out_dir / "summary.md").write_text(markdown_table(evaluation))
+    console.print(summary_table(evaluation))
+    best = best_pair(evaluation)
+    if best is not None:
+        console.print(
+            f"best on shockwave: {best['planner']} x {best['controller']}: fuel saving "
+            f"{best['fuel_saving_pct']:+.1f} %, throughput "
+            f"{best['throughput_vph_change_pct']:+.1f} %, network speed "
+            f"{best['network_speed_mps_change_pct']:+.1f} %, collisions {best['collisions']}"
+        )
+    console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")

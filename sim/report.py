@@ -1,0 +1,158 @@
+"""Evaluation outputs: the CSV of every run, the heatmap of KPI changes, the printed table.
+
+The heatmap mirrors the paper's controller-freeze figure: one panel per scenario, Speed Planner
+variants across the top, Vehicle Controllers in rows, KPIs in columns; green is better than the
+all-human baseline, white neutral, red worse (the colour follows each KPI's good direction, the
+number printed is the plain percentage change).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.table import Table
+
+from sim.evaluate import KPI_DIRECTION, PAPER_KPIS, Evaluation
+
+# KPIs drawn in the heatmap: the paper's three and comfort.
+HEATMAP_KPIS = (*PAPER_KPIS, "accel_rms_mps2")
+KPI_LABELS = {
+    "fuel_economy_mpg": "fuel economy",
+    "throughput_vph": "throughput",
+    "network_speed_mps": "network speed",
+    "accel_rms_mps2": "accel RMS",
+    "jerk_rms_mps3": "jerk RMS",
+    "min_gap_m": "min gap",
+    "min_ttc_s": "min TTC",
+}
+# Changes of this size or more get the strongest colour.
+COLOUR_SCALE_PCT = 10.0
+
+
+def write_csv(evaluation: Evaluation, path: Path) -> None:
+    """One row per run, absolute KPIs and changes against its baseline."""
+    rows = evaluation.rows()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def summary_table(evaluation: Evaluation) -> Table:
+    """Mean changes per scenario x planner x controller, for the terminal."""
+    table = Table(title="KPI change vs all-human baseline (mean over the scenario's drives)")
+    for column in (
+        "scenario",
+        "planner",
+        "controller",
+        "drives",
+        "fuel saving",
+        "fuel economy",
+        "throughput",
+        "network speed",
+        "accel RMS",
+        "min gap",
+        "collisions",
+    ):
+        table.add_column(column, justify="left" if column in ("scenario", "planner") else "right")
+    for row in evaluation.summary():
+        table.add_row(
+            row["scenario"],
+            row["planner"],
+            row["controller"],
+            str(row["cases"]),
+            _pct(row["fuel_saving_pct"]),
+            _pct(row["fuel_economy_mpg_change_pct"]),
+            _pct(row["throughput_vph_change_pct"]),
+            _pct(row["network_speed_mps_change_pct"]),
+            _pct(row["accel_rms_mps2_change_pct"]),
+            _pct(row["min_gap_m_change_pct"]),
+            str(row["collisions"]),
+        )
+    return table
+
+
+def markdown_table(evaluation: Evaluation) -> str:
+    """The same summary as a Markdown table (for docs/simulation.md)."""
+    header = (
+        "| scenario | planner | controller | drives | fuel saving | fuel economy | throughput "
+        "| network speed | accel RMS | min gap | collisions |\n"
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+    )
+    lines = [
+        f"| {r['scenario']} | {r['planner']} | {r['controller']} | {r['cases']} "
+        f"| {_pct(r['fuel_saving_pct'])} | {_pct(r['fuel_economy_mpg_change_pct'])} "
+        f"| {_pct(r['throughput_vph_change_pct'])} | {_pct(r['network_speed_mps_change_pct'])} "
+        f"| {_pct(r['accel_rms_mps2_change_pct'])} | {_pct(r['min_gap_m_change_pct'])} "
+        f"| {r['collisions']} |"
+        for r in evaluation.summary()
+    ]
+    return header + "\n".join(lines) + "\n"
+
+
+def _pct(value: float) -> str:
+    return "n/a" if not math.isfinite(value) else f"{value:+.1f} %"
+
+
+def write_heatmap(evaluation: Evaluation, path: Path) -> None:
+    """PNG: one panel per scenario, controllers x (planner, KPI), green better / red worse."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import TwoSlopeNorm
+
+    summary = evaluation.summary()
+    scenarios = evaluation.scenarios()
+    planners = list(dict.fromkeys(p for p, _ in evaluation.variants()))
+    controllers = list(dict.fromkeys(c for _, c in evaluation.variants()))
+    columns = [(p, k) for p in planners for k in HEATMAP_KPIS]
+    figure, axes = plt.subplots(
+        len(scenarios),
+        1,
+        figsize=(1.3 * len(columns) + 3.0, 0.55 * len(controllers) * len(scenarios) + 2.2),
+        squeeze=False,
+    )
+    norm = TwoSlopeNorm(vcenter=0.0, vmin=-COLOUR_SCALE_PCT, vmax=COLOUR_SCALE_PCT)
+    for axis, scenario in zip(axes[:, 0], scenarios, strict=True):
+        values = np.full((len(controllers), len(columns)), np.nan)
+        for row in summary:
+            if row["scenario"] != scenario:
+                continue
+            i = controllers.index(row["controller"])
+            for j, (planner, kpi) in enumerate(columns):
+                if planner == row["planner"]:
+                    values[i, j] = row[f"{kpi}_change_pct"]
+        direction = np.array([KPI_DIRECTION[k] for _, k in columns], dtype=float)
+        axis.imshow(values * direction, cmap="RdYlGn", norm=norm, aspect="auto")
+        for i in range(len(controllers)):
+            for j in range(len(columns)):
+                text = "n/a" if np.isnan(values[i, j]) else f"{values[i, j]:+.1f}%"
+                axis.text(j, i, text, ha="center", va="center", fontsize=8)
+        axis.set_title(scenario)
+        axis.set_yticks(range(len(controllers)), controllers, fontsize=8)
+        axis.set_xticks(
+            range(len(columns)),
+            [f"{planner}\n{KPI_LABELS[kpi]}" for planner, kpi in columns],
+            fontsize=7,
+        )
+    figure.suptitle("KPI change vs all-human baseline (green better, red worse)")
+    figure.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def best_pair(evaluation: Evaluation, scenario: str = "shockwave") -> dict[str, Any] | None:
+    """The planner x controller with the largest fuel saving on `scenario` and no collision."""
+    candidates = [
+        row
+        for row in evaluation.summary()
+        if row["scenario"] == scenario and row["collisions"] == 0
+    ]
+    return max(candidates, key=lambda row: row["fuel_saving_pct"], default=None)

@@ -1,0 +1,124 @@
+"""The candidate evaluation: baseline vs planner x controller, its CSV, heatmap and CLI."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.drives import Drive, load_drive
+from sim.evaluate import BASELINE, ControllerVariant, evaluate
+from sim.report import best_pair, markdown_table, write_csv, write_heatmap
+from sim.scenarios import Case
+from tests.support.servers import cli_env, run_cli
+
+STOP_AND_GO = "trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+FREEFLOW = "trajectories/2021-04-07-12-33-03_masterArray_0_4031.csv"
+
+
+def short_drives(shared_dir: Path) -> tuple[Drive, Drive]:
+    data = shared_dir / "data"
+    return (
+        load_drive(data / STOP_AND_GO).slice(300.0, 300.0),
+        load_drive(data / FREEFLOW),
+    )
+
+
+def write_drive(drive: Drive, path: Path) -> None:
+    """A drive as the recorder writes it (Time in unix s, Velocity in km/h)."""
+    time_s = drive.start_unix_s + np.arange(drive.steps + 1) * drive.dt_s
+    rows = "".join(f"{t:.1f},{v * 3.6:.6f}\n" for t, v in zip(time_s, drive.speed_mps, strict=True))
+    path.write_text("Time,Velocity\n" + rows)
+
+
+def test_variant_parsing() -> None:
+    variant = ControllerVariant.parse('microaccel:accel:{"k": 0.4}')
+    assert variant.controller == "microaccel"
+    assert variant.params == {"k": 0.4}
+    assert variant.name == 'microaccel/accel{"k": 0.4}'
+    with pytest.raises(ValueError, match="expected NAME:ACTUATION"):
+        ControllerVariant.parse("microaccel:fast")
+    with pytest.raises(ValueError, match="params"):
+        ControllerVariant.parse("microaccel:accel:{k}")
+
+
+def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_path: Path) -> None:
+    stop_and_go, _ = short_drives(shared_dir)
+    case = Case("shockwave", stop_and_go)
+    evaluation = evaluate(
+        [case],
+        ["kernel_smooth", "kernel_smooth_buffer"],
+        [ControllerVariant("microaccel", "accel")],
+    )
+    assert [r.controller for r in evaluation.results] == [
+        BASELINE,
+        "microaccel/accel",
+        "microaccel/accel",
+    ]
+    run = evaluation.results[1]
+    base = evaluation.results[0]
+    expected = 100 * (run.kpis.fuel_economy_mpg / base.kpis.fuel_economy_mpg - 1)
+    assert evaluation.change_pct(run, "fuel_economy_mpg") == pytest.approx(expected)
+    assert evaluation.fuel_saving_pct(run) == pytest.approx(
+        100 * (1 - base.kpis.fuel_economy_mpg / run.kpis.fuel_economy_mpg)
+    )
+    assert evaluation.change_pct(base, "throughput_vph") == 0.0
+    summary = evaluation.summary()
+    assert len(summary) == 2
+    assert summary[0]["collisions"] == 0
+    assert summary[0]["fuel_saving_pct"] > 0
+    best = best_pair(evaluation)
+    assert best is not None
+    assert best["fuel_saving_pct"] == max(row["fuel_saving_pct"] for row in summary)
+
+    write_csv(evaluation, tmp_path / "evaluation.csv")
+    with (tmp_path / "evaluation.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 3
+    assert float(rows[0]["fuel_saving_pct"]) == 0.0
+    write_heatmap(evaluation, tmp_path / "heatmap.png")
+    assert (tmp_path / "heatmap.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "| shockwave | kernel_smooth | microaccel/accel | 1 |" in markdown_table(evaluation)
+
+
+def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    for drive in short_drives(shared_dir):
+        write_drive(drive, drives / f"{drive.name[:19]}.csv")
+    out = tmp_path / "out"
+    result = run_cli(
+        "sim",
+        "evaluate",
+        "--drives",
+        str(drives),
+        "--planner",
+        "kernel_smooth",
+        "--controller",
+        "microaccel:accel",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "best on shockwave: kernel_smooth x microaccel/accel" in result.stdout
+    assert (out / "heatmap.png").exists()
+    with (out / "evaluation.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    # shockwave (stop-and-go slice), freeflow and bottleneck (fast slice): baseline + 1 each
+    assert sorted({row["scenario"] for row in rows}) == ["bottleneck", "freeflow", "shockwave"]
+    assert len(rows) == 6
+    assert "shockwave" in (out / "summary.md").read_text()
+
+
+def test_cli_names_a_bad_controller_and_a_missing_folder(tmp_path: Path) -> None:
+    bad = run_cli("sim", "evaluate", "--controller", "microaccel", env=cli_env())
+    assert bad.returncode != 0
+    assert "expected NAME:ACTUATION" in bad.stderr
+    missing = run_cli("sim", "evaluate", "--drives", str(tmp_path / "nowhere"), env=cli_env())
+    assert missing.returncode != 0
+    assert "no drive CSV files" in missing.stderr
+    assert "Traceback" not in missing.stderr
