@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from datetime import date, datetime
-from typing import Any, TextIO
+from typing import IO, Any
 
 import pandas as pd
 from sqlalchemy import Connection, text
@@ -147,7 +147,7 @@ def _frame(connection: Connection, sql: str, params: dict[str, Any]) -> pd.DataF
 def export_csv(
     connection: Connection,
     name: str,
-    out: TextIO,
+    out: IO[str],
     *,
     since: datetime | date | None = None,
     until: datetime | date | None = None,

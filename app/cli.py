@@ -15,8 +15,10 @@ import shutil
 import signal
 import socket
 import subprocess
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from datetime import UTC, datetime
 from pathlib import Path
 from types import FrameType
 from typing import NoReturn
@@ -37,6 +39,14 @@ from app.core.db import (
     session_scope,
 )
 from app.core.security import TOKEN_ROLES, issue_token
+from app.users.service import (
+    OPS_ROLES,
+    UserError,
+    check_new_user,
+    list_users,
+    new_password,
+    save_user,
+)
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
 from sim.commands import sim
@@ -249,6 +259,109 @@ def tokens_create(role: str, vehicle_id: str | None, name: str) -> None:
     click.echo(token)
 
 
+# --- users (dashboard logins) -------------------------------------------------------------
+
+
+@cli.group()
+def users() -> None:
+    """Dashboard users (roles viewer, operator, admin)."""
+
+
+@users.command("add")
+@click.argument("username")
+@click.option("--role", required=True, type=click.Choice(OPS_ROLES))
+@click.option(
+    "--password-stdin", is_flag=True, help="Read the password from standard input (one line)."
+)
+def users_add(username: str, role: str, password_stdin: bool) -> None:
+    """Create a dashboard user, or reset an existing user's role and password."""
+    if password_stdin:
+        password = sys.stdin.readline().rstrip("\r\n")
+    else:
+        password = click.prompt("password", hide_input=True, confirmation_prompt=True)
+    try:
+        check_new_user(username, role, password)
+    except UserError as error:
+        raise CliError(f"users add: {error}") from None
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        created = save_user(session, username, role, password)
+    console.print(f"user {username} {'created' if created else 'updated'} with role {role}")
+
+
+@users.command("list")
+def users_list() -> None:
+    """Show the dashboard users."""
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        table = Table("user", "role", "last login", "failed logins")
+        for user in list_users(session):
+            last = user.last_login_at.isoformat(timespec="seconds") if user.last_login_at else ""
+            table.add_row(user.username, user.role, last, str(user.failed_logins))
+    console.print(table)
+
+
+# --- analytics -----------------------------------------------------------------------------
+
+
+def _moment(value: str | None, option: str) -> datetime | None:
+    """An ISO 8601 date or time from an option (UTC when it names no zone)."""
+    if value is None:
+        return None
+    try:
+        moment = datetime.fromisoformat(value)
+    except ValueError:
+        raise CliError(f"{option}: not an ISO 8601 date or time: {value!r}") from None
+    return moment if moment.tzinfo is not None else moment.replace(tzinfo=UTC)
+
+
+@cli.group("analytics")
+def analytics_group() -> None:
+    """The analytics views (schema `analytics`, docs/analytics.md)."""
+
+
+@analytics_group.command("list")
+def analytics_list() -> None:
+    """Name the views and what one row of each is."""
+    from app.analytics import VIEWS
+
+    table = Table("view", "one row per", "time column")
+    for view in VIEWS.values():
+        table.add_row(view.name, view.grain, view.time_column)
+    console.print(table)
+
+
+@analytics_group.command("export")
+@click.argument("view_name")
+@click.option("--since", help="From this ISO 8601 date or time (UTC unless a zone is given).")
+@click.option("--until", help="Up to (not including) this date or time.")
+@click.option("--vehicle", "vehicle_id", help="Only this vehicle (views with a vehicle_id).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False, allow_dash=True),
+    default="-",
+    show_default=True,
+    help="CSV file to write (- for standard output).",
+)
+def analytics_export(
+    view_name: str, since: str | None, until: str | None, vehicle_id: str | None, output: str
+) -> None:
+    """Export one analytics view as CSV (header row, ISO 8601 times in UTC)."""
+    from app.analytics import UnknownView, export_csv, view
+
+    try:
+        view(view_name)
+    except UnknownView as error:
+        raise CliError(f"analytics export: {error}") from None
+    window = {"since": _moment(since, "--since"), "until": _moment(until, "--until")}
+    with database(settings()) as url, make_sync_engine(url).connect() as connection:
+        with click.open_file(output, "w", encoding="utf-8", lazy=False) as out:
+            try:
+                rows = export_csv(connection, view_name, out, vehicle_id=vehicle_id, **window)
+            except UnknownView as error:
+                raise CliError(f"analytics export: {error}") from None
+    click.echo(f"{rows} row(s) of analytics.{view_name}", err=True)
+
+
 # --- serve, demo ---------------------------------------------------------------------------
 
 
@@ -303,6 +416,9 @@ def serve(host: str | None, port: int | None, workers: int | None, no_migrate: b
         run_server(url, current, migrate=not no_migrate)
 
 
+DEMO_ADMIN = "admin"
+
+
 @cli.command("demo")
 @click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
 @click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
@@ -316,12 +432,17 @@ def demo(host: str | None, port: int | None) -> None:
     with database(current) as url:
         engine = make_sync_engine(url)
         upgrade(engine)
+        admin_password = new_password()
         with session_scope(engine) as session:
             counts = seed(session)
+            save_user(session, DEMO_ADMIN, "admin", admin_password)
         engine.dispose()
         public = current.public_url or f"http://{current.host}:{current.port}"
         console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
         console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+        console.print(
+            f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)"
+        )
         console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
         run_server(url, current, migrate=False)
 

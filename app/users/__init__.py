@@ -1,0 +1,1 @@
+"""Dashboard users: passwords, roles, login throttling."""

@@ -1,0 +1,172 @@
+"""Dashboard users (table ops_user): salted scrypt passwords and a login that slows down guessing.
+
+A wrong password (or unknown username) counts against the account; from the third failure in a
+row the account must wait 1, 2, 4, ... s (at most LOCKOUT_MAX_S) after its last failure before
+another attempt is even checked. A success resets the count.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import re
+import secrets
+from dataclasses import dataclass
+from datetime import datetime, timedelta
+from typing import Literal
+
+import anyio.to_thread
+from sqlalchemy import literal_column, select
+from sqlalchemy.dialects.postgresql import insert
+from sqlalchemy.ext.asyncio import AsyncSession
+from sqlalchemy.orm import Session
+
+from app.models import OpsUser
+
+OpsRole = Literal["viewer", "operator", "admin"]
+OPS_ROLES: tuple[OpsRole, ...] = ("viewer", "operator", "admin")
+USERNAME_PATTERN = re.compile(r"^[A-Za-z0-9_.@-]{1,64}$")
+MIN_PASSWORD_LENGTH = 10
+
+# scrypt cost: n = 2^14, r = 8 uses 16 MiB and ~50 ms per hash on a Raspberry-Pi-class core, the
+# interactive-login setting recommended by the scrypt paper.
+SCRYPT_N = 2**14
+SCRYPT_R = 8
+SCRYPT_P = 1
+SCRYPT_KEY_BYTES = 32
+SALT_BYTES = 16
+
+FREE_FAILURES = 2  # failures before the account starts waiting between attempts
+LOCKOUT_MAX_S = 300.0
+
+
+class UserError(ValueError):
+    """A username, role or password that cannot be stored; the message says which."""
+
+
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
+def hash_password(password: str) -> str:
+    """`scrypt$n$r$p$salt$key` with a fresh random salt."""
+    salt = secrets.token_bytes(SALT_BYTES)
+    key = hashlib.scrypt(
+        password.encode(), salt=salt, n=SCRYPT_N, r=SCRYPT_R, p=SCRYPT_P, dklen=SCRYPT_KEY_BYTES
+    )
+    return f"scrypt${SCRYPT_N}${SCRYPT_R}${SCRYPT_P}${_b64(salt)}${_b64(key)}"
+
+
+def verify_password(password: str, stored: str) -> bool:
+    """Whether the password matches the stored hash (constant-time comparison)."""
+    try:
+        scheme, n, r, p, salt, key = stored.split("$")
+        if scheme != "scrypt":
+            return False
+        expected = base64.b64decode(key)
+        candidate = hashlib.scrypt(
+            password.encode(),
+            salt=base64.b64decode(salt),
+            n=int(n),
+            r=int(r),
+            p=int(p),
+            dklen=len(expected),
+        )
+    except (ValueError, TypeError):
+        return False
+    return hmac.compare_digest(candidate, expected)
+
+
+# Checked against when the username is unknown, so both failures take the same time.
+_DUMMY_HASH = hash_password(secrets.token_urlsafe(16))
+
+
+def check_new_user(username: str, role: str, password: str) -> None:
+    """Raise UserError naming what is wrong with a user about to be stored."""
+    if not USERNAME_PATTERN.match(username):
+        raise UserError("username: 1-64 letters, digits or _ . @ -")
+    if role not in OPS_ROLES:
+        raise UserError(f"role: must be one of {', '.join(OPS_ROLES)}, not {role!r}")
+    if len(password) < MIN_PASSWORD_LENGTH:
+        raise UserError(f"password: at least {MIN_PASSWORD_LENGTH} characters")
+
+
+def save_user(session: Session, username: str, role: str, password: str) -> bool:
+    """Create the user, or reset its role and password; True when it was created."""
+    check_new_user(username, role, password)
+    statement = insert(OpsUser).values(
+        username=username, role=role, password_hash=hash_password(password)
+    )
+    statement = statement.on_conflict_do_update(
+        index_elements=[OpsUser.username],
+        set_={
+            "role": statement.excluded.role,
+            "password_hash": statement.excluded.password_hash,
+            "failed_logins": 0,
+            "last_failed_at": None,
+        },
+    )
+    # xmax = 0 on the returned row means it was inserted rather than updated (PostgreSQL).
+    return bool(session.execute(statement.returning(literal_column("xmax = 0"))).scalar_one())
+
+
+def new_password() -> str:
+    """A random password to print once (the demo's admin)."""
+    return secrets.token_urlsafe(12)
+
+
+def wait_before_next_attempt(failures: int) -> float:
+    """Seconds an account must wait after its last failure: 0, then 1, 2, 4, ... up to the cap."""
+    if failures <= FREE_FAILURES:
+        return 0.0
+    return float(min(2.0 ** (failures - FREE_FAILURES - 1), LOCKOUT_MAX_S))
+
+
+@dataclass(frozen=True)
+class LoginResult:
+    """The outcome of a login attempt: the user, or a message and how long to wait."""
+
+    user: OpsUser | None
+    message: str = ""
+    retry_after_s: float = 0.0
+
+
+WRONG_CREDENTIALS = "Wrong username or password."
+
+
+async def log_in(session: AsyncSession, username: str, password: str, now: datetime) -> LoginResult:
+    """Check a login; failures are counted and slow the account down."""
+    user = await session.scalar(
+        select(OpsUser).where(OpsUser.username == username).with_for_update()
+    )
+    if user is None:
+        await anyio.to_thread.run_sync(verify_password, password, _DUMMY_HASH)
+        return LoginResult(None, WRONG_CREDENTIALS)
+    if user.last_failed_at is not None:
+        unlocks_at = user.last_failed_at + timedelta(
+            seconds=wait_before_next_attempt(user.failed_logins)
+        )
+        if now < unlocks_at:
+            wait_s = (unlocks_at - now).total_seconds()
+            return LoginResult(
+                None,
+                f"Too many failed logins for this account: wait {wait_s:.0f} s and try again.",
+                wait_s,
+            )
+    # scrypt takes tens of milliseconds: off the event loop.
+    if not await anyio.to_thread.run_sync(verify_password, password, user.password_hash):
+        user.failed_logins += 1
+        user.last_failed_at = now
+        await session.flush()
+        return LoginResult(None, WRONG_CREDENTIALS)
+    user.failed_logins = 0
+    user.last_failed_at = None
+    user.last_login_at = now
+    await session.flush()
+    return LoginResult(user)
+
+
+def list_users(session: Session) -> list[OpsUser]:
+    """Every dashboard user, by name."""
+    return list(session.scalars(select(OpsUser).order_by(OpsUser.username)))

@@ -1,0 +1,152 @@
+"""`smoothfleet users add|list` and `smoothfleet analytics list|export` in a subprocess."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import httpx
+from sqlalchemy import Engine, text
+
+from app.users.service import verify_password
+from tests.support.fleet import ping, post_pings
+from tests.support.servers import cli_env, live_server, run_cli, smoothfleet_command
+from tests.support.tokens import issue
+
+
+def add_user(database_url: str, *args: str, password: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*smoothfleet_command(), "users", "add", *args, "--password-stdin"],
+        input=password + "\n",
+        env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
+def stored_user(engine: Engine, username: str) -> tuple[str, str]:
+    with engine.connect() as connection:
+        row = connection.execute(
+            text("SELECT role, password_hash FROM ops_user WHERE username = :u"), {"u": username}
+        ).one()
+    return str(row[0]), str(row[1])
+
+
+def test_users_add_stores_a_salted_scrypt_hash_and_can_reset_it(
+    database_url: str, engine: Engine
+) -> None:
+    created = add_user(database_url, "maria", "--role", "operator", password="correct horse")
+    assert created.returncode == 0, created.stderr
+    assert "user maria created with role operator" in created.stdout
+    role, password_hash = stored_user(engine, "maria")
+    assert role == "operator"
+    assert password_hash.startswith("scrypt$16384$8$1$")
+    assert "correct horse" not in password_hash
+    assert verify_password("correct horse", password_hash)
+    assert not verify_password("correct horsE", password_hash)
+
+    reset = add_user(database_url, "maria", "--role", "viewer", password="battery staple")
+    assert "user maria updated with role viewer" in reset.stdout
+    role, new_hash = stored_user(engine, "maria")
+    assert role == "viewer"
+    assert verify_password("battery staple", new_hash)
+    # A fresh salt each time: the same password never gives the same hash.
+    again = add_user(database_url, "maria", "--role", "viewer", password="battery staple")
+    assert again.returncode == 0
+    assert stored_user(engine, "maria")[1] != new_hash
+
+    listed = run_cli("users", "list", env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url))
+    assert "maria" in listed.stdout
+    assert "viewer" in listed.stdout
+
+
+def test_users_add_refuses_a_short_password_in_one_line(database_url: str, engine: Engine) -> None:
+    result = add_user(database_url, "bob", "--role", "admin", password="short")
+    assert result.returncode == 1
+    assert result.stderr.strip() == (
+        "smoothfleet: error: users add: password: at least 10 characters"
+    )
+    with engine.connect() as connection:
+        assert connection.execute(text("SELECT count(*) FROM ops_user")).scalar_one() == 0
+
+
+def test_users_add_refuses_an_unknown_role(database_url: str) -> None:
+    result = add_user(database_url, "bob", "--role", "root", password="long enough pw")
+    assert result.returncode == 2
+    assert "'root' is not one of 'viewer', 'operator', 'admin'" in result.stderr
+
+
+def test_analytics_list_names_every_view(database_url: str) -> None:
+    result = run_cli("analytics", "list", env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url))
+    assert result.returncode == 0
+    for name in ("engagement_daily", "edie_boxes", "plan_adherence", "inrix_latency"):
+        assert name in result.stdout
+
+
+def test_analytics_export_writes_a_view_as_csv(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    # SF-007 drives 5 pings, 2 engaged: engagement share 0.4.
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=10)
+    pings = [
+        ping(
+            "SF-007",
+            start + timedelta(seconds=i),
+            3000.0 + 25.0 * i,
+            25.0,
+            controller_engaged=i < 2,
+        )
+        for i in range(5)
+    ]
+    with live_server(seeded_database_url) as base, httpx.Client(base_url=base) as client:
+        post_pings(client, issue(seeded_engine, "admin"), pings)
+    output = tmp_path / "engagement.csv"
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+
+    result = run_cli(
+        "analytics",
+        "export",
+        "engagement_daily",
+        "--vehicle",
+        "SF-007",
+        "-o",
+        str(output),
+        env=env,
+    )
+
+    assert result.returncode == 0, result.stderr
+    assert "1 row(s) of analytics.engagement_daily" in result.stderr
+    rows = list(csv.DictReader(output.read_text().splitlines()))
+    assert len(rows) == 1
+    assert rows[0]["vehicle_id"] == "SF-007"
+    assert rows[0]["day"] == start.date().isoformat()
+    assert (rows[0]["pings"], rows[0]["engaged_pings"]) == ("5", "2")
+    assert float(rows[0]["engagement_share"]) == 0.4
+
+    later = run_cli(
+        "analytics",
+        "export",
+        "engagement_daily",
+        "--since",
+        (start + timedelta(days=1)).date().isoformat(),
+        env=env,
+    )
+    assert later.returncode == 0
+    assert later.stdout.strip().splitlines() == [
+        "vehicle_id,day,pings,engaged_pings,acc_engaged_pings,engagement_share,acc_engaged_share"
+    ]
+
+
+def test_analytics_export_names_the_views_when_one_is_unknown(database_url: str) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    result = run_cli("analytics", "export", "speeds", env=env)
+    assert result.returncode == 1
+    assert result.stderr.startswith(
+        "smoothfleet: error: analytics export: unknown analytics view 'speeds'; choose one of:"
+    )
+    bad_time = run_cli("analytics", "export", "edie_boxes", "--since", "yesterday", env=env)
+    assert bad_time.returncode == 1
+    assert "--since: not an ISO 8601 date or time: 'yesterday'" in bad_time.stderr
