@@ -39,6 +39,7 @@ from app.core.db import (
     session_scope,
 )
 from app.core.security import TOKEN_ROLES, issue_token
+from app.feeds.commands import inrix
 from app.users.service import (
     OPS_ROLES,
     UserError,
@@ -456,6 +457,7 @@ def _with_overrides(**overrides: object) -> Settings:
     return load_settings(**given)
 
 
+cli.add_command(inrix)
 cli.add_command(sim)
 
 

@@ -39,15 +39,12 @@ async def store_readings(
 ) -> StoreResult:
     """Store the readings of known segments; count the rest. The caller commits."""
     codes = sorted({reading.xd_code for reading in readings})
-    corridor_of = dict(
-        (
-            await session.execute(
-                select(InrixSegment.xd_code, InrixSegment.corridor_id).where(
-                    InrixSegment.xd_code.in_(codes)
-                )
-            )
-        ).tuples()
+    found = await session.execute(
+        select(InrixSegment.xd_code, InrixSegment.corridor_id).where(
+            InrixSegment.xd_code.in_(codes)
+        )
     )
+    corridor_of = {row.xd_code: row.corridor_id for row in found}
     known = [reading for reading in readings if reading.xd_code in corridor_of]
     unknown = sorted({reading.xd_code for reading in readings} - set(corridor_of))
     accepted = 0

@@ -1,0 +1,178 @@
+"""`smoothfleet inrix poll | replay | convert`: feed the warehouse from INRIX or a recording.
+
+Both write straight into the database (no running server needed), through the same code as
+`POST /api/v1/feeds/inrix`, and print one line per snapshot.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from collections.abc import Awaitable, Callable
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import click
+import httpx
+from sqlalchemy.exc import DBAPIError
+from sqlalchemy.ext.asyncio import AsyncSession, async_sessionmaker
+
+from app.core.config import Settings, SettingsError
+from app.core.db import make_async_engine
+from app.feeds.inrix import InrixFormatError, readings
+from app.feeds.poller import InrixPoller, PollFailed
+from app.feeds.recording import (
+    RecordedSnapshot,
+    RecordingError,
+    read_recording,
+    snapshots_from_drive,
+    to_line,
+    write_recording,
+)
+from app.feeds.replay import replay as replay_snapshots
+from app.feeds.service import StoreResult, shifted, store_readings
+
+
+def _describe(result: StoreResult) -> str:
+    when = ", ".join(moment.isoformat() for moment in result.measured_at) or "no timestamp"
+    line = (
+        f"{when}: {result.accepted} stored, {result.duplicates} already stored, "
+        f"{result.unknown_codes} of unknown codes"
+    )
+    if result.unknown:
+        line += f" ({', '.join(result.unknown)})"
+    return line
+
+
+def _storer(
+    sessions: async_sessionmaker[AsyncSession], shift: Callable[[RecordedSnapshot], timedelta]
+) -> Callable[[RecordedSnapshot], Awaitable[None]]:
+    """Store one snapshot in its own transaction and print what became of it."""
+
+    async def store(snapshot: RecordedSnapshot) -> None:
+        try:
+            found = shifted(readings(snapshot.response), shift(snapshot))
+        except InrixFormatError as error:
+            raise PollFailed(str(error)) from None
+        try:
+            async with sessions() as session, session.begin():
+                result = await store_readings(session, found, datetime.now(UTC))
+        except (DBAPIError, OSError) as error:
+            reason = str(error).strip().splitlines()[0] if str(error).strip() else "unreachable"
+            raise PollFailed(f"database: {reason}") from None
+        click.echo(_describe(result))
+
+    return store
+
+
+async def _with_database(
+    url: str, work: Callable[[async_sessionmaker[AsyncSession]], Awaitable[int]]
+) -> int:
+    engine = make_async_engine(url, pool_size=1)
+    try:
+        return await work(async_sessionmaker(engine, expire_on_commit=False))
+    finally:
+        await engine.dispose()
+
+
+@click.group()
+def inrix() -> None:
+    """The INRIX segment-speed feed: poll the provider, replay or convert recordings."""
+
+
+@inrix.command("poll")
+@click.option(
+    "--period", type=float, help="Seconds between polls (SMOOTHFLEET_INRIX_POLL_PERIOD_S)."
+)
+@click.option("--count", type=click.IntRange(min=1), help="Stop after this many snapshots.")
+@click.option(
+    "--record",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also append every response to this recording (JSON lines) for later replays.",
+)
+def poll(period: float | None, count: int | None, record: Path | None) -> None:
+    """Fetch SMOOTHFLEET_INRIX_URL every period (key: SMOOTHFLEET_INRIX_KEY) and store it."""
+    from app.cli import database, settings
+
+    current: Settings = settings()
+    if not current.inrix_url:
+        raise SettingsError("SMOOTHFLEET_INRIX_URL: must be set for `smoothfleet inrix poll`")
+    if current.inrix_key is None or not current.inrix_key.get_secret_value():
+        raise SettingsError("SMOOTHFLEET_INRIX_KEY: must be set for `smoothfleet inrix poll`")
+    if period is not None and period <= 0:
+        raise click.BadParameter("must be positive", param_hint="--period")
+    url, key = current.inrix_url, current.inrix_key
+    # httpx logs request URLs at INFO; keep it quiet, our own lines say what happened.
+    logging.getLogger("httpx").setLevel(logging.WARNING)
+    logging.basicConfig(level=logging.INFO, format="smoothfleet inrix: %(message)s")
+
+    async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
+        store = _storer(sessions, lambda snapshot: timedelta(0))
+
+        async def handle(snapshot: RecordedSnapshot) -> None:
+            await store(snapshot)
+            if record is not None:
+                with record.open("ab") as handle_file:
+                    handle_file.write(to_line(snapshot))
+
+        async with httpx.AsyncClient() as client:
+            poller = InrixPoller(
+                url, key, period_s=period or current.inrix_poll_period_s, client=client
+            )
+            return await poller.run(handle, count=count)
+
+    with database(current) as database_url:
+        asyncio.run(_with_database(database_url, work))
+
+
+@inrix.command("replay")
+@click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "--speed",
+    type=click.FloatRange(min=0),
+    default=1.0,
+    show_default=True,
+    help="1 = real time, 10 = ten times faster, 0 = as fast as possible.",
+)
+@click.option(
+    "--shift-to-now",
+    is_flag=True,
+    help="Move the provider timestamps so the first snapshot is stamped now (demos).",
+)
+def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
+    """Store a recording's snapshots in the order they were received."""
+    from app.cli import CliError, database, settings
+
+    try:
+        snapshots = read_recording(recording)
+    except RecordingError as error:
+        raise CliError(str(error)) from None
+    offset = (
+        datetime.now(UTC) - snapshots[0].recorded_at if shift_to_now and snapshots else timedelta(0)
+    )
+
+    async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
+        return await replay_snapshots(
+            snapshots, _storer(sessions, lambda snapshot: offset), speed=speed
+        )
+
+    with database(settings()) as database_url:
+        try:
+            count = asyncio.run(_with_database(database_url, work))
+        except PollFailed as error:
+            raise CliError(f"{recording.name}: {error}") from None
+    click.echo(f"replayed {count} snapshot(s) from {recording}")
+
+
+@inrix.command("convert")
+@click.argument("drive_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
+def convert(drive_dir: Path, recording: Path) -> None:
+    """Make a recording from a drive of ../shared/data/trajectories_with_inrix/."""
+    from app.cli import CliError
+
+    try:
+        count = write_recording(recording, snapshots_from_drive(drive_dir))
+    except RecordingError as error:
+        raise CliError(str(error)) from None
+    click.echo(f"wrote {count} snapshot(s) to {recording}")

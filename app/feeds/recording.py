@@ -1,0 +1,168 @@
+"""Recorded INRIX snapshots: a JSON Lines file, and a converter from the shared drive data.
+
+Format (one line per snapshot, in the order they were received):
+
+    {"recorded_at": "2021-03-15T13:17:50.700Z", "response": { ...provider response... }}
+
+`recorded_at` is when the response arrived from the provider; `response` is the body exactly as
+the provider sent it (mph). `smoothfleet inrix poll --record FILE` writes this format and
+`smoothfleet inrix replay FILE` reads it. `smoothfleet inrix convert DRIVE_DIR FILE` makes one
+from a folder of ../shared/data/trajectories_with_inrix/ (per-minute segment speeds in m/s,
+INRIX score and c-Value per segment): each minute becomes a provider-format response whose
+segment codes are SF-I24WB-NN, NN being the column of those files (seed_data/build.py).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from app.feeds.inrix import MPS_PER_MPH, S_PER_MINUTE
+
+
+class RecordingError(ValueError):
+    """A recording or a drive folder cannot be read; the message names the file and line."""
+
+
+@dataclass(frozen=True)
+class RecordedSnapshot:
+    """A provider response and when it was received."""
+
+    recorded_at: datetime
+    response: dict[str, Any]
+
+
+def to_line(snapshot: RecordedSnapshot) -> bytes:
+    """One line of a recording (with its newline)."""
+    return orjson.dumps(
+        {"recorded_at": snapshot.recorded_at, "response": snapshot.response},
+        option=orjson.OPT_UTC_Z | orjson.OPT_APPEND_NEWLINE,
+    )
+
+
+def write_recording(path: Path, snapshots: Iterable[RecordedSnapshot]) -> int:
+    """Write the snapshots to a new recording; returns how many."""
+    count = 0
+    with path.open("wb") as handle:
+        for snapshot in snapshots:
+            handle.write(to_line(snapshot))
+            count += 1
+    return count
+
+
+def read_recording(path: Path) -> list[RecordedSnapshot]:
+    """The snapshots of a recording in the order they were received."""
+    try:
+        lines = path.read_bytes().splitlines()
+    except OSError as error:
+        raise RecordingError(f"{path}: {error.strerror}") from None
+    snapshots = []
+    for number, line in enumerate(lines, start=1):
+        if not line.strip():
+            continue
+        try:
+            entry = orjson.loads(line)
+            recorded_at = datetime.fromisoformat(entry["recorded_at"])
+            response = entry["response"]
+        except (orjson.JSONDecodeError, KeyError, TypeError, ValueError) as error:
+            raise RecordingError(
+                f"{path.name} line {number}: not a recorded snapshot "
+                f'({{"recorded_at": ..., "response": {{...}}}}): {error}'
+            ) from None
+        if recorded_at.tzinfo is None or not isinstance(response, dict):
+            raise RecordingError(
+                f"{path.name} line {number}: recorded_at needs a zone and response an object"
+            )
+        snapshots.append(RecordedSnapshot(recorded_at, response))
+    # Stable: snapshots received at the same instant keep their order in the file.
+    return sorted(snapshots, key=lambda snapshot: snapshot.recorded_at)
+
+
+def segment_code(column: int) -> str:
+    """Our segment code for a column of the recorded feed files (as seed_data/build.py)."""
+    return f"SF-I24WB-{column:02d}"
+
+
+def _table(path: Path) -> tuple[list[float], list[list[float]]]:
+    """A feed CSV: the relative times and, per row, one value per segment column."""
+    try:
+        with path.open(newline="") as handle:
+            rows = list(csv.reader(handle))
+    except OSError as error:
+        raise RecordingError(f"{path}: {error.strerror}") from None
+    times, values = [], []
+    for number, row in enumerate(rows[1:], start=2):
+        try:
+            numbers = [float(cell) for cell in row]
+        except ValueError:
+            raise RecordingError(f"{path.name} line {number}: not all numbers") from None
+        times.append(numbers[0])
+        values.append(numbers[1:])
+    return times, values
+
+
+def _drive_start(trajectory: Path) -> float:
+    """Unix time of the drive's first sample (the feed files' times are relative to it)."""
+    try:
+        with trajectory.open(newline="") as handle:
+            reader = csv.DictReader(handle)
+            first = next(reader)
+        return float(first["Time"])
+    except (OSError, StopIteration, KeyError, ValueError) as error:
+        raise RecordingError(f"{trajectory}: no first Time sample ({error})") from None
+
+
+def _iso(moment: float) -> str:
+    return (
+        datetime.fromtimestamp(moment, UTC)
+        .isoformat(timespec="milliseconds")
+        .replace("+00:00", "Z")
+    )
+
+
+def snapshots_from_drive(directory: Path) -> list[RecordedSnapshot]:
+    """The per-minute INRIX readings of a recorded drive as provider-format snapshots."""
+    start = _drive_start(directory / "trajectory.csv")
+    times, speeds = _table(directory / "speed.csv")
+    score_times, scores = _table(directory / "confidence.csv")
+    c_times, c_values = _table(directory / "cvalue.csv")
+    if not times == score_times == c_times:
+        raise RecordingError(f"{directory.name}: speed, confidence and cvalue rows differ")
+    try:
+        starts: Sequence[float] = json.loads((directory / "segments.json").read_text())
+    except (OSError, ValueError) as error:
+        raise RecordingError(f"{directory / 'segments.json'}: {error}") from None
+    snapshots = []
+    for relative, speed_row, score_row, c_row in zip(times, speeds, scores, c_values, strict=True):
+        measured = _iso(start + relative)
+        segments = []
+        for column, speed_mps in enumerate(speed_row):
+            segment: dict[str, Any] = {
+                "code": segment_code(column),
+                "type": "XDS",
+                "speed": round(speed_mps / MPS_PER_MPH, 3),
+                "score": int(score_row[column]),
+                "c-Value": c_row[column],
+                "segmentClosed": False,
+            }
+            # The last column's end is not in segments.json, so its length is unknown.
+            if column + 1 < len(starts) and speed_mps > 0:
+                length_m = starts[column + 1] - starts[column]
+                segment["travelTimeMinutes"] = round(length_m / speed_mps / S_PER_MINUTE, 4)
+            segments.append(segment)
+        response = {
+            "docType": "GetSegmentSpeed",
+            "statusId": 0,
+            "statusText": "OK",
+            "createdDate": measured,
+            "result": {"segmentspeeds": [{"timestamp": measured, "segments": segments}]},
+        }
+        snapshots.append(RecordedSnapshot(datetime.fromisoformat(measured), response))
+    return snapshots

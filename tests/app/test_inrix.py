@@ -1,0 +1,249 @@
+"""The INRIX feed: the provider's JSON in mph stored in SI, unknown codes counted, nothing twice.
+
+The input is the real recorded feed of ../shared/data/trajectories_with_inrix/ (per-minute
+segment speeds), converted to the provider's format; columns 0, 1 and 20 of those files lie off
+the seed corridor, so the feed reports 3 codes we do not know.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from sqlalchemy import Engine, text
+
+from app.feeds.recording import read_recording, snapshots_from_drive
+from tests.support.api import serving
+from tests.support.servers import cli_env, run_cli
+from tests.support.tokens import bearer, issue
+
+MPH = 0.44704  # m/s
+
+
+@pytest.fixture(scope="module")
+def drive(shared_dir: Path) -> Path:
+    """The 2021-03-15 drive with the INRIX feed of the same minutes."""
+    return sorted((shared_dir / "data/trajectories_with_inrix").glob("2021-03-15*"))[0]
+
+
+@pytest.fixture
+def api(seeded_database_url: str) -> Iterator[httpx.Client]:
+    with serving(seeded_database_url) as client:
+        yield client
+
+
+@pytest.fixture
+def feed(seeded_engine: Engine) -> dict[str, str]:
+    return bearer(issue(seeded_engine, "feed"))
+
+
+def estimates(engine: Engine) -> dict[tuple[str, datetime], dict[str, Any]]:
+    with engine.connect() as connection:
+        rows = connection.execute(text("SELECT * FROM fact_inrix_estimate"))
+        return {(row.xd_code, row.measured_at): dict(row._mapping) for row in rows}
+
+
+def provider_response(*segments: dict[str, Any], **top: Any) -> dict[str, Any]:
+    sets: dict[str, Any] = {"segments": list(segments)}
+    if "timestamp" in top:
+        sets["timestamp"] = top.pop("timestamp")
+    return {"docType": "GetSegmentSpeed", **top, "result": {"segmentspeeds": [sets]}}
+
+
+def test_the_recorded_feed_converts_to_provider_snapshots_in_mph(drive: Path) -> None:
+    snapshots = snapshots_from_drive(drive)
+
+    assert len(snapshots) == 13  # one per minute
+    # trajectory.csv starts at unix 1615814550.7; speed.csv's first row is at -270.7 s.
+    assert snapshots[0].recorded_at == datetime(2021, 3, 15, 13, 18, tzinfo=UTC)
+    [speeds] = snapshots[0].response["result"]["segmentspeeds"]
+    assert speeds["timestamp"] == "2021-03-15T13:18:00.000Z"
+    by_code = {segment["code"]: segment for segment in speeds["segments"]}
+    assert len(by_code) == 21
+    # speed.csv column 2 reads 31.2928 m/s = 70 mph; column 11 reads 8.49376 m/s = 19 mph.
+    assert by_code["SF-I24WB-02"]["speed"] == 70.0
+    assert by_code["SF-I24WB-11"]["speed"] == 19.0
+    assert by_code["SF-I24WB-11"]["c-Value"] == 90.0
+    # Segment 2 spans 717.166 m (segments.json): 717.166 / 31.2928 = 22.918 s = 0.382 min.
+    assert by_code["SF-I24WB-02"]["travelTimeMinutes"] == 0.382
+    assert "travelTimeMinutes" not in by_code["SF-I24WB-20"]  # its end is unknown
+
+
+def test_a_snapshot_is_stored_in_si_with_unknown_codes_counted_and_never_twice(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine, drive: Path
+) -> None:
+    response = snapshots_from_drive(drive)[0].response
+
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=feed)
+
+    assert answer.status_code == 200
+    body = answer.json()
+    assert (body["accepted"], body["duplicates"], body["unknown_codes"]) == (18, 0, 3)
+    assert body["unknown"] == ["SF-I24WB-00", "SF-I24WB-01", "SF-I24WB-20"]
+    assert body["measured_at"] == ["2021-03-15T13:18:00Z"]
+    stored = estimates(seeded_engine)
+    assert len(stored) == 18
+    row = stored[("SF-I24WB-02", datetime(2021, 3, 15, 13, 18, tzinfo=UTC))]
+    assert row["corridor_id"] == "I-24-WB"
+    assert row["speed_mps"] == pytest.approx(70 * MPH)  # 31.2928 m/s
+    assert row["travel_time_s"] == pytest.approx(0.382 * 60)  # 22.92 s
+    assert (row["score"], row["c_value"], row["is_closed"]) == (30, 100.0, False)
+    slow = stored[("SF-I24WB-11", datetime(2021, 3, 15, 13, 18, tzinfo=UTC))]
+    assert slow["speed_mps"] == pytest.approx(19 * MPH)  # the queue: 8.49 m/s
+
+    again = api.post("/api/v1/feeds/inrix", json=response, headers=feed).json()
+    assert (again["accepted"], again["duplicates"], again["unknown_codes"]) == (0, 18, 3)
+    assert len(estimates(seeded_engine)) == 18
+
+
+def test_every_provider_field_is_converted_and_closures_kept(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    response = provider_response(
+        {
+            "code": "SF-I24WB-05",
+            "type": "XDS",
+            "speed": 45,
+            "average": 50,
+            "reference": 60,
+            "travelTimeMinutes": 1.5,
+            "score": 20,
+            "c-Value": 72.5,
+            "segmentClosed": False,
+            "subSegments": [{"offset": 0.1, "speed": 40}],
+        },
+        {"code": "SF-I24WB-06", "type": "XDS", "score": 10, "segmentClosed": True},
+        createdDate="2026-11-23T08:00:30Z",
+        timestamp="2026-11-23T08:00:00Z",
+    )
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=feed)
+
+    assert answer.json()["accepted"] == 2
+    measured = datetime(2026, 11, 23, 8, 0, tzinfo=UTC)
+    stored = estimates(seeded_engine)
+    five = stored[("SF-I24WB-05", measured)]
+    assert five["speed_mps"] == pytest.approx(45 * MPH)
+    assert five["average_speed_mps"] == pytest.approx(50 * MPH)
+    assert five["reference_speed_mps"] == pytest.approx(60 * MPH)
+    assert five["travel_time_s"] == pytest.approx(90.0)
+    assert (five["score"], five["c_value"]) == (20, 72.5)
+    closed = stored[("SF-I24WB-06", measured)]
+    assert closed["is_closed"] is True
+    assert closed["speed_mps"] is None
+
+
+def test_a_set_without_timestamp_takes_the_response_created_date(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    response = provider_response(
+        {"code": "SF-I24WB-07", "speed": 60}, createdDate="2026-11-23T08:01:00Z"
+    )
+    assert api.post("/api/v1/feeds/inrix", json=response, headers=feed).status_code == 200
+    assert ("SF-I24WB-07", datetime(2026, 11, 23, 8, 1, tzinfo=UTC)) in estimates(seeded_engine)
+
+
+@pytest.mark.parametrize(
+    ("document", "expected"),
+    [
+        ({"segmentspeeds": []}, "result"),
+        (provider_response({"code": "SF-I24WB-07", "speed": 60}), "no timestamp"),
+        (
+            provider_response({"code": "SF-I24WB-07", "speed": -3}, timestamp="2026-11-23T08:00Z"),
+            "speed",
+        ),
+    ],
+    ids=["no-result", "no-timestamp", "negative-speed"],
+)
+def test_a_body_that_is_not_a_segment_speed_response_is_422(
+    api: httpx.Client,
+    feed: dict[str, str],
+    seeded_engine: Engine,
+    document: dict[str, Any],
+    expected: str,
+) -> None:
+    answer = api.post("/api/v1/feeds/inrix", json=document, headers=feed)
+    assert answer.status_code == 422
+    assert expected in str(answer.json()["detail"])
+    assert estimates(seeded_engine) == {}
+
+
+@pytest.mark.parametrize(("role", "status"), [("admin", 200), ("vehicle", 403), ("viewer", 403)])
+def test_only_feed_and_admin_tokens_post_the_feed(
+    api: httpx.Client, seeded_engine: Engine, drive: Path, role: str, status: int
+) -> None:
+    token = issue(seeded_engine, role, "SF-001" if role == "vehicle" else None)  # type: ignore[arg-type]
+    response = snapshots_from_drive(drive)[1].response
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=bearer(token))
+    assert answer.status_code == status
+    assert api.post("/api/v1/feeds/inrix", json=response).status_code == 401
+
+
+def test_convert_then_replay_the_real_feed_from_the_command_line(
+    seeded_database_url: str, seeded_engine: Engine, drive: Path, tmp_path: Path
+) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    recording = tmp_path / "inrix.jsonl"
+
+    converted = run_cli("inrix", "convert", str(drive), str(recording), env=env)
+    assert converted.returncode == 0, converted.stderr
+    assert len(read_recording(recording)) == 13
+
+    replayed = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
+    assert replayed.returncode == 0, replayed.stderr
+    lines = replayed.stdout.splitlines()
+    assert lines[0].startswith("2021-03-15T13:18:00+00:00: 18 stored, 0 already stored, 3 of")
+    assert lines[-1] == f"replayed 13 snapshot(s) from {recording}"
+    stored = estimates(seeded_engine)
+    assert len(stored) == 13 * 18
+    # The last minute's column 11 in speed.csv: 12.96416 m/s (29 mph).
+    last = stored[("SF-I24WB-11", datetime(2021, 3, 15, 13, 30, tzinfo=UTC))]
+    assert last["speed_mps"] == pytest.approx(12.96416, abs=1e-4)
+
+    again = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
+    assert "0 stored, 18 already stored" in again.stdout
+    assert len(estimates(seeded_engine)) == 13 * 18
+
+
+def test_replay_can_stamp_an_old_recording_as_now(
+    seeded_database_url: str, seeded_engine: Engine, drive: Path, tmp_path: Path
+) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    recording = tmp_path / "inrix.jsonl"
+    run_cli("inrix", "convert", str(drive), str(recording), env=env)
+    before = datetime.now(UTC)
+
+    result = run_cli("inrix", "replay", str(recording), "--speed", "0", "--shift-to-now", env=env)
+
+    assert result.returncode == 0, result.stderr
+    stamps = sorted({measured for _, measured in estimates(seeded_engine)})
+    assert len(stamps) == 13
+    assert before <= stamps[0] <= datetime.now(UTC)
+    assert (stamps[-1] - stamps[0]).total_seconds() == pytest.approx(12 * 60)
+
+
+def test_a_broken_recording_is_one_line_naming_the_line(
+    seeded_database_url: str, tmp_path: Path
+) -> None:
+    recording = tmp_path / "broken.jsonl"
+    recording.write_text('{"recorded_at": "2021-03-15T13:18:00Z", "response": {}}\n' + "not json\n")
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    result = run_cli("inrix", "replay", str(recording), env=env)
+    assert result.returncode == 1
+    assert result.stderr.strip().startswith("smoothfleet: error: broken.jsonl line 2:")
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_recorded_snapshot_that_is_not_a_response_stops_the_replay(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    recording = tmp_path / "odd.jsonl"
+    recording.write_text('{"recorded_at": "2021-03-15T13:18:00Z", "response": {"result": 1}}\n')
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    result = run_cli("inrix", "replay", str(recording), env=env)
+    assert result.returncode == 1
+    assert "odd.jsonl: not an INRIX segment-speed response: result" in result.stderr
+    assert estimates(seeded_engine) == {}

@@ -1,0 +1,201 @@
+"""`smoothfleet inrix poll`: each period, retries with backoff, the key never shown; replays."""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+
+import httpx
+import orjson
+import pytest
+from pydantic import SecretStr
+from sqlalchemy import Engine, text
+
+from app.feeds.poller import InrixPoller
+from app.feeds.recording import RecordedSnapshot, read_recording, snapshots_from_drive
+from app.feeds.replay import replay
+from tests.support.servers import cli_env, run_cli
+
+KEY = "inrix-key-7f3a9c"
+
+
+class FakeClock:
+    """Time that moves only when the code under test sleeps."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+        self.sleeps: list[float] = []
+
+    def __call__(self) -> float:
+        return self.now
+
+    async def sleep(self, seconds: float) -> None:
+        self.sleeps.append(seconds)
+        self.now += seconds
+
+
+class Provider:
+    """A stand-in INRIX endpoint on a real socket: fails `failures` times, then answers."""
+
+    def __init__(self, body: bytes, failures: int) -> None:
+        self.body = body
+        self.failures = failures
+        self.authorizations: list[str | None] = []
+        self.paths: list[str] = []
+
+    @property
+    def handler(self) -> type[BaseHTTPRequestHandler]:
+        provider = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self) -> None:  # noqa: N802 - http.server's naming
+                provider.authorizations.append(self.headers.get("Authorization"))
+                provider.paths.append(self.path)
+                if len(provider.authorizations) <= provider.failures:
+                    self.send_response(503)
+                    self.end_headers()
+                    return
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(provider.body)))
+                self.end_headers()
+                self.wfile.write(provider.body)
+
+            def log_message(self, *args: object) -> None:
+                pass
+
+        return Handler
+
+
+@pytest.fixture
+def snapshot(shared_dir: Path) -> RecordedSnapshot:
+    drive = sorted((shared_dir / "data/trajectories_with_inrix").glob("2021-04-22*"))[0]
+    return snapshots_from_drive(drive)[0]
+
+
+@pytest.fixture
+def provider(snapshot: RecordedSnapshot) -> Iterator[tuple[Provider, str]]:
+    fake = Provider(orjson.dumps(snapshot.response), failures=2)
+    server = ThreadingHTTPServer(("127.0.0.1", 0), fake.handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield fake, f"http://127.0.0.1:{server.server_address[1]}/v1/segments/speed?corridor=I-24"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+def test_poll_retries_until_the_provider_answers_and_never_shows_the_key(
+    provider: tuple[Provider, str],
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+) -> None:
+    fake, url = provider
+    recording = tmp_path / "polled.jsonl"
+    env = cli_env(
+        SMOOTHFLEET_DATABASE_URL=seeded_database_url,
+        SMOOTHFLEET_INRIX_URL=url,
+        SMOOTHFLEET_INRIX_KEY=KEY,
+    )
+
+    result = run_cli("inrix", "poll", "--count", "1", "--record", str(recording), env=env)
+
+    assert result.returncode == 0, result.stderr
+    assert fake.authorizations == [f"Bearer {KEY}"] * 3
+    assert all(KEY not in path for path in fake.paths)
+    assert "provider answered HTTP 503; retrying in 1 s" in result.stderr
+    assert "retrying in 2 s" in result.stderr
+    assert KEY not in result.stdout + result.stderr
+    assert result.stdout.startswith("2021-04-22T13:31:00+00:00: 18 stored, 0 already stored")
+    with seeded_engine.connect() as connection:
+        count = connection.execute(text("SELECT count(*) FROM fact_inrix_estimate")).scalar()
+    assert count == 18
+    [recorded] = read_recording(recording)
+    assert recorded.response["result"]["segmentspeeds"][0]["timestamp"] == (
+        "2021-04-22T13:31:00.000Z"
+    )
+
+
+@pytest.mark.parametrize("missing", ["SMOOTHFLEET_INRIX_URL", "SMOOTHFLEET_INRIX_KEY"])
+def test_poll_without_url_or_key_is_one_line_naming_it(
+    seeded_database_url: str, missing: str
+) -> None:
+    settings = {
+        "SMOOTHFLEET_DATABASE_URL": seeded_database_url,
+        "SMOOTHFLEET_INRIX_URL": "http://127.0.0.1:9/",
+        "SMOOTHFLEET_INRIX_KEY": KEY,
+    }
+    del settings[missing]
+    result = run_cli("inrix", "poll", "--count", "1", env=cli_env(**settings))
+    assert result.returncode == 1
+    assert (
+        result.stderr.strip()
+        == f"smoothfleet: error: {missing}: must be set for `smoothfleet inrix poll`"
+    )
+
+
+def test_backoff_doubles_and_gives_up_when_the_next_period_starts(
+    snapshot: RecordedSnapshot,
+) -> None:
+    clock = FakeClock()
+    calls: list[float] = []
+    body = orjson.dumps(snapshot.response)
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        calls.append(clock.now)
+        # Down for the whole first period (60 s) and the first try of the second.
+        if clock.now < 1061:
+            return httpx.Response(502)
+        return httpx.Response(200, content=body)
+
+    handled: list[RecordedSnapshot] = []
+
+    async def handle(recorded: RecordedSnapshot) -> None:
+        handled.append(recorded)
+
+    async def run() -> int:
+        async with httpx.AsyncClient(transport=httpx.MockTransport(answer)) as client:
+            poller = InrixPoller(
+                "http://provider.test/speed",
+                SecretStr(KEY),
+                period_s=60,
+                client=client,
+                sleep=clock.sleep,
+                clock=clock,
+            )
+            return await poller.run(handle, count=2)
+
+    assert asyncio.run(run()) == 2
+    # First period: tries at 0, 1, 3, 7, 15, 31 s (retry waits 1, 2, 4, 8, 16); the next wait
+    # (30 s, capped) would cross into the second period, so it waits for that period instead.
+    offsets = [round(moment - 1000) for moment in calls]
+    assert offsets[:6] == [0, 1, 3, 7, 15, 31]
+    # Second period begins at 60 s: fails once, succeeds after 1 s; the third period at 120 s.
+    assert offsets[6:] == [60, 61, 120]
+    assert len(handled) == 2
+
+
+def test_replay_keeps_the_recorded_spacing_divided_by_the_speed() -> None:
+    start = datetime(2021, 3, 15, 13, 18, tzinfo=UTC)
+    snapshots = [
+        RecordedSnapshot(start + timedelta(seconds=offset), {"n": offset})
+        for offset in (0, 60, 60, 180)
+    ]
+    clock = FakeClock()
+    handed: list[tuple[float, object]] = []
+
+    async def handle(snapshot: RecordedSnapshot) -> None:
+        handed.append((clock.now - 1000, snapshot.response["n"]))
+
+    assert asyncio.run(replay(snapshots, handle, speed=10, sleep=clock.sleep, clock=clock)) == 4
+    assert handed == [(0, 0), (6, 60), (6, 60), (18, 180)]
+
+    fast = FakeClock()
+    asyncio.run(replay(snapshots, handle, speed=0, sleep=fast.sleep, clock=fast))
+    assert fast.sleeps == []
