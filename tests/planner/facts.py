@@ -1,0 +1,82 @@
+"""Write INRIX readings and pings straight into the warehouse for the planner's tests."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from datetime import datetime, timedelta
+
+import numpy as np
+from sqlalchemy import Engine, text
+
+from app.seed import seed_corridor_document
+
+CORRIDOR = "I-24-WB"
+SEED = seed_corridor_document()
+INRIX_CODES = [segment["xd_code"] for segment in SEED["inrix_segments"]]
+
+
+def inrix_snapshot(
+    engine: Engine,
+    measured_at: datetime,
+    speeds_mps: Sequence[float],
+    received_at: datetime | None = None,
+    **by_code: float,
+) -> None:
+    """One INRIX minute: a speed per corridor segment in order (overrides by code)."""
+    speeds = dict(zip(INRIX_CODES, speeds_mps, strict=True)) | by_code
+    with engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, speed_mps, "
+                "received_at) VALUES (:corridor, :code, :measured_at, :speed, :received_at)"
+            ),
+            [
+                {
+                    "corridor": CORRIDOR,
+                    "code": code,
+                    "measured_at": measured_at,
+                    "speed": speed,
+                    "received_at": received_at or measured_at,
+                }
+                for code, speed in speeds.items()
+            ],
+        )
+
+
+def standing_slowdown(slow_mps: float = 7.0) -> list[float]:
+    """Free flow at 29 m/s with a slowdown over segments SF-I24WB-11 to -14 (8.25-9.7 km)."""
+    speeds = [29.0] * len(INRIX_CODES)
+    for code in ("SF-I24WB-11", "SF-I24WB-12", "SF-I24WB-13", "SF-I24WB-14"):
+        speeds[INRIX_CODES.index(code)] = slow_mps
+    return speeds
+
+
+def pings(
+    engine: Engine,
+    vehicle_id: str,
+    end: datetime,
+    x_m: Sequence[float | None],
+    speed_mps: float | Sequence[float],
+    lane: int | None = None,
+) -> None:
+    """One ping a second ending at `end`, at the given positions (None = off the corridor)."""
+    count = len(x_m)
+    speeds = np.broadcast_to(np.asarray(speed_mps, dtype=float), (count,))
+    rows = [
+        {
+            "vehicle": vehicle_id,
+            "ts": end - timedelta(seconds=count - 1 - index),
+            "x_m": position,
+            "speed": float(speeds[index]),
+            "lane": lane,
+        }
+        for index, position in enumerate(x_m)
+    ]
+    with engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps, x_m, lane) "
+                "VALUES (:vehicle, :ts, 36.0, -86.6, :speed, :x_m, :lane)"
+            ),
+            rows,
+        )

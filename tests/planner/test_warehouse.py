@@ -1,0 +1,211 @@
+"""The planner's database edge on a real PostgreSQL: one transaction per cycle, provenance,
+degraded inputs, one publisher per corridor, and replay."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+import pytest
+from sqlalchemy import Engine, text
+from sqlalchemy.orm import Session
+
+from planner.params import PlannerParams
+from planner.warehouse import (
+    PLANNER_LOCK_SPACE,
+    CycleOutcome,
+    UnknownPlan,
+    load_grid,
+    replay_plan,
+    run_cycle,
+)
+from tests.planner.facts import CORRIDOR, inrix_snapshot, pings, standing_slowdown
+
+NOW = datetime(2026, 11, 24, 13, 0, tzinfo=UTC)
+PARAMS = PlannerParams()
+
+
+def cycle(engine: Engine, now: datetime, **options: object) -> CycleOutcome:
+    with Session(engine) as session, session.begin():
+        return run_cycle(
+            session,
+            CORRIDOR,
+            algorithm=str(options.pop("algorithm", "kernel_smooth_buffer")),
+            params=PARAMS,
+            valid_for_s=180.0,
+            now=now,
+            **options,  # type: ignore[arg-type]
+        )
+
+
+def minutes_of_slowdown(engine: Engine, until: datetime, minutes: int) -> None:
+    """INRIX showing the standing slowdown every minute up to three minutes before `until`."""
+    for minute in range(minutes, 0, -1):
+        inrix_snapshot(engine, until - timedelta(minutes=2 + minute), standing_slowdown())
+
+
+def test_a_cycle_publishes_every_lane_with_its_provenance(seeded_engine: Engine) -> None:
+    minutes_of_slowdown(seeded_engine, NOW, 5)
+    # SF-002 (lane 2) crawls through 8.4-8.7 km; SF-001 (lane 1) is off the corridor.
+    pings(seeded_engine, "SF-002", NOW, np.linspace(8400, 8700, 60), 5.0)
+    pings(seeded_engine, "SF-001", NOW - timedelta(seconds=5), [None] * 30, 30.0)
+    outcome = cycle(seeded_engine, NOW)
+    assert outcome.status == "published"
+    with seeded_engine.connect() as connection:
+        run = connection.execute(
+            text("SELECT * FROM plan_run WHERE plan_id = :id"), {"id": outcome.plan_id}
+        ).one()
+        rows = connection.execute(
+            text(
+                "SELECT lane, count(*) AS cells, min(tse_speed_mps) AS slowest "
+                "FROM fact_speed_planner WHERE plan_id = :id GROUP BY lane ORDER BY lane"
+            ),
+            {"id": outcome.plan_id},
+        ).all()
+        observations = connection.execute(
+            text(
+                "SELECT vehicle_id, lane, sum(ping_count) FROM fact_vehicle_observation "
+                "GROUP BY vehicle_id, lane"
+            )
+        ).all()
+    assert run.status == "published"
+    assert run.algorithm == "kernel_smooth_buffer"
+    assert run.params["window_m"] == PARAMS.window_m
+    assert run.valid_until - run.published_at == timedelta(seconds=180)
+    assert [(row.lane, row.cells) for row in rows] == [(1, 158), (2, 158), (3, 158), (4, 158)]
+    assert rows[1].slowest == pytest.approx(5.0)  # lane 2's own observation wins
+    assert rows[0].slowest > 5.0  # lane 1 hears of it at half weight only
+    # Only SF-002's on-corridor pings became observations, in its assigned lane.
+    assert [(row[0], row[1], row[2]) for row in observations] == [("SF-002", 2, 60)]
+    inputs = run.inputs
+    assert inputs["vehicles"] == 1
+    assert inputs["pings"] == 60
+    assert inputs["pings_off_corridor"] == 30
+    assert inputs["inrix_age_s"] == 180.0
+    assert inputs["inrix_snapshots"] == 5
+    assert inputs["ping_window_end"] == NOW.isoformat()
+
+
+def test_a_standing_slowdown_gets_a_buffer_from_the_fourth_cycle(seeded_engine: Engine) -> None:
+    minutes_of_slowdown(seeded_engine, NOW + timedelta(minutes=5), 10)
+    buffered = []
+    for minute in range(5):
+        outcome = cycle(seeded_engine, NOW + timedelta(minutes=minute))
+        with seeded_engine.connect() as connection:
+            buffered.append(
+                connection.scalar(
+                    text(
+                        "SELECT count(*) FROM fact_speed_planner WHERE plan_id = :id "
+                        "AND is_buffer AND lane = 1"
+                    ),
+                    {"id": outcome.plan_id},
+                )
+            )
+    assert buffered[:3] == [0, 0, 0]
+    assert buffered[3] > 0
+    assert buffered[4] == buffered[3]
+
+
+def test_no_fresh_inrix_and_no_pings_publishes_nothing_and_says_why(
+    seeded_engine: Engine,
+) -> None:
+    inrix_snapshot(seeded_engine, NOW - timedelta(minutes=11), standing_slowdown())
+    outcome = cycle(seeded_engine, NOW)
+    assert outcome.status == "skipped"
+    assert outcome.reason is not None
+    assert "newest INRIX is 660 s old (limit 600 s); 0 pings" in outcome.reason
+    with seeded_engine.connect() as connection:
+        run = connection.execute(text("SELECT status, reason FROM plan_run")).one()
+        assert connection.scalar(text("SELECT count(*) FROM fact_speed_planner")) == 0
+    assert run.status == "skipped"
+    assert run.reason == outcome.reason
+
+
+def test_bad_inrix_readings_are_ignored_and_counted(seeded_engine: Engine) -> None:
+    speeds = standing_slowdown()
+    inrix_snapshot(
+        seeded_engine,
+        NOW - timedelta(minutes=3),
+        speeds,
+        **{"SF-I24WB-05": float("nan"), "SF-I24WB-06": 50.0, "SF-I24WB-07": -1.0},
+    )
+    outcome = cycle(seeded_engine, NOW, algorithm="kernel_smooth")
+    assert outcome.status == "published"
+    assert outcome.inputs["inrix_ignored"] == {
+        "unknown_segment": 0,
+        "closed": 0,
+        "not_a_number": 1,
+        "out_of_range": 2,  # 50 m/s is 112 mph
+    }
+    with seeded_engine.connect() as connection:
+        segment_06 = connection.scalar(
+            text(
+                "SELECT max(p.tse_speed_mps) FROM fact_speed_planner p "
+                "JOIN dim_i24_segment s USING (i24_segment_id) WHERE s.xd_code = 'SF-I24WB-06'"
+            )
+        )
+    assert segment_06 == pytest.approx(29.0)  # filled from its neighbours, not 50 m/s
+
+
+def test_only_one_planner_publishes_per_corridor(seeded_engine: Engine) -> None:
+    minutes_of_slowdown(seeded_engine, NOW, 3)
+    with Session(seeded_engine) as other, other.begin():
+        other.execute(
+            text("SELECT pg_advisory_xact_lock(:space, hashtext('I-24-WB'))"),
+            {"space": PLANNER_LOCK_SPACE},
+        )
+        assert cycle(seeded_engine, NOW).status == "busy"
+    assert cycle(seeded_engine, NOW).status == "published"
+    # A replica a few seconds behind finds a fresh plan and leaves it be.
+    later = NOW + timedelta(seconds=5)
+    assert cycle(seeded_engine, later, min_interval_s=30.0).status == "busy"
+    with seeded_engine.connect() as connection:
+        assert connection.scalar(text("SELECT count(*) FROM plan_run")) == 1
+
+
+def test_replay_recomputes_a_plan_from_the_warehouse(seeded_engine: Engine) -> None:
+    minutes_of_slowdown(seeded_engine, NOW + timedelta(minutes=4), 9)
+    for minute in range(4):
+        pings(
+            seeded_engine,
+            "SF-002",
+            NOW + timedelta(minutes=minute),
+            np.linspace(8000, 8400, 60),
+            9.0,
+        )
+        outcome = cycle(seeded_engine, NOW + timedelta(minutes=minute))
+    # INRIX arriving after the run must not change its replay.
+    late = NOW + timedelta(minutes=3)
+    inrix_snapshot(seeded_engine, late, [5.0] * 18, received_at=late + timedelta(minutes=5))
+    with Session(seeded_engine) as session:
+        report = replay_plan(session, outcome.plan_id or 0)
+    assert report.matches
+    assert report.cells == 4 * 158
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text(
+                "UPDATE fact_speed_planner SET target_speed_mps = target_speed_mps + 0.5 "
+                "WHERE plan_id = :id AND lane = 3 AND i24_segment_id = 40"
+            ),
+            {"id": outcome.plan_id},
+        )
+    with Session(seeded_engine) as session:
+        tampered = replay_plan(session, outcome.plan_id or 0)
+    assert not tampered.matches
+    assert tampered.max_difference_mps == pytest.approx(0.5, abs=1e-3)
+
+
+def test_replay_of_a_plan_that_was_not_published_says_so(seeded_engine: Engine) -> None:
+    skipped = cycle(seeded_engine, NOW)
+    with Session(seeded_engine) as session:
+        with pytest.raises(UnknownPlan, match="was skipped"):
+            replay_plan(session, skipped.plan_id or 0)
+        with pytest.raises(UnknownPlan, match="no plan 999"):
+            replay_plan(session, 999)
+
+
+def test_the_grid_is_the_seed_corridor(seeded_engine: Engine) -> None:
+    with Session(seeded_engine) as session:
+        grid = load_grid(session, CORRIDOR)
+    assert (grid.lanes, grid.cells) == (4, 158)
+    assert grid.end_x_m[-1] == pytest.approx(14585.72)
