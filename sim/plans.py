@@ -87,6 +87,10 @@ class SimulatedPlanner:
     _previous_smoothed: deque[FloatArray] = field(default_factory=deque)
     _target: FloatArray | None = None
     _published_at_s: float = -math.inf
+    _centers: FloatArray = field(init=False)
+
+    def __post_init__(self) -> None:
+        self._centers = self.grid.center_x_m
 
     @classmethod
     def for_drive(
@@ -109,7 +113,7 @@ class SimulatedPlanner:
         assert self._target is not None  # _run publishes or raises
         age = time_s - self._published_at_s
         return TargetProfile(
-            x_m=self.grid.center_x_m,
+            x_m=self._centers,
             target_speed_mps=self._target,
             shift_m=self.params.wave_speed_mps * age,
         )
