@@ -1,0 +1,137 @@
+"""Bearer tokens: hashed lookups, a short cache, and how fast a revocation takes effect."""
+
+from __future__ import annotations
+
+import asyncio
+from datetime import UTC, datetime
+
+import pytest
+from sqlalchemy import Engine, text
+
+from app.auth import Principal, TokenCache
+from app.core.db import make_async_engine
+from tests.support.api import ping, serving
+from tests.support.tokens import bearer, issue
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def revoke(engine: Engine) -> None:
+    with engine.begin() as connection:
+        connection.execute(text("UPDATE api_token SET revoked_at = now()"))
+
+
+def test_tokens_resolve_to_their_role_and_vehicle(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    tokens = {
+        "vehicle": issue(seeded_engine, "vehicle", "SF-003"),
+        "feed": issue(seeded_engine, "feed"),
+        "operator": issue(seeded_engine, "operator"),
+    }
+
+    async def resolve() -> dict[str, Principal | None]:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            cache = TokenCache(engine, ttl_s=5)
+            found = {role: await cache.principal(token) for role, token in tokens.items()}
+            found["unknown"] = await cache.principal("sf_unknown")
+            return found
+        finally:
+            await engine.dispose()
+
+    found = asyncio.run(resolve())
+    assert found["vehicle"] is not None
+    assert (found["vehicle"].role, found["vehicle"].vehicle_id) == ("vehicle", "SF-003")
+    assert found["feed"] is not None
+    assert (found["feed"].role, found["feed"].vehicle_id) == ("feed", None)
+    assert found["operator"] is not None
+    assert found["operator"].role == "operator"
+    assert found["unknown"] is None
+    with seeded_engine.connect() as connection:
+        used = connection.execute(text("SELECT last_used_at FROM api_token")).scalars().all()
+    assert all(moment is not None and moment <= datetime.now(UTC) for moment in used)
+
+
+def test_a_revoked_token_is_refused_once_its_cache_entry_expires(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    clock = Clock()
+
+    async def scenario() -> list[bool]:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            cache = TokenCache(engine, ttl_s=5, clock=clock)
+            seen = [await cache.principal(token) is not None]
+            revoke(seeded_engine)
+            clock.now = 4.9  # within the cache's life: still honoured
+            seen.append(await cache.principal(token) is not None)
+            clock.now = 5.1  # looked up again: refused
+            seen.append(await cache.principal(token) is not None)
+            return seen
+        finally:
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) == [True, True, False]
+
+
+def test_concurrent_first_requests_of_a_token_share_one_lookup(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    token = issue(seeded_engine, "admin")
+
+    async def scenario() -> tuple[int, int]:
+        engine = make_async_engine(seeded_database_url)
+        lookups = 0
+        try:
+            cache = TokenCache(engine, ttl_s=5)
+            original = cache._lookup
+
+            async def counted(token_hash: str) -> Principal | None:
+                nonlocal lookups
+                lookups += 1
+                return await original(token_hash)
+
+            cache._lookup = counted  # type: ignore[method-assign]
+            found = await asyncio.gather(*(cache.principal(token) for _ in range(50)))
+            return lookups, sum(p is not None for p in found)
+        finally:
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) == (1, 50)
+
+
+def test_with_no_cache_a_revocation_takes_effect_at_the_next_request(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    headers = bearer(issue(seeded_engine, "vehicle", "SF-001"))
+    with serving(seeded_database_url, token_cache_ttl_s=0) as client:
+        assert client.post("/api/v1/pings", json=ping(), headers=headers).status_code == 200
+        revoke(seeded_engine)
+        refused = client.post("/api/v1/pings", json=ping(), headers=headers)
+    assert refused.status_code == 401
+    assert refused.json() == {"detail": "invalid or revoked token"}
+
+
+@pytest.mark.parametrize(
+    ("path", "method"),
+    [
+        ("/api/v1/pings", "POST"),
+        ("/api/v1/vehicles/SF-001/status", "POST"),
+        ("/api/v1/vehicles/SF-001/config", "GET"),
+        ("/api/v1/corridors/I-24-WB", "GET"),
+        ("/api/v1/feeds/inrix", "POST"),
+    ],
+)
+def test_every_api_path_needs_a_token(seeded_database_url: str, path: str, method: str) -> None:
+    with serving(seeded_database_url) as client:
+        answer = client.request(method, path, json={})
+    assert answer.status_code == 401
+    assert answer.headers["WWW-Authenticate"] == "Bearer"
