@@ -31,6 +31,12 @@ def shared_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
+def dbc_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A cache directory for the generated opendbc DBCs (vehicle agent, car emulator)."""
+    return tmp_path_factory.mktemp("dbc")
+
+
+@pytest.fixture(scope="session")
 def pg_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """URL of a PostgreSQL server's maintenance database, for the whole session."""
     external = os.environ.get("SMOOTHFLEET_TEST_DATABASE_URL")

@@ -8,7 +8,9 @@ does not print them):
 - gap control: constant time gap, a_g = k_1 (d - s_0 - T v) + k_2 (v_l - v) with k_1 = 0.23 1/s^2
   and k_2 = 0.07 1/s, the values Milanes & Shladover (2014) fitted to a production ACC, and
   T = 1.2, 1.5, 2.0 s for 1, 2, 3 bars (paper, ACC-Based Controller);
-- the stock ACC's collision avoidance when closing: a_c = -(v - v_l)^2 / (2 (d - s_0));
+- the stock ACC's collision avoidance when closing: a_c = b_0 - (v - v_l)^2 / (2 (d - s_0)),
+  the kinematic deceleration that matches the leader's speed at s_0, relaxed by b_0 = 0.5 m/s^2
+  so that closing slowly on a distant leader does not pin the acceleration at zero;
 a = min(a_s, a_g, a_c) in gap control, clipped to the ACC's authority [-3.5, 2.0] m/s^2.
 
 Buttons behave as the fleet's cars: a short press of + (resume) or - (set) moves the setting by
@@ -56,6 +58,7 @@ class StockAccParams:
     sensor_range_m: float = 100.0
     min_accel_mps2: float = -3.5
     max_accel_mps2: float = 2.0
+    closing_slack_mps2: float = 0.5
 
 
 def stock_acc_accel(
@@ -80,7 +83,9 @@ def stock_acc_accel(
         gap_safe - params.standstill_gap_m - np.asarray(time_gap_s) * v
     ) + params.rel_speed_gain * (lead - v)
     margin = np.maximum(gap_safe - params.standstill_gap_m, 0.5)
-    closing = np.where(lead < v, -((v - lead) ** 2) / (2.0 * margin), np.inf)
+    closing = np.where(
+        lead < v, params.closing_slack_mps2 - (v - lead) ** 2 / (2.0 * margin), np.inf
+    )
     accel = np.where(in_range, np.minimum(accel, np.minimum(gap_control, closing)), accel)
     clipped: NDArray[np.float64] = np.clip(accel, params.min_accel_mps2, params.max_accel_mps2)
     return clipped

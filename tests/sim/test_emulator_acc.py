@@ -25,8 +25,13 @@ def test_gap_control_mode_with_a_leader_in_range() -> None:
     # a_g = 0.23 (30 - 4 - 1.5 * 20) + 0.07 (20 - 20) = -0.92 < a_s
     assert float(stock_acc_accel(20.0, 50 * MPH, 1.5, 30.0, 20.0, PARAMS)) == pytest.approx(-0.92)
     # Closing at 10 m/s: a_g = 0.23 (30 - 4 - 37.5) + 0.07 (-10) = -3.345,
-    # a_c = -(10^2) / (2 * 26) = -1.923 -> -3.345.
+    # a_c = 0.5 - (10^2) / (2 * 26) = -1.423 -> -3.345.
     assert float(stock_acc_accel(25.0, 70 * MPH, 1.5, 30.0, 15.0, PARAMS)) == pytest.approx(-3.345)
+    # Closing at 10 m/s from 90 m: a_g = 0.23 (90 - 4 - 37.5) - 0.7 = 10.455,
+    # a_c = 0.5 - 100 / (2 * 86) = -0.0814 -> the kinematic term brakes.
+    assert float(stock_acc_accel(25.0, 70 * MPH, 1.5, 90.0, 15.0, PARAMS)) == pytest.approx(
+        0.5 - 100 / 172
+    )
     # Beyond the 100 m radar range: speed control.
     assert float(stock_acc_accel(20.0, 50 * MPH, 1.5, 150.0, 0.0, PARAMS)) == pytest.approx(0.9408)
 

@@ -1,0 +1,257 @@
+"""The emulated car on a CAN bus: its make's DBC frames out, button frames and acceleration
+requests in, a stock ACC in between, and a leader ahead.
+
+Stepped by whoever owns the clock (`step(now)`): a test or the simulator advances simulation
+time, the demo its own loop. Frames go out at each message's nominal period (the agent's table
+in vehicle_agent.cars, scaled by `period_scale` to lighten a hundred emulated cars: the agent
+tolerates 10 missed periods, so a scale up to ~5 keeps every input fresh).
+
+The car's own button message reports every button held, the driver's and the agent's alike, as a
+button board pressing the real switches would; the agent tells its own presses apart.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+from sim.emulator.acc import StockAcc, StockAccParams
+from sim.emulator.frames import FRAMES, CarSnapshot
+from sim.emulator.leaders import ConstantSpeedLeader, Leader
+from vehicle_agent.cars import CarInterface, CruiseButton, car_for
+from vehicle_agent.codec import FrameError, codec_for
+from vehicle_agent.corridor import CorridorGeometry
+from vehicle_agent.gps import GpsFix
+
+log = logging.getLogger(__name__)
+
+# The powertrain's response to an acceleration command: a first-order lag (s).
+ACTUATOR_LAG_S = 0.3
+# Agent commands older than this many command periods are no longer obeyed.
+COMMAND_TIMEOUT_PERIODS = 3
+MAX_SUBSTEP_S = 0.02
+# What the driver's feet do: brake pedal (m/s^2) and gas pedal (m/s^2).
+DRIVER_BRAKE_MPS2 = -2.5
+DRIVER_GAS_MPS2 = 1.0
+
+
+@dataclass
+class Driver:
+    """The driver's inputs."""
+
+    brake: bool = False
+    gas: bool = False
+    buttons: frozenset[CruiseButton] = frozenset()
+
+
+class CarEmulator:
+    """One emulated car of a given make on `bus`."""
+
+    def __init__(
+        self,
+        car: CarInterface | str,
+        bus: can.BusABC,
+        *,
+        speed_mps: float = 0.0,
+        position_m: float = 0.0,
+        leader: Leader | None = None,
+        acc_params: StockAccParams | None = None,
+        corridor: CorridorGeometry | None = None,
+        lane: int | None = None,
+        start_s: float = 0.0,
+        period_scale: float = 1.0,
+        dbc_cache: Path | None = None,
+    ) -> None:
+        self.car = car if isinstance(car, CarInterface) else car_for(car)
+        self.bus = bus
+        self.codec = codec_for(self.car.dbc_name, self.car.checksums, dbc_cache)
+        self.frames = FRAMES[self.car.key]
+        self.acc = StockAcc(acc_params)
+        self.driver = Driver()
+        self.speed_mps = speed_mps
+        self.accel_mps2 = 0.0
+        self.position_m = position_m
+        self.leader = leader
+        self.corridor = corridor
+        self.lane = lane
+        self.time_s = start_s
+        self.period_scale = period_scale
+        self.muted: set[str] = set()
+        self.sent = 0
+        self.agent_frames = 0
+        self.agent_bad_frames = 0
+        self._command_id = self.codec.frame_id(self.car.command_message)
+        self._frame_ids = {name: self.codec.frame_id(name) for name in self.frames}
+        self._next_send = dict.fromkeys(self.frames, start_s)
+        self._counters = dict.fromkeys(self.frames, 0)
+        self._agent_buttons: frozenset[CruiseButton] = frozenset()
+        self._agent_command_s = -math.inf
+        self._agent_accel = 0.0
+
+    # The driver -----------------------------------------------------------------------------
+
+    def driver_engage(self, set_speed_mph: int | None = None) -> None:
+        """The driver sets ACC (at the current speed, or at `set_speed_mph`)."""
+        self.acc.main_on = True
+        self.acc.engage(self.speed_mps)
+        if set_speed_mph is not None:
+            self.acc.set_speed_mph = set_speed_mph
+
+    def driver_brake(self, pressed: bool) -> None:
+        """Brake pedal: pressing it disengages the ACC."""
+        self.driver.brake = pressed
+        if pressed:
+            self.acc.cancel()
+
+    def driver_gas(self, pressed: bool) -> None:
+        """Gas pedal: overrides the ACC while pressed."""
+        self.driver.gas = pressed
+
+    def driver_buttons(self, *buttons: CruiseButton) -> None:
+        """The steering-wheel buttons the driver holds from now on."""
+        self.driver.buttons = frozenset(buttons)
+
+    # The road ahead --------------------------------------------------------------------------
+
+    def cut_in(self, gap_m: float, speed_mps: float) -> None:
+        """A car changes into the lane `gap_m` ahead and drives on at `speed_mps`."""
+        self.leader = ConstantSpeedLeader(self.position_m + gap_m, speed_mps, self.time_s)
+
+    def lead(self) -> tuple[float | None, float | None]:
+        """(gap in m, leader speed in m/s) of the leader, or (None, None)."""
+        if self.leader is None:
+            return None, None
+        position, speed = self.leader.state(self.time_s)
+        return position - self.position_m, speed
+
+    def gps_fix(self, time_s: float) -> GpsFix | None:
+        """Where the car is, as a GPS receiver would report it (needs a corridor)."""
+        if self.corridor is None:
+            return None
+        lat, lon = self.corridor.position(self.position_m)
+        heading = self.corridor.heading_deg(self.position_m)
+        return GpsFix(
+            time_s=time_s,
+            lat=float(lat),
+            lon=float(lon),
+            speed_mps=self.speed_mps,
+            heading_deg=float(heading[0]),
+            satellites=12,
+            lane=self.lane,
+        )
+
+    # Simulation -----------------------------------------------------------------------------
+
+    def step(self, now: float) -> None:
+        """Read the agent's frames, advance the car to `now`, send the frames that are due."""
+        self._receive(now)
+        held = self.driver.buttons | self._agent_buttons_at(now)
+        self.acc.buttons(now, held, self.speed_mps)
+        while self.time_s < now - 1e-9:
+            dt = min(MAX_SUBSTEP_S, now - self.time_s)
+            self._advance(dt)
+        self.time_s = now
+        self._send_due(now, held)
+
+    def _agent_buttons_at(self, now: float) -> frozenset[CruiseButton]:
+        timeout = COMMAND_TIMEOUT_PERIODS * self.car.command_period_s
+        return self._agent_buttons if now - self._agent_command_s <= timeout else frozenset()
+
+    def _receive(self, now: float) -> None:
+        while True:
+            frame = self.bus.recv(timeout=0)
+            if frame is None:
+                return
+            if frame.arbitration_id != self._command_id:
+                continue
+            try:
+                _, signals = self.codec.decode(frame.arbitration_id, frame.data)
+            except FrameError:
+                self.agent_bad_frames += 1
+                continue
+            self.agent_frames += 1
+            self._agent_command_s = now
+            if self.car.actuation == "accel":
+                self._agent_accel = self.car.commanded_accel(signals)
+            else:
+                self._agent_buttons = self.car.pressed_buttons(signals)
+
+    def commanded_accel(self) -> float:
+        """What the powertrain is asked for now: driver, agent request or stock ACC."""
+        if self.driver.brake:
+            return DRIVER_BRAKE_MPS2
+        gap, lead_speed = self.lead()
+        params = self.acc.params
+        if not self.acc.engaged:
+            return DRIVER_GAS_MPS2 if self.driver.gas else 0.0
+        timeout = COMMAND_TIMEOUT_PERIODS * self.car.command_period_s
+        if self.car.actuation == "accel" and self.time_s - self._agent_command_s <= timeout:
+            command = min(max(self._agent_accel, params.min_accel_mps2), params.max_accel_mps2)
+        else:
+            command = self.acc.accel(self.speed_mps, gap, lead_speed)
+        return max(command, DRIVER_GAS_MPS2) if self.driver.gas else command
+
+    def _advance(self, dt: float) -> None:
+        command = self.commanded_accel()
+        self.accel_mps2 += (command - self.accel_mps2) * min(dt / ACTUATOR_LAG_S, 1.0)
+        self.speed_mps = max(self.speed_mps + self.accel_mps2 * dt, 0.0)
+        if self.speed_mps == 0.0:
+            self.accel_mps2 = max(self.accel_mps2, 0.0)
+        self.position_m += self.speed_mps * dt
+        self.time_s += dt
+
+    def snapshot(self, held: frozenset[CruiseButton]) -> CarSnapshot:
+        """What the car's ECUs report now."""
+        gap, lead_speed = self.lead()
+        sensed = (
+            gap is not None
+            and lead_speed is not None
+            and 0.0 < gap <= (self.acc.params.sensor_range_m)
+        )
+        return CarSnapshot(
+            speed_mps=self.speed_mps,
+            acc_main_on=self.acc.main_on,
+            acc_engaged=self.acc.engaged,
+            set_speed_mph=self.acc.set_speed_mph,
+            gap_setting=self.acc.gap_setting,
+            lead_present=sensed,
+            lead_distance_m=gap if sensed else None,
+            lead_rel_speed_mps=(lead_speed - self.speed_mps)
+            if sensed and lead_speed is not None
+            else None,
+            brake_pressed=self.driver.brake,
+            gas_pressed=self.driver.gas,
+            buttons=held,
+        )
+
+    def _send_due(self, now: float, held: frozenset[CruiseButton]) -> None:
+        snapshot: CarSnapshot | None = None
+        for name, build in self.frames.items():
+            if now + 1e-9 < self._next_send[name]:
+                continue
+            rule = self.car.messages[name]
+            period = rule.period_s * self.period_scale
+            self._next_send[name] = max(self._next_send[name] + period, now + period / 2)
+            if name in self.muted:
+                continue
+            snapshot = snapshot or self.snapshot(held)
+            signals = build(snapshot)
+            if rule.counter_signal is not None:
+                signals[rule.counter_signal] = self._counters[name]
+                self._counters[name] = (self._counters[name] + 1) % rule.counter_modulo
+            self.send_raw(
+                can.Message(
+                    arbitration_id=self._frame_ids[name],
+                    data=self.codec.encode(name, signals),
+                    is_extended_id=False,
+                )
+            )
+
+    def send_raw(self, frame: can.Message) -> None:
+        """Put any frame on the bus (tests use it for garbage)."""
+        self.bus.send(frame)
+        self.sent += 1

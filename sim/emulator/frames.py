@@ -1,0 +1,143 @@
+"""What each make's car puts on its bus, from the emulated car's physical state.
+
+Written independently of the agent's decoding (vehicle_agent.cars) so the two check each other:
+the emulator sets DBC signals from physics here, the agent reads them back there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from vehicle_agent.cars import CruiseButton
+from vehicle_agent.cars.toyota import NO_LEAD_DISTANCE_M
+
+KPH_PER_MPS = 3.6
+MPH_PER_MPS = 1 / 0.44704
+KPH_PER_MPH = 1.609344
+
+
+@dataclass(frozen=True)
+class CarSnapshot:
+    """The emulated car at one instant, as its ECUs would report it."""
+
+    speed_mps: float
+    acc_main_on: bool
+    acc_engaged: bool
+    set_speed_mph: int | None
+    gap_setting: int
+    lead_present: bool
+    lead_distance_m: float | None
+    lead_rel_speed_mps: float | None
+    brake_pressed: bool
+    gas_pressed: bool
+    buttons: frozenset[CruiseButton]
+
+
+SignalBuilder = Callable[[CarSnapshot], dict[str, float]]
+
+
+def _nissan_wheels(s: CarSnapshot) -> dict[str, float]:
+    kph = s.speed_mps * KPH_PER_MPS
+    return {
+        "WHEEL_SPEED_FL": kph,
+        "WHEEL_SPEED_FR": kph,
+        "WHEEL_SPEED_RL": kph,
+        "WHEEL_SPEED_RR": kph,
+    }
+
+
+NISSAN: dict[str, SignalBuilder] = {
+    "WHEEL_SPEEDS_FRONT": _nissan_wheels,
+    "WHEEL_SPEEDS_REAR": _nissan_wheels,
+    "PRO_PILOT": lambda s: {
+        "CRUISE_ON": int(s.acc_main_on),
+        "CRUISE_ACTIVATED": int(s.acc_engaged),
+    },
+    "PROPILOT_HUD": lambda s: {
+        "SET_SPEED": s.set_speed_mph if s.acc_engaged and s.set_speed_mph else 0,
+        "FOLLOW_DISTANCE": s.gap_setting,
+        "LEAD_CAR": int(s.lead_present),
+    },
+    "CRUISE_THROTTLE": lambda s: {
+        "RES_BUTTON": int(CruiseButton.PLUS in s.buttons),
+        "SET_BUTTON": int(CruiseButton.MINUS in s.buttons),
+        "FOLLOW_DISTANCE_BUTTON": int(CruiseButton.GAP in s.buttons),
+        "CANCEL_BUTTON": int(CruiseButton.CANCEL in s.buttons),
+        "PROPILOT_BUTTON": int(CruiseButton.MAIN in s.buttons),
+        "NO_BUTTON_PRESSED": int(not s.buttons),
+        "USER_BRAKE_PRESSED": int(s.brake_pressed),
+        "GAS_PEDAL": 200 if s.gas_pressed else 0,
+    },
+}
+
+
+def _gm_buttons(s: CarSnapshot) -> dict[str, float]:
+    code = 1
+    for button, value in (
+        (CruiseButton.PLUS, 2),
+        (CruiseButton.MINUS, 3),
+        (CruiseButton.MAIN, 5),
+        (CruiseButton.CANCEL, 6),
+    ):
+        if button in s.buttons:
+            code = value
+    return {
+        "ACCButtons": code,
+        "DistanceButton": int(CruiseButton.GAP in s.buttons),
+        "ACCAlwaysOne": 1,
+    }
+
+
+GM: dict[str, SignalBuilder] = {
+    "ECMVehicleSpeed": lambda s: {
+        "VehicleSpeed": s.speed_mps * MPH_PER_MPS,
+        "VehicleSpeedLeft": s.speed_mps * MPH_PER_MPS,
+    },
+    "ECMEngineStatus": lambda s: {
+        "CruiseActive": int(s.acc_engaged),
+        "CruiseMainOn": int(s.acc_main_on),
+        "BrakePressed": int(s.brake_pressed),
+    },
+    "ASCMActiveCruiseControlStatus": lambda s: {
+        "ACCSpeedSetpoint": (s.set_speed_mph or 0) * KPH_PER_MPH if s.acc_engaged else 0,
+        "ACCGapLevel": s.gap_setting,
+        "ACCLeadCar": int(s.lead_present),
+        "ACCCmdActive": int(s.acc_engaged),
+        "ACCAlwaysOne": 1,
+    },
+    "ASCMSteeringButton": _gm_buttons,
+    "AcceleratorPedal2": lambda s: {"AcceleratorPedal2": 120 if s.gas_pressed else 0},
+}
+
+
+TOYOTA: dict[str, SignalBuilder] = {
+    "SPEED": lambda s: {"SPEED": s.speed_mps * KPH_PER_MPS},
+    "PCM_CRUISE": lambda s: {
+        "CRUISE_ACTIVE": int(s.acc_engaged),
+        "GAS_RELEASED": int(not s.gas_pressed),
+    },
+    "PCM_CRUISE_2": lambda s: {
+        "MAIN_ON": int(s.acc_main_on),
+        "BRAKE_PRESSED": int(s.brake_pressed),
+        "SET_SPEED": round((s.set_speed_mph or 0) * KPH_PER_MPH),
+    },
+    "PCM_CRUISE_SM": lambda s: {
+        "MAIN_ON": int(s.acc_main_on),
+        "UI_SET_SPEED": s.set_speed_mph if s.acc_engaged and s.set_speed_mph else 0,
+        "DISTANCE_LINES": s.gap_setting,
+        "CRUISE_CONTROL_STATE": 6 if s.acc_engaged else 2,
+    },
+    "LEAD_INFO": lambda s: {
+        "LEAD_LONG_DIST": s.lead_distance_m
+        if s.lead_present and s.lead_distance_m
+        else NO_LEAD_DISTANCE_M,
+        "LEAD_REL_SPEED": (s.lead_rel_speed_mps or 0.0) if s.lead_present else 0.0,
+    },
+}
+
+FRAMES: dict[str, dict[str, SignalBuilder]] = {
+    "nissan_rogue": NISSAN,
+    "cadillac_xt5": GM,
+    "toyota_rav4": TOYOTA,
+}

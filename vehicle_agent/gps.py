@@ -1,0 +1,101 @@
+"""GPS for the agent: a fix source behind one small interface (gpsd on a car, the emulator in
+simulation and tests)."""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class GpsFix:
+    """One position fix; `time_s` is the agent's monotonic time when it arrived."""
+
+    time_s: float
+    lat: float
+    lon: float
+    has_fix: bool = True
+    speed_mps: float | None = None
+    heading_deg: float | None = None
+    satellites: int | None = None
+    # The lane, where a lane source exists (a simulation); GPS alone cannot tell lanes apart.
+    lane: int | None = None
+
+
+class GpsSource(Protocol):
+    """Anything that can say where the car is."""
+
+    def latest(self) -> GpsFix | None:
+        """The most recent fix, or None before the first one."""
+
+
+class GpsdSource:
+    """Fixes from gpsd's JSON protocol (TPV reports; SKY for the satellite count), read by a
+    background thread so the control loop never waits on the GPS."""
+
+    def __init__(
+        self, clock: Callable[[], float], host: str = "127.0.0.1", port: int = 2947
+    ) -> None:
+        self.clock = clock
+        self.address = (host, port)
+        self._latest: GpsFix | None = None
+        self._satellites: int | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="gpsd", daemon=True)
+
+    def start(self) -> None:
+        """Start reading in the background (reconnecting when gpsd goes away)."""
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the reader thread."""
+        self._stop.set()
+
+    def latest(self) -> GpsFix | None:
+        """The most recent TPV fix."""
+        return self._latest
+
+    def handle(self, line: str) -> None:
+        """Fold in one gpsd JSON report."""
+        try:
+            report = json.loads(line)
+        except json.JSONDecodeError:
+            return
+        if report.get("class") == "SKY":
+            used = [s for s in report.get("satellites", []) if s.get("used")]
+            self._satellites = len(used)
+        elif report.get("class") == "TPV" and "lat" in report and "lon" in report:
+            self._latest = GpsFix(
+                time_s=self.clock(),
+                lat=float(report["lat"]),
+                lon=float(report["lon"]),
+                has_fix=int(report.get("mode", 0)) >= 2,
+                speed_mps=report.get("speed"),
+                heading_deg=report.get("track"),
+                satellites=self._satellites,
+            )
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                with socket.create_connection(self.address, timeout=5) as connection:
+                    connection.sendall(b'?WATCH={"enable":true,"json":true}\n')
+                    buffer = b""
+                    while not self._stop.is_set():
+                        chunk = connection.recv(4096)
+                        if not chunk:
+                            break
+                        buffer += chunk
+                        *lines, buffer = buffer.split(b"\n")
+                        for line in lines:
+                            self.handle(line.decode("utf-8", "replace"))
+            except OSError as error:
+                log.warning("gpsd at %s:%s: %s", *self.address, error)
+            self._stop.wait(2.0)
