@@ -40,6 +40,7 @@ from app.core.db import (
 )
 from app.core.security import TOKEN_ROLES, issue_token
 from app.feeds.commands import inrix
+from app.plans.commands import planner
 from app.users.service import (
     OPS_ROLES,
     UserError,
@@ -409,8 +410,15 @@ def run_server(url: str, current: Settings, *, migrate: bool) -> None:
 @click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
 @click.option("--workers", type=int, help="uvicorn worker processes (SMOOTHFLEET_WORKERS).")
 @click.option("--no-migrate", is_flag=True, help="Do not run migrations before serving.")
-def serve(host: str | None, port: int | None, workers: int | None, no_migrate: bool) -> None:
-    """Run the API and dashboard."""
+@click.option("--no-planner", is_flag=True, help="Do not run the planner schedule in this server.")
+def serve(
+    host: str | None, port: int | None, workers: int | None, no_migrate: bool, no_planner: bool
+) -> None:
+    """Run the API and dashboard (and the planner schedule unless --no-planner)."""
+    if no_planner:
+        # The workers read their settings from the environment.
+        os.environ["SMOOTHFLEET_PLANNER_ENABLED"] = "false"
+        get_settings.cache_clear()
     current = _with_overrides(host=host, port=port, workers=workers)
     ensure_port_free(current.host, current.port)
     with database(current) as url:
@@ -459,6 +467,7 @@ def _with_overrides(**overrides: object) -> Settings:
 
 cli.add_command(inrix)
 cli.add_command(sim)
+cli.add_command(planner)
 
 
 # --- entry point ---------------------------------------------------------------------------

@@ -21,6 +21,8 @@ from app.fleet.router import router as fleet_router
 from app.health.router import router as health_router
 from app.ingest import ingest_running
 from app.maintenance import maintain_async
+from app.plans.jobs import schedule_planner
+from app.plans.router import router as plans_router
 from app.vehicles.router import router as vehicles_router
 
 log = logging.getLogger(__name__)
@@ -72,12 +74,19 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             max_instances=1,
             coalesce=True,
         )
+        stop_planner = (
+            schedule_planner(scheduler, database_url, settings)
+            if settings.planner_enabled
+            else None
+        )
         scheduler.start()
         try:
             async with ingest_running(app, engine, settings):
                 yield
         finally:
             scheduler.shutdown(wait=False)
+            if stop_planner is not None:
+                stop_planner()
             await engine.dispose()
 
     app = FastAPI(
@@ -95,4 +104,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(corridors_router)
     app.include_router(feeds_router)
     app.include_router(fleet_router)
+    app.include_router(plans_router)
     return app

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsError as SourceParseError
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
 
@@ -56,6 +57,9 @@ class Settings(BaseSettings):
     # Speed planner
     planner_period_s: float = Field(60.0, gt=0, le=3600)
     plan_valid_for_s: float = Field(180.0, gt=0)
+    planner_enabled: bool = True  # `smoothfleet serve --no-planner` turns it off
+    planner_algorithm: str = "kernel_smooth_buffer"
+    planner_params: dict[str, Any] = Field(default_factory=dict)  # JSON, see planner/params.py
 
     # INRIX feed
     inrix_url: str | None = None
@@ -115,6 +119,22 @@ class Settings(BaseSettings):
             raise ValueError("must be a postgresql:// URL")
         return value
 
+    @field_validator("planner_algorithm")
+    @classmethod
+    def _planner_algorithm_is_registered(cls, value: str) -> str:
+        from planner import ALGORITHMS
+
+        if value not in ALGORITHMS:
+            raise ValueError(f"unknown algorithm {value!r} (known: {', '.join(ALGORITHMS)})")
+        return value
+
+    @field_validator("planner_params")
+    @classmethod
+    def _planner_params_are_valid(cls, value: dict[str, Any]) -> dict[str, Any]:
+        from planner import PlannerParams
+
+        return PlannerParams.parse(value).stored()
+
     @model_validator(mode="after")
     def _no_placeholder_secrets_in_production(self) -> Settings:
         if (
@@ -147,6 +167,10 @@ def load_settings(**overrides: object) -> Settings:
         return Settings(**overrides)  # type: ignore[arg-type]
     except ValidationError as error:
         raise SettingsError(_describe(error)) from None
+    except SourceParseError as error:
+        # A JSON-valued setting that is not JSON: pydantic-settings names only the field.
+        field = str(error).split('"')[1] if '"' in str(error) else "settings"
+        raise SettingsError(f"SMOOTHFLEET_{field.upper()}: not valid JSON") from None
 
 
 @lru_cache(maxsize=1)

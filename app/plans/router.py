@@ -1,0 +1,135 @@
+"""Plans for vehicles and analysts: the latest valid plan (ETag/304, 503 + Retry-After when
+there is none), a vehicle's lane plan, and the planner's run history.
+
+Who may read: any ops token; a vehicle token the plans of its own vehicle's corridor (and its own
+vehicle's plan); a feed token nothing here.
+"""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal
+
+from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
+
+from app.auth import AuthDep, Principal
+from app.core.config import Settings
+from app.core.db import SessionDep
+from app.core.errors import error_responses, service_unavailable
+from app.plans.schemas import PlanHistoryOut, PlanOut
+from app.plans.service import (
+    corridor_lanes,
+    latest_valid_plan_id,
+    plan_document,
+    plan_history,
+    vehicle_assignment,
+)
+from app.vehicles.schemas import VEHICLE_ID_PATTERN
+
+router = APIRouter(prefix="/api/v1", tags=["plans"])
+
+PLAN_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"model": PlanOut, "description": "the plan"},
+    304: {"description": "unchanged since If-None-Match"},
+    **error_responses(401, 403, 404, 422, 503),
+}
+
+
+async def _readable_corridor(
+    principal: Principal, session: SessionDep, corridor_id: str | None
+) -> str | None:
+    """The corridor a caller may read plans of (a vehicle: only its own)."""
+    if principal.role == "feed":
+        raise HTTPException(403, "a feed token may not read plans")
+    if principal.role != "vehicle":
+        return corridor_id
+    assignment = await vehicle_assignment(session, principal.vehicle_id or "")
+    if assignment is None:
+        raise HTTPException(403, "this vehicle token's vehicle is no longer on the roster")
+    own = assignment[0]
+    if corridor_id is not None and corridor_id != own:
+        raise HTTPException(403, f"a vehicle token may read only its own corridor's plans ({own})")
+    return own
+
+
+def _matches(if_none_match: str | None, etag: str) -> bool:
+    if not if_none_match:
+        return False
+    candidates = {tag.strip().removeprefix("W/") for tag in if_none_match.split(",")}
+    return "*" in candidates or etag in candidates
+
+
+async def _serve_latest(
+    request: Request, session: SessionDep, corridor_id: str, lane: int | None
+) -> Response:
+    lanes = await corridor_lanes(session, corridor_id)
+    if lanes is None:
+        raise HTTPException(404, f"unknown corridor {corridor_id}")
+    if lane is not None and not 1 <= lane <= lanes:
+        raise HTTPException(422, f"lane must be 1-{lanes} on {corridor_id}, got {lane}")
+    settings: Settings = request.app.state.settings
+    plan_id = await latest_valid_plan_id(session, corridor_id, datetime.now(UTC))
+    if plan_id is None:
+        return service_unavailable(
+            f"no valid plan for {corridor_id}: leave the car to its stock ACC",
+            retry_after_s=max(1, round(settings.planner_period_s)),
+        )
+    etag = f'"plan-{plan_id}-lane-{lane if lane is not None else "all"}"'
+    headers = {"ETag": etag, "Cache-Control": "no-cache"}
+    if _matches(request.headers.get("if-none-match"), etag):
+        return Response(status_code=304, headers=headers)
+    body = await plan_document(session, corridor_id, plan_id, lane)
+    return Response(body, media_type="application/json", headers=headers)
+
+
+@router.get("/plans/latest", responses=PLAN_RESPONSES, response_model=PlanOut)
+async def get_latest_plan(
+    request: Request,
+    principal: AuthDep,
+    session: SessionDep,
+    corridor: Annotated[str, Query(description="corridor id, e.g. I-24-WB")],
+    lane: Annotated[int | None, Query(description="one lane only (1 = leftmost)")] = None,
+) -> Response:
+    """The newest published plan still valid, all lanes or one; 503 + Retry-After if none."""
+    readable = await _readable_corridor(principal, session, corridor)
+    return await _serve_latest(request, session, readable or corridor, lane)
+
+
+@router.get("/vehicles/{vehicle_id}/plan", responses=PLAN_RESPONSES, response_model=PlanOut)
+async def get_vehicle_plan(
+    vehicle_id: Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)],
+    request: Request,
+    principal: AuthDep,
+    session: SessionDep,
+) -> Response:
+    """The latest valid plan of the vehicle's corridor, for its assigned lane only."""
+    if principal.role == "feed" or (
+        principal.role == "vehicle" and principal.vehicle_id != vehicle_id
+    ):
+        raise HTTPException(
+            403, f"a {principal.role} token may not read the plan of vehicle {vehicle_id}"
+        )
+    assignment = await vehicle_assignment(session, vehicle_id)
+    if assignment is None:
+        raise HTTPException(404, f"unknown vehicle {vehicle_id}")
+    corridor_id, lane = assignment
+    return await _serve_latest(request, session, corridor_id, lane)
+
+
+@router.get("/plans", responses=error_responses(401, 403, 503))
+async def get_plan_history(
+    principal: AuthDep,
+    session: SessionDep,
+    corridor: Annotated[str | None, Query(description="corridor id (all when omitted)")] = None,
+    since: Annotated[datetime | None, Query(description="runs started at or after")] = None,
+    until: Annotated[datetime | None, Query(description="runs started before")] = None,
+    status: Annotated[Literal["published", "skipped", "failed"] | None, Query()] = None,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+) -> PlanHistoryOut:
+    """Planner runs with their algorithm, parameters and inputs, newest first (for replay)."""
+    corridor_id = await _readable_corridor(principal, session, corridor)
+    for name, moment in (("since", since), ("until", until)):
+        if moment is not None and moment.tzinfo is None:
+            raise HTTPException(422, f"{name} needs a time zone (RFC 3339)")
+    runs = await plan_history(session, corridor_id, since, until, status, limit)
+    return PlanHistoryOut(plans=runs)

@@ -1,0 +1,176 @@
+"""Read plans for the API: the latest valid plan of a corridor, a lane's targets, the history.
+
+A published plan never changes, so its rendered document is cached per (plan_id, lane): the
+fleet polling every few seconds costs one indexed lookup of the latest plan_id per request.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from datetime import datetime
+from typing import Any
+
+import orjson
+from sqlalchemy import text
+from sqlalchemy.ext.asyncio import AsyncSession
+
+from app.plans.schemas import BufferOut, LanePlanOut, PlanRunOut
+
+# Rendered plan documents kept per process (a few lanes of the last few plans).
+CACHED_DOCUMENTS = 64
+# Targets and positions are served to the millimetre per second / millimetre.
+DECIMALS = 3
+
+_documents: OrderedDict[tuple[int, int | None], bytes] = OrderedDict()
+
+
+async def corridor_lanes(session: AsyncSession, corridor_id: str) -> int | None:
+    """How many lanes the corridor has, or None if it is unknown."""
+    lanes = await session.scalar(
+        text("SELECT lanes FROM dim_corridor WHERE corridor_id = :corridor"),
+        {"corridor": corridor_id},
+    )
+    return None if lanes is None else int(lanes)
+
+
+async def vehicle_assignment(session: AsyncSession, vehicle_id: str) -> tuple[str, int] | None:
+    """The vehicle's corridor and assigned lane, or None if it is unknown."""
+    row = (
+        await session.execute(
+            text("SELECT corridor_id, assigned_lane FROM dim_vehicle WHERE vehicle_id = :vehicle"),
+            {"vehicle": vehicle_id},
+        )
+    ).first()
+    return None if row is None else (str(row.corridor_id), int(row.assigned_lane))
+
+
+async def latest_valid_plan_id(
+    session: AsyncSession, corridor_id: str, now: datetime
+) -> int | None:
+    """The newest published plan of the corridor that is still valid at `now`."""
+    plan_id = await session.scalar(
+        text(
+            "SELECT plan_id FROM plan_run WHERE corridor_id = :corridor AND status = 'published' "
+            "AND published_at <= :now AND valid_until > :now "
+            "ORDER BY published_at DESC LIMIT 1"
+        ),
+        {"corridor": corridor_id, "now": now},
+    )
+    return None if plan_id is None else int(plan_id)
+
+
+def _buffers(
+    starts: list[float], ends: list[float], targets: list[float], flags: list[bool]
+) -> list[BufferOut]:
+    buffers: list[BufferOut] = []
+    run_start: int | None = None
+    for index, flag in enumerate([*flags, False]):
+        if flag and run_start is None:
+            run_start = index
+        elif not flag and run_start is not None:
+            buffers.append(
+                BufferOut(
+                    start_x_m=starts[run_start],
+                    end_x_m=ends[index - 1],
+                    target_speed_mps=min(targets[run_start:index]),
+                )
+            )
+            run_start = None
+    return buffers
+
+
+async def plan_document(
+    session: AsyncSession, corridor_id: str, plan_id: int, lane: int | None
+) -> bytes:
+    """The plan as JSON (interfaces.md shape), all lanes or one."""
+    key = (plan_id, lane)
+    if key in _documents:
+        _documents.move_to_end(key)
+        return _documents[key]
+    run = (
+        await session.execute(
+            text(
+                "SELECT plan_id, corridor_id, published_at, valid_until, algorithm, params, inputs "
+                "FROM plan_run WHERE corridor_id = :corridor AND plan_id = :plan_id"
+            ),
+            {"corridor": corridor_id, "plan_id": plan_id},
+        )
+    ).one()
+    rows = (
+        await session.execute(
+            text(
+                "SELECT p.lane, s.start_x_m, s.end_x_m, s.start_postmile, p.target_speed_mps, "
+                "p.is_buffer FROM fact_speed_planner p "
+                "JOIN dim_i24_segment s ON s.i24_segment_id = p.i24_segment_id "
+                "WHERE p.corridor_id = :corridor AND p.plan_id = :plan_id "
+                "AND (CAST(:lane AS smallint) IS NULL OR p.lane = :lane) "
+                "ORDER BY p.lane, s.start_x_m"
+            ),
+            {"corridor": corridor_id, "plan_id": plan_id, "lane": lane},
+        )
+    ).all()
+    by_lane: dict[int, list[Any]] = {}
+    for row in rows:
+        by_lane.setdefault(int(row.lane), []).append(row)
+    lanes = []
+    for lane_number, lane_rows in by_lane.items():
+        starts = [round(float(row.start_x_m), DECIMALS) for row in lane_rows]
+        ends = [round(float(row.end_x_m), DECIMALS) for row in lane_rows]
+        targets = [round(float(row.target_speed_mps), DECIMALS) for row in lane_rows]
+        lanes.append(
+            LanePlanOut(
+                lane=lane_number,
+                x_m=starts,
+                end_x_m=ends,
+                postmile=[round(float(row.start_postmile), 4) for row in lane_rows],
+                target_speed_mps=targets,
+                buffers=_buffers(starts, ends, targets, [bool(row.is_buffer) for row in lane_rows]),
+            )
+        )
+    document = {
+        "plan_id": int(run.plan_id),
+        "corridor": run.corridor_id,
+        "published_at": run.published_at,
+        "valid_until": run.valid_until,
+        "algorithm": run.algorithm,
+        "params": run.params,
+        "inputs": run.inputs,
+        "lanes": [lane_plan.model_dump() for lane_plan in lanes],
+    }
+    body = orjson.dumps(document)
+    _documents[key] = body
+    while len(_documents) > CACHED_DOCUMENTS:
+        _documents.popitem(last=False)
+    return body
+
+
+async def plan_history(
+    session: AsyncSession,
+    corridor_id: str | None,
+    since: datetime | None,
+    until: datetime | None,
+    status: str | None,
+    limit: int,
+) -> list[PlanRunOut]:
+    """Planner runs started in [since, until), newest first."""
+    rows = (
+        await session.execute(
+            text(
+                "SELECT plan_id, corridor_id AS corridor, status, reason, algorithm, params, "
+                "inputs, started_at, published_at, valid_until, duration_ms FROM plan_run "
+                "WHERE (CAST(:corridor AS text) IS NULL OR corridor_id = :corridor) "
+                "AND (CAST(:since AS timestamptz) IS NULL OR started_at >= :since) "
+                "AND (CAST(:until AS timestamptz) IS NULL OR started_at < :until) "
+                "AND (CAST(:status AS text) IS NULL OR status = :status) "
+                "ORDER BY started_at DESC, plan_id DESC LIMIT :limit"
+            ),
+            {
+                "corridor": corridor_id,
+                "since": since,
+                "until": until,
+                "status": status,
+                "limit": limit,
+            },
+        )
+    ).mappings()
+    return [PlanRunOut.model_validate(dict(row)) for row in rows]
