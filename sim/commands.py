@@ -20,7 +20,7 @@ console = Console(width=max(Console().width, 160))
 
 # ../shared beside the clone (README): the real drives the evaluation replays.
 SHARED_DRIVES = Path(__file__).resolve().parents[2] / "shared" / "data" / "trajectories"
-DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel")
+DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel", "simple:acc", "microaccel_acc:acc")
 
 
 @click.group("sim")

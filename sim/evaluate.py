@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from sim.av import StockAcc, agent_policy
+from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.kpi import Kpis, platoon_kpis
 from sim.plans import SimulatedPlanner
@@ -188,7 +189,7 @@ def run_case(
     humans: int,
     avs: int,
     planner_params: Mapping[str, Any] | None = None,
-    stock_acc: Callable[[], StockAcc] | None = None,
+    stock_acc: Callable[[], StockAcc] = SimulatedAccCar,
 ) -> RunResult:
     """One simulation: the baseline (variant None) or the AVs under planner x controller."""
     if variant is None:
@@ -199,16 +200,13 @@ def run_case(
     if planner is None:
         raise ValueError("an AV variant needs a planner variant")
     schedule = SimulatedPlanner.for_drive(case.drive, planner, planner_params)
-    needs_acc = variant.actuation == "acc"
-    if needs_acc and stock_acc is None:
-        raise ValueError(f"{variant.name}: acc controllers need the car emulator's stock-ACC model")
     policies = [
         agent_policy(
             variant.controller,
             variant.actuation,
             schedule,
             variant.params,
-            stock_acc=stock_acc() if needs_acc and stock_acc is not None else None,
+            stock_acc=stock_acc() if variant.actuation == "acc" else None,
         )
         for _ in range(avs)
     ]
@@ -230,7 +228,7 @@ def evaluate(
     humans: int = 24,
     avs: int = 1,
     planner_params: Mapping[str, Any] | None = None,
-    stock_acc: Callable[[], StockAcc] | None = None,
+    stock_acc: Callable[[], StockAcc] = SimulatedAccCar,
     progress: Callable[[str], None] | None = None,
 ) -> Evaluation:
     """Baseline and every planner x controller on every case; `progress` hears each run."""

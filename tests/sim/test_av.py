@@ -9,12 +9,14 @@ import pytest
 
 from sim.av import RADAR_RANGE_M, AgentPolicy, agent_policy
 from sim.drives import drive_from_speeds, load_drive
+from sim.emulator.acc import SimulatedAccCar
 from sim.kpi import platoon_kpis
 from sim.plans import SimulatedPlanner
 from sim.platoon import AvObservation, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
+    AccSetPoint,
     Controller,
     Observation,
     TargetProfile,
@@ -135,3 +137,45 @@ def test_one_av_smooths_a_real_stop_and_go_slice(shared_dir: Path) -> None:
     assert platoon_kpis(mixed).fuel_economy_mpg > platoon_kpis(humans).fuel_economy_mpg
     assert platoon_kpis(mixed).accel_rms_mps2 < platoon_kpis(humans).accel_rms_mps2
     assert mixed.speed_mps[:, -1].std() < humans.speed_mps[:, -1].std()
+
+
+def test_an_acc_av_drives_through_the_emulators_stock_acc() -> None:
+    # The controller's set points go through the car emulator's ACC (buttons and all); a twin
+    # controller + ACC fed the same observations makes the same accelerations.
+    plan = FixedPlan()
+    policy = agent_policy("microaccel_acc", "acc", plan, stock_acc=SimulatedAccCar())
+    twin_controller = build_controller("microaccel_acc", "acc")
+    twin_car = SimulatedAccCar()
+    speeds = []
+    for step in range(40):
+        t = step * 0.1
+        sensed = AvObservation(t, 25.0 * t, 25.0, 60.0, 24.0)
+        action = twin_controller.step(
+            Observation(
+                time_s=t,
+                speed_mps=25.0,
+                target_speed_mps=20.0,
+                position_m=25.0 * t,
+                target=plan.profile(t),
+                lead_present=True,
+                acc_speed_setting_mph=twin_car.speed_setting_mph,
+                acc_gap_setting=twin_car.gap_setting,
+            )
+        )
+        assert isinstance(action, AccSetPoint)
+        expected = twin_car.accel_mps2(action, t, 25.0, 60.0, 24.0)
+        assert policy.accel_mps2(sensed) == expected
+        speeds.append(twin_car.speed_setting_mph)
+    # the plan says 20 m/s (44.7 mph): the buttons bring the set speed down from 56 mph
+    assert speeds[0] == 56.0
+    assert speeds[-1] is not None
+    assert speeds[-1] < 56.0
+
+
+def test_a_platoon_behind_an_acc_av(shared_dir: Path) -> None:
+    drive = load_drive(shared_dir / "data" / STOP_AND_GO).slice(300.0, 300.0)
+    planner = SimulatedPlanner.for_drive(drive, "kernel_smooth")
+    policy = agent_policy("microaccel_acc", "acc", planner, stock_acc=SimulatedAccCar())
+    run = simulate_platoon(drive, platoon_roles(humans=24, avs=1), [policy])
+    assert run.collisions == 0
+    assert run.gap_violations == 0
