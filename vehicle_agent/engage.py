@@ -1,0 +1,113 @@
+"""When the agent may command the car: a pure state machine where handing back wins.
+
+Three modes: STOCK (the car's own ACC drives; the agent only watches), ENGAGED (the agent sends
+set points or acceleration requests), OVERRIDDEN (the driver touched the brake, the gas or a cruise
+button: the agent keeps off until `override_holdoff_s` after the driver's last touch).
+
+Every step the inputs are checked in a fixed order; the first that fails hands the car back in
+that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged by
+the driver, GPS healthy, on the assigned corridor, in the assigned lane, plan fresh, actuator
+healthy. Taking over needs all of them to have held for `engage_after_s` without interruption, so
+a flickering input cannot toggle control on and off at the loop rate.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class Mode(enum.Enum):
+    """Who drives."""
+
+    STOCK = "stock"
+    ENGAGED = "engaged"
+    OVERRIDDEN = "overridden"
+
+
+@dataclass(frozen=True, slots=True)
+class EngageInputs:
+    """Everything the decision depends on, sampled at one instant."""
+
+    time_s: float
+    enabled: bool
+    can_ok: bool
+    acc_engaged: bool
+    gps_ok: bool
+    on_corridor: bool
+    in_lane: bool
+    plan_fresh: bool
+    actuator_ok: bool
+    driver_active: bool
+
+
+# The checks in order, with the reason reported when one fails.
+CHECKS: tuple[tuple[str, str], ...] = (
+    ("enabled", "agent not enabled for this vehicle"),
+    ("can_ok", "CAN inputs not healthy"),
+    ("acc_engaged", "ACC not engaged by the driver"),
+    ("gps_ok", "no GPS fix"),
+    ("on_corridor", "off the assigned corridor"),
+    ("in_lane", "not in the assigned lane"),
+    ("plan_fresh", "no fresh plan"),
+    ("actuator_ok", "actuator refused by the safety layer"),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class EngagePolicy:
+    """Timings of the state machine (s)."""
+
+    engage_after_s: float = 1.0
+    override_holdoff_s: float = 3.0
+
+
+@dataclass(frozen=True, slots=True)
+class EngageState:
+    """The mode, since when, since when every check has passed, and why (not) engaged."""
+
+    mode: Mode
+    since_s: float
+    ready_since_s: float | None
+    reason: str
+
+    @property
+    def commanding(self) -> bool:
+        """True when the agent commands the car."""
+        return self.mode is Mode.ENGAGED
+
+
+INITIAL = EngageState(Mode.STOCK, 0.0, None, "starting")
+
+
+def first_failure(inputs: EngageInputs) -> str | None:
+    """The reason of the first failing check, or None when all pass."""
+    for name, reason in CHECKS:
+        if not getattr(inputs, name):
+            return reason
+    return None
+
+
+def step(state: EngageState, inputs: EngageInputs, policy: EngagePolicy) -> EngageState:
+    """The next state; never ENGAGED while a check fails or the driver is active."""
+    now = inputs.time_s
+    if inputs.driver_active:
+        return EngageState(Mode.OVERRIDDEN, now, None, "driver override")
+    if state.mode is Mode.OVERRIDDEN and now - state.since_s < policy.override_holdoff_s:
+        return state
+    failure = first_failure(inputs)
+    if failure is not None:
+        if state.mode is Mode.STOCK and state.reason == failure:
+            return state
+        return EngageState(Mode.STOCK, now, None, failure)
+    if state.mode is Mode.ENGAGED:
+        return state
+    ready_since = state.ready_since_s if state.ready_since_s is not None else now
+    if now - ready_since >= policy.engage_after_s:
+        return EngageState(Mode.ENGAGED, now, ready_since, "engaged")
+    return EngageState(
+        Mode.STOCK,
+        state.since_s if state.mode is Mode.STOCK else now,
+        ready_since,
+        "waiting for steady conditions",
+    )
