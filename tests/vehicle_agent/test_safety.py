@@ -1,0 +1,224 @@
+"""The safety layer: under random commands no frame reaches the bus out of limits."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import can
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
+from vehicle_agent.codec import codec_for
+from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
+from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
+
+_channels = itertools.count()
+READING = CarReading(
+    speed_mps=25.0,
+    acc_available=True,
+    acc_engaged=True,
+    acc_speed_setting_mph=56.0,
+    acc_gap_setting=3,
+    lead_present=False,
+)
+
+
+def car_state(time_s: float, *, valid: bool = True, engaged: bool = True) -> CarState:
+    reading = CarReading(
+        **{
+            **{f: getattr(READING, f) for f in READING.__slots__},  # type: ignore[attr-defined]
+            "acc_engaged": engaged,
+        }
+    )
+    return CarState(time_s, valid, None if valid else "SPEED missing", reading if valid else None)
+
+
+@pytest.fixture
+def buses() -> Iterator[tuple[can.BusABC, can.BusABC]]:
+    channel = f"safety-{next(_channels)}"
+    agent = can.Bus(interface="virtual", channel=channel)
+    car = can.Bus(interface="virtual", channel=channel)
+    yield agent, car
+    agent.shutdown()
+    car.shutdown()
+
+
+def received(bus: can.BusABC) -> list[can.Message]:
+    frames = []
+    while (frame := bus.recv(timeout=0)) is not None:
+        frames.append(frame)
+    return frames
+
+
+accel_requests = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=-4.0, max_value=2.0),
+)
+car_conditions = st.tuples(st.booleans(), st.booleans(), st.floats(0.0, 0.5))
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(steps=st.lists(st.tuples(accel_requests, car_conditions), min_size=1, max_size=80))
+def test_no_acceleration_frame_leaves_out_of_limits(
+    steps: list[tuple[float, tuple[bool, bool, float]]],
+    buses: tuple[can.BusABC, can.BusABC],
+    dbc_cache: Path,
+) -> None:
+    agent_bus, car_bus = buses
+    received(car_bus)
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
+    sent_at: list[tuple[float, float]] = []
+    for index, (request, (valid, engaged, state_age)) in enumerate(steps):
+        now = index / 30
+        context = SafetyContext(now, car_state(now - state_age, valid=valid, engaged=engaged), 0.0)
+        if port.request(request, context):  # straight from a "controller", no limiter
+            sent_at.append((now, request))
+            assert valid
+            assert engaged
+            assert state_age <= 0.25
+    frames = received(car_bus)
+    assert len(frames) == len(sent_at)
+    previous: tuple[float, float] | None = None
+    for frame, (now, _) in zip(frames, sent_at, strict=True):
+        assert frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+        _, signals = codec.decode(frame.arbitration_id, frame.data)
+        accel = signals["ACCEL_CMD"]
+        assert math.isfinite(accel)
+        assert -3.0 <= accel <= 1.5
+        assert signals["CANCEL_REQ"] == 0
+        if previous is not None and now - previous[0] <= 0.5:
+            dt = now - previous[0]
+            assert dt >= 0.8 / 30 - 1e-9
+            assert previous[1] - 5.0 * dt - 0.011 <= accel <= previous[1] + 2.5 * dt + 0.011
+        elif previous is None:
+            assert -5.0 / 30 - 0.011 <= accel <= 2.5 / 30 + 0.011  # from a measured 0 m/s^2
+        previous = (now, accel)
+
+
+buttons = st.one_of(st.none(), st.sampled_from(list(CruiseButton)))
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    key=st.sampled_from(["nissan_rogue", "cadillac_xt5"]),
+    steps=st.lists(st.tuples(buttons, st.booleans(), st.booleans()), min_size=1, max_size=120),
+)
+def test_no_button_frame_leaves_out_of_limits(
+    key: str,
+    steps: list[tuple[CruiseButton | None, bool, bool]],
+    buses: tuple[can.BusABC, can.BusABC],
+    dbc_cache: Path,
+) -> None:
+    agent_bus, car_bus = buses
+    received(car_bus)
+    car = car_for(key)
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), dict)
+    held: frozenset[CruiseButton] = frozenset()
+    press_started: float | None = None
+    last_onset: float | None = None
+    for index, (button, valid, engaged) in enumerate(steps):
+        now = index * 0.05
+        port.hold(button, SafetyContext(now, car_state(now, valid=valid, engaged=engaged)))
+        frames = received(car_bus)  # the virtual bus delivers at once: these left just now
+        assert len(frames) <= 1
+        for frame in frames:
+            assert frame.arbitration_id == codec.frame_id(car.command_message)
+            _, signals = codec.decode(frame.arbitration_id, frame.data)  # checksum valid
+            pressed = car.pressed_buttons(signals)
+            assert pressed <= {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP}
+            assert len(pressed) <= 1
+            if pressed:
+                assert valid
+                assert engaged
+                if not held:
+                    assert last_onset is None or now - last_onset >= 0.45 - 1e-9
+                    last_onset = press_started = now
+                else:
+                    assert pressed == held
+                    assert press_started is not None
+                    assert now - press_started <= 1.2 + 1e-9
+            held = pressed
+
+
+def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    context = SafetyContext(1.0, car_state(1.0), 0.0)
+    good = codec.encode("ACC_CONTROL", car.accel_signals(0.05, {}))
+    frame_id = codec.frame_id("ACC_CONTROL")
+    assert (
+        safety.check(can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), context)
+        is None
+    )
+    checks = {
+        "id 0xb4 is not ACC_CONTROL": can.Message(
+            arbitration_id=180, data=good, is_extended_id=False
+        ),
+        "4 bytes, ACC_CONTROL has 8": can.Message(
+            arbitration_id=frame_id, data=good[:4], is_extended_id=False
+        ),
+        "does not decode: ACC_CONTROL: checksum": can.Message(
+            arbitration_id=frame_id, data=good[:7] + bytes([good[7] ^ 1]), is_extended_id=False
+        ),
+    }
+    for reason, frame in checks.items():
+        assert (safety.check(frame, context) or "").startswith(reason)
+    too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, {}))
+    assert (
+        safety.check(
+            can.Message(arbitration_id=frame_id, data=too_hard, is_extended_id=False), context
+        )
+        == "acceleration -3.5 m/s^2 outside [-3.0, 1.5]"
+    )
+    disengaged = SafetyContext(1.0, car_state(1.0, engaged=False), 0.0)
+    assert (
+        safety.check(
+            can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), disengaged
+        )
+        == "ACC not engaged by the driver"
+    )
+    stale = SafetyContext(1.0, car_state(0.5), 0.0)
+    assert (
+        safety.check(can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), stale)
+        == "car state 0.50 s old"
+    )
+
+
+def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -> None:
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    writes: list[tuple[int, bool]] = []
+    board = GpioButtonBoard(
+        {
+            CruiseButton.PLUS: 17,
+            CruiseButton.MINUS: 27,
+            CruiseButton.GAP: 22,
+            CruiseButton.CANCEL: 5,
+        },
+        lambda line, level: writes.append((line, level)),
+        safety,
+    )
+    board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    board.hold(CruiseButton.PLUS, SafetyContext(0.25, car_state(0.25)))
+    board.hold(None, SafetyContext(0.3, car_state(0.3)))
+    board.hold(CruiseButton.MINUS, SafetyContext(0.35, car_state(0.35)))  # too soon: refused
+    board.hold(CruiseButton.CANCEL, SafetyContext(1.0, car_state(1.0)))  # never the agent's
+    board.hold(CruiseButton.GAP, SafetyContext(2.0, car_state(2.0, engaged=False)))
+    board.hold(CruiseButton.GAP, SafetyContext(3.0, car_state(3.0)))
+    assert writes == [(17, True), (17, False), (22, True)]
+    assert safety.refused == {"press": 1, "button": 1, "ACC": 1}

@@ -1,0 +1,155 @@
+"""Where commands leave the agent: the make's command frames on CAN, or a GPIO button board.
+Everything goes through the safety layer first; releasing a button is always allowed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Protocol
+
+import can
+
+from vehicle_agent.cars import CarInterface, CruiseButton
+from vehicle_agent.cars.base import Signals
+from vehicle_agent.codec import Codec
+from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
+
+# After a press, keep sending this many released frames so the car sees the release even if a
+# frame is lost.
+RELEASE_FRAMES = 3
+# Send when the period is this nearly over (a tick of the loop may land a little early).
+PERIOD_SLACK = 0.9
+
+
+class ButtonPort(Protocol):
+    """Something that holds at most one ACC button down."""
+
+    def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
+        """Hold `button` from now on (None: release)."""
+
+
+class CanButtonPort:
+    """Holds a button by sending the make's button frame every command period."""
+
+    def __init__(
+        self,
+        car: CarInterface,
+        codec: Codec,
+        sender: SafeSender,
+        latest: Callable[[], Mapping[str, Signals]],
+    ) -> None:
+        self.car = car
+        self.codec = codec
+        self.sender = sender
+        self.latest = latest
+        self.frame_id = codec.frame_id(car.command_message)
+        self._counter = 0
+        self._last_sent_s: float | None = None
+        self._release_frames = 0
+
+    def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
+        """Send this period's frame for `button` if one is due."""
+        now = context.time_s
+        if button is None and self._release_frames == 0:
+            return
+        if (
+            self._last_sent_s is not None
+            and now - self._last_sent_s < PERIOD_SLACK * self.car.command_period_s
+        ):
+            return
+        signals = self.car.button_signals(button, self.latest())
+        if self.car.command_counter_signal is not None:
+            signals[self.car.command_counter_signal] = self._counter
+        frame = can.Message(
+            arbitration_id=self.frame_id,
+            data=self.codec.encode(self.car.command_message, signals),
+            is_extended_id=False,
+        )
+        if self.sender.send(frame, context):
+            self._last_sent_s = now
+            if self.car.command_counter_modulo:
+                self._counter = (self._counter + 1) % self.car.command_counter_modulo
+            self._release_frames = (
+                RELEASE_FRAMES if button is not None else self._release_frames - 1
+            )
+        elif button is not None:
+            # Refused: fall back to releasing (always allowed) on the next period.
+            self._release_frames = RELEASE_FRAMES
+
+
+class GpioButtonBoard:
+    """A button board on GPIO lines (one line per button, active high), as the field team's
+    mattHAT spoofed the Rogue's steering-wheel buttons. `write_line(line, level)` is injected:
+    on a Raspberry Pi `sysfs_gpio_writer()`, in tests a recorder."""
+
+    def __init__(
+        self,
+        lines: Mapping[CruiseButton, int],
+        write_line: Callable[[int, bool], None],
+        safety: SafetyLayer,
+    ) -> None:
+        self.lines = dict(lines)
+        self.write_line = write_line
+        self.safety = safety
+        self.held: CruiseButton | None = None
+
+    def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
+        """Release the previous line, raise the new one if the safety layer allows it."""
+        pressed = frozenset() if button is None else frozenset({button})
+        if button is not None and not self.safety.admit_press(pressed, context):
+            button = None
+        elif button is None:
+            self.safety.admit_press(pressed, context)
+        if button == self.held:
+            return
+        if self.held is not None:
+            self.write_line(self.lines[self.held], False)
+        if button is not None:
+            self.write_line(self.lines[button], True)
+        self.held = button
+
+
+def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bool], None]:
+    """Drive exported GPIO lines through sysfs (`/sys/class/gpio/gpioN/value`)."""
+
+    def write(line: int, level: bool) -> None:
+        (root / f"gpio{line}" / "value").write_text("1" if level else "0")
+
+    return write
+
+
+class CanAccelPort:
+    """Sends the make's acceleration request frame every command period."""
+
+    def __init__(self, car: CarInterface, codec: Codec, sender: SafeSender) -> None:
+        self.car = car
+        self.codec = codec
+        self.sender = sender
+        self.frame_id = codec.frame_id(car.command_message)
+        self._last_sent_s: float | None = None
+
+    def due(self, now: float) -> bool:
+        """True when the next request frame should go out."""
+        return (
+            self._last_sent_s is None
+            or now - self._last_sent_s >= PERIOD_SLACK * self.car.command_period_s
+        )
+
+    def request(self, accel_mps2: float, context: SafetyContext) -> bool:
+        """Send a request for `accel_mps2` (already limited); True when it went out."""
+        signals = self.car.accel_signals(accel_mps2, {})
+        try:
+            data = self.codec.encode(self.car.command_message, signals)
+        except (ValueError, OverflowError) as error:
+            self.sender.safety.refuse(f"encode: {accel_mps2!r} does not encode ({error})")
+            return False
+        frame = can.Message(arbitration_id=self.frame_id, data=data, is_extended_id=False)
+        sent = self.sender.send(frame, context)
+        if sent:
+            self._last_sent_s = context.time_s
+        return sent
+
+    def stop(self) -> None:
+        """Stop requesting (the car's own ACC takes over when the requests stop)."""
+        self._last_sent_s = None

@@ -1,0 +1,219 @@
+"""The independent safety layer: every frame the agent sends is re-checked here, from its bytes.
+
+It trusts nothing upstream (controller, limiter, sequencer, frame builder): the frame is decoded
+again with the make's DBC and must pass every check, or it is not sent, counted and logged:
+- allowed: the make's one command message (standard id, DBC length, valid checksum);
+- values: finite, acceleration within [-3, 1.5] m/s^2 and within the jerk limits of the last
+  request (or of the car's measured acceleration when taking over), no cancel request; only the
+  plus, minus and gap buttons, one at a time, a new press no sooner than 0.45 s after the last,
+  no hold longer than 1.2 s;
+- rate: no faster than 0.8 x the make's command period;
+- the car: ACC engaged by the driver, the car state valid and fresh.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+import can
+
+from vehicle_agent.actuators import AccelLimits
+from vehicle_agent.cars import CarInterface, CarState, CruiseButton
+from vehicle_agent.codec import Codec, FrameError
+from vehicle_agent.logs import ThrottledLog
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SafetyLimits:
+    """What the safety layer lets through."""
+
+    accel: AccelLimits = field(default_factory=AccelLimits)
+    # Slack on the jerk check for rounding in the frame's 0.001 m/s^2 resolution.
+    jerk_tolerance_mps2: float = 0.01
+    # A car state older than this is not fresh (2.5 control periods at 10 Hz).
+    max_input_age_s: float = 0.25
+    min_period_fraction: float = 0.8
+    min_press_interval_s: float = 0.45
+    max_hold_s: float = 1.2
+    allowed_buttons: frozenset[CruiseButton] = frozenset(
+        {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP}
+    )
+    # A previous request older than this is no reference for the jerk check (s).
+    jerk_reference_s: float = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyContext:
+    """What the safety layer knows about the car when a frame is about to leave."""
+
+    time_s: float
+    car_state: CarState
+    measured_accel_mps2: float | None = None
+
+
+class SafetyLayer:
+    """Checks outgoing frames of one make; remembers what it let through."""
+
+    def __init__(self, car: CarInterface, codec: Codec, limits: SafetyLimits | None = None) -> None:
+        self.car = car
+        self.codec = codec
+        self.limits = limits or SafetyLimits()
+        self.command_id = codec.frame_id(car.command_message)
+        self.command_length = codec.length(car.command_message)
+        self.refused: Counter[str] = Counter()
+        self.sent = 0
+        self._last_sent_s: float | None = None
+        self._last_accel: tuple[float, float] | None = None
+        self._held: frozenset[CruiseButton] = frozenset()
+        self._press_started_s: float | None = None
+        self._log = ThrottledLog(log)
+
+    def check(self, frame: can.Message, context: SafetyContext) -> str | None:
+        """Why `frame` must not be sent now, or None when it may."""
+        now = context.time_s
+        if frame.arbitration_id != self.command_id or frame.is_extended_id:
+            return f"id {frame.arbitration_id:#x} is not {self.car.command_message}"
+        if len(frame.data) != self.command_length:
+            return f"{len(frame.data)} bytes, {self.car.command_message} has {self.command_length}"
+        try:
+            _, signals = self.codec.decode(frame.arbitration_id, frame.data)
+        except FrameError as error:
+            return f"does not decode: {error}"
+        if not all(math.isfinite(float(value)) for value in signals.values()):
+            return "non-finite signal value"
+        minimum_gap = self.limits.min_period_fraction * self.car.command_period_s
+        if self._last_sent_s is not None and now - self._last_sent_s < minimum_gap:
+            return f"rate: sent {now - self._last_sent_s:.3f} s after the previous frame"
+        if self.car.actuation == "accel":
+            return self._check_car(context) or self._check_accel(
+                self.car.commanded_accel(signals), signals, context
+            )
+        return self.check_press(self.car.pressed_buttons(signals), context)
+
+    def _check_car(self, context: SafetyContext) -> str | None:
+        state = context.car_state
+        if not state.valid or state.reading is None:
+            return f"car state invalid: {state.problem}"
+        age = context.time_s - state.time_s
+        if age > self.limits.max_input_age_s:
+            return f"car state {age:.2f} s old"
+        if not state.reading.acc_engaged:
+            return "ACC not engaged by the driver"
+        return None
+
+    def _check_accel(
+        self, accel: float, signals: dict[str, float], context: SafetyContext
+    ) -> str | None:
+        limits = self.limits.accel
+        if not limits.min_accel_mps2 <= accel <= limits.max_accel_mps2:
+            low, high = limits.min_accel_mps2, limits.max_accel_mps2
+            return f"acceleration {accel} m/s^2 outside [{low}, {high}]"
+        if signals.get("CANCEL_REQ"):
+            return "cancel request"
+        now = context.time_s
+        last = self._last_accel
+        if last is not None and now - last[0] <= self.limits.jerk_reference_s:
+            reference_time, reference = last
+            dt = now - reference_time
+        else:
+            measured = context.measured_accel_mps2
+            reference = measured if measured is not None and math.isfinite(measured) else 0.0
+            dt = self.car.command_period_s
+        tolerance = self.limits.jerk_tolerance_mps2
+        if not (
+            reference - limits.max_jerk_down_mps3 * dt - tolerance
+            <= accel
+            <= reference + limits.max_jerk_up_mps3 * dt + tolerance
+        ):
+            return f"jerk: {reference:.3f} -> {accel:.3f} m/s^2 in {dt:.3f} s"
+        return None
+
+    def check_press(self, pressed: frozenset[CruiseButton], context: SafetyContext) -> str | None:
+        """Why holding `pressed` now is not allowed (releasing always is), or None."""
+        if not pressed:
+            return None
+        now = context.time_s
+        problem = self._check_car(context)
+        if problem is not None:
+            return problem
+        if not pressed <= self.limits.allowed_buttons:
+            names = ", ".join(sorted(b.value for b in pressed - self.limits.allowed_buttons))
+            return f"button {names} is not the agent's to press"
+        if len(pressed) > 1:
+            return "buttons: more than one at once"
+        started = self._press_started_s
+        if not self._held:
+            if started is not None and now - started < self.limits.min_press_interval_s:
+                return f"press rate: {now - started:.2f} s after the previous press"
+        elif pressed != self._held:
+            return "buttons: switching without a release"
+        elif started is not None and now - started > self.limits.max_hold_s:
+            return f"hold: button held {now - started:.2f} s"
+        return None
+
+    def refuse(self, reason: str) -> None:
+        """Count and log a command refused before it became a frame."""
+        kind = reason.split(" ", 1)[0].rstrip(":")
+        self.refused[kind] += 1
+        self._log.warning(kind, f"safety refused {self.car.command_message}: {reason}")
+
+    def _record_press(self, pressed: frozenset[CruiseButton], now: float) -> None:
+        if pressed and not self._held:
+            self._press_started_s = now
+        self._held = pressed
+
+    def admit(self, frame: can.Message, context: SafetyContext) -> bool:
+        """Check `frame`; remember it when it may be sent, count and log it when not."""
+        reason = self.check(frame, context)
+        if reason is not None:
+            self.refuse(reason)
+            return False
+        now = context.time_s
+        self.sent += 1
+        self._last_sent_s = now
+        _, signals = self.codec.decode(frame.arbitration_id, frame.data)
+        if self.car.actuation == "accel":
+            self._last_accel = (now, self.car.commanded_accel(signals))
+        else:
+            self._record_press(self.car.pressed_buttons(signals), now)
+        return True
+
+    def admit_press(self, pressed: frozenset[CruiseButton], context: SafetyContext) -> bool:
+        """The same checks for a button board that presses without CAN frames."""
+        reason = self.check_press(pressed, context)
+        if reason is not None:
+            self.refuse(reason)
+            return False
+        self._record_press(pressed, context.time_s)
+        return True
+
+    def idle(self) -> None:
+        """The agent stopped commanding: the next request starts from the car's own state."""
+        self._last_accel = None
+        self._held = frozenset()
+
+
+class SafeSender:
+    """The only way a frame reaches the bus: through the safety layer."""
+
+    def __init__(self, bus: can.BusABC, safety: SafetyLayer) -> None:
+        self.bus = bus
+        self.safety = safety
+        self.send_errors = 0
+
+    def send(self, frame: can.Message, context: SafetyContext) -> bool:
+        """Send `frame` if the safety layer admits it; True when it went out."""
+        if not self.safety.admit(frame, context):
+            return False
+        try:
+            self.bus.send(frame)
+        except can.CanError as error:
+            self.send_errors += 1
+            log.warning("CAN send failed: %s", error)
+            return False
+        return True
