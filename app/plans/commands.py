@@ -13,7 +13,7 @@ from datetime import UTC, datetime
 import click
 
 from app.core.config import Settings
-from planner.warehouse import CycleOutcome, UnknownCorridor, UnknownPlan
+from planner.warehouse import CycleOutcome, UnknownPlan, corridor_ids
 
 
 def describe(outcome: CycleOutcome) -> str:
@@ -34,8 +34,26 @@ def planner() -> None:
     """The Speed Planner: its schedule, a single cycle, and replay of a stored plan."""
 
 
+def _check_corridors(url: str, corridors: tuple[str, ...]) -> None:
+    """Fail with one line when a named corridor is not in the warehouse."""
+    from app.cli import CliError
+    from app.core.db import make_sync_engine, session_scope
+
+    engine = make_sync_engine(url)
+    try:
+        with session_scope(engine) as session:
+            known = corridor_ids(session)
+    finally:
+        engine.dispose()
+    unknown = [corridor for corridor in corridors if corridor not in known]
+    if unknown:
+        raise CliError(
+            f"planner: unknown corridor {', '.join(unknown)} (known: {', '.join(known) or 'none'})"
+        )
+
+
 def _cycle(url: str, current: Settings, corridors: tuple[str, ...], min_interval_s: float) -> int:
-    from app.cli import CliError, console
+    from app.cli import console
     from app.core.db import make_sync_engine
     from app.plans.jobs import run_planner
 
@@ -44,8 +62,6 @@ def _cycle(url: str, current: Settings, corridors: tuple[str, ...], min_interval
         outcomes = run_planner(
             engine, current, corridors=list(corridors) or None, min_interval_s=min_interval_s
         )
-    except UnknownCorridor as error:
-        raise CliError(f"planner: {error}") from None
     finally:
         engine.dispose()
     for outcome in outcomes:
@@ -61,6 +77,7 @@ def once(corridors: tuple[str, ...]) -> None:
 
     current = settings()
     with database(current) as url:
+        _check_corridors(url, corridors)
         failed = _cycle(url, current, corridors, 0.0)
     if failed:
         raise SystemExit(1)
@@ -77,6 +94,7 @@ def run(corridors: tuple[str, ...]) -> None:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s %(message)s")
     current = settings()
     with database(current) as url:
+        _check_corridors(url, corridors)
         scheduler = BlockingScheduler(timezone="UTC")
         scheduler.add_job(
             _cycle,

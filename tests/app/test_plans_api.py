@@ -1,0 +1,209 @@
+"""The Speed Planner end to end on the real database and server: INRIX minutes showing a
+standing slowdown and one car's pings in its lane become a published plan that vehicles read
+with ETag / 304; without a valid plan the answer is 503 + Retry-After."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime, timedelta
+from typing import Any
+
+import httpx
+import numpy as np
+import pytest
+from sqlalchemy import Engine, text
+
+from app.core.config import load_settings
+from app.plans.jobs import run_planner
+from planner.inputs import MPH
+from tests.planner.facts import inrix_snapshot, standing_slowdown
+from tests.support.fleet import drive, post_pings
+from tests.support.servers import live_server
+from tests.support.tokens import bearer, issue
+
+LATEST = "/api/v1/plans/latest"
+SPEED_LIMIT = 70 * MPH
+MIN_TARGET = 20 * MPH
+
+
+@dataclass
+class Served:
+    """The live server, its tokens and the plans published before the test."""
+
+    client: httpx.Client
+    tokens: dict[str, str]
+    plan_ids: list[int]
+
+    def get(self, path: str, role: str | None = "viewer", **params: Any) -> httpx.Response:
+        headers = bearer(self.tokens[role]) if role else {}
+        return self.client.get(path, params=params, headers=headers)
+
+
+def tokens_for(engine: Engine) -> dict[str, str]:
+    return {
+        "viewer": issue(engine, "viewer"),
+        "feed": issue(engine, "feed"),
+        "vehicle": issue(engine, "vehicle", "SF-002"),
+        "other_vehicle": issue(engine, "vehicle", "SF-001"),
+    }
+
+
+@pytest.fixture
+def served(seeded_database_url: str, seeded_engine: Engine) -> Iterator[Served]:
+    """Four planner cycles a minute apart over a standing slowdown at 8.25-9.7 km."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    for minute in range(12, 2, -1):
+        inrix_snapshot(seeded_engine, now - timedelta(minutes=minute), standing_slowdown())
+    settings = load_settings(database_url=seeded_database_url)
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base, timeout=30) as client,
+    ):
+        tokens = tokens_for(seeded_engine)
+        # SF-002 (lane 2) crawls at 5 m/s through the slowdown in the last minute.
+        post_pings(
+            client, tokens["vehicle"], drive("SF-002", now - timedelta(seconds=59), 8400, 5.0, 60)
+        )
+        plan_ids = []
+        for minutes_ago in (3, 2, 1, 0):
+            (outcome,) = run_planner(
+                seeded_engine, settings, now=now - timedelta(minutes=minutes_ago)
+            )
+            assert outcome.status == "published", outcome.reason
+            plan_ids.append(outcome.plan_id or 0)
+        yield Served(client, tokens, plan_ids)
+
+
+def target_at(lane: dict[str, Any], x_m: float) -> float:
+    index = int(np.searchsorted(lane["x_m"], x_m, side="right")) - 1
+    return float(lane["target_speed_mps"][index])
+
+
+def test_the_plan_slows_ahead_of_the_bottleneck_and_is_faster_elsewhere(served: Served) -> None:
+    response = served.get(LATEST, corridor="I-24-WB")
+    assert response.status_code == 200, response.text
+    plan = response.json()
+    assert plan["plan_id"] == served.plan_ids[-1]
+    assert plan["algorithm"] == "kernel_smooth_buffer"
+    assert plan["inputs"]["vehicles"] == 1
+    assert plan["inputs"]["pings"] == 60
+    assert [lane["lane"] for lane in plan["lanes"]] == [1, 2, 3, 4]
+    lane2 = plan["lanes"][1]
+    assert len(lane2["x_m"]) == len(lane2["target_speed_mps"]) == 158
+    # Free flow far upstream and downstream, slower approaching the slowdown, slowest in it.
+    far_upstream = target_at(lane2, 2000)
+    approaching = target_at(lane2, 7500)
+    in_queue = target_at(lane2, 8500)
+    downstream = target_at(lane2, 12500)
+    assert far_upstream == pytest.approx(29.0, abs=0.01)
+    assert downstream == pytest.approx(29.0, abs=0.01)
+    assert in_queue < approaching < far_upstream
+    assert in_queue < 0.5 * far_upstream  # its forward window is mostly queue
+    # The slowdown stood through four cycles: a buffer ends where the queue begins.
+    (buffer,) = lane2["buffers"]
+    assert buffer["end_x_m"] <= 8251.03 + 1e-6
+    assert buffer["start_x_m"] < 7500 < buffer["end_x_m"]
+    assert buffer["target_speed_mps"] >= 0.8 * 7.0  # never far below the smoothed speed
+    for lane in plan["lanes"]:
+        assert MIN_TARGET - 1e-3 <= min(lane["target_speed_mps"])
+        assert max(lane["target_speed_mps"]) <= SPEED_LIMIT + 1e-3
+
+
+def test_the_car_in_lane_2_makes_its_lane_slower_than_the_others(served: Served) -> None:
+    plan = served.get(LATEST, corridor="I-24-WB").json()
+    lanes = {lane["lane"]: lane for lane in plan["lanes"]}
+    # Its 5 m/s observations replace INRIX's 7 m/s in lane 2 only, so lane 2 slows earlier.
+    assert target_at(lanes[2], 7000) < target_at(lanes[4], 7000)
+
+
+def test_an_unchanged_plan_answers_304(served: Served) -> None:
+    first = served.get(LATEST, corridor="I-24-WB")
+    etag = first.headers["ETag"]
+    again = served.client.get(
+        LATEST,
+        params={"corridor": "I-24-WB"},
+        headers={**bearer(served.tokens["viewer"]), "If-None-Match": etag},
+    )
+    assert again.status_code == 304
+    assert again.headers["ETag"] == etag
+    assert again.content == b""
+    one_lane = served.get(LATEST, corridor="I-24-WB", lane=3)
+    assert one_lane.headers["ETag"] != etag
+    assert [lane["lane"] for lane in one_lane.json()["lanes"]] == [3]
+
+
+def test_a_vehicle_reads_its_own_lane_and_nothing_else(served: Served) -> None:
+    own = served.get("/api/v1/vehicles/SF-002/plan", role="vehicle")
+    assert own.status_code == 200
+    assert [lane["lane"] for lane in own.json()["lanes"]] == [2]
+    etag = own.headers["ETag"]
+    cached = served.client.get(
+        "/api/v1/vehicles/SF-002/plan",
+        headers={**bearer(served.tokens["vehicle"]), "If-None-Match": etag},
+    )
+    assert cached.status_code == 304
+    assert served.get(LATEST, role="vehicle", corridor="I-24-WB").status_code == 200
+    assert served.get("/api/v1/vehicles/SF-002/plan", role="other_vehicle").status_code == 403
+    assert served.get(LATEST, role="vehicle", corridor="OTHER").status_code == 403
+    assert served.get(LATEST, role="feed", corridor="I-24-WB").status_code == 403
+    assert served.get(LATEST, role=None, corridor="I-24-WB").status_code == 401
+    missing = served.get("/api/v1/vehicles/SF-999/plan")
+    assert missing.status_code == 404
+    assert missing.json() == {"detail": "unknown vehicle SF-999"}
+
+
+def test_bad_queries_say_what_was_wrong(served: Served) -> None:
+    unknown = served.get(LATEST, corridor="I-40-EB")
+    assert unknown.status_code == 404
+    assert unknown.json() == {"detail": "unknown corridor I-40-EB"}
+    bad_lane = served.get(LATEST, corridor="I-24-WB", lane=5)
+    assert bad_lane.status_code == 422
+    assert bad_lane.json() == {"detail": "lane must be 1-4 on I-24-WB, got 5"}
+
+
+def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None:
+    history = served.get("/api/v1/plans", corridor="I-24-WB")
+    assert history.status_code == 200
+    runs = history.json()["plans"]
+    assert [run["plan_id"] for run in runs] == served.plan_ids[::-1]
+    newest = runs[0]
+    assert newest["status"] == "published"
+    assert newest["params"]["window_m"] == 1500.0
+    assert newest["inputs"]["previous_plans"] == served.plan_ids[-2::-1]
+    assert newest["inputs"]["inrix_age_s"] == 180.0
+    window = served.get(
+        "/api/v1/plans",
+        corridor="I-24-WB",
+        since=runs[2]["started_at"],
+        until=runs[0]["started_at"],
+    ).json()["plans"]
+    assert [run["plan_id"] for run in window] == [runs[1]["plan_id"], runs[2]["plan_id"]]
+    assert served.get("/api/v1/plans", status="failed").json() == {"plans": []}
+    naive = served.get("/api/v1/plans", since="2026-01-01T00:00:00")
+    assert naive.status_code == 422
+
+
+def test_without_a_valid_plan_vehicles_are_told_to_retry(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    with (
+        live_server(seeded_database_url, planner_enabled=False, planner_period_s=60) as base,
+        httpx.Client(base_url=base, timeout=30) as client,
+    ):
+        token = issue(seeded_engine, "vehicle", "SF-002")
+        response = client.get("/api/v1/vehicles/SF-002/plan", headers=bearer(token))
+        assert response.status_code == 503
+        assert response.headers["Retry-After"] == "60"
+        assert "no valid plan for I-24-WB" in response.json()["detail"]
+        # An expired plan is no plan either.
+        with seeded_engine.begin() as connection:
+            connection.execute(
+                text(
+                    "INSERT INTO plan_run (corridor_id, status, algorithm, started_at, "
+                    "published_at, valid_until) VALUES ('I-24-WB', 'published', 'kernel_smooth', "
+                    "now() - interval '10 minutes', now() - interval '10 minutes', "
+                    "now() - interval '7 minutes')"
+                )
+            )
+        assert client.get("/api/v1/vehicles/SF-002/plan", headers=bearer(token)).status_code == 503
