@@ -24,6 +24,7 @@ from app.maintenance import maintain_async
 from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
 from app.vehicles.router import router as vehicles_router
+from dashboards.pages import install as install_dashboard
 
 log = logging.getLogger(__name__)
 
@@ -104,5 +105,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(corridors_router)
     app.include_router(feeds_router)
     app.include_router(fleet_router)
+    install_dashboard(app)
     app.include_router(plans_router)
     return app

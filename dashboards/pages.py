@@ -1,0 +1,805 @@
+"""The dashboard's pages: login, fleet health (piStatus), vehicle, plans, feeds, analytics.
+
+Pages are rendered on the server (Jinja2) with their charts as inline SVG; the fleet page
+refreshes its table from `/fleet/live` without reloading. Speeds are shown in mph and places in
+postmiles (people's units on US roads); times in UTC.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from fastapi import APIRouter, FastAPI, Form, Query, Request
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
+from fastapi.staticfiles import StaticFiles
+from fastapi.templating import Jinja2Templates
+
+from app.core.config import Settings
+from app.core.db import SessionDep
+from app.fleet.readiness import CHECKS, Thresholds, describe_age
+from app.fleet.service import (
+    PROBLEM_FILTERS,
+    AssignmentError,
+    FleetEntry,
+    VehicleNotFound,
+    change_assignment,
+    count,
+    fleet,
+    select_entries,
+    set_maintenance,
+    vehicle_entry,
+)
+from app.models import PlanRun
+from app.users.service import log_in
+from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+from dashboards import data
+from dashboards.auth import (
+    LoginRequired,
+    PageError,
+    PageUser,
+    UserDep,
+    check_form,
+    check_login_csrf,
+    clear_session,
+    login_csrf_token,
+    remember_login_csrf,
+    safe_next,
+    set_session,
+)
+from dashboards.charts import (
+    AMOUNT_STOPS,
+    Axis,
+    Band,
+    ColourScale,
+    Series,
+    bar_chart,
+    heatmap,
+    line_chart,
+)
+from dashboards.data import MPH_PER_MPS
+
+HERE = Path(__file__).parent
+templates = Jinja2Templates(directory=HERE / "templates")
+router = APIRouter(include_in_schema=False)
+
+TRACE_WINDOW = timedelta(minutes=30)
+PLAN_HISTORY = timedelta(minutes=60)
+ANALYTICS_DAYS = 30
+HEATMAP_COLUMNS = 240
+HEATMAP_ROWS = 180
+
+
+def _mph(value: float | None) -> str:
+    return "—" if value is None else f"{value * MPH_PER_MPS:.1f}"
+
+
+def _utc(value: datetime | None) -> str:
+    return "—" if value is None else value.astimezone(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+templates.env.filters["mph"] = _mph
+templates.env.filters["utc"] = _utc
+templates.env.filters["age"] = describe_age
+
+
+def _settings(request: Request) -> Settings:
+    settings: Settings = request.app.state.settings
+    return settings
+
+
+def _render(
+    request: Request,
+    name: str,
+    user: PageUser | None,
+    status_code: int = 200,
+    **context: Any,
+) -> HTMLResponse:
+    return templates.TemplateResponse(
+        request,
+        name,
+        {"user": user, "now": datetime.now(UTC), **context},
+        status_code=status_code,
+    )
+
+
+def install(app: FastAPI) -> None:
+    """Mount the pages, their static files and their error pages on the app."""
+    app.include_router(router)
+    app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
+
+    async def on_login_required(request: Request, error: Exception) -> Response:
+        assert isinstance(error, LoginRequired)
+        if request.headers.get("x-requested-with") == "fetch":
+            return JSONResponse({"detail": "log in again"}, status_code=401)
+        return RedirectResponse(f"/login?next={_quote(error.next_path)}", status_code=303)
+
+    async def on_page_error(request: Request, error: Exception) -> Response:
+        assert isinstance(error, PageError)
+        return _render(
+            request,
+            "error.html",
+            None,
+            status_code=error.status_code,
+            title=error.title,
+            message=error.message,
+        )
+
+    app.add_exception_handler(LoginRequired, on_login_required)
+    app.add_exception_handler(PageError, on_page_error)
+
+
+def _quote(path: str) -> str:
+    from urllib.parse import quote
+
+    return quote(path, safe="")
+
+
+# --- login --------------------------------------------------------------------------------------
+
+
+@router.get("/")
+async def home() -> RedirectResponse:
+    """The fleet page is the dashboard's front page."""
+    return RedirectResponse("/fleet", status_code=303)
+
+
+@router.get("/login")
+async def login_form(request: Request, next: str | None = None) -> HTMLResponse:
+    """The login form."""
+    return _login_page(request, safe_next(next), "", 200)
+
+
+def _login_page(request: Request, next_path: str, message: str, status_code: int) -> HTMLResponse:
+    token = login_csrf_token(request)
+    response = _render(
+        request,
+        "login.html",
+        None,
+        status_code=status_code,
+        next=next_path,
+        message=message,
+        csrf_token=token,
+    )
+    remember_login_csrf(request, response, token)
+    return response
+
+
+@router.post("/login")
+async def login_submit(
+    request: Request,
+    session: SessionDep,
+    username: Annotated[str, Form()] = "",
+    password: Annotated[str, Form()] = "",
+    csrf_token: Annotated[str, Form()] = "",
+    next: Annotated[str, Form()] = "/fleet",
+) -> Response:
+    """Check the password; a failure says so, and repeated failures must wait."""
+    check_login_csrf(request, csrf_token)
+    result = await log_in(session, username.strip(), password, datetime.now(UTC))
+    if result.user is None:
+        status_code = 429 if result.retry_after_s else 401
+        response = _login_page(request, safe_next(next), result.message, status_code)
+        if result.retry_after_s:
+            response.headers["Retry-After"] = str(math.ceil(result.retry_after_s))
+        return response
+    redirect = RedirectResponse(safe_next(next), status_code=303)
+    set_session(request, redirect, result.user)
+    return redirect
+
+
+@router.post("/logout")
+async def logout(user: UserDep, csrf_token: Annotated[str, Form()] = "") -> RedirectResponse:
+    """End the session."""
+    check_form(user, csrf_token, needs_operator=False)
+    response = RedirectResponse("/login", status_code=303)
+    clear_session(response)
+    return response
+
+
+# --- fleet --------------------------------------------------------------------------------------
+
+
+def _fleet_filters(
+    entries: list[FleetEntry], route: str | None, make: str | None, problem: str | None
+) -> dict[str, Any]:
+    route = route or None
+    make = make or None
+    problem = problem or None
+    if problem is not None and problem not in PROBLEM_FILTERS:
+        raise PageError(400, "Unknown filter", f"There is no problem filter called {problem!r}.")
+    chosen = select_entries(entries, route=route, make=make, problem=problem)
+    query = "&".join(
+        f"{name}={_quote(value)}"
+        for name, value in (("route", route), ("make", make), ("problem", problem))
+        if value
+    )
+    return {
+        "entries": chosen,
+        "counts": count(chosen),
+        "total": len(entries),
+        "routes": sorted({entry.vehicle.route for entry in entries}),
+        "makes": sorted({entry.vehicle.make for entry in entries}),
+        "problems": PROBLEM_FILTERS,
+        "route": route,
+        "make": make,
+        "problem": problem,
+        "query": query,
+        "checks": CHECKS,
+    }
+
+
+async def _fleet_context(
+    request: Request,
+    session: SessionDep,
+    route: str | None,
+    make: str | None,
+    problem: str | None,
+) -> dict[str, Any]:
+    now = datetime.now(UTC)
+    entries = await fleet(session, now, Thresholds.from_settings(_settings(request)))
+    context = _fleet_filters(entries, route, make, problem)
+    context["generated_at"] = now
+    context["refresh_s"] = _settings(request).dashboard_refresh_s
+    return context
+
+
+@router.get("/fleet")
+async def fleet_page(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    route: str | None = None,
+    make: str | None = None,
+    problem: str | None = None,
+) -> HTMLResponse:
+    """piStatus: every vehicle's checks and whether it is cleared for deployment."""
+    context = await _fleet_context(request, session, route, make, problem)
+    return _render(request, "fleet.html", user, page="fleet", **context)
+
+
+@router.get("/fleet/live")
+async def fleet_live(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    route: str | None = None,
+    make: str | None = None,
+    problem: str | None = None,
+) -> HTMLResponse:
+    """The fleet page's counts and table, for its periodic refresh."""
+    context = await _fleet_context(request, session, route, make, problem)
+    return _render(request, "_fleet_live.html", user, **context)
+
+
+# --- vehicle ------------------------------------------------------------------------------------
+
+
+async def _entry_or_404(request: Request, session: SessionDep, vehicle_id: str) -> FleetEntry:
+    try:
+        return await vehicle_entry(
+            session,
+            vehicle_id,
+            datetime.now(UTC),
+            Thresholds.from_settings(_settings(request)),
+        )
+    except VehicleNotFound:
+        raise PageError(
+            404,
+            "Unknown vehicle",
+            f"There is no vehicle {vehicle_id} in the roster. Check the id on the fleet page, or "
+            "add the car with `smoothfleet vehicles add`.",
+        ) from None
+
+
+def _speed_chart(entry: FleetEntry, trace: data.Trace) -> Any:
+    times = [moment.timestamp() for moment in trace.ts]
+    bands = []
+    start: float | None = None
+    for moment, engaged in zip(times, trace.engaged, strict=True):
+        if engaged and start is None:
+            start = moment
+        if not engaged and start is not None:
+            bands.append(Band(start, moment, "#bbf7d0"))
+            start = None
+    if start is not None:
+        bands.append(Band(start, times[-1] + 1.0, "#bbf7d0"))
+    return line_chart(
+        "vehicle-speed",
+        f"Speed of {entry.vehicle.vehicle_id} against its plan's target",
+        [
+            Series("speed", times, [v * MPH_PER_MPS for v in trace.speed_mps], "#2563eb"),
+            Series(
+                "plan target",
+                times,
+                [None if v is None else v * MPH_PER_MPS for v in trace.target_mps],
+                "#dc2626",
+                style="step",
+                dashed=True,
+            ),
+        ],
+        Axis("time (UTC)", "time"),
+        Axis("speed (mph)", lower=0.0),
+        bands=bands,
+        band_label="controller engaged",
+    )
+
+
+async def _vehicle_context(
+    request: Request, session: SessionDep, vehicle_id: str
+) -> dict[str, Any]:
+    entry = await _entry_or_404(request, session, vehicle_id)
+    context: dict[str, Any] = {
+        "entry": entry,
+        "checks": CHECKS,
+        "lanes": list(range(1, entry.corridor_lanes + 1)),
+        "controllers": sorted(
+            name
+            for name, actuations in CONTROLLER_ACTUATIONS.items()
+            if entry.vehicle.actuation in actuations
+        ),
+        "params_json": json.dumps(entry.vehicle.controller_params),
+        "speed_chart": None,
+        "engagement_chart": None,
+    }
+    if entry.last_ping is not None:
+        trace = await data.vehicle_trace(session, vehicle_id, entry.last_ping.ts, TRACE_WINDOW)
+        if trace.ts:
+            context["speed_chart"] = _speed_chart(entry, trace)
+    context["statuses"] = await data.status_history(session, vehicle_id)
+    engagement = await data.vehicle_engagement(
+        session, vehicle_id, datetime.now(UTC) - timedelta(days=ANALYTICS_DAYS)
+    )
+    context["engagement"] = engagement
+    if engagement:
+        context["engagement_chart"] = bar_chart(
+            "vehicle-engagement",
+            f"Engagement of {vehicle_id} per day",
+            [row["day"].strftime("%m-%d") for row in engagement],
+            [100.0 * row["engagement_share"] for row in engagement],
+            "day (UTC)",
+            Axis("time with controller engaged (%)", lower=0.0, upper=100.0),
+            value_format="{:.0f} %",
+        )
+    return context
+
+
+@router.get("/vehicles/{vehicle_id}")
+async def vehicle_page(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    vehicle_id: str,
+    saved: str | None = None,
+) -> HTMLResponse:
+    """One vehicle: checks, speed against the plan, status history, engagement, assignment."""
+    context = await _vehicle_context(request, session, vehicle_id)
+    saved_message = {"assignment": "Assignment saved.", "maintenance": "Maintenance saved."}
+    return _render(
+        request,
+        "vehicle.html",
+        user,
+        page="fleet",
+        saved=saved_message.get(saved or ""),
+        error=None,
+        **context,
+    )
+
+
+@router.post("/vehicles/{vehicle_id}/assignment")
+async def vehicle_assignment(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    vehicle_id: str,
+    lane: Annotated[str, Form()] = "",
+    route: Annotated[str, Form()] = "",
+    controller: Annotated[str, Form()] = "",
+    params: Annotated[str, Form()] = "{}",
+    csrf_token: Annotated[str, Form()] = "",
+) -> Response:
+    """Change the vehicle's lane, route and controller (operators and admins)."""
+    check_form(user, csrf_token, needs_operator=True)
+    await _entry_or_404(request, session, vehicle_id)
+    try:
+        try:
+            lane_number = int(lane)
+        except ValueError:
+            raise AssignmentError(f"lane: {lane!r} is not a lane number") from None
+        try:
+            controller_params = json.loads(params or "{}")
+        except json.JSONDecodeError as error:
+            raise AssignmentError(f"controller parameters: not valid JSON ({error.msg})") from None
+        if not isinstance(controller_params, dict):
+            raise AssignmentError("controller parameters: must be a JSON object")
+        await change_assignment(
+            session,
+            vehicle_id,
+            lane=lane_number,
+            route=route,
+            controller_name=controller,
+            controller_params=controller_params,
+            changed_by=f"dashboard user {user.username}",
+        )
+    except AssignmentError as error:
+        context = await _vehicle_context(request, session, vehicle_id)
+        return _render(
+            request,
+            "vehicle.html",
+            user,
+            status_code=422,
+            page="fleet",
+            saved=None,
+            error=f"Not saved: {error}",
+            **context,
+        )
+    return RedirectResponse(f"/vehicles/{vehicle_id}?saved=assignment", status_code=303)
+
+
+@router.post("/vehicles/{vehicle_id}/maintenance")
+async def vehicle_maintenance(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    vehicle_id: str,
+    in_maintenance: Annotated[str, Form()] = "",
+    note: Annotated[str, Form()] = "",
+    csrf_token: Annotated[str, Form()] = "",
+) -> Response:
+    """Take the vehicle out of service or put it back (operators and admins)."""
+    check_form(user, csrf_token, needs_operator=True)
+    await _entry_or_404(request, session, vehicle_id)
+    await set_maintenance(
+        session,
+        vehicle_id,
+        in_maintenance=in_maintenance in ("on", "true", "1"),
+        note=note,
+        changed_by=f"dashboard user {user.username}",
+    )
+    return RedirectResponse(f"/vehicles/{vehicle_id}?saved=maintenance", status_code=303)
+
+
+# --- plans --------------------------------------------------------------------------------------
+
+
+def _plan_charts(profiles: list[data.LaneProfile]) -> list[tuple[int, Any]]:
+    charts = []
+    for profile in profiles:
+        x = [
+            value
+            for pair in zip(profile.start_postmile, profile.end_postmile, strict=True)
+            for value in pair
+        ]
+        target = [v * MPH_PER_MPS for v in profile.target_mps for _ in range(2)]
+        tse = [None if v is None else v * MPH_PER_MPS for v in profile.tse_mps for _ in range(2)]
+        charts.append(
+            (
+                profile.lane,
+                line_chart(
+                    f"plan-lane-{profile.lane}",
+                    f"Target speed of lane {profile.lane} along the corridor",
+                    [
+                        Series("fused TSE", x, tse, "#9ca3af"),
+                        Series("target speed", x, target, "#2563eb"),
+                    ],
+                    Axis("postmile (direction of travel →)"),
+                    Axis("speed (mph)", lower=0.0),
+                    bands=[Band(start, end) for start, end in profile.buffers()],
+                    band_label="buffer region",
+                    height=240,
+                ),
+            )
+        )
+    return charts
+
+
+def _time_space_chart(
+    chart_id: str,
+    title: str,
+    field: data.TimeSpace,
+    values: np.ndarray[Any, np.dtype[np.float64]],
+    since: datetime,
+    until: datetime,
+    speed_upper_mph: float,
+) -> Any:
+    times = np.linspace(since.timestamp(), until.timestamp(), HEATMAP_COLUMNS, endpoint=False)
+    times += (times[1] - times[0]) / 2
+    low, high = field.segment_edges_postmile[0], field.segment_edges_postmile[-1]
+    postmiles = np.linspace(low, high, HEATMAP_ROWS, endpoint=False)
+    postmiles += (postmiles[1] - postmiles[0]) / 2
+    grid = data.sample_plans(field, values, times, postmiles) * MPH_PER_MPS
+    return heatmap(
+        chart_id,
+        title,
+        grid,
+        (since.timestamp(), until.timestamp()),
+        (float(low), float(high)),
+        Axis("time (UTC)", "time"),
+        Axis("postmile (direction of travel ↑)"),
+        ColourScale(0.0, speed_upper_mph, "speed (mph)"),
+    )
+
+
+async def _plan_page(
+    request: Request,
+    user: PageUser,
+    session: SessionDep,
+    plan: PlanRun | None,
+    corridor_id: str | None,
+    lane: int,
+) -> HTMLResponse:
+    corridors = await data.corridors(session)
+    corridor = next(
+        (c for c in corridors if c.corridor_id == (plan.corridor_id if plan else corridor_id)),
+        corridors[0] if corridors else None,
+    )
+    context: dict[str, Any] = {
+        "page": "plans",
+        "corridors": corridors,
+        "corridor": corridor,
+        "plan": plan,
+        "lane": lane,
+        "lane_charts": [],
+        "runs": [],
+        "target_map": None,
+        "tse_map": None,
+        "inputs": {},
+        "params": "",
+    }
+    if corridor is None:
+        return _render(request, "plans.html", user, **context)
+    if plan is None:
+        plan = await data.latest_plan(session, corridor.corridor_id)
+        context["plan"] = plan
+    context["runs"] = await data.plan_runs(session, corridor.corridor_id)
+    context["lanes"] = list(range(1, corridor.lanes + 1))
+    if plan is None:
+        return _render(request, "plans.html", user, **context)
+    context["inputs"] = plan.inputs
+    context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
+    context["lane_charts"] = _plan_charts(await data.plan_profiles(session, plan))
+    until = plan.published_at or plan.started_at
+    since = until - PLAN_HISTORY
+    field = await data.recent_plans(session, corridor.corridor_id, lane, since, until)
+    if field is not None:
+        upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
+        context["target_map"] = _time_space_chart(
+            "plan-heatmap",
+            f"Target speed of lane {lane}, recent plans",
+            field,
+            field.target_mps,
+            since,
+            until,
+            upper,
+        )
+        if not np.all(np.isnan(field.tse_mps)):
+            context["tse_map"] = _time_space_chart(
+                "tse-heatmap",
+                f"Fused traffic state (TSE) of lane {lane}",
+                field,
+                field.tse_mps,
+                since,
+                until,
+                upper,
+            )
+    return _render(request, "plans.html", user, **context)
+
+
+@router.get("/plans")
+async def plans_page(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    corridor: str | None = None,
+    lane: Annotated[int, Query(ge=1, le=12)] = 1,
+) -> HTMLResponse:
+    """The latest plan of a corridor: targets per lane, buffers, time-space maps, provenance."""
+    return await _plan_page(request, user, session, None, corridor, lane)
+
+
+@router.get("/plans/{plan_id}")
+async def plan_page(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    plan_id: int,
+    lane: Annotated[int, Query(ge=1, le=12)] = 1,
+) -> HTMLResponse:
+    """One plan run by id."""
+    plan = await data.plan_by_id(session, plan_id)
+    if plan is None:
+        raise PageError(
+            404,
+            "Unknown plan",
+            f"There is no plan {plan_id}. The plans page lists the recent runs.",
+        )
+    return await _plan_page(request, user, session, plan, plan.corridor_id, lane)
+
+
+# --- feeds --------------------------------------------------------------------------------------
+
+
+@router.get("/feeds")
+async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
+    """INRIX freshness and latency, pings per second, rejected inputs."""
+    now = datetime.now(UTC)
+    latest = await data.latest_inrix(session)
+    snapshots = await data.inrix_snapshots(session, now - timedelta(hours=6))
+    minutes = await data.pings_per_minute(session, now - timedelta(hours=1))
+    context: dict[str, Any] = {
+        "page": "feeds",
+        "latest": latest,
+        "latest_age_s": None if latest is None else (now - latest["measured_at"]).total_seconds(),
+        "minutes": minutes,
+        "rejected": data.rejected_inputs(),
+        "inrix_chart": None,
+        "ping_chart": None,
+        "last_minute": minutes[-1] if minutes else None,
+    }
+    if snapshots:
+        context["inrix_chart"] = line_chart(
+            "inrix-latency",
+            "INRIX latency per snapshot",
+            [
+                Series(
+                    "latency",
+                    [row["measured_at"].timestamp() for row in snapshots],
+                    [row["latency_s"] for row in snapshots],
+                    "#9333ea",
+                    style="points" if len(snapshots) < 3 else "line",
+                )
+            ],
+            Axis("INRIX measurement time (UTC)", "time"),
+            Axis("latency: received − measured (s)", lower=0.0),
+            height=240,
+        )
+    if minutes:
+        context["ping_chart"] = line_chart(
+            "ping-rate",
+            "Pings per second, per minute of GPS time",
+            [
+                Series(
+                    "pings per second",
+                    [row["minute"].timestamp() for row in minutes],
+                    [row["pings"] / 60.0 for row in minutes],
+                    "#2563eb",
+                    style="points" if len(minutes) < 3 else "line",
+                )
+            ],
+            Axis("time (UTC)", "time"),
+            Axis("pings per second", lower=0.0),
+            height=240,
+        )
+    return _render(request, "feeds.html", user, **context)
+
+
+# --- analytics ----------------------------------------------------------------------------------
+
+
+@router.get("/analytics")
+async def analytics_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
+    """Engagement per day, pings and vehicles per hour, plan adherence, Edie fields."""
+    now = datetime.now(UTC)
+    since = now - timedelta(days=ANALYTICS_DAYS)
+    engagement = await data.fleet_engagement(session, since)
+    hourly = await data.fleet_pings_hourly(session, now - timedelta(hours=48))
+    adherence = await data.fleet_adherence(session, since)
+    context: dict[str, Any] = {
+        "page": "analytics",
+        "engagement": engagement,
+        "hourly": hourly,
+        "adherence": adherence,
+        "charts": {},
+        "edie_window": None,
+    }
+    charts = context["charts"]
+    if engagement:
+        charts["engagement"] = bar_chart(
+            "engagement-share",
+            "Share of fleet time with the controller engaged, per day",
+            [row["day"].strftime("%m-%d") for row in engagement],
+            [100.0 * row["engagement_share"] for row in engagement],
+            "day (UTC)",
+            Axis("time with controller engaged (%)", lower=0.0, upper=100.0),
+            value_format="{:.0f} %",
+        )
+    if hourly:
+        hours = [row["hour"].timestamp() for row in hourly]
+        style: Literal["points", "line"] = "points" if len(hourly) < 3 else "line"
+        charts["pings"] = line_chart(
+            "pings-hourly",
+            "Pings per hour",
+            [Series("pings", hours, [float(r["pings"]) for r in hourly], style=style)],
+            Axis("hour (UTC)", "time"),
+            Axis("pings per hour", lower=0.0),
+            height=220,
+        )
+        charts["vehicles"] = line_chart(
+            "vehicles-hourly",
+            "Vehicles heard per hour",
+            [
+                Series(
+                    "vehicles",
+                    hours,
+                    [float(r["vehicles"]) for r in hourly],
+                    "#16a34a",
+                    style=style,
+                )
+            ],
+            Axis("hour (UTC)", "time"),
+            Axis("vehicles", lower=0.0),
+            height=220,
+        )
+    if adherence:
+        charts["adherence"] = bar_chart(
+            "plan-adherence",
+            "Mean |speed − plan target| per day",
+            [row["day"].strftime("%m-%d") for row in adherence],
+            [row["mean_abs_speed_error_mps"] * MPH_PER_MPS for row in adherence],
+            "day (UTC)",
+            Axis("mean |speed − target| (mph)", lower=0.0),
+            value_format="{:.1f}",
+            colour="#dc2626",
+        )
+    await _edie_charts(session, context)
+    return _render(request, "analytics.html", user, **context)
+
+
+async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
+    """Bulk speed and fuel per distance of the last hour with pings (paper, Results)."""
+    newest = await data.newest_ping_ts(session)
+    corridors = await data.corridors(session)
+    if newest is None or not corridors:
+        return
+    corridor = corridors[0]
+    until = newest + timedelta(seconds=1)
+    since = until - timedelta(hours=1)
+    boxes = await data.edie_field(session, since, until, corridor.corridor_id)
+    if not boxes:
+        return
+    h_t, h_x = 10.0, 200.0
+    t0 = math.floor(since.timestamp() / h_t) * h_t
+    columns = math.ceil((until.timestamp() - t0) / h_t)
+    rows = math.ceil(corridor.length_m / h_x)
+    speed = np.full((rows, columns), np.nan)
+    fuel = np.full((rows, columns), np.nan)
+    for box in boxes:
+        column = int(round((box["t_start"].timestamp() - t0) / h_t))
+        row = int(round(box["x_start_m"] / h_x))
+        if 0 <= row < rows and 0 <= column < columns:
+            speed[row, column] = box["speed_mps"] * MPH_PER_MPS
+            if box["fuel_per_distance_g_per_m"] is not None:
+                fuel[row, column] = box["fuel_per_distance_g_per_m"] * 1000.0
+    postmiles = (
+        corridor.postmile_at_start,
+        corridor.postmile_at_start + rows * h_x / data.METRES_PER_MILE,
+    )
+    x_range = (t0, t0 + columns * h_t)
+    context["edie_window"] = (since, until, corridor.corridor_id)
+    upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
+    context["charts"]["edie_speed"] = heatmap(
+        "edie-speed",
+        "Bulk speed u = q / ρ of the fleet's pings",
+        speed,
+        x_range,
+        postmiles,
+        Axis("time (UTC)", "time"),
+        Axis("postmile (direction of travel ↑)"),
+        ColourScale(0.0, upper, "bulk speed (mph)"),
+    )
+    finite = fuel[np.isfinite(fuel)]
+    fuel_upper = float(np.percentile(finite, 95)) if finite.size else 1.0
+    context["charts"]["edie_fuel"] = heatmap(
+        "edie-fuel",
+        "Bulk fuel consumption ψ = f / q",
+        fuel,
+        x_range,
+        postmiles,
+        Axis("time (UTC)", "time"),
+        Axis("postmile (direction of travel ↑)"),
+        ColourScale(0.0, max(fuel_upper, 1e-3), "fuel per distance (g/km)", AMOUNT_STOPS),
+    )

@@ -1,0 +1,353 @@
+"""The dashboard's pages over HTTP: login, roles, CSRF, 404s, empty states, pages with data."""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+
+import httpx
+import pytest
+from sqlalchemy import Engine, text
+
+from app.core.config import load_settings
+from app.core.db import session_scope
+from app.plans.jobs import run_planner
+from app.users.service import save_user, wait_before_next_attempt
+from tests.dashboards.support import PASSWORDS, add_users, csrf_of, log_in, logged_in, post_form
+from tests.support.fleet import drive, healthy_status, post_inrix, post_pings, post_status
+from tests.support.servers import live_server
+from tests.support.tokens import issue
+
+
+@pytest.fixture
+def site(seeded_database_url: str, seeded_engine: Engine) -> Iterator[str]:
+    """The app on a seeded database with one user per role; yields its base URL."""
+    add_users(seeded_engine)
+    with live_server(seeded_database_url, planner_enabled=False) as base:
+        yield base
+
+
+@pytest.fixture
+def empty_site(database_url: str, engine: Engine) -> Iterator[str]:
+    """The app on a migrated database without corridor, roster or data."""
+    add_users(engine)
+    with live_server(database_url, planner_enabled=False) as base:
+        yield base
+
+
+def post_fleet_data(base: str, engine: Engine) -> None:
+    """SF-001 drives engaged and reports healthy; INRIX arrives; the real planner publishes."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    with httpx.Client(base_url=base, timeout=30) as client:
+        admin = issue(engine, "admin")
+        post_pings(
+            client,
+            admin,
+            drive("SF-001", now - timedelta(seconds=60), 3000.0, 25.0, 60, controller_engaged=True),
+        )
+        post_status(client, admin, "SF-001", **healthy_status(now - timedelta(seconds=2)))
+        with engine.connect() as connection:
+            codes = list(
+                connection.execute(
+                    text("SELECT xd_code FROM dim_inrix_segment ORDER BY seq")
+                ).scalars()
+            )
+        for minutes_ago in (3, 2):
+            post_inrix(
+                client,
+                admin,
+                now - timedelta(minutes=minutes_ago),
+                {code: 25.0 if 8 <= seq <= 10 else 62.0 for seq, code in enumerate(codes)},
+            )
+    url = engine.url.render_as_string(hide_password=False)
+    outcomes = run_planner(engine, load_settings(database_url=url))
+    assert outcomes[0].status == "published", outcomes
+
+
+# --- login --------------------------------------------------------------------------------------
+
+
+def test_pages_send_a_visitor_to_the_login_form(site: str) -> None:
+    with httpx.Client(base_url=site) as client:
+        response = client.get("/vehicles/SF-001")
+        assert response.status_code == 303
+        assert response.headers["location"] == "/login?next=%2Fvehicles%2FSF-001"
+        live = client.get("/fleet/live", headers={"X-Requested-With": "fetch"})
+        assert live.status_code == 401
+
+
+def test_login_sets_a_protected_session_cookie_and_goes_where_the_user_was_going(
+    site: str,
+) -> None:
+    with httpx.Client(base_url=site) as client:
+        response = log_in(client, "viewer", PASSWORDS["viewer"], "/vehicles/SF-002")
+        assert response.status_code == 303
+        assert response.headers["location"] == "/vehicles/SF-002"
+        cookie = response.headers["set-cookie"]
+        assert "sf_session=" in cookie
+        assert "HttpOnly" in cookie
+        assert "SameSite=lax" in cookie
+        page = client.get("/fleet")
+        assert page.status_code == 200
+        assert page.text.count('<tr data-vehicle="') == 100
+
+
+@pytest.mark.parametrize(("username", "password"), [("viewer", "wrong-password"), ("nobody", "x")])
+def test_a_wrong_login_says_so_without_telling_which_part(
+    site: str, username: str, password: str
+) -> None:
+    with httpx.Client(base_url=site) as client:
+        response = log_in(client, username, password)
+        assert response.status_code == 401
+        assert "Wrong username or password." in response.text
+        assert client.get("/fleet").status_code == 303
+
+
+def test_repeated_failures_make_the_account_wait(site: str, seeded_engine: Engine) -> None:
+    with httpx.Client(base_url=site) as client:
+        for _ in range(3):
+            assert log_in(client, "operator", "guess-guess").status_code == 401
+        # The third failure in a row: even the right password must wait a second.
+        locked = log_in(client, "operator", PASSWORDS["operator"])
+        assert locked.status_code == 429
+        assert "Too many failed logins for this account" in locked.text
+        assert locked.headers["retry-after"] == "1"
+        with seeded_engine.begin() as connection:
+            failures = connection.execute(
+                text("SELECT failed_logins FROM ops_user WHERE username = 'operator'")
+            ).scalar_one()
+            assert failures == 3
+            # ... and after the wait it is let in, which resets the count.
+            connection.execute(
+                text(
+                    "UPDATE ops_user SET last_failed_at = now() - interval '2 s' "
+                    "WHERE username = 'operator'"
+                )
+            )
+        assert log_in(client, "operator", PASSWORDS["operator"]).status_code == 303
+
+
+def test_the_wait_doubles_with_each_failure_up_to_five_minutes() -> None:
+    assert [wait_before_next_attempt(n) for n in range(7)] == [0, 0, 0, 1, 2, 4, 8]
+    assert wait_before_next_attempt(40) == 300
+
+
+def test_a_login_form_without_its_token_is_refused(site: str) -> None:
+    with httpx.Client(base_url=site) as client:
+        response = client.post(
+            "/login", data={"username": "viewer", "password": PASSWORDS["viewer"]}
+        )
+        assert response.status_code == 403
+        assert "did not come from this site" in response.text
+
+
+def test_login_never_redirects_to_another_site(site: str) -> None:
+    with httpx.Client(base_url=site) as client:
+        response = log_in(client, "viewer", PASSWORDS["viewer"], "//evil.example/")
+        assert response.headers["location"] == "/fleet"
+
+
+def test_a_new_password_ends_old_sessions(site: str, seeded_engine: Engine) -> None:
+    with logged_in(site, "viewer") as client:
+        assert client.get("/fleet").status_code == 200
+        with session_scope(seeded_engine) as session:
+            save_user(session, "viewer", "viewer", "a-brand-new-password")
+        assert client.get("/fleet").status_code == 303
+
+
+def test_logout_ends_the_session(site: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = post_form(client, "/fleet", "/logout")
+        assert response.status_code == 303
+        assert client.get("/fleet").status_code == 303
+
+
+# --- roles and CSRF -----------------------------------------------------------------------------
+
+
+def test_a_viewer_cannot_change_an_assignment(site: str, seeded_engine: Engine) -> None:
+    with logged_in(site, "viewer") as client:
+        page = client.get("/vehicles/SF-001")
+        assert "Save assignment" not in page.text
+        assert "Your role is viewer" in page.text
+        response = post_form(
+            client,
+            "/vehicles/SF-001",
+            "/vehicles/SF-001/assignment",
+            lane="3",
+            route="B",
+            controller="simple",
+        )
+        assert response.status_code == 403
+        assert "only operators and admins can change vehicles" in response.text
+    with seeded_engine.connect() as connection:
+        lane = connection.execute(
+            text("SELECT assigned_lane FROM dim_vehicle WHERE vehicle_id = 'SF-001'")
+        ).scalar_one()
+    assert lane == 1
+
+
+def test_an_operator_changes_an_assignment_from_the_vehicle_page(site: str) -> None:
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-001",
+            "/vehicles/SF-001/assignment",
+            lane="3",
+            route="B",
+            controller="simple",
+            params='{"gain": 0.5}',
+        )
+        assert response.status_code == 303
+        page = client.get(response.headers["location"])
+        assert "Assignment saved." in page.text
+        assert '<strong data-field="lane">3</strong>' in page.text
+        assert '<strong data-field="route">B</strong>' in page.text
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"lane": "7"}, "lane: I-24-WB has lanes 1 to 4, not 7"),
+        ({"params": "{gain"}, "controller parameters: not valid JSON"),
+        ({"controller": "microaccel"}, "cannot drive SF-001, whose actuation is"),
+    ],
+)
+def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
+    site: str, fields: dict[str, str], message: str
+) -> None:
+    form = {"lane": "2", "route": "A", "controller": "simple", "params": "{}", **fields}
+    with logged_in(site, "operator") as client:
+        response = post_form(client, "/vehicles/SF-001", "/vehicles/SF-001/assignment", **form)
+        assert response.status_code == 422
+        assert "Not saved:" in response.text
+        assert message in response.text
+
+
+def test_a_form_without_the_session_token_is_refused(site: str) -> None:
+    with logged_in(site, "admin") as client:
+        response = client.post(
+            "/vehicles/SF-001/maintenance", data={"in_maintenance": "on", "csrf_token": "forged"}
+        )
+        assert response.status_code == 403
+        assert "did not come from this site" in response.text
+
+
+def test_an_operator_marks_a_car_in_maintenance(site: str) -> None:
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-004",
+            "/vehicles/SF-004/maintenance",
+            in_maintenance="on",
+            note="replace UPS battery",
+        )
+        assert response.status_code == 303
+        fleet = client.get("/fleet", params={"problem": "maintenance"}).text
+        assert fleet.count('<tr data-vehicle="') == 1
+        assert 'data-vehicle="SF-004" data-verdict="maintenance"' in fleet
+
+
+# --- unknown things and empty states ------------------------------------------------------------
+
+
+def test_an_unknown_vehicle_is_a_404_page(site: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = client.get("/vehicles/SF-999")
+        assert response.status_code == 404
+        assert "There is no vehicle SF-999 in the roster" in response.text
+        assert "Traceback" not in response.text
+
+
+def test_an_unknown_plan_is_a_404_page(site: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = client.get("/plans/424242")
+        assert response.status_code == 404
+        assert "There is no plan 424242" in response.text
+
+
+def test_an_unknown_filter_is_explained(site: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = client.get("/fleet", params={"problem": "everything"})
+        assert response.status_code == 400
+        assert "no problem filter called 'everything'" in html.unescape(response.text)
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ("/fleet", "No vehicles in the roster yet"),
+        ("/plans", "No corridor yet"),
+        ("/feeds", "No INRIX data yet"),
+        ("/analytics", "No pings on the corridor in the last 30 days"),
+    ],
+)
+def test_every_page_works_on_an_empty_database(empty_site: str, path: str, says: str) -> None:
+    with logged_in(empty_site, "viewer") as client:
+        response = client.get(path)
+        assert response.status_code == 200
+        assert says in response.text
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ("/plans", "No plan published yet"),
+        ("/vehicles/SF-010", "No pings from this vehicle yet"),
+        ("/feeds", "No pings in the last hour"),
+        ("/analytics", "No ping has followed a plan yet"),
+    ],
+)
+def test_pages_of_a_fleet_without_data_say_what_to_do(site: str, path: str, says: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = client.get(path)
+        assert response.status_code == 200
+        assert says in response.text
+
+
+def test_filters_that_match_nothing_say_so(site: str) -> None:
+    with logged_in(site, "viewer") as client:
+        response = client.get("/fleet", params={"route": "Z"})
+        assert "No vehicle matches these filters" in response.text
+
+
+# --- pages with data ----------------------------------------------------------------------------
+
+
+def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: Engine) -> None:
+    post_fleet_data(site, seeded_engine)
+    with logged_in(site, "viewer") as client:
+        fleet = client.get("/fleet").text
+        assert 'data-vehicle="SF-001" data-verdict="cleared"' in fleet
+        assert '<span class="number" data-count="cleared">1</span>' in fleet
+
+        live = client.get("/fleet/live", params={"route": "A"}).text
+        assert "<html" not in live
+        assert 'data-vehicle="SF-001"' in live
+
+        vehicle = client.get("/vehicles/SF-001").text
+        assert 'data-chart="vehicle-speed"' in vehicle
+        assert 'data-chart="vehicle-engagement"' in vehicle
+        assert "100 %" in vehicle  # every ping engaged
+        assert "1.0.0" in vehicle  # the status history shows the agent version
+
+        plans = client.get("/plans").text
+        for chart in ("plan-lane-1", "plan-lane-4", "plan-heatmap", "tse-heatmap"):
+            assert f'data-chart="{chart}"' in plans
+        assert "postmile (direction of travel →)" in plans
+        assert "speed (mph)" in plans
+        assert "kernel_smooth_buffer" in plans
+
+        feeds = client.get("/feeds").text
+        assert 'data-field="inrix-latency"' in feeds
+        assert 'data-chart="ping-rate"' in feeds
+
+        analytics = client.get("/analytics").text
+        for chart in ("engagement-share", "pings-hourly", "vehicles-hourly", "edie-speed"):
+            assert f'data-chart="{chart}"' in analytics
+
+
+def test_the_csrf_token_belongs_to_the_session(site: str) -> None:
+    with logged_in(site, "operator") as first, logged_in(site, "operator") as second:
+        assert csrf_of(first.get("/fleet").text) != csrf_of(second.get("/fleet").text)
