@@ -12,7 +12,14 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from sim.drives import DriveError, load_drives
 from sim.evaluate import ControllerVariant, evaluate
-from sim.report import best_pair, markdown_table, summary_table, write_csv, write_heatmap
+from sim.report import (
+    MAX_LOSS_PCT,
+    best_pair,
+    markdown_table,
+    summary_table,
+    write_csv,
+    write_heatmap,
+)
 from sim.scenarios import SCENARIOS, scenario_cases
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -144,9 +151,15 @@ def evaluate_command(
     (out_dir / "summary.md").write_text(markdown_table(evaluation))
     console.print(summary_table(evaluation))
     best = best_pair(evaluation)
-    if best is not None:
+    if best is None:
         console.print(
-            f"best on shockwave: {best['planner']} x {best['controller']}: fuel saving "
+            f"no pair kept throughput and speed within {MAX_LOSS_PCT:.0f} % on shockwave "
+            "without a collision"
+        )
+    else:
+        console.print(
+            f"best on shockwave (throughput and speed within {MAX_LOSS_PCT:.0f} %, no collision): "
+            f"{best['planner']} x {best['controller']}: fuel saving "
             f"{best['fuel_saving_pct']:+.1f} %, throughput "
             f"{best['throughput_vph_change_pct']:+.1f} %, network speed "
             f"{best['network_speed_mps_change_pct']:+.1f} %, collisions {best['collisions']}"

@@ -86,6 +86,7 @@ class RunResult:
     controller: str
     kpis: Kpis
     plans_run: int = 0
+    plans_buffered: int = 0
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,7 @@ class Evaluation:
                     row[f"{kpi}_change_pct"] = float(
                         np.mean([self.change_pct(r, kpi) for r in runs])
                     )
+                row["plans_buffered"] = sum(r.plans_buffered for r in runs)
                 row["collisions"] = sum(r.kpis.collisions for r in runs)
                 row["gap_violations"] = sum(r.kpis.gap_violations for r in runs)
                 rows.append(row)
@@ -166,6 +168,7 @@ class Evaluation:
                 "planner": r.planner,
                 "controller": r.controller,
                 "plans_run": r.plans_run,
+                "plans_buffered": r.plans_buffered,
             }
             row.update(r.kpis.as_dict())
             row["fuel_saving_pct"] = self.fuel_saving_pct(r)
@@ -217,7 +220,14 @@ def run_case(
         speed_limit=case.bottleneck,
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
     )
-    return RunResult(case, planner, variant.name, case_kpis(case, run), schedule.plans_run)
+    return RunResult(
+        case,
+        planner,
+        variant.name,
+        case_kpis(case, run),
+        schedule.plans_run,
+        schedule.plans_buffered,
+    )
 
 
 def evaluate(

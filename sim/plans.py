@@ -81,6 +81,8 @@ class SimulatedPlanner:
     feed: InrixFeed
     period_s: float = PLANNER_PERIOD_S
     plans_run: int = 0
+    # Plans that held a buffer (a standing bottleneck's deceleration region).
+    plans_buffered: int = 0
     _ping_time: list[float] = field(default_factory=list)
     _ping_x: list[float] = field(default_factory=list)
     _ping_speed: list[float] = field(default_factory=list)
@@ -144,3 +146,4 @@ class SimulatedPlanner:
         self._target = plan.target_mps[SIM_LANE - 1]
         self._published_at_s = now_s
         self.plans_run += 1
+        self.plans_buffered += int(bool(plan.is_buffer.any()))

@@ -148,11 +148,20 @@ def write_heatmap(evaluation: Evaluation, path: Path) -> None:
     plt.close(figure)
 
 
+# The issue's aims for the best pair on shockwave drives: throughput and network speed within
+# -2 % of the all-human baseline, and no collision.
+MAX_LOSS_PCT = -2.0
+
+
 def best_pair(evaluation: Evaluation, scenario: str = "shockwave") -> dict[str, Any] | None:
-    """The planner x controller with the largest fuel saving on `scenario` and no collision."""
+    """The planner x controller with the largest fuel saving on `scenario` among those with no
+    collision and throughput and network speed no worse than MAX_LOSS_PCT."""
     candidates = [
         row
         for row in evaluation.summary()
-        if row["scenario"] == scenario and row["collisions"] == 0
+        if row["scenario"] == scenario
+        and row["collisions"] == 0
+        and row["throughput_vph_change_pct"] >= MAX_LOSS_PCT
+        and row["network_speed_mps_change_pct"] >= MAX_LOSS_PCT
     ]
     return max(candidates, key=lambda row: row["fuel_saving_pct"], default=None)

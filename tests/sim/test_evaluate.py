@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drives import Drive, load_drive
-from sim.evaluate import BASELINE, ControllerVariant, evaluate
+from sim.drives import Drive, drive_from_speeds, load_drive
+from sim.evaluate import BASELINE, ControllerVariant, Evaluation, RunResult, evaluate
+from sim.kpi import Kpis
 from sim.report import best_pair, markdown_table, write_csv, write_heatmap
 from sim.scenarios import Case
 from tests.support.servers import cli_env, run_cli
@@ -83,6 +84,30 @@ def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_
     assert "| shockwave | kernel_smooth | microaccel/accel | 1 |" in markdown_table(evaluation)
 
 
+def kpis(mpg: float, throughput: float, speed: float, collisions: int = 0) -> Kpis:
+    return Kpis(mpg, throughput, speed, 0.5, 1.0, 5.0, 10.0, collisions, 0)
+
+
+def test_best_pair_keeps_throughput_speed_and_safety() -> None:
+    case = Case("shockwave", drive_from_speeds("d", np.full(10, 20.0)))
+    evaluation = Evaluation(
+        [
+            RunResult(case, "-", BASELINE, kpis(40.0, 2000.0, 20.0)),
+            # saves the most fuel but loses 3 % of the network speed
+            RunResult(case, "p", "slow", kpis(50.0, 2000.0, 19.4)),
+            # saves more than "good" but crashes
+            RunResult(case, "p", "crash", kpis(48.0, 2000.0, 20.0, collisions=1)),
+            # loses 1.5 % of throughput: within the aim
+            RunResult(case, "p", "good", kpis(44.0, 1970.0, 19.9)),
+        ]
+    )
+    best = best_pair(evaluation)
+    assert best is not None
+    assert best["controller"] == "good"
+    # 1 - 40/44 = 9.09 %
+    assert best["fuel_saving_pct"] == pytest.approx(100 / 11)
+
+
 def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_path: Path) -> None:
     drives = tmp_path / "drives"
     drives.mkdir()
@@ -104,7 +129,7 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
         timeout=300,
     )
     assert result.returncode == 0, result.stderr
-    assert "best on shockwave: kernel_smooth x microaccel/accel" in result.stdout
+    assert "no collision): kernel_smooth x microaccel/accel: fuel saving" in result.stdout
     assert (out / "heatmap.png").exists()
     with (out / "evaluation.csv").open() as handle:
         rows = list(csv.DictReader(handle))
