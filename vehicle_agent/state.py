@@ -2,9 +2,10 @@
 freshness. Common to every make; the make's `CarInterface` says what the signals mean.
 
 A watched message is usable when its last good frame is younger than 10 periods, and no bad
-frame of it arrived since (a wrong length, checksum or counter marks the state invalid until the
-next good frame). Frames of ids the make does not watch are counted and ignored: a car's bus
-carries many messages the agent has no use for, and the bus filters keep most of them out.
+frame of it arrived since: a wrong length, checksum or counter marks the state invalid in the
+next snapshot at least, and until a good frame of that message follows. Frames of ids the make
+does not watch are counted and ignored: a car's bus carries many messages the agent has no use
+for, and the bus filters keep most of them out.
 """
 
 from __future__ import annotations
@@ -49,6 +50,7 @@ class CarStateReader:
         self._received_at: dict[str, float] = {}
         self._last_counter: dict[str, int] = {}
         self._problems: dict[str, str] = {}
+        self._reported: set[str] = set()
         self._unknown_seen: set[int] = set()
         self.stats = CanStats()
         self._log = ThrottledLog(log)
@@ -95,16 +97,23 @@ class CarStateReader:
                 return
         self.latest[name] = signals
         self._received_at[name] = time_s
-        self._problems.pop(name, None)
+        if name in self._reported:
+            self._problems.pop(name, None)
+            self._reported.discard(name)
         self.stats.used += 1
 
     def _refuse(self, name: str, kind: str, message: str) -> None:
         self.stats.errors[kind] += 1
         self._problems[name] = message
+        self._reported.discard(name)
         self._log.warning(kind, f"bad CAN frame ({kind}): {message}")
 
     def snapshot(self, time_s: float) -> CarState:
         """The car now; invalid (with the first problem found) unless every input is fresh."""
+        if self._problems:
+            self._reported.update(self._problems)
+            name = next(iter(self._problems))
+            return CarState(time_s, False, self._problems[name], None)
         for name, rule in self.car.messages.items():
             received = self._received_at.get(name)
             if received is None:
@@ -112,9 +121,6 @@ class CarStateReader:
             age = time_s - received
             if age > STALE_PERIODS * rule.period_s:
                 return CarState(time_s, False, f"{name} missing for {age:.2f} s", None)
-            problem = self._problems.get(name)
-            if problem is not None:
-                return CarState(time_s, False, problem, None)
         try:
             reading = self.car.interpret(self.latest)
         except (KeyError, ValueError, TypeError) as error:

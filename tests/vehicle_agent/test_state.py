@@ -211,7 +211,11 @@ def test_garbage_frames_are_counted_and_invalidate_until_a_good_one(dbc_cache: P
     state = reader.snapshot(10.03)
     assert not state.valid
     assert "SPEED: checksum" in (state.problem or "")
+    reader.ingest(good, 10.035)  # a good frame after the refusal was reported: valid again
+    assert reader.snapshot(10.036).valid
     reader.ingest(truncated, 10.04)
+    reader.ingest(good, 10.045)  # even followed at once by a good frame, the next snapshot
+    assert not reader.snapshot(10.05).valid  # reports the truncated one
     assert reader.stats.errors == {"checksum": 1, "length": 1}
     reader.ingest(good, 10.06)
     assert reader.snapshot(10.07).valid

@@ -1,0 +1,638 @@
+"""The vehicle agent: read the car, decide, act behind the safety layer, report.
+
+One `Agent` drives one car. Everything it touches is injected (CAN bus, clock, GPS, server
+client, ping spool, button port) so tests, the simulator and the demo build it in-process on a
+virtual bus with simulated time. Three entry points, each cheap when nothing is due:
+- `tick()`: read frames -> car state -> engage logic -> controller (every control period, 10 Hz)
+  -> actuation (every call: presses take 0.25 s, RAV4 requests go out at ~30 Hz) -> safety ->
+  send. Call it at the make's command period (`command_period_s`).
+- `record()`: a 1 Hz ping into the on-disk spool.
+- `network()`: config, corridor, plan polls, status reports and the spool upload (blocking
+  HTTP: run it on its own thread in a car, see `runner.run_agent`).
+Bad input of any kind is logged, counted and ends in the stock ACC driving; the agent keeps going.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import can
+
+from vehicle_agent import engage
+from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
+from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
+from vehicle_agent.clock import Clock
+from vehicle_agent.codec import codec_for
+from vehicle_agent.controllers import (
+    AccelCommand,
+    AccSetPoint,
+    Action,
+    Controller,
+    ControllerConfigError,
+    Observation,
+    build_controller,
+)
+from vehicle_agent.corridor import CorridorGeometry
+from vehicle_agent.gps import GpsFix, GpsSource
+from vehicle_agent.plan import LanePlan, Plan, PlanError
+from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
+from vehicle_agent.probes import cpu_temp_c, disk_free_mb
+from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
+from vehicle_agent.server import ServerClient, ServerError, VehicleConfig
+from vehicle_agent.spool import PingSpool
+from vehicle_agent.state import CarStateReader
+
+log = logging.getLogger(__name__)
+
+AGENT_VERSION = "0.1.0"
+CONTROL_PERIOD_S = 0.1
+# A GPS fix older than this is no fix (s).
+GPS_MAX_AGE_S = 2.0
+# The car's button message echoes the agent's own presses for a moment after release (s).
+ECHO_GRACE_S = 0.3
+# The safety layer refusing a command keeps the agent off for this long (s).
+ACTUATOR_FAULT_HOLD_S = 1.0
+# Waves travel upstream at about this speed (m/s); plan lookups move downstream by it x age.
+DEFAULT_WAVE_SPEED_MPS = -5.0
+# How often the config is re-read (s), and the longest back-off after failures (s).
+CONFIG_REFRESH_S = 60.0
+MAX_BACKOFF_S = 30.0
+MAX_PINGS_PER_BATCH = 1000
+# Upload at most this many batches per network() call, so status and plan polls stay timely.
+MAX_BATCHES_PER_CALL = 5
+# Low-pass time constant of the acceleration estimated from the speed (s).
+ACCEL_FILTER_S = 0.3
+
+
+@dataclass(frozen=True)
+class Assignment:
+    """What the server's config made of this vehicle: ready-to-use objects."""
+
+    config: VehicleConfig
+    corridor: CorridorGeometry
+    controller: Controller
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The agent at one tick, for telemetry (read by other threads)."""
+
+    time_s: float
+    wall: datetime
+    reading: CarReading | None
+    can_problem: str | None
+    fix: GpsFix | None
+    x_m: float | None
+    on_corridor: bool
+    mode: engage.Mode
+    reason: str
+    plan_id: int | None
+    plan_age_s: float | None
+    controller: str | None
+    accel_mps2: float | None
+
+
+@dataclass
+class Schedule:
+    """When a periodic job next runs, with exponential back-off after failures."""
+
+    next_s: float = 0.0
+    failures: int = 0
+
+    def due(self, now: float) -> bool:
+        """True when it is time."""
+        return now >= self.next_s
+
+    def done(self, now: float, period_s: float) -> None:
+        """It worked: next run one period from now."""
+        self.failures = 0
+        self.next_s = now + period_s
+
+    def failed(self, now: float, period_s: float) -> None:
+        """It failed: retry after a growing delay, never longer than MAX_BACKOFF_S."""
+        self.failures += 1
+        self.next_s = now + min(period_s * 2 ** (self.failures - 1), MAX_BACKOFF_S)
+
+
+@dataclass
+class AgentStats:
+    """Counters for status reports and tests."""
+
+    ticks: int = 0
+    control_steps: int = 0
+    pings_spooled: int = 0
+    pings_uploaded: int = 0
+    pings_without_fix: int = 0
+    handbacks: Counter[str] = field(default_factory=Counter)
+    server_errors: Counter[str] = field(default_factory=Counter)
+    plans_refused: int = 0
+    controller_errors: int = 0
+
+
+class Agent:
+    """One car's agent."""
+
+    def __init__(
+        self,
+        *,
+        vehicle_id: str,
+        car: CarInterface,
+        bus: can.BusABC,
+        clock: Clock,
+        gps: GpsSource,
+        spool: PingSpool,
+        server: ServerClient | None = None,
+        button_port: ButtonPort | None = None,
+        dbc_cache: Path | None = None,
+        engage_policy: engage.EngagePolicy | None = None,
+        wave_speed_mps: float = DEFAULT_WAVE_SPEED_MPS,
+    ) -> None:
+        self.vehicle_id = vehicle_id
+        self.car = car
+        self.bus = bus
+        self.clock = clock
+        self.gps = gps
+        self.spool = spool
+        self.server = server
+        self.engage_policy = engage_policy or engage.EngagePolicy()
+        self.wave_speed_mps = wave_speed_mps
+        self.codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+        self.reader = CarStateReader(car, self.codec)
+        self.safety = SafetyLayer(car, self.codec)
+        self.sender = SafeSender(bus, self.safety)
+        self.sequencer = ButtonSequencer()
+        self.limiter = AccelLimiter()
+        self.buttons: ButtonPort | None = None
+        self.accel_port: CanAccelPort | None = None
+        if car.actuation == "acc":
+            self.buttons = button_port or CanButtonPort(
+                car, self.codec, self.sender, lambda: self.reader.latest
+            )
+        else:
+            self.accel_port = CanAccelPort(car, self.codec, self.sender)
+        self.stats = AgentStats()
+        self.started_s = clock.monotonic()
+        self.assignment: Assignment | None = None
+        self.lane_plan: LanePlan | None = None
+        self.state = engage.INITIAL
+        self.snapshot: Snapshot | None = None
+        self._running: Assignment | None = None
+        self._next_control_s = 0.0
+        self._requested_accel = 0.0
+        self._own_button: CruiseButton | None = None
+        self._own_released: tuple[float, CruiseButton] | None = None
+        self._actuator_fault_until = -math.inf
+        self._last_settings: tuple[float | None, int | None] | None = None
+        self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
+        self._config_schedule = Schedule()
+        self._plan_schedule = Schedule()
+        self._status_schedule = Schedule()
+        self._upload_schedule = Schedule()
+        self._next_ping_s = 0.0
+        self._last_ping_ts: datetime | None = None
+        self._frames_at_status = (self.started_s, 0)
+
+    # Periods the caller needs -----------------------------------------------------------------
+
+    @property
+    def command_period_s(self) -> float:
+        """How often `tick()` should run: the make's command period."""
+        return self.car.command_period_s
+
+    @property
+    def config(self) -> VehicleConfig | None:
+        """The server's current config for this vehicle, once read."""
+        return None if self.assignment is None else self.assignment.config
+
+    # Control ----------------------------------------------------------------------------------
+
+    def tick(self) -> None:
+        """One pass of the control loop (see the module docstring)."""
+        now = self.clock.monotonic()
+        wall = self.clock.now()
+        self.stats.ticks += 1
+        while (frame := self.bus.recv(timeout=0)) is not None:
+            self.reader.ingest(frame, now)
+        car_state = self.reader.snapshot(now)
+        reading = car_state.reading
+        measured_accel = self._estimate_accel(reading, now)
+        fix = self.gps.latest()
+        gps_ok = fix is not None and fix.has_fix and now - fix.time_s <= GPS_MAX_AGE_S
+        assignment = self.assignment
+        x_m, on_corridor = self._locate(fix, reading, now) if gps_ok else (None, False)
+        lane_plan = self.lane_plan
+        plan_fresh = (
+            assignment is not None
+            and lane_plan is not None
+            and lane_plan.is_fresh(now, wall, assignment.config.stale_plan_after_s)
+        )
+        previous = self.state
+        self.state = engage.step(
+            previous,
+            engage.EngageInputs(
+                time_s=now,
+                enabled=self._enabled(assignment),
+                can_ok=car_state.valid,
+                acc_engaged=reading is not None and reading.acc_engaged,
+                gps_ok=gps_ok,
+                on_corridor=on_corridor,
+                in_lane=self._in_lane(fix, assignment),
+                plan_fresh=plan_fresh,
+                actuator_ok=now >= self._actuator_fault_until,
+                driver_active=self._driver_active(reading, now, previous.commanding),
+            ),
+            self.engage_policy,
+        )
+        if previous.commanding and not self.state.commanding:
+            self._hand_back(self.state.reason)
+        if self.state.commanding and not previous.commanding:
+            self._take_over(now, measured_accel)
+        if self.state.commanding and now >= self._next_control_s:
+            late = now - self._next_control_s > CONTROL_PERIOD_S
+            self._next_control_s = (now if late else self._next_control_s) + CONTROL_PERIOD_S
+            self._control(now, wall, reading, x_m)
+        self._actuate(now, car_state, measured_accel)
+        self.snapshot = Snapshot(
+            time_s=now,
+            wall=wall,
+            reading=reading,
+            can_problem=car_state.problem,
+            fix=fix,
+            x_m=x_m,
+            on_corridor=on_corridor,
+            mode=self.state.mode,
+            reason=self.state.reason,
+            plan_id=None if lane_plan is None else lane_plan.plan_id,
+            plan_age_s=None if lane_plan is None else lane_plan.age_s(wall),
+            controller=None if assignment is None else assignment.config.controller.name,
+            accel_mps2=measured_accel,
+        )
+
+    def _enabled(self, assignment: Assignment | None) -> bool:
+        if assignment is None:
+            return False
+        config = assignment.config
+        if not config.active or config.in_maintenance:
+            return False
+        # A new assignment while commanding: hand back, then take over with the new one.
+        return self._running is None or self._running is assignment
+
+    def _locate(
+        self, fix: GpsFix | None, reading: CarReading | None, now: float
+    ) -> tuple[float | None, bool]:
+        assignment = self.assignment
+        if assignment is None or fix is None:
+            return None, False
+        located = assignment.corridor.locate(fix.lat, fix.lon)
+        x_m = float(located.x_m[0])
+        if reading is not None:
+            x_m += reading.speed_mps * max(now - fix.time_s, 0.0)
+        return x_m, bool(located.on_corridor[0])
+
+    @staticmethod
+    def _in_lane(fix: GpsFix | None, assignment: Assignment | None) -> bool:
+        """GPS cannot tell lanes apart: without a lane source the driver keeps the assigned
+        lane (as in the field test); with one (simulation) it must match."""
+        if assignment is None or fix is None or fix.lane is None:
+            return True
+        return fix.lane == assignment.config.assigned_lane
+
+    def _driver_active(self, reading: CarReading | None, now: float, commanding: bool) -> bool:
+        """Brake, gas, a cruise button the agent is not pressing, or (on acceleration-actuated
+        cars, whose set points the agent never touches) a changed set point."""
+        if reading is None:
+            return False
+        settings = (reading.acc_speed_setting_mph, reading.acc_gap_setting)
+        changed = self._last_settings is not None and settings != self._last_settings
+        self._last_settings = settings
+        own: set[CruiseButton] = set()
+        if self._own_button is not None:
+            own.add(self._own_button)
+        if self._own_released is not None and now - self._own_released[0] <= ECHO_GRACE_S:
+            own.add(self._own_released[1])
+        return (
+            reading.brake_pressed
+            or reading.gas_pressed
+            or bool(reading.buttons - own)
+            or (self.car.actuation == "accel" and commanding and changed)
+        )
+
+    def _estimate_accel(self, reading: CarReading | None, now: float) -> float | None:
+        if reading is None:
+            self._accel_estimate = None
+            return None
+        previous = self._accel_estimate
+        if previous is None or now <= previous[0]:
+            accel = 0.0 if previous is None else previous[2]
+        else:
+            dt = now - previous[0]
+            raw = (reading.speed_mps - previous[1]) / dt
+            accel = previous[2] + dt / (ACCEL_FILTER_S + dt) * (raw - previous[2])
+        self._accel_estimate = (now, reading.speed_mps, accel)
+        return accel
+
+    def _take_over(self, now: float, measured_accel: float | None) -> None:
+        assert self.assignment is not None  # enabled only with an assignment
+        self._running = self.assignment
+        self._running.controller.reset()
+        self.limiter.reset(measured_accel or 0.0, now)
+        self.safety.idle()
+        self._next_control_s = now
+        log.info("agent takes over (%s)", self.assignment.config.controller.name)
+
+    def _hand_back(self, reason: str) -> None:
+        self._running = None
+        self.sequencer.stop()
+        if self.accel_port is not None:
+            self.accel_port.stop()
+        self.safety.idle()
+        self.stats.handbacks[reason] += 1
+        log.info("agent hands back to the stock ACC: %s", reason)
+
+    def _control(
+        self, now: float, wall: datetime, reading: CarReading | None, x_m: float | None
+    ) -> None:
+        running = self._running
+        lane_plan = self.lane_plan
+        if running is None or reading is None or lane_plan is None or x_m is None:
+            return
+        profile = lane_plan.profile(wall, self.wave_speed_mps)
+        observation = Observation(
+            time_s=now,
+            speed_mps=reading.speed_mps,
+            target_speed_mps=profile.at(x_m),
+            position_m=x_m,
+            target=profile,
+            lead_present=reading.lead_present,
+            lead_distance_m=reading.lead_distance_m,
+            lead_rel_speed_mps=reading.lead_rel_speed_mps,
+            acc_speed_setting_mph=reading.acc_speed_setting_mph,
+            acc_gap_setting=reading.acc_gap_setting,
+        )
+        try:
+            action: Action = running.controller.step(observation)
+        except (ArithmeticError, ValueError, TypeError) as error:
+            self.stats.controller_errors += 1
+            log.warning("controller %s failed: %s", running.config.controller.name, error)
+            self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+            return
+        self.stats.control_steps += 1
+        if isinstance(action, AccSetPoint):
+            self.sequencer.request(action.speed_setting_mph, action.gap_setting)
+        elif isinstance(action, AccelCommand):
+            self._requested_accel = action.accel_mps2
+
+    def _actuate(self, now: float, car_state: CarState, measured_accel: float | None) -> None:
+        context = SafetyContext(now, car_state, measured_accel)
+        if self.buttons is not None:
+            held = None
+            reading = car_state.reading
+            if self.state.commanding and reading is not None:
+                held = self.sequencer.step(
+                    now, reading.acc_speed_setting_mph, reading.acc_gap_setting
+                )
+            if self._own_button is not None and held != self._own_button:
+                self._own_released = (now, self._own_button)
+            self._own_button = held
+            refused_before = sum(self.safety.refused.values())
+            self.buttons.hold(held, context)
+            if sum(self.safety.refused.values()) > refused_before:
+                self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+        elif self.accel_port is not None and self.state.commanding and self.accel_port.due(now):
+            accel = self.limiter.limit(now, self._requested_accel)
+            if not self.accel_port.request(accel, context):
+                self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+
+    # Telemetry --------------------------------------------------------------------------------
+
+    def record(self) -> bool:
+        """Spool a ping when one is due; True when one was written."""
+        now = self.clock.monotonic()
+        period = self.config.ping_period_s if self.config else 1.0
+        if now < self._next_ping_s:
+            return False
+        late = now - self._next_ping_s > period  # first ping, or the caller stalled
+        self._next_ping_s = now + period if late else self._next_ping_s + period
+        ping = self.ping()
+        if ping is None:
+            self.stats.pings_without_fix += 1
+            return False
+        self.spool.add(ping)
+        self.stats.pings_spooled += 1
+        return True
+
+    def ping(self) -> dict[str, Any] | None:
+        """The ping for the latest snapshot (None without a GPS fix: lat/lon are required)."""
+        snapshot = self.snapshot
+        if snapshot is None or snapshot.fix is None or not snapshot.fix.has_fix:
+            return None
+        ts = self.clock.now()
+        if self._last_ping_ts is not None and ts <= self._last_ping_ts:
+            return None  # (vehicle_id, ts) is the ping's key: never two at one instant
+        self._last_ping_ts = ts
+        reading, fix = snapshot.reading, snapshot.fix
+        ping: dict[str, Any] = {
+            "vehicle_id": self.vehicle_id,
+            "ts": ts.isoformat(timespec="milliseconds"),
+            "lat": round(fix.lat, 7),
+            "lon": round(fix.lon, 7),
+            "speed_mps": round(reading.speed_mps if reading else (fix.speed_mps or 0.0), 3),
+            "controller_engaged": snapshot.mode is engage.Mode.ENGAGED,
+        }
+        optional = {
+            "accel_mps2": snapshot.accel_mps2,
+            "heading_deg": fix.heading_deg,
+            "lane": fix.lane,
+            "controller": snapshot.controller,
+            "plan_id": snapshot.plan_id,
+        }
+        if reading is not None:
+            optional |= {
+                "acc_engaged": reading.acc_engaged,
+                "acc_speed_setting_mph": reading.acc_speed_setting_mph,
+                "acc_gap_setting": reading.acc_gap_setting,
+                "lead_present": reading.lead_present,
+                "lead_distance_m": reading.lead_distance_m,
+                "lead_rel_speed_mps": reading.lead_rel_speed_mps,
+            }
+        for key, value in optional.items():
+            if value is None or (isinstance(value, float) and not math.isfinite(value)):
+                continue
+            ping[key] = round(value, 3) if isinstance(value, float) else value
+        if "heading_deg" in ping:
+            ping["heading_deg"] = ping["heading_deg"] % 360.0
+        return ping
+
+    def status_report(self) -> dict[str, Any]:
+        """The piStatus report for now."""
+        now = self.clock.monotonic()
+        snapshot = self.snapshot
+        since, frames_then = self._frames_at_status
+        frames = self.reader.stats.frames
+        rate = (frames - frames_then) / (now - since) if now > since else 0.0
+        self._frames_at_status = (now, frames)
+        fix = snapshot.fix if snapshot else None
+        reading = snapshot.reading if snapshot else None
+        report: dict[str, Any] = {
+            "ts": self.clock.now().isoformat(timespec="milliseconds"),
+            "agent_version": AGENT_VERSION,
+            "uptime_s": round(now - self.started_s, 1),
+            "can_ok": snapshot is not None and snapshot.can_problem is None,
+            "can_msgs_per_s": round(rate, 1),
+            "gps_fix": fix is not None and fix.has_fix,
+            "gps_satellites": fix.satellites if fix else None,
+            "acc_available": reading.acc_available if reading else None,
+            "controller": snapshot.controller if snapshot else None,
+            "controller_running": snapshot is not None and snapshot.mode is engage.Mode.ENGAGED,
+            "plan_id": snapshot.plan_id if snapshot else None,
+            "plan_age_s": round(max(snapshot.plan_age_s, 0.0), 1)
+            if snapshot and snapshot.plan_age_s is not None
+            else None,
+            "spool_backlog": self.spool.backlog(),
+            "disk_free_mb": disk_free_mb(self.spool.path.parent),
+            "cpu_temp_c": cpu_temp_c(),
+            "server_rtt_ms": round(self.server.last_rtt_ms, 1)
+            if self.server and self.server.last_rtt_ms is not None
+            else None,
+        }
+        return {key: value for key, value in report.items() if value is not None}
+
+    # Network ----------------------------------------------------------------------------------
+
+    def network(self) -> None:
+        """Config, plan, status and uploads, each when due (blocking HTTP)."""
+        if self.server is None:
+            return
+        now = self.clock.monotonic()
+        if self._config_schedule.due(now):
+            self._refresh_config(now)
+        config = self.config
+        if config is not None and self._plan_schedule.due(now):
+            self._poll_plan(now, config)
+        status_period = config.status_period_s if config else 10.0
+        if self._status_schedule.due(now):
+            try:
+                self.server.post_status(self.status_report())
+                self._status_schedule.done(now, status_period)
+            except ServerError as error:
+                self._server_failed("status", error)
+                self._status_schedule.failed(now, status_period)
+        if self._upload_schedule.due(now):
+            self.upload(now)
+
+    def _server_failed(self, what: str, error: ServerError) -> None:
+        self.stats.server_errors[what] += 1
+        log.warning("%s", error)
+
+    def _refresh_config(self, now: float) -> None:
+        assert self.server is not None
+        try:
+            config = self.server.config()
+        except ServerError as error:
+            self._server_failed("config", error)
+            self._config_schedule.failed(now, 2.0)
+            return
+        self._config_schedule.done(now, CONFIG_REFRESH_S)
+        current = self.assignment
+        if current is not None and current.config == config:
+            return
+        try:
+            corridor = (
+                current.corridor
+                if current is not None and current.config.corridor_id == config.corridor_id
+                else self.server.corridor(config.corridor_id)
+            )
+            self.configure(config, corridor)
+        except (ServerError, ControllerConfigError, ValueError) as error:
+            log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
+            self.stats.server_errors["config"] += 1
+            self.assignment = None
+
+    def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:
+        """Adopt a config (building its controller); raises ValueError when it cannot apply to
+        this car. A new lane drops the plan held for the old one."""
+        if config.actuation != self.car.actuation:
+            raise ValueError(
+                f"config says actuation {config.actuation}, the car ({self.car.key}) is "
+                f"{self.car.actuation}"
+            )
+        if corridor.corridor_id != config.corridor_id:
+            raise ValueError(
+                f"geometry of {corridor.corridor_id}, config says {config.corridor_id}"
+            )
+        controller = build_controller(
+            config.controller.name, config.actuation, config.controller.params
+        )
+        previous = self.assignment
+        self.assignment = Assignment(config, corridor, controller)
+        if previous is None or previous.config.assigned_lane != config.assigned_lane:
+            self.lane_plan = None
+            self._plan_schedule = Schedule()
+
+    def accept_plan(self, plan: Plan, etag: str | None = None) -> bool:
+        """Hold `plan` for the assigned lane; False (and no plan held) when it has no such lane."""
+        config = self.config
+        if config is None:
+            return False
+        try:
+            self.lane_plan = LanePlan(plan, config.assigned_lane, etag, self.clock.monotonic())
+        except PlanError as error:
+            self.stats.plans_refused += 1
+            log.warning("%s", error)
+            self.lane_plan = None
+            return False
+        return True
+
+    def _poll_plan(self, now: float, config: VehicleConfig) -> None:
+        assert self.server is not None
+        held = self.lane_plan
+        try:
+            fetched = self.server.plan(held.etag if held else None)
+        except ServerError as error:
+            self._server_failed("plan", error)
+            if "refused" in str(error):
+                self.stats.plans_refused += 1
+                self.lane_plan = None
+            self._plan_schedule.failed(now, config.plan_poll_s)
+            return
+        self._plan_schedule.done(now, config.plan_poll_s)
+        if fetched.status == "unavailable":
+            self.lane_plan = None
+            if fetched.retry_after_s:
+                self._plan_schedule.next_s = now + min(fetched.retry_after_s, MAX_BACKOFF_S)
+        elif fetched.status == "unchanged" and held is not None:
+            held.confirmed_s = now
+        elif fetched.plan is not None:
+            self.accept_plan(fetched.plan, fetched.etag)
+
+    def upload(self, now: float | None = None) -> int:
+        """Send spooled pings, oldest first, in batches; returns how many left the spool."""
+        if self.server is None:
+            return 0
+        now = self.clock.monotonic() if now is None else now
+        uploaded = 0
+        for _ in range(MAX_BATCHES_PER_CALL):
+            rows = self.spool.oldest(MAX_PINGS_PER_BATCH)
+            if not rows:
+                break
+            try:
+                answer = self.server.post_pings([ping for _, ping in rows])
+            except ServerError as error:
+                self._server_failed("pings", error)
+                self._upload_schedule.failed(now, 1.0)
+                return uploaded
+            for index, reason in answer.rejected:
+                log.warning("server rejected ping %s: %s", rows[index][1].get("ts"), reason)
+            self.spool.remove([row_id for row_id, _ in rows], rejected=len(answer.rejected))
+            uploaded += len(rows)
+            self.stats.pings_uploaded += len(rows)
+            if len(rows) < MAX_PINGS_PER_BATCH:
+                break
+        self._upload_schedule.done(now, 1.0)
+        return uploaded

@@ -1,0 +1,59 @@
+"""Time for the agent, injected: a monotonic clock for control and a wall clock (the car's
+GPS-disciplined system clock) for the timestamps it reports."""
+
+from __future__ import annotations
+
+import threading
+import time
+from datetime import UTC, datetime, timedelta
+from typing import Protocol
+
+
+class Clock(Protocol):
+    """Monotonic seconds for control, aware UTC datetimes for reports."""
+
+    def monotonic(self) -> float:
+        """Seconds from an arbitrary origin, never going backwards."""
+
+    def now(self) -> datetime:
+        """The wall-clock time (UTC)."""
+
+
+class SystemClock:
+    """The machine's clocks."""
+
+    def monotonic(self) -> float:
+        """time.monotonic()."""
+        return time.monotonic()
+
+    def now(self) -> datetime:
+        """datetime.now(UTC)."""
+        return datetime.now(UTC)
+
+
+class ManualClock:
+    """A clock that moves only when told to (tests, simulation): both clocks move together."""
+
+    def __init__(self, start: datetime | None = None, monotonic_s: float = 0.0) -> None:
+        self._start_wall = start or datetime(2024, 1, 1, tzinfo=UTC)
+        self._start_mono = monotonic_s
+        self._mono = monotonic_s
+        self._lock = threading.Lock()
+
+    def monotonic(self) -> float:
+        """The simulated monotonic time."""
+        return self._mono
+
+    def now(self) -> datetime:
+        """The simulated wall time."""
+        return self._start_wall + timedelta(seconds=self._mono - self._start_mono)
+
+    def advance(self, seconds: float) -> None:
+        """Move both clocks forward."""
+        with self._lock:
+            self._mono += seconds
+
+    def set(self, monotonic_s: float) -> None:
+        """Jump to a monotonic time (never backwards)."""
+        with self._lock:
+            self._mono = max(self._mono, monotonic_s)

@@ -1,0 +1,147 @@
+"""Plans as the agent holds them: validated on arrival, looked up at the car's position.
+
+A plan lane gives target speeds per sub-segment, `target_speed_mps[i]` holding from `x_m[i]` to
+`end_x_m[i]` (without `end_x_m`, the targets are points joined linearly). A plan that could make
+the car misbehave is refused whole: no lanes, arrays of different lengths, positions not
+increasing, a speed that is negative or not finite. The agent then has no fresh plan and leaves
+the car to its stock ACC.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import datetime
+
+import numpy as np
+from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from vehicle_agent.controllers import TargetProfile
+
+# Fastest plausible target (m/s, about 134 mph): anything above is garbage.
+MAX_TARGET_SPEED_MPS = 60.0
+# Sub-segment steps are drawn this far (m) before the next segment starts, so np.interp sees
+# strictly increasing positions.
+STEP_EDGE_M = 0.01
+
+
+class PlanError(ValueError):
+    """A plan the agent refuses; the message says what was wrong."""
+
+
+class PlanBuffer(BaseModel):
+    """A buffer region of a lane (informational: its targets are in the lane's arrays)."""
+
+    start_x_m: float
+    end_x_m: float
+    target_speed_mps: float
+
+
+class PlanLane(BaseModel):
+    """One lane's targets along the corridor."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    lane: int = Field(ge=1)
+    x_m: list[float]
+    end_x_m: list[float] | None = None
+    target_speed_mps: list[float]
+    buffers: list[PlanBuffer] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> PlanLane:
+        n = len(self.x_m)
+        if n == 0 or len(self.target_speed_mps) != n:
+            raise ValueError(
+                f"lane {self.lane}: {n} positions but {len(self.target_speed_mps)} speeds"
+            )
+        if self.end_x_m is not None and len(self.end_x_m) != n:
+            raise ValueError(f"lane {self.lane}: {n} positions but {len(self.end_x_m)} ends")
+        if self.end_x_m is None and n < 2:
+            raise ValueError(f"lane {self.lane}: a profile needs at least two points")
+        values = [*self.x_m, *(self.end_x_m or [])]
+        if not all(math.isfinite(v) for v in values):
+            raise ValueError(f"lane {self.lane}: a position is not finite")
+        if any(b <= a for a, b in zip(self.x_m, self.x_m[1:], strict=False)):
+            raise ValueError(f"lane {self.lane}: positions do not increase")
+        if self.end_x_m is not None and any(
+            end <= start for start, end in zip(self.x_m, self.end_x_m, strict=True)
+        ):
+            raise ValueError(f"lane {self.lane}: a sub-segment ends before it starts")
+        for speed in self.target_speed_mps:
+            if not math.isfinite(speed) or speed < 0 or speed > MAX_TARGET_SPEED_MPS:
+                raise ValueError(f"lane {self.lane}: target speed {speed} m/s is not usable")
+        return self
+
+    def profile_points(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and speeds for linear lookup (steps drawn as flat runs)."""
+        speeds = np.asarray(self.target_speed_mps, dtype=np.float64)
+        starts = np.asarray(self.x_m, dtype=np.float64)
+        if self.end_x_m is None:
+            return starts, speeds
+        ends = np.asarray(self.end_x_m, dtype=np.float64)
+        inner_ends = np.maximum(
+            np.minimum(ends, np.append(starts[1:], np.inf)) - STEP_EDGE_M, starts + STEP_EDGE_M / 2
+        )
+        x = np.column_stack([starts, inner_ends]).ravel()
+        return x, np.repeat(speeds, 2)
+
+
+class Plan(BaseModel):
+    """A published plan (the fields the agent uses; the rest is ignored)."""
+
+    model_config = ConfigDict(extra="ignore")
+
+    plan_id: int
+    corridor: str
+    published_at: AwareDatetime
+    valid_until: AwareDatetime | None = None
+    lanes: list[PlanLane] = Field(min_length=1)
+
+    def lane(self, lane: int) -> PlanLane | None:
+        """The lane's targets, or None when the plan has no such lane."""
+        return next((candidate for candidate in self.lanes if candidate.lane == lane), None)
+
+
+def parse_plan(body: bytes | str) -> Plan:
+    """A validated plan from the server's JSON, or PlanError naming the problem."""
+    try:
+        return Plan.model_validate_json(body)
+    except ValidationError as error:
+        detail = error.errors()[0]
+        where = ".".join(str(part) for part in detail.get("loc", ()))
+        message = str(detail.get("msg", "invalid")).removeprefix("Value error, ")
+        raise PlanError(f"plan refused: {where + ': ' if where else ''}{message}") from None
+
+
+class LanePlan:
+    """One lane of a plan, ready for lookups, and what the agent knows about its freshness."""
+
+    def __init__(self, plan: Plan, lane: int, etag: str | None, confirmed_s: float) -> None:
+        lane_plan = plan.lane(lane)
+        if lane_plan is None:
+            raise PlanError(f"plan {plan.plan_id} has no lane {lane}")
+        self.plan = plan
+        self.lane = lane
+        self.etag = etag
+        self.confirmed_s = confirmed_s
+        self.x_m, self.speeds = lane_plan.profile_points()
+
+    @property
+    def plan_id(self) -> int:
+        """The plan being followed."""
+        return self.plan.plan_id
+
+    def age_s(self, wall: datetime) -> float:
+        """Seconds since the plan was published."""
+        return (wall - self.plan.published_at).total_seconds()
+
+    def is_fresh(self, now_s: float, wall: datetime, stale_after_s: float) -> bool:
+        """Published and confirmed by the server within `stale_after_s`, and still valid."""
+        if self.plan.valid_until is not None and wall > self.plan.valid_until:
+            return False
+        return self.age_s(wall) <= stale_after_s and now_s - self.confirmed_s <= stale_after_s
+
+    def profile(self, wall: datetime, wave_speed_mps: float) -> TargetProfile:
+        """Targets as seen now: the lookup moves downstream by -wave speed x plan age."""
+        shift = -wave_speed_mps * max(self.age_s(wall), 0.0)
+        return TargetProfile(self.x_m, self.speeds, shift_m=shift)

@@ -1,0 +1,108 @@
+"""Store-and-forward for pings: every ping is written to SQLite on disk first, and leaves the
+spool only once the server has answered that it committed it (or rejected it for good).
+
+A crash loses nothing that was written (WAL journal, synchronous=FULL); a ping sent but not yet
+deleted when the agent dies is sent again after restart and the server counts it as a duplicate
+(its (vehicle_id, ts) key is unique), so every ping reaches the database exactly once. The spool
+is bounded: past `max_rows` the oldest pings are dropped (and counted), so a car offline for
+days cannot fill its disk.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import threading
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS ping (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    body TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS counter (
+    name TEXT PRIMARY KEY,
+    value INTEGER NOT NULL
+);
+"""
+
+
+class PingSpool:
+    """A bounded FIFO of pings in one SQLite file, shared by the agent's threads."""
+
+    def __init__(self, path: Path, max_rows: int = 100_000) -> None:
+        if max_rows < 1:
+            raise ValueError("max_rows must be at least 1")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.path = path
+        self.max_rows = max_rows
+        self._lock = threading.Lock()
+        self._db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=FULL")
+        self._db.executescript(SCHEMA)
+
+    def close(self) -> None:
+        """Close the file."""
+        with self._lock:
+            self._db.close()
+
+    def add(self, ping: Mapping[str, Any]) -> None:
+        """Append a ping (committed to disk before returning); drop the oldest past the bound."""
+        body = json.dumps(ping, separators=(",", ":"))
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            try:
+                self._db.execute("INSERT INTO ping (body) VALUES (?)", (body,))
+                (count,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
+                excess = count - self.max_rows
+                if excess > 0:
+                    self._db.execute(
+                        "DELETE FROM ping WHERE id IN (SELECT id FROM ping ORDER BY id LIMIT ?)",
+                        (excess,),
+                    )
+                    self._bump("dropped", excess)
+                self._db.execute("COMMIT")
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+
+    def _bump(self, name: str, amount: int) -> None:
+        self._db.execute(
+            "INSERT INTO counter (name, value) VALUES (?, ?) "
+            "ON CONFLICT (name) DO UPDATE SET value = value + excluded.value",
+            (name, amount),
+        )
+
+    def oldest(self, limit: int) -> list[tuple[int, dict[str, Any]]]:
+        """Up to `limit` pings, oldest first, with their spool ids."""
+        with self._lock:
+            rows = self._db.execute(
+                "SELECT id, body FROM ping ORDER BY id LIMIT ?", (limit,)
+            ).fetchall()
+        return [(int(row[0]), json.loads(row[1])) for row in rows]
+
+    def remove(self, ids: Sequence[int], rejected: int = 0) -> None:
+        """Forget pings the server has answered for."""
+        if not ids:
+            return
+        with self._lock:
+            self._db.execute("BEGIN IMMEDIATE")
+            self._db.executemany("DELETE FROM ping WHERE id = ?", [(i,) for i in ids])
+            if rejected:
+                self._bump("rejected", rejected)
+            self._db.execute("COMMIT")
+
+    def backlog(self) -> int:
+        """Pings waiting for upload."""
+        with self._lock:
+            (count,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
+        return int(count)
+
+    def counter(self, name: str) -> int:
+        """A running total: `dropped` (past the bound) or `rejected` (by the server)."""
+        with self._lock:
+            row = self._db.execute("SELECT value FROM counter WHERE name = ?", (name,)).fetchone()
+        return int(row[0]) if row else 0
