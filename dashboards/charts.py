@@ -32,6 +32,7 @@ MARGIN_RIGHT = 20
 MARGIN_TOP = 30
 MARGIN_BOTTOM = 46
 LEGEND_WIDTH = 96  # colour legend beside a heatmap
+MAX_BAR_WIDTH = 60
 
 PALETTE = ("#2563eb", "#dc2626", "#16a34a", "#9333ea", "#ea580c", "#0891b2", "#4b5563")
 NO_DATA_COLOUR = "#e5e7eb"
@@ -228,14 +229,25 @@ def format_tick(value: float, kind: AxisKind, span: float) -> str:
 
 
 def bounds(
-    values: Sequence[float | None], lower: float | None, upper: float | None
+    values: Sequence[float | None],
+    lower: float | None,
+    upper: float | None,
+    *,
+    headroom: bool = False,
 ) -> tuple[float, float]:
-    """Axis bounds: given ones, else the data's range (a flat range is widened by 1)."""
+    """Axis bounds: given ones, else the data's range (a flat range is widened by 1).
+
+    With `headroom`, a data-derived upper bound moves up to the next tick, so the highest value
+    is not drawn on the frame.
+    """
     finite = [v for v in values if v is not None and math.isfinite(v)]
     low = lower if lower is not None else (min(finite) if finite else 0.0)
     high = upper if upper is not None else (max(finite) if finite else 1.0)
     if high <= low:
         high = low + 1.0
+    if headroom and upper is None:
+        step = nice_step(high - low, 5)
+        high = math.ceil((high + 0.02 * (high - low)) / step) * step
     return low, high
 
 
@@ -349,7 +361,7 @@ def line_chart(
     xs = [x for s in series for x in s.x] + [b.start for b in bands] + [b.end for b in bands]
     ys = [y for s in series for y in s.y]
     x_lower, x_upper = bounds(xs, x_axis.lower, x_axis.upper)
-    y_lower, y_upper = bounds(ys, y_axis.lower, y_axis.upper)
+    y_lower, y_upper = bounds(ys, y_axis.lower, y_axis.upper, headroom=True)
     frame = Frame(x_lower, x_upper, y_lower, y_upper, width, height)
     left, top, plot_width, plot_height = frame.plot
     body = _axes(frame, x_axis, y_axis)
@@ -398,7 +410,7 @@ def bar_chart(
     height: int = HEIGHT,
 ) -> Markup:
     """One bar per label, each with its value written above it."""
-    y_lower, y_upper = bounds([0.0, *values], y_axis.lower, y_axis.upper)
+    y_lower, y_upper = bounds([0.0, *values], y_axis.lower, y_axis.upper, headroom=True)
     frame = Frame(0.0, float(max(1, len(labels))), y_lower, y_upper, width, height)
     left, top, plot_width, plot_height = frame.plot
     body = [
@@ -414,14 +426,15 @@ def bar_chart(
             f"{escape(format_tick(tick, 'linear', y_upper - y_lower))}</text>"
         )
     slot = plot_width / max(1, len(labels))
+    bar_width = min(slot * 0.7, MAX_BAR_WIDTH)
     label_every = max(1, math.ceil(len(labels) * 60 / plot_width))
     for index, (label, value) in enumerate(zip(labels, values, strict=True)):
         centre = left + slot * (index + 0.5)
         if value is not None and math.isfinite(value):
             y = frame.py(value)
             body.append(
-                f'<rect class="bar" x="{centre - slot * 0.35:.1f}" y="{y:.1f}" '
-                f'width="{slot * 0.7:.1f}" height="{frame.py(y_lower) - y:.1f}" fill="{colour}">'
+                f'<rect class="bar" x="{centre - bar_width / 2:.1f}" y="{y:.1f}" '
+                f'width="{bar_width:.1f}" height="{frame.py(y_lower) - y:.1f}" fill="{colour}">'
                 f"<title>{escape(label)}: {escape(value_format.format(value))}</title></rect>"
             )
             if len(labels) <= 31:

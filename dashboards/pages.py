@@ -139,6 +139,17 @@ def _quote(path: str) -> str:
     return quote(path, safe="")
 
 
+def _readable(value: object) -> str:
+    """A provenance value for people: nested counts as "name n, ...", lists joined."""
+    if isinstance(value, dict):
+        return ", ".join(
+            f"{name.replace('_', ' ')} {_readable(item)}" for name, item in value.items()
+        )
+    if isinstance(value, list):
+        return ", ".join(_readable(item) for item in value) or "none"
+    return str(value)
+
+
 # --- login --------------------------------------------------------------------------------------
 
 
@@ -559,12 +570,17 @@ async def _plan_page(
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
         return _render(request, "plans.html", user, **context)
-    context["inputs"] = plan.inputs
+    context["inputs"] = {name: _readable(value) for name, value in plan.inputs.items()}
     context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
     context["lane_charts"] = _plan_charts(await data.plan_profiles(session, plan))
-    until = plan.published_at or plan.started_at
-    since = until - PLAN_HISTORY
-    field = await data.recent_plans(session, corridor.corridor_id, lane, since, until)
+    # The hour of plans up to this one, drawn until this plan stops being in force (or now).
+    published = plan.published_at or plan.started_at
+    until = max(
+        published + timedelta(seconds=_settings(request).planner_period_s),
+        min(datetime.now(UTC), plan.valid_until or published),
+    )
+    since = published - PLAN_HISTORY
+    field = await data.recent_plans(session, corridor.corridor_id, lane, since, published)
     if field is not None:
         upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
         context["target_map"] = _time_space_chart(
@@ -628,8 +644,10 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
     """INRIX freshness and latency, pings per second, rejected inputs."""
     now = datetime.now(UTC)
     latest = await data.latest_inrix(session)
-    snapshots = await data.inrix_snapshots(session, now - timedelta(hours=6))
-    minutes = await data.pings_per_minute(session, now - timedelta(hours=1))
+    inrix_since = now - timedelta(hours=6)
+    ping_since = now - timedelta(hours=1)
+    snapshots = await data.inrix_snapshots(session, inrix_since)
+    minutes = await data.pings_per_minute(session, ping_since)
     context: dict[str, Any] = {
         "page": "feeds",
         "latest": latest,
@@ -653,7 +671,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(snapshots) < 3 else "line",
                 )
             ],
-            Axis("INRIX measurement time (UTC)", "time"),
+            Axis("INRIX measurement time (UTC)", "time", inrix_since.timestamp(), now.timestamp()),
             Axis("latency: received − measured (s)", lower=0.0),
             height=240,
         )
@@ -670,7 +688,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(minutes) < 3 else "line",
                 )
             ],
-            Axis("time (UTC)", "time"),
+            Axis("time (UTC)", "time", ping_since.timestamp(), now.timestamp()),
             Axis("pings per second", lower=0.0),
             height=240,
         )
@@ -686,7 +704,8 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
     now = datetime.now(UTC)
     since = now - timedelta(days=ANALYTICS_DAYS)
     engagement = await data.fleet_engagement(session, since)
-    hourly = await data.fleet_pings_hourly(session, now - timedelta(hours=48))
+    hourly_since = (now - timedelta(hours=48)).replace(minute=0, second=0, microsecond=0)
+    hourly = await data.fleet_pings_hourly(session, hourly_since)
     adherence = await data.fleet_adherence(session, since)
     context: dict[str, Any] = {
         "page": "analytics",
@@ -708,13 +727,14 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
             value_format="{:.0f} %",
         )
     if hourly:
-        hours = [row["hour"].timestamp() for row in hourly]
+        hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
+        hour_axis = Axis("hour (UTC)", "time", hourly_since.timestamp(), now.timestamp())
         style: Literal["points", "line"] = "points" if len(hourly) < 3 else "line"
         charts["pings"] = line_chart(
             "pings-hourly",
             "Pings per hour",
             [Series("pings", hours, [float(r["pings"]) for r in hourly], style=style)],
-            Axis("hour (UTC)", "time"),
+            hour_axis,
             Axis("pings per hour", lower=0.0),
             height=220,
         )
@@ -730,7 +750,7 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
                     style=style,
                 )
             ],
-            Axis("hour (UTC)", "time"),
+            hour_axis,
             Axis("vehicles", lower=0.0),
             height=220,
         )

@@ -1,0 +1,208 @@
+"""The dashboard in a real headless Chromium (Debian's /usr/bin/chromium driven by Playwright).
+
+Data arrives the way it does in the field, through the API while the page is open; the tests
+watch the page change without reloading it. Screenshots go to tests/artifacts/ (git-ignored).
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import httpx
+import pytest
+from playwright.sync_api import BrowserContext, Page, expect, sync_playwright
+from sqlalchemy import Engine, text
+
+from tests.dashboards.support import PASSWORDS, add_users
+from tests.dashboards.test_pages import post_fleet_data
+from tests.support.fleet import drive, healthy_status, post_pings, post_status
+from tests.support.servers import live_server
+from tests.support.tokens import issue
+
+pytestmark = pytest.mark.browser
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+ARTIFACTS = Path(__file__).resolve().parents[1] / "artifacts"
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory: pytest.TempPathFactory) -> Iterator[BrowserContext]:
+    """Chromium with a fresh profile, never a downloaded browser."""
+    if not CHROMIUM.exists():
+        pytest.fail("Debian's chromium is missing: apt-get install -y chromium (scripts/test does)")
+    profile = tmp_path_factory.mktemp("chromium-profile")
+    with sync_playwright() as playwright:
+        context = playwright.chromium.launch_persistent_context(
+            str(profile),
+            executable_path=str(CHROMIUM),
+            headless=True,
+            args=CHROMIUM_ARGS,
+            viewport={"width": 1500, "height": 1000},
+        )
+        yield context
+        context.close()
+    shutil.rmtree(profile, ignore_errors=True)
+
+
+@pytest.fixture
+def page(browser: BrowserContext) -> Iterator[Page]:
+    browser.clear_cookies()
+    page = browser.new_page()
+    yield page
+    page.close()
+
+
+def screenshot(page: Page, name: str) -> None:
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / name), full_page=True)
+
+
+def log_in(page: Page, base: str, role: str, path: str = "/fleet") -> None:
+    page.goto(f"{base}{path}")
+    expect(page).to_have_url(f"{base}/login?next={path.replace('/', '%2F')}")
+    page.get_by_label("Username").fill(role)
+    page.get_by_label("Password").fill(PASSWORDS[role])
+    page.get_by_role("button", name="Log in").click()
+    expect(page).to_have_url(f"{base}{path}")
+
+
+def report(client: httpx.Client, token: str, vehicle_id: str) -> None:
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        client,
+        token,
+        drive(vehicle_id, now - timedelta(seconds=5), 4000.0, 24.0, 5, controller_engaged=True),
+    )
+    post_status(client, token, vehicle_id, **healthy_status(now))
+
+
+def test_fleet_page_fills_live_and_a_stale_status_turns_red(
+    page: Page, seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    add_users(seeded_engine)
+    # A status is amber from 3 s and red from 6 s here, and the page refreshes every second,
+    # so the test sees in seconds what the field sees in a minute.
+    with (
+        live_server(
+            seeded_database_url,
+            planner_enabled=False,
+            readiness_status_age_s=(3.0, 6.0),
+            dashboard_refresh_s=1.0,
+        ) as base,
+        httpx.Client(base_url=base, timeout=30) as client,
+    ):
+        log_in(page, base, "viewer")
+        row = page.locator('tr[data-vehicle="SF-001"]')
+        expect(page.locator("tr[data-vehicle]")).to_have_count(100)
+        expect(row).to_have_attribute("data-verdict", "not cleared")
+        page.evaluate("window.notReloaded = true")
+
+        token = issue(seeded_engine, "admin")
+        report(client, token, "SF-001")
+        report(client, token, "SF-002")
+
+        expect(row).to_have_attribute("data-verdict", "cleared", timeout=10_000)
+        expect(page.locator('[data-count="cleared"]')).to_have_text("2")
+        expect(row.locator('td[data-check="gps"]')).to_have_text("fix, 11 sat")
+        assert page.evaluate("window.notReloaded") is True
+        screenshot(page, "fleet-live.png")
+
+        # The car stops reporting: its status check goes amber, then red, and it loses clearance.
+        status = row.locator('td[data-check="status"]')
+        expect(status).to_have_attribute("data-level", "red", timeout=15_000)
+        expect(row).to_have_attribute("data-verdict", "not cleared")
+        assert page.evaluate("window.notReloaded") is True
+        screenshot(page, "fleet-stale.png")
+
+        # Filters: only the Toyotas, then only the cars with a GPS problem (none).
+        page.get_by_label("Make").select_option("Toyota")
+        expect(page).to_have_url(f"{base}/fleet?route=&make=Toyota&problem=")
+        makes = page.locator("tr[data-vehicle] td:nth-child(2)").all_inner_texts()
+        assert makes
+        assert all(make.startswith("Toyota") for make in makes)
+
+
+def test_an_operator_changes_an_assignment(
+    page: Page, seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    add_users(seeded_engine)
+    with live_server(seeded_database_url, planner_enabled=False) as base:
+        log_in(page, base, "operator", "/vehicles/SF-003")
+        page.get_by_label("Lane").select_option("4")
+        page.get_by_label("Route").fill("B")
+        page.locator('form.assignment select[name="controller"]').select_option("simple")
+        page.get_by_role("button", name="Save assignment").click()
+
+        expect(page.get_by_role("status")).to_have_text("Assignment saved.")
+        expect(page.locator('[data-field="lane"]')).to_have_text("4")
+        expect(page.locator('[data-field="route"]')).to_have_text("B")
+        screenshot(page, "vehicle-assignment.png")
+    with seeded_engine.connect() as connection:
+        row = connection.execute(
+            text(
+                "SELECT assigned_lane, route, controller_name FROM dim_vehicle "
+                "WHERE vehicle_id = 'SF-003'"
+            )
+        ).one()
+    assert tuple(row) == (4, "B", "simple")
+
+
+def test_a_viewer_sees_no_change_forms_and_unknown_vehicles_are_404(
+    page: Page, seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    add_users(seeded_engine)
+    with live_server(seeded_database_url, planner_enabled=False) as base:
+        log_in(page, base, "viewer", "/vehicles/SF-003")
+        expect(page.get_by_role("button", name="Save assignment")).to_have_count(0)
+        expect(page.get_by_text("Your role is viewer")).to_be_visible()
+        response = page.goto(f"{base}/vehicles/NOPE-1")
+        assert response is not None
+        assert response.status == 404
+        expect(page.get_by_role("heading", name="Unknown vehicle")).to_be_visible()
+
+
+def test_plan_page_shows_the_published_plan_as_charts(
+    page: Page, seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    add_users(seeded_engine)
+    with live_server(seeded_database_url, planner_enabled=False) as base:
+        post_fleet_data(base, seeded_engine)
+        log_in(page, base, "viewer", "/plans")
+
+        lane_chart = page.locator('svg[data-chart="plan-lane-1"]')
+        expect(lane_chart).to_be_visible()
+        expect(lane_chart.locator("text.x-label")).to_have_text("postmile (direction of travel →)")
+        expect(lane_chart.locator("text.y-label")).to_have_text("speed (mph)")
+        expect(lane_chart.locator('path[data-series="target speed"]')).to_have_count(1)
+        heat = page.locator('svg[data-chart="plan-heatmap"]')
+        expect(heat).to_be_visible()
+        expect(heat.locator("g.colour-legend")).to_contain_text("speed (mph)")
+        box = lane_chart.bounding_box()
+        assert box is not None
+        assert box["width"] > 400
+        assert box["height"] > 100
+        screenshot(page, "plans.png")
+
+        page.goto(f"{base}/vehicles/SF-001")
+        expect(page.locator('svg[data-chart="vehicle-speed"]')).to_be_visible()
+        screenshot(page, "vehicle.png")
+        page.goto(f"{base}/analytics")
+        expect(page.locator('svg[data-chart="engagement-share"]')).to_be_visible()
+        expect(page.locator('svg[data-chart="edie-fuel"]')).to_be_visible()
+        screenshot(page, "analytics.png")
+        page.goto(f"{base}/feeds")
+        expect(page.locator('svg[data-chart="inrix-latency"]')).to_be_visible()
+        screenshot(page, "feeds.png")
