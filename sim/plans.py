@@ -4,8 +4,9 @@ Every `period_s` (60 s) of simulated time the real planner (`planner.plan_speeds
 registered algorithm and parameters as the server's) is fed what the server would have: the
 INRIX minutes it has received by then (simulated by `sim.traffic`, ~3 minutes late) and the
 fleet's pings of the last ping window (the simulated AVs post one per second, like the agent).
-The AVs read the newest plan as a `TargetProfile` shifted by the wave speed times the plan's
-age, the agent's lookup.
+Each plan is handed to the AVs as the agent receives it (a `vehicle_agent.plan.Plan`, sub-segment
+steps with their ends) and read with the agent's own `LanePlan.profile`: the lookup shifted by
+the agent's wave speed times the plan's age.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import math
 from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import numpy as np
@@ -29,7 +31,9 @@ from planner import (
 )
 from sim.drives import Drive
 from sim.traffic import INRIX_LATENCY_S, InrixFeed, inrix_snapshots, segment_bounds
+from vehicle_agent.agent import DEFAULT_WAVE_SPEED_MPS
 from vehicle_agent.controllers import TargetProfile
+from vehicle_agent.plan import LanePlan, Plan, PlanLane
 
 FloatArray = NDArray[np.float64]
 
@@ -87,12 +91,10 @@ class SimulatedPlanner:
     _ping_x: list[float] = field(default_factory=list)
     _ping_speed: list[float] = field(default_factory=list)
     _previous_smoothed: deque[FloatArray] = field(default_factory=deque)
-    _target: FloatArray | None = None
+    # Simulated time 0 on the plans' clock (plans carry wall-clock publication times).
+    epoch: datetime = datetime(2021, 1, 1, tzinfo=UTC)
+    _lane_plan: LanePlan | None = None
     _published_at_s: float = -math.inf
-    _centers: FloatArray = field(init=False)
-
-    def __post_init__(self) -> None:
-        self._centers = self.grid.center_x_m
 
     @classmethod
     def for_drive(
@@ -109,15 +111,12 @@ class SimulatedPlanner:
         self._ping_speed.append(speed_mps)
 
     def profile(self, time_s: float) -> TargetProfile:
-        """The plan the AVs hold at `time_s`, shifted for its age as the agent does."""
-        if time_s >= self._published_at_s + self.period_s or self._target is None:
+        """The plan the AVs hold at `time_s`, looked up as the agent does."""
+        if time_s >= self._published_at_s + self.period_s or self._lane_plan is None:
             self._run(math.floor(time_s / self.period_s) * self.period_s)
-        assert self._target is not None  # _run publishes or raises
-        age = time_s - self._published_at_s
-        return TargetProfile(
-            x_m=self._centers,
-            target_speed_mps=self._target,
-            shift_m=self.params.wave_speed_mps * age,
+        assert self._lane_plan is not None  # _run publishes or raises
+        return self._lane_plan.profile(
+            self.epoch + timedelta(seconds=time_s), DEFAULT_WAVE_SPEED_MPS
         )
 
     def _run(self, now_s: float) -> None:
@@ -143,7 +142,21 @@ class SimulatedPlanner:
         self._previous_smoothed.appendleft(plan.smoothed_mps)
         while len(self._previous_smoothed) > self.params.standing_cycles:
             self._previous_smoothed.pop()
-        self._target = plan.target_mps[SIM_LANE - 1]
+        published = self.epoch + timedelta(seconds=now_s)
+        agent_plan = Plan(
+            plan_id=self.plans_run + 1,
+            corridor=self.grid.corridor_id,
+            published_at=published,
+            lanes=[
+                PlanLane(
+                    lane=SIM_LANE,
+                    x_m=self.grid.start_x_m.tolist(),
+                    end_x_m=self.grid.end_x_m.tolist(),
+                    target_speed_mps=plan.target_mps[SIM_LANE - 1].tolist(),
+                )
+            ],
+        )
+        self._lane_plan = LanePlan(agent_plan, SIM_LANE, None, now_s)
         self._published_at_s = now_s
         self.plans_run += 1
         self.plans_buffered += int(bool(plan.is_buffer.any()))
