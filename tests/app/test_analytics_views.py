@@ -13,6 +13,7 @@ from datetime import UTC, datetime, timedelta
 from typing import Any
 
 import httpx
+import numpy as np
 import pandas as pd
 import pytest
 from sqlalchemy import Connection, Engine, text
@@ -450,3 +451,16 @@ def test_export_csv_writes_a_header_and_iso_times(connection: Connection, store:
 def test_seed_geometry_round_trips_positions() -> None:
     lat, lon = seed_geometry().position(5000.0)
     assert seed_geometry().locate(lat, lon).x_m[0] == pytest.approx(5000.0, abs=0.01)
+
+
+def test_the_sql_energy_model_matches_the_simulators(connection: Connection) -> None:
+    from sim.energy import RAV4_2019
+
+    speeds = np.linspace(0.0, 35.0, 15)
+    accels = np.linspace(-3.0, 2.5, 12)
+    grades = (-0.02, 0.0, 0.03)
+    for grade in grades:
+        for accel in accels:
+            expected = RAV4_2019.fuel_rate_gps(speeds, accel, grade)
+            found = [fuel(connection, float(v), float(accel), grade) for v in speeds]
+            np.testing.assert_allclose(found, expected, rtol=1e-12, atol=1e-15)
