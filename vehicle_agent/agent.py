@@ -1,8 +1,9 @@
 """The vehicle agent: read the car, decide, act behind the safety layer, report.
 
 One `Agent` drives one car. Everything it touches is injected (CAN bus, clock, GPS, server
-client, ping spool, button port) so tests, the simulator and the demo build it in-process on a
-virtual bus with simulated time. Three entry points, each cheap when nothing is due:
+client, ping spool, a button board in place of CAN button frames) so tests, the simulator and
+the demo build it in-process on a virtual bus with simulated time. Three entry points, each
+cheap when nothing is due:
 - `tick()`: read frames -> car state -> engage logic -> controller (every control period, 10 Hz)
   -> actuation (every call: presses take 0.25 s, RAV4 requests go out at ~30 Hz) -> safety ->
   send. Call it at the make's command period (`command_period_s`).
@@ -17,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -148,7 +150,7 @@ class Agent:
         gps: GpsSource,
         spool: PingSpool,
         server: ServerClient | None = None,
-        button_port: ButtonPort | None = None,
+        button_port: Callable[[SafetyLayer], ButtonPort] | None = None,
         dbc_cache: Path | None = None,
         engage_policy: engage.EngagePolicy | None = None,
         wave_speed_mps: float = DEFAULT_WAVE_SPEED_MPS,
@@ -171,8 +173,10 @@ class Agent:
         self.buttons: ButtonPort | None = None
         self.accel_port: CanAccelPort | None = None
         if car.actuation == "acc":
-            self.buttons = button_port or CanButtonPort(
-                car, self.codec, self.sender, lambda: self.reader.latest
+            self.buttons = (
+                button_port(self.safety)
+                if button_port is not None
+                else CanButtonPort(car, self.codec, self.sender, lambda: self.reader.latest)
             )
         else:
             self.accel_port = CanAccelPort(car, self.codec, self.sender)
@@ -636,3 +640,10 @@ class Agent:
                 break
         self._upload_schedule.done(now, 1.0)
         return uploaded
+
+    def shutdown(self) -> None:
+        """Stop commanding (the stock ACC keeps driving) and close the spool."""
+        if self.state.commanding:
+            self._hand_back("agent stopping")
+        self.state = engage.EngageState(engage.Mode.STOCK, self.clock.monotonic(), None, "stopped")
+        self.spool.close()

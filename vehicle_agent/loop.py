@@ -37,7 +37,7 @@ class RateKeeper:
         self.lags.append(lag)
         self.next_deadline += self.period_s
         if now - self.next_deadline > self.period_s:
-            skipped = int((now - self.next_deadline) // self.period_s)
+            skipped = int((now - self.next_deadline) // self.period_s) + 1
             self.missed += skipped
             self.next_deadline += skipped * self.period_s
         return lag

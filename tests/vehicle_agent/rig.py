@@ -110,8 +110,9 @@ class Rig:
     car_bus: can.BusABC
     agent_bus: can.BusABC
 
-    def run(self, seconds: float, *, until: Any = None) -> float:
-        """Advance simulated time tick by tick; stop early when `until()` is true."""
+    def run(self, seconds: float, *, until: Any = None, network: bool = False) -> float:
+        """Advance simulated time tick by tick (talking to the server too when `network`);
+        stop early when `until()` is true."""
         period = self.agent.command_period_s
         end = self.clock.monotonic() + seconds
         while self.clock.monotonic() < end - 1e-9:
@@ -119,6 +120,8 @@ class Rig:
             self.emulator.step(self.clock.monotonic())
             self.agent.tick()
             self.agent.record()
+            if network:
+                self.agent.network()
             if until is not None and until():
                 break
         return self.clock.monotonic()
@@ -157,6 +160,7 @@ def rig(
     spool: PingSpool | None = None,
     config_fields: dict[str, Any] | None = None,
     start: datetime | None = None,
+    vehicle_id: str = "SF-TEST",
 ) -> Iterator[Rig]:
     """An engaged-ready agent and emulated car (the driver has not set ACC yet)."""
     channel = f"agent-rig-{next(_channels)}"
@@ -175,7 +179,7 @@ def rig(
     )
     gps = EmulatorGps(emulator, clock)
     agent = Agent(
-        vehicle_id="SF-TEST",
+        vehicle_id=vehicle_id,
         car=car_for(key),
         bus=agent_bus,
         clock=clock,

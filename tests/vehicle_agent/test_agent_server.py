@@ -1,0 +1,158 @@
+"""The agent against the real server on a real PostgreSQL: config, corridor and plan in, pings
+and status reports out, and store-and-forward through a server outage and an agent restart."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import httpx
+import pytest
+from sqlalchemy import Engine, text
+
+from app.core.config import load_settings
+from app.plans.jobs import run_planner
+from tests.planner.facts import INRIX_CODES, inrix_snapshot
+from tests.support.servers import live_server
+from tests.support.tokens import issue
+from tests.vehicle_agent.rig import rig
+from vehicle_agent.engage import Mode
+from vehicle_agent.server import ServerClient
+from vehicle_agent.spool import PingSpool
+
+pytestmark = pytest.mark.slow
+
+
+def publish_free_flow_plan(database_url: str, engine: Engine) -> int:
+    """A real planner run over ten minutes of 25 m/s INRIX readings."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    for minute in range(12, 2, -1):
+        inrix_snapshot(engine, now - timedelta(minutes=minute), [25.0] * len(INRIX_CODES))
+    (outcome,) = run_planner(engine, load_settings(database_url=database_url), now=now)
+    assert outcome.status == "published", outcome.reason
+    return int(outcome.plan_id or 0)
+
+
+def test_agent_takes_its_assignment_from_the_server_and_reports(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    plan_id = publish_free_flow_plan(seeded_database_url, seeded_engine)
+    token = issue(seeded_engine, "vehicle", "SF-098")  # a RAV4 running microaccel in lane 2
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        rig(
+            "toyota_rav4",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-098",
+            server=ServerClient(http, "SF-098", token),
+            speed_mps=24.0,
+        ) as r,
+    ):
+        r.run(1.0, network=True)
+        config = r.agent.config
+        assert config is not None
+        assert (config.controller.name, config.assigned_lane) == ("microaccel", 2)
+        assert r.agent.lane_plan is not None
+        assert r.agent.lane_plan.plan_id == plan_id
+        r.emulator.driver_engage(set_speed_mph=54)
+        r.run(10.0, network=True)
+        assert r.agent.state.mode is Mode.ENGAGED, r.agent.state.reason
+        r.run(15.0, network=True)
+        r.agent.upload()
+        assert r.agent.spool.backlog() == 0
+        assert r.agent.stats.server_errors == {}
+    with seeded_engine.connect() as connection:
+        pings = connection.execute(
+            text(
+                "SELECT count(*), count(*) FILTER (WHERE is_controller_engaged), max(plan_id), "
+                "count(x_m) FROM fact_vehicle_ping WHERE vehicle_id = 'SF-098'"
+            )
+        ).one()
+        statuses = connection.execute(
+            text(
+                "SELECT count(*), bool_or(is_controller_running), max(plan_id) "
+                "FROM fact_vehicle_status WHERE vehicle_id = 'SF-098'"
+            )
+        ).one()
+    assert pings[0] >= 25
+    assert pings[1] >= 10
+    assert pings[2] == plan_id
+    assert pings[3] == pings[0]  # every ping map-matched onto the corridor by the server
+    assert statuses[0] >= 2
+    assert statuses[1] is True
+    assert statuses[2] == plan_id
+
+
+def ping_keys(engine: Engine) -> list[datetime]:
+    with engine.connect() as connection:
+        return list(
+            connection.execute(
+                text("SELECT ts FROM fact_vehicle_ping WHERE vehicle_id = 'SF-001' ORDER BY ts")
+            ).scalars()
+        )
+
+
+def test_every_spooled_ping_reaches_the_database_once_across_outage_and_restart(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    spool_path = tmp_path / "spool.sqlite"
+    spooled: list[str] = []
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    # 1. Server up: 10 pings. The agent sends them, the server commits them, and the agent is
+    #    killed before it can forget them (the worst moment).
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        rig(
+            "nissan_rogue",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-001",
+            server=ServerClient(http, "SF-001", token),
+            start=start,
+            spool=PingSpool(spool_path),
+        ) as first,
+    ):
+        first.run(9.95)
+        rows = first.agent.spool.oldest(100)
+        spooled += [ping["ts"] for _, ping in rows]
+        answer = first.agent.server.post_pings([ping for _, ping in rows])  # type: ignore[union-attr]
+        assert answer.accepted == len(rows) == 10
+    # (killed: no shutdown, no spool.remove; the spool file stays as it was on disk)
+    assert len(ping_keys(seeded_engine)) == 10
+    # 2. Server down. The restarted agent keeps spooling; uploads fail and are retried later.
+    with (
+        httpx.Client(base_url=base) as dead,
+        rig(
+            "nissan_rogue",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-001",
+            server=ServerClient(dead, "SF-001", token, timeout_s=0.5),
+            start=start + timedelta(seconds=30),
+            spool=PingSpool(spool_path),
+        ) as second,
+    ):
+        second.run(20.0, network=True)
+        assert second.agent.stats.server_errors["pings"] >= 1
+        assert second.agent.spool.backlog() == 30
+        spooled = [ping["ts"] for _, ping in second.agent.spool.oldest(100)]
+        # 3. The server comes back (same database, a new address): the backlog drains oldest
+        #    first, the 10 pings sent before the crash count as duplicates.
+        with (
+            live_server(seeded_database_url, planner_enabled=False) as base_again,
+            httpx.Client(base_url=base_again) as http_again,
+        ):
+            second.agent.server = ServerClient(http_again, "SF-001", token)
+            uploaded = second.agent.upload()
+        assert uploaded == 30
+        assert second.agent.spool.backlog() == 0
+    stored = ping_keys(seeded_engine)
+    assert len(stored) == 30
+    assert sorted(datetime.fromisoformat(ts) for ts in spooled) == stored

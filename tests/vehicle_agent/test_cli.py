@@ -1,0 +1,126 @@
+"""`smoothfleet-agent` settings and command line: wrong input stops it with one clear line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from vehicle_agent.actuators import ButtonSequencer
+from vehicle_agent.cars import CruiseButton
+from vehicle_agent.loop import RateKeeper
+from vehicle_agent.settings import AgentSettingsError, board_lines, load_agent_settings
+
+
+def run_agent_cli(
+    *args: str, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    script = Path(sys.executable).parent / "smoothfleet-agent"
+    return subprocess.run(
+        [str(script), *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PATH": "/usr/bin:/bin", **(env or {})},
+    )
+
+
+def test_missing_and_wrong_settings_name_the_variable() -> None:
+    missing = run_agent_cli("--token", "abc", "--vehicle-id", "SF-001")
+    assert missing.returncode == 2
+    assert missing.stderr.strip() == (
+        "smoothfleet-agent: SMOOTHFLEET_AGENT_SERVER_URL: Field required"
+    )
+    wrong = run_agent_cli(
+        "--vehicle-id",
+        "SF-001",
+        "--server",
+        "http://x",
+        env={"SMOOTHFLEET_AGENT_TOKEN": "change-me"},
+    )
+    assert wrong.returncode == 2
+    assert wrong.stderr.startswith("smoothfleet-agent: SMOOTHFLEET_AGENT_TOKEN: must be the ")
+    assert "Traceback" not in wrong.stderr
+
+
+def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
+    result = run_agent_cli(
+        "--server",
+        "http://127.0.0.1:9",
+        "--token",
+        "abc",
+        "--vehicle-id",
+        "SF-001",
+        "--make",
+        "toyota_rav4",
+        "--can",
+        "nosuch:can0",
+        "--gps",
+        "none",
+        "--spool",
+        str(tmp_path / "s.sqlite"),
+    )
+    assert result.returncode == 1
+    assert result.stderr.startswith("smoothfleet-agent: cannot open CAN bus nosuch:can0")
+
+
+def test_settings_from_an_env_file_with_the_command_line_winning(tmp_path: Path) -> None:
+    env_file = tmp_path / "agent.env"
+    env_file.write_text(
+        "SMOOTHFLEET_AGENT_SERVER_URL=https://fleet.example/\n"
+        "SMOOTHFLEET_AGENT_TOKEN=secret-token-1\n"
+        "SMOOTHFLEET_AGENT_VEHICLE_ID=SF-010\n"
+        "SMOOTHFLEET_AGENT_CAN=socketcan:can1\n"
+    )
+    settings = load_agent_settings(env_file, can="virtual:test")
+    assert settings.server_url == "https://fleet.example"
+    assert settings.vehicle_id == "SF-010"
+    assert settings.can == "virtual:test"
+    with pytest.raises(AgentSettingsError, match="SMOOTHFLEET_AGENT_MAKE: must be one of"):
+        load_agent_settings(env_file, make="tesla")
+    with pytest.raises(AgentSettingsError, match="SMOOTHFLEET_AGENT_BUTTON_BOARD: .*no line"):
+        load_agent_settings(env_file, button_board="plus=17")
+
+
+def test_button_board_lines() -> None:
+    assert board_lines("plus=17, minus=27,gap=22") == {
+        CruiseButton.PLUS: 17,
+        CruiseButton.MINUS: 27,
+        CruiseButton.GAP: 22,
+    }
+
+
+def test_rate_keeper_sleeps_to_each_deadline_and_measures_lag() -> None:
+    now = [0.0]
+    sleeps: list[float] = []
+
+    def sleep(seconds: float) -> None:
+        sleeps.append(seconds)
+        now[0] += seconds
+
+    keeper = RateKeeper(0.1, clock=lambda: now[0], sleep=sleep)
+    now[0] += 0.03  # the step took 30 ms
+    assert keeper.wait() == 0.0
+    assert sleeps == [pytest.approx(0.07)]
+    now[0] += 0.15  # a 150 ms step: late by 50 ms
+    assert keeper.wait() == pytest.approx(0.05)
+    now[0] += 0.5  # a stall: missed deadlines are skipped, not replayed
+    keeper.wait()
+    assert keeper.missed >= 3
+    assert keeper.next_deadline > now[0]
+
+
+def test_sequencer_gives_up_after_unconfirmed_presses() -> None:
+    sequencer = ButtonSequencer()
+    sequencer.request(60, 3)
+    time_s, presses = 0.0, []
+    while time_s < 10.0:  # the car never reports a change
+        presses.append(sequencer.step(time_s, 55.0, 3))
+        time_s += 0.05
+    assert sequencer.stalled
+    assert sequencer.presses == 3
+    assert presses[-1] is None
+    sequencer.request(61, 3)  # a new request tries again
+    assert sequencer.step(time_s, 55.0, 3) is CruiseButton.PLUS

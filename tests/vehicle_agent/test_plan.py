@@ -1,0 +1,85 @@
+"""Plans as the agent receives them: refused when unusable, looked up with the wave shift."""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime, timedelta
+
+import pytest
+
+from vehicle_agent.plan import LanePlan, PlanError, parse_plan
+
+PUBLISHED = datetime(2024, 5, 1, 12, 0, tzinfo=UTC)
+
+
+def body(**lane: object) -> str:
+    lane_body = {
+        "lane": 2,
+        "x_m": [0.0, 100.0, 200.0],
+        "end_x_m": [100.0, 200.0, 300.0],
+        "target_speed_mps": [30.0, 20.0, 10.0],
+        "buffers": [],
+    } | lane
+    return json.dumps(
+        {
+            "plan_id": 7,
+            "corridor": "I-24-WB",
+            "published_at": PUBLISHED.isoformat(),
+            "valid_until": (PUBLISHED + timedelta(minutes=3)).isoformat(),
+            "algorithm": "x",
+            "params": {},
+            "inputs": {},
+            "lanes": [lane_body],
+        }
+    )
+
+
+@pytest.mark.parametrize(
+    ("lane", "message"),
+    [
+        ({"target_speed_mps": [30.0, -1.0, 10.0]}, "target speed -1.0 m/s is not usable"),
+        ({"target_speed_mps": [30.0, 20.0]}, "3 positions but 2 speeds"),
+        ({"x_m": [0.0, 200.0, 100.0]}, "positions do not increase"),
+        ({"end_x_m": [100.0, 150.0, 10.0]}, "a sub-segment ends before it starts"),
+    ],
+)
+def test_unusable_plans_are_refused_with_the_reason(lane: dict[str, object], message: str) -> None:
+    with pytest.raises(PlanError, match=message):
+        parse_plan(body(**lane))
+
+
+def test_non_finite_speeds_and_missing_lanes_are_refused() -> None:
+    with pytest.raises(PlanError, match="lanes"):
+        parse_plan(
+            json.dumps(
+                {
+                    "plan_id": 1,
+                    "corridor": "I-24-WB",
+                    "published_at": PUBLISHED.isoformat(),
+                    "lanes": [],
+                }
+            )
+        )
+    with pytest.raises(PlanError):
+        parse_plan(body().replace("10.0]", "NaN]"))
+    with pytest.raises(PlanError, match="has no lane 3"):
+        LanePlan(parse_plan(body()), 3, None, 0.0)
+
+
+def test_targets_hold_over_each_sub_segment_and_move_downstream_with_age() -> None:
+    lane = LanePlan(parse_plan(body()), 2, '"abc"', confirmed_s=50.0)
+    fresh = lane.profile(PUBLISHED, wave_speed_mps=-5.0)
+    assert fresh.at(50.0) == 30.0
+    assert fresh.at(150.0) == 20.0
+    assert fresh.at(250.0) == 10.0
+    # 20 s later, waves have moved 100 m upstream: the target at 50 m is the published one at
+    # 150 m.
+    assert lane.profile(PUBLISHED + timedelta(seconds=20), -5.0).at(50.0) == 20.0
+
+
+def test_freshness_needs_a_recent_plan_a_recent_confirmation_and_validity() -> None:
+    lane = LanePlan(parse_plan(body()), 2, None, confirmed_s=50.0)
+    assert lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=60), stale_after_s=120.0)
+    assert not lane.is_fresh(200.0, PUBLISHED + timedelta(seconds=60), stale_after_s=120.0)
+    assert not lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=121), stale_after_s=120.0)
+    assert not lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=181), stale_after_s=600.0)

@@ -1,0 +1,42 @@
+"""The ping spool: oldest first, bounded, and nothing written is lost when the agent dies."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from vehicle_agent.spool import PingSpool
+
+
+def test_pings_leave_oldest_first_and_only_when_removed(tmp_path: Path) -> None:
+    spool = PingSpool(tmp_path / "spool.sqlite")
+    for second in range(5):
+        spool.add({"ts": f"2024-01-01T00:00:0{second}Z"})
+    rows = spool.oldest(3)
+    assert [ping["ts"][-3:-1] for _, ping in rows] == ["00", "01", "02"]
+    spool.remove([row_id for row_id, _ in rows], rejected=1)
+    assert spool.backlog() == 2
+    assert spool.counter("rejected") == 1
+
+
+def test_the_spool_is_bounded_and_counts_what_it_dropped(tmp_path: Path) -> None:
+    spool = PingSpool(tmp_path / "spool.sqlite", max_rows=3)
+    for index in range(5):
+        spool.add({"n": index})
+    assert [ping["n"] for _, ping in spool.oldest(10)] == [2, 3, 4]
+    assert spool.counter("dropped") == 2
+    with pytest.raises(ValueError, match="max_rows"):
+        PingSpool(tmp_path / "other.sqlite", max_rows=0)
+
+
+def test_a_crashed_agent_loses_nothing_written(tmp_path: Path) -> None:
+    path = tmp_path / "spool.sqlite"
+    crashed = PingSpool(path)
+    for index in range(3):
+        crashed.add({"n": index})
+    # Never closed: a second process opens the same file as the restarted agent would.
+    restarted = PingSpool(path)
+    assert [ping["n"] for _, ping in restarted.oldest(10)] == [0, 1, 2]
+    restarted.add({"n": 3})
+    assert restarted.backlog() == 4

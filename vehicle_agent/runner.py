@@ -1,0 +1,70 @@
+"""Running an agent on a car: the control loop on its own thread at the make's command period
+(a rate keeper measuring lag), pings on another, the network on a third, until stopped."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+from vehicle_agent.agent import Agent
+from vehicle_agent.loop import RateKeeper
+
+log = logging.getLogger(__name__)
+
+# How often the loops report their lag in the log (s).
+LAG_REPORT_S = 60.0
+
+
+def _loop(
+    name: str, period_s: float, step: Callable[[], object], stop: threading.Event
+) -> RateKeeper:
+    keeper = RateKeeper(period_s)
+    reported = time.monotonic()
+    while not stop.is_set():
+        try:
+            step()
+        except Exception:  # the loop must survive any single bad step; the step logged why
+            log.exception("%s step failed", name)
+        keeper.wait()
+        if time.monotonic() - reported >= LAG_REPORT_S:
+            reported = time.monotonic()
+            log.info(
+                "%s loop lag p50 %.1f ms, p99 %.1f ms, %d periods missed",
+                name,
+                keeper.lag_percentile(50) * 1000,
+                keeper.lag_percentile(99) * 1000,
+                keeper.missed,
+            )
+    return keeper
+
+
+def run_agent(agent: Agent, stop: threading.Event) -> None:
+    """Run until `stop` is set, then hand the car back and close the spool."""
+    threads = [
+        threading.Thread(
+            target=_loop,
+            args=("control", agent.command_period_s, agent.tick, stop),
+            name="control",
+            daemon=True,
+        ),
+        threading.Thread(
+            target=_loop,
+            args=("telemetry", 0.1, agent.record, stop),
+            name="telemetry",
+            daemon=True,
+        ),
+        threading.Thread(
+            target=_loop,
+            args=("network", 0.2, agent.network, stop),
+            name="network",
+            daemon=True,
+        ),
+    ]
+    for thread in threads:
+        thread.start()
+    stop.wait()
+    for thread in threads:
+        thread.join(timeout=10)
+    agent.shutdown()

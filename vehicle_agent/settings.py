@@ -1,0 +1,123 @@
+"""The agent's settings: environment variables prefixed SMOOTHFLEET_AGENT_ (or an env file), the
+command line overriding them. A missing or wrong setting stops the agent with one line naming it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import platformdirs
+from pydantic import Field, SecretStr, ValidationError, field_validator
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from vehicle_agent.cars import CARS, CruiseButton
+
+PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
+
+
+class AgentSettingsError(Exception):
+    """A setting is missing or wrong; the message names it in one line."""
+
+
+class AgentSettings(BaseSettings):
+    """Everything the agent can be told."""
+
+    model_config = SettingsConfigDict(env_prefix="SMOOTHFLEET_AGENT_", extra="ignore")
+
+    server_url: str
+    token: SecretStr
+    vehicle_id: str = Field(pattern=r"^[A-Za-z0-9_-]{1,32}$")
+    # python-can channel: socketcan:can0 in a car, virtual:<name> in simulation.
+    can: str = "socketcan:can0"
+    # Car interface key (nissan_rogue, cadillac_xt5, toyota_rav4); unset: from the server config.
+    make: str | None = None
+    # gpsd:<host>:<port>, or none (no GPS: the agent reports but never takes over).
+    gps: str = "gpsd:127.0.0.1:2947"
+    spool_path: Path = Field(
+        default_factory=lambda: (
+            Path(platformdirs.user_data_dir("smoothfleet-agent")) / "spool.sqlite"
+        )
+    )
+    spool_max_rows: int = Field(100_000, ge=100)
+    dbc_cache_dir: Path | None = None
+    http_timeout_s: float = Field(3.0, gt=0, le=60)
+    wave_speed_mps: float = Field(-5.0, le=0, ge=-20)
+    # GPIO button board instead of CAN button frames, e.g. "plus=17,minus=27,gap=22".
+    button_board: str | None = None
+    log_level: str = "INFO"
+
+    @field_validator("server_url")
+    @classmethod
+    def _http_url(cls, value: str) -> str:
+        if not value.startswith(("http://", "https://")):
+            raise ValueError("must be an http:// or https:// URL")
+        return value.rstrip("/")
+
+    @field_validator("token")
+    @classmethod
+    def _real_token(cls, value: SecretStr) -> SecretStr:
+        if value.get_secret_value().strip().lower() in PLACEHOLDER_TOKENS:
+            raise ValueError("must be the vehicle's token (smoothfleet tokens create)")
+        return value
+
+    @field_validator("can")
+    @classmethod
+    def _channel(cls, value: str) -> str:
+        interface, sep, channel = value.partition(":")
+        if not sep or not interface or not channel:
+            raise ValueError("must be interface:channel, e.g. socketcan:can0")
+        return value
+
+    @field_validator("make")
+    @classmethod
+    def _known_make(cls, value: str | None) -> str | None:
+        if value is not None and value not in CARS:
+            raise ValueError(f"must be one of {', '.join(sorted(CARS))}")
+        return value
+
+    @field_validator("gps")
+    @classmethod
+    def _gps(cls, value: str) -> str:
+        if value != "none" and not value.startswith("gpsd:"):
+            raise ValueError("must be gpsd:<host>:<port> or none")
+        return value
+
+    @field_validator("button_board")
+    @classmethod
+    def _board(cls, value: str | None) -> str | None:
+        if value:
+            board_lines(value)
+        return value or None
+
+
+def board_lines(spec: str) -> dict[CruiseButton, int]:
+    """`plus=17,minus=27,gap=22` -> GPIO line per button."""
+    lines: dict[CruiseButton, int] = {}
+    for part in spec.split(","):
+        name, sep, line = part.strip().partition("=")
+        try:
+            button = CruiseButton(name.strip().lower())
+            lines[button] = int(line)
+        except ValueError:
+            raise ValueError(f"{part.strip()!r} is not button=line (plus, minus, gap)") from None
+        if not sep:
+            raise ValueError(f"{part.strip()!r} is not button=line")
+    missing = {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP} - set(lines)
+    if missing:
+        raise ValueError(f"no line for {', '.join(sorted(b.value for b in missing))}")
+    return lines
+
+
+def load_agent_settings(env_file: Path | None = None, **overrides: object) -> AgentSettings:
+    """Read the settings (command-line overrides win), or AgentSettingsError in one line."""
+    given = {key: value for key, value in overrides.items() if value is not None}
+    if env_file is not None and not env_file.is_file():
+        raise AgentSettingsError(f"--env-file: {env_file} does not exist")
+    try:
+        return AgentSettings(_env_file=env_file, **given)  # type: ignore[arg-type]
+    except ValidationError as error:
+        first = error.errors()[0]
+        location = [str(part) for part in first.get("loc", ())]
+        name = "SMOOTHFLEET_AGENT_" + location[0].upper() if location else "settings"
+        message = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
+        raise AgentSettingsError(f"{name}: {message}") from None
