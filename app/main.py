@@ -19,7 +19,7 @@ from app.corridors.router import router as corridors_router
 from app.feeds.router import router as feeds_router
 from app.fleet.router import router as fleet_router
 from app.health.router import router as health_router
-from app.ingest import ingest_running
+from app.ingest import PingFastPath, ingest_running
 from app.maintenance import maintain_async
 from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
@@ -98,6 +98,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     install_error_handlers(app)
+    app.add_middleware(PingFastPath)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics)
     app.include_router(health_router)

@@ -5,6 +5,8 @@ Use `AuthDep` for "any valid token" and `allow(...)` for a set of roles, e.g.
 """
 
 from app.auth.dependencies import (
+    CHALLENGE,
+    PING_WRITER_ROLES,
     AdminDep,
     AuthDep,
     FeedWriterDep,
@@ -13,10 +15,13 @@ from app.auth.dependencies import (
     ViewerDep,
     allow,
     authenticate,
+    bearer_scheme,
 )
-from app.auth.tokens import Principal, TokenCache
+from app.auth.tokens import Principal, TokenCache, bearer_token, token_cache_for
 
 __all__ = [
+    "CHALLENGE",
+    "PING_WRITER_ROLES",
     "AdminDep",
     "AuthDep",
     "FeedWriterDep",
@@ -27,4 +32,7 @@ __all__ = [
     "ViewerDep",
     "allow",
     "authenticate",
+    "bearer_scheme",
+    "bearer_token",
+    "token_cache_for",
 ]

@@ -12,24 +12,12 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from app.auth.tokens import Principal, TokenCache
-from app.core.config import Settings
+from app.auth.tokens import Principal, token_cache_for
 from app.core.security import TokenRole
 
 bearer_scheme = HTTPBearer(auto_error=False, description="A smoothfleet API token (sf_...).")
 
 CHALLENGE = {"WWW-Authenticate": "Bearer"}
-
-
-def token_cache(request: Request) -> TokenCache:
-    """The process's token cache, made on first use from the app's engine and settings."""
-    state = request.app.state
-    cache: TokenCache | None = getattr(state, "token_cache", None)
-    if cache is None:
-        settings: Settings = state.settings
-        cache = TokenCache(state.engine, settings.token_cache_ttl_s)
-        state.token_cache = cache
-    return cache
 
 
 async def authenticate(
@@ -39,7 +27,7 @@ async def authenticate(
     """The caller's principal; 401 when the token is missing, malformed, unknown or revoked."""
     if credentials is None:
         raise HTTPException(401, "missing bearer token (Authorization: Bearer <token>)", CHALLENGE)
-    principal = await token_cache(request).principal(credentials.credentials)
+    principal = await token_cache_for(request.app.state).principal(credentials.credentials)
     if principal is None:
         raise HTTPException(401, "invalid or revoked token", CHALLENGE)
     # Kept on the request for what runs later (per-token rate limits, access logs).
@@ -68,7 +56,8 @@ OperatorDep = Annotated[Principal, Depends(allow("operator", "admin"))]
 """Operators and admins (changing assignments)."""
 AdminDep = Annotated[Principal, Depends(allow("admin"))]
 """Admins only."""
-PingWriterDep = Annotated[Principal, Depends(allow("vehicle", "operator", "admin"))]
+PING_WRITER_ROLES: tuple[TokenRole, ...] = ("vehicle", "operator", "admin")
+PingWriterDep = Annotated[Principal, Depends(allow(*PING_WRITER_ROLES))]
 """Who may post pings and status reports (a vehicle token only for its own vehicle)."""
 FeedWriterDep = Annotated[Principal, Depends(allow("feed", "admin"))]
 """Who may post third-party feed data."""

@@ -20,7 +20,9 @@ from dataclasses import dataclass
 
 from sqlalchemy import text
 from sqlalchemy.ext.asyncio import AsyncEngine
+from starlette.datastructures import State
 
+from app.core.config import Settings
 from app.core.security import TokenRole, hash_token
 
 # Looks a token up and notes its use at most once a minute (not on every ping).
@@ -113,3 +115,22 @@ class TokenCache:
             return None
         role: TokenRole = row.kind if row.kind in ("vehicle", "feed") else row.role
         return Principal(token_id=int(row.token_id), role=role, vehicle_id=row.vehicle_id)
+
+
+def bearer_token(authorization: str | None) -> str | None:
+    """The token of an `Authorization: Bearer <token>` header value, or None."""
+    if not authorization:
+        return None
+    scheme, _, token = authorization.partition(" ")
+    token = token.strip()
+    return token if scheme.lower() == "bearer" and token else None
+
+
+def token_cache_for(state: State) -> TokenCache:
+    """The app's token cache, made on first use from its engine and settings."""
+    cache: TokenCache | None = getattr(state, "token_cache", None)
+    if cache is None:
+        settings: Settings = state.settings
+        cache = TokenCache(state.engine, settings.token_cache_ttl_s)
+        state.token_cache = cache
+    return cache

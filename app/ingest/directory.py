@@ -76,11 +76,13 @@ class FleetDirectoryCache:
         self._loaded_at = -float("inf")
         self._lock = asyncio.Lock()
 
-    async def directory(self, vehicle_ids: Collection[str] = ()) -> FleetDirectory:
+    async def directory(
+        self, vehicle_ids: Collection[str] = (), *, reload: bool = False
+    ) -> FleetDirectory:
         """A fresh enough directory that knows `vehicle_ids` if the roster does."""
         current = self._directory
         now = self._clock()
-        if current is not None and now - self._loaded_at < self._ttl_s:
+        if not reload and current is not None and now - self._loaded_at < self._ttl_s:
             unknown = any(v not in current.vehicle_corridor for v in vehicle_ids)
             if not unknown or now - self._loaded_at < MIN_RELOAD_INTERVAL_S:
                 return current

@@ -7,7 +7,7 @@ from contextlib import asynccontextmanager
 from dataclasses import dataclass
 from datetime import datetime
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI
 from sqlalchemy.ext.asyncio import AsyncEngine
 
 from app.auth import Principal
@@ -23,7 +23,11 @@ from app.ingest.pings import (
     validate_items,
     vehicle_ids,
 )
-from app.ingest.writer import PingWriter
+from app.ingest.writer import PingWriter, RefusedByDatabase
+
+
+class RowsRefused(RuntimeError):
+    """The database refused rows that passed every check, even with a fresh roster (409)."""
 
 
 @dataclass(frozen=True)
@@ -57,7 +61,17 @@ class Ingest:
             received_at, retention_days=self.retention_days, max_future_s=self.max_future_s
         )
         rows, rejected = validate_items(items, directory, window, received_at)
-        outcome = await self.writer.write(rows)
+        try:
+            outcome = await self.writer.write(rows)
+        except RefusedByDatabase:
+            # The roster changed under the cache (a vehicle removed): check again with a fresh
+            # directory, so the removed vehicle's pings become per-item rejections.
+            directory = await self.directory.directory(reload=True)
+            rows, rejected = validate_items(items, directory, window, received_at)
+            try:
+                outcome = await self.writer.write(rows)
+            except RefusedByDatabase as error:
+                raise RowsRefused(f"refused by the database: {error}") from None
         metrics.PINGS.labels("accepted").inc(outcome.accepted)
         metrics.PINGS.labels("duplicate").inc(outcome.duplicates)
         metrics.PINGS.labels("rejected").inc(len(rejected))
@@ -81,9 +95,3 @@ async def ingest_running(
         yield
     finally:
         await writer.stop()
-
-
-def ingest_of(request: Request) -> Ingest:
-    """The app's ingest machinery."""
-    ingest: Ingest = request.app.state.ingest
-    return ingest

@@ -1,42 +1,60 @@
 """The SQL of the ping fast path, in one place.
 
-A group of requests' pings is written with one statement: the columns travel as arrays and
-`unnest` turns them back into rows, so one round trip carries thousands of pings with their
-types checked by PostgreSQL. `ON CONFLICT DO NOTHING` makes a resent ping a no-op, and
-`RETURNING` names the keys actually inserted, which is how each request learns its own
-accepted and duplicate counts.
+A group of requests' pings is written in one transaction on one connection:
+1. binary COPY of the rows (numbered n = 0, 1, ...) into the connection's temporary table
+   `ping_incoming` (emptied at every commit); psycopg formats the rows in C;
+2. one INSERT ... SELECT from it into fact_vehicle_ping with ON CONFLICT DO NOTHING, so a resent
+   ping is a no-op; the same statement returns the numbers of the rows that were NOT inserted
+   (already stored), usually none, which is how each request learns its own counts;
+3. COMMIT, and only then the requests are answered.
 """
 
 from __future__ import annotations
 
-# (column, array type) in the order of app.ingest.pings.PingRow, with x_m (computed by the
+# (column, PostgreSQL type) in the order of app.ingest.pings.PingRow, with x_m (computed by the
 # writer from lat/lon) after lane.
 PING_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("vehicle_id", "text[]"),
-    ("ts", "timestamptz[]"),
-    ("received_at", "timestamptz[]"),
-    ("lat", "float8[]"),
-    ("lon", "float8[]"),
-    ("speed_mps", "float4[]"),
-    ("accel_mps2", "float4[]"),
-    ("heading_deg", "float4[]"),
-    ("lane", "int2[]"),
-    ("x_m", "float4[]"),
-    ("is_acc_engaged", "bool[]"),
-    ("is_controller_engaged", "bool[]"),
-    ("controller", "text[]"),
-    ("acc_speed_setting_mph", "float4[]"),
-    ("acc_gap_setting", "int2[]"),
-    ("is_lead_present", "bool[]"),
-    ("lead_distance_m", "float4[]"),
-    ("lead_rel_speed_mps", "float4[]"),
-    ("plan_id", "int8[]"),
+    ("vehicle_id", "text"),
+    ("ts", "timestamptz"),
+    ("received_at", "timestamptz"),
+    ("lat", "float8"),
+    ("lon", "float8"),
+    ("speed_mps", "float4"),
+    ("accel_mps2", "float4"),
+    ("heading_deg", "float4"),
+    ("lane", "int2"),
+    ("x_m", "float4"),
+    ("is_acc_engaged", "bool"),
+    ("is_controller_engaged", "bool"),
+    ("controller", "text"),
+    ("acc_speed_setting_mph", "float4"),
+    ("acc_gap_setting", "int2"),
+    ("is_lead_present", "bool"),
+    ("lead_distance_m", "float4"),
+    ("lead_rel_speed_mps", "float4"),
+    ("plan_id", "int8"),
+)
+_NAMES = ", ".join(name for name, _ in PING_COLUMNS)
+
+# COPY needs the types of a binary stream: the row number, then the columns.
+COPY_TYPES = ["int4", *(pg_type for _, pg_type in PING_COLUMNS)]
+
+CREATE_INCOMING = (
+    "CREATE TEMPORARY TABLE IF NOT EXISTS ping_incoming (n int4, LIKE fact_vehicle_ping) "
+    "ON COMMIT DELETE ROWS"
 )
 
-INSERT_PINGS = (
-    "INSERT INTO fact_vehicle_ping ("
-    + ", ".join(name for name, _ in PING_COLUMNS)
-    + ")\nSELECT * FROM unnest(\n    "
-    + ",\n    ".join(f"%({name})s::{array_type}" for name, array_type in PING_COLUMNS)
-    + "\n)\nON CONFLICT (vehicle_id, ts) DO NOTHING\nRETURNING vehicle_id, ts"
+COPY_INCOMING = f"COPY ping_incoming (n, {_NAMES}) FROM STDIN (FORMAT BINARY)"
+
+INSERT_FROM_INCOMING = f"""
+WITH inserted AS (
+    INSERT INTO fact_vehicle_ping ({_NAMES})
+    SELECT {_NAMES} FROM ping_incoming
+    ON CONFLICT (vehicle_id, ts) DO NOTHING
+    RETURNING vehicle_id, ts
 )
+SELECT incoming.n
+FROM ping_incoming AS incoming
+LEFT JOIN inserted USING (vehicle_id, ts)
+WHERE inserted.vehicle_id IS NULL
+"""

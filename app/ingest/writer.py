@@ -15,32 +15,35 @@ once; a sent row the database did not insert (ON CONFLICT DO NOTHING) was alread
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
-from typing import Any
 
 import numpy as np
-from sqlalchemy.exc import IntegrityError
-from sqlalchemy.ext.asyncio import AsyncEngine
+import psycopg
+from sqlalchemy.ext.asyncio import AsyncConnection, AsyncEngine
 
 from app.core import metrics
 from app.ingest.pings import PingRow
-from app.ingest.sql import INSERT_PINGS, PING_COLUMNS
+from app.ingest.sql import COPY_INCOMING, COPY_TYPES, CREATE_INCOMING, INSERT_FROM_INCOMING
 
 log = logging.getLogger(__name__)
 
 # Rows per statement: big enough to amortise the round trip, small enough that one group's
 # parameters stay a few MB and a statement takes well under the statement timeout.
 MAX_GROUP_ROWS = 20_000
-_LANE = PingRow._fields.index("lane")
-_ROW_FIELDS = len(PingRow._fields) - 1  # every field but `corridor` is a column
+_LANE = PingRow._fields.index("lane")  # x_m follows lane in the table
 
 
 class WriterStopped(RuntimeError):
     """The server is shutting down; the request's rows were not written."""
+
+
+class RefusedByDatabase(RuntimeError):
+    """The database refused a request's rows (a constraint); nothing of them was written."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -69,6 +72,9 @@ class PingWriter:
         self._queue: asyncio.Queue[_Submission] = asyncio.Queue()
         self._flushes: set[asyncio.Task[None]] = set()
         self._runner: asyncio.Task[None] | None = None
+        # Connections kept between groups (one per slot at most): no pool checkout and no
+        # pre-ping round trip per group. A connection that fails is dropped, not reused.
+        self._idle: list[AsyncConnection] = []
 
     def start(self) -> None:
         """Start collecting groups (inside the running event loop)."""
@@ -82,6 +88,9 @@ class PingWriter:
             await asyncio.gather(self._runner, return_exceptions=True)
             self._runner = None
         await asyncio.gather(*self._flushes, return_exceptions=True)
+        for connection in self._idle:
+            await connection.close()
+        self._idle.clear()
         while not self._queue.empty():
             submission = self._queue.get_nowait()
             if not submission.answer.done():
@@ -123,9 +132,10 @@ class PingWriter:
     async def _answer(self, group: list[_Submission]) -> None:
         try:
             outcomes = await self._write_group(group)
-        except IntegrityError as error:
+        except psycopg.IntegrityError as error:
             if len(group) == 1:
-                _fail(group, error)
+                reason = str(error).strip().splitlines()[0] if str(error).strip() else "refused"
+                _fail(group, RefusedByDatabase(reason))
                 return
             # A row the checks let through was refused (e.g. its vehicle was just removed from
             # the roster): write each request alone so that only its own request fails.
@@ -155,19 +165,41 @@ class PingWriter:
                 sent.append(row)
                 owner.append(number)
         started = time.perf_counter()
-        parameters = _column_arrays(sent)
-        async with self._engine.connect() as connection:
-            result = await connection.exec_driver_sql(INSERT_PINGS, parameters)
-            inserted = {(row.vehicle_id, row.ts) for row in result}
-            await connection.commit()
+        x_m = _map_match(sent)
+        connection = self._idle.pop() if self._idle else await self._engine.connect()
+        try:
+            pooled = await connection.get_raw_connection()
+            driver = pooled.driver_connection
+            assert isinstance(driver, psycopg.AsyncConnection)
+            # Commit (not a transaction block): the pool's pre-ping may already have opened the
+            # transaction. On any error the connection is discarded, its transaction with it.
+            async with driver.cursor() as cursor:
+                if "ping_incoming" not in pooled.info:
+                    await cursor.execute(CREATE_INCOMING)
+                async with cursor.copy(COPY_INCOMING) as copy:
+                    copy.set_types(COPY_TYPES)
+                    for number, (row, position) in enumerate(zip(sent, x_m, strict=True)):
+                        await copy.write_row(
+                            (number, *row[: _LANE + 1], position, *row[_LANE + 1 : -1])
+                        )
+                await cursor.execute(INSERT_FROM_INCOMING)
+                already_stored = {n for (n,) in await cursor.fetchall()}
+            await driver.commit()
+            pooled.info["ping_incoming"] = True
+        except BaseException:
+            with contextlib.suppress(Exception):
+                await connection.invalidate()
+                await connection.close()
+            raise
+        self._idle.append(connection)
         metrics.PING_GROUP_ROWS.observe(len(sent))
         metrics.PING_GROUP_SECONDS.observe(time.perf_counter() - started)
         accepted = [0] * len(group)
-        for row, number in zip(sent, owner, strict=True):
-            if (row.vehicle_id, row.ts) in inserted:
-                accepted[number] += 1
-            else:
+        for position, number in enumerate(owner):
+            if position in already_stored:
                 duplicates[number] += 1
+            else:
+                accepted[number] += 1
         return [WriteOutcome(a, d) for a, d in zip(accepted, duplicates, strict=True)]
 
 
@@ -190,10 +222,3 @@ def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
         for position, value in zip(positions, corridor.x_m(lat, lon), strict=True):
             x_m[position] = value
     return x_m
-
-
-def _column_arrays(rows: Sequence[PingRow]) -> dict[str, Any]:
-    """The statement's parameters: one list per column."""
-    columns: list[Any] = [list(values) for values in zip(*rows, strict=True)][:_ROW_FIELDS]
-    columns.insert(_LANE + 1, _map_match(rows))
-    return {name: values for (name, _), values in zip(PING_COLUMNS, columns, strict=True)}

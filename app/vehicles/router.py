@@ -5,15 +5,14 @@ from __future__ import annotations
 from datetime import UTC, datetime, timedelta
 from typing import Annotated, Any
 
-import orjson
-from fastapi import APIRouter, HTTPException, Path, Request, Response
+from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 
-from app.auth import AuthDep, PingWriterDep, Principal
+from app.auth import AuthDep, PingWriterDep, Principal, bearer_scheme
 from app.core import metrics
 from app.core.config import Settings
 from app.core.db import SessionDep
 from app.core.errors import error_responses
-from app.ingest import BodyError, ForeignVehicle, ingest_of
+from app.ingest.http import reply_to_pings
 from app.vehicles.reports import store_status, vehicle_config, vehicle_exists
 from app.vehicles.schemas import (
     MAX_PINGS_PER_BATCH,
@@ -71,31 +70,26 @@ def _may_act_for(principal: Principal, vehicle_id: str) -> None:
 @router.post(
     "/pings",
     response_model=PingAnswer,
-    responses=error_responses(401, 403, 413, 503),
+    responses=error_responses(401, 403, 409, 413, 422, 503),
     openapi_extra=_PINGS_BODY,
+    dependencies=[Depends(bearer_scheme)],
     summary="Post one ping or a batch of up to 1000",
 )
-async def post_pings(request: Request, principal: PingWriterDep) -> Response:
+async def post_pings(request: Request) -> Response:
     """Store the good pings, answering only after they are committed.
 
     Each bad ping is rejected with its index and reason while the good ones are kept; a resent
-    ping (same vehicle_id and ts) counts as a duplicate. A vehicle token may only post its own
-    vehicle's pings: one foreign ping refuses the whole request (403) and nothing is stored.
+    ping (same vehicle_id and ts) counts as a duplicate. Vehicle, operator and admin tokens may
+    post; a vehicle token only its own vehicle's pings: one foreign ping refuses the whole
+    request (403) and nothing is stored. The server answers this path in app.ingest.asgi
+    before routing; this declaration documents it and answers the same way.
     """
-    received_at = datetime.now(UTC)
-    body = await request.body()
-    try:
-        result = await ingest_of(request).pings(body, principal, received_at)
-    except BodyError as error:
-        raise HTTPException(422, str(error)) from None
-    except ForeignVehicle as error:
-        raise HTTPException(403, str(error)) from None
-    answer = {
-        "accepted": result.accepted,
-        "duplicates": result.duplicates,
-        "rejected": [{"index": r.index, "error": r.error} for r in result.rejected],
-    }
-    return Response(orjson.dumps(answer), media_type="application/json")
+    reply = await reply_to_pings(
+        request.app.state, request.headers.get("authorization"), await request.body()
+    )
+    return Response(
+        reply.body, status_code=reply.status, headers=reply.headers, media_type="application/json"
+    )
 
 
 @router.post(

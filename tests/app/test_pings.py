@@ -316,3 +316,35 @@ def test_a_database_outage_is_503_with_retry_after(
     assert answer.status_code == 503
     assert answer.headers["Retry-After"] == "5"
     assert answer.json() == {"detail": "database unavailable, retry later"}
+
+
+def test_pings_of_a_vehicle_just_removed_from_the_roster_are_rejected_per_item(
+    api: httpx.Client, seeded_engine: Engine
+) -> None:
+    operator = bearer(issue(seeded_engine, "operator"))
+    assert api.post("/api/v1/pings", json=ping("SF-050"), headers=operator).status_code == 200
+    with seeded_engine.begin() as connection:  # removed while the server still caches it
+        connection.execute(text("DELETE FROM fact_vehicle_ping WHERE vehicle_id = 'SF-050'"))
+        connection.execute(text("DELETE FROM dim_vehicle WHERE vehicle_id = 'SF-050'"))
+
+    answer = api.post(
+        "/api/v1/pings", json={"pings": [ping("SF-051"), ping("SF-050")]}, headers=operator
+    )
+
+    assert answer.status_code == 200
+    assert answer.json() == {
+        "accepted": 1,
+        "duplicates": 0,
+        "rejected": [{"index": 1, "error": "unknown vehicle SF-050"}],
+    }
+    assert len(stored(seeded_engine, "SF-051")) == 1
+
+
+def test_the_endpoint_is_documented_with_its_body_and_security(api: httpx.Client) -> None:
+    operation = api.get("/openapi.json").json()["paths"]["/api/v1/pings"]["post"]
+    body = operation["requestBody"]["content"]["application/json"]["schema"]
+    ping_schema, batch_schema = body["anyOf"]
+    assert set(ping_schema["required"]) == {"vehicle_id", "ts", "lat", "lon", "speed_mps"}
+    assert batch_schema["properties"]["pings"]["maxItems"] == 1000
+    assert operation["security"] == [{"HTTPBearer": []}]
+    assert {"200", "401", "403", "413", "422", "503"} <= set(operation["responses"])
