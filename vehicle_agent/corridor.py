@@ -26,6 +26,10 @@ EARTH_RADIUS_M = 6_371_008.8
 ON_CORRIDOR_MAX_OFFSET_M = 100.0
 # Points projected per block: bounds the (points x segments) work array to a few MB.
 _BLOCK_ELEMENTS = 2_000_000
+# Grid cell edge of the candidate index (a few sub-segments per cell), and the most
+# (cells x sub-segments) it may weigh at build time; longer corridors get coarser cells.
+_CELL_M = 250.0
+_INDEX_ELEMENTS = 4_000_000
 
 FloatArray = NDArray[np.float64]
 
@@ -69,6 +73,7 @@ class CorridorGeometry:
         self._starts = self._points[:-1]
         self._steps = np.diff(self._points, axis=0)
         self._step_len2 = np.einsum("ij,ij->i", self._steps, self._steps)
+        self._build_index()
 
     @classmethod
     def from_segments(
@@ -92,15 +97,24 @@ class CorridorGeometry:
         return np.column_stack([east, north])
 
     def locate(self, lat: ArrayLike, lon: ArrayLike) -> Located:
-        """Project fixes onto the corridor (vectorised over fixes)."""
+        """Project fixes onto the corridor (vectorised over fixes).
+
+        Each fix is first tried against the few sub-segments listed for its grid cell (see
+        `_build_index`); a fix not within `max_offset_m` of one of them (off the corridor, or
+        outside the grid) is projected onto every sub-segment. Both give the same nearest
+        sub-segment: a sub-segment within `max_offset_m` of a fix is always listed in its cell.
+        """
         lat_a = np.atleast_1d(np.asarray(lat, dtype=np.float64))
         lon_a = np.atleast_1d(np.asarray(lon, dtype=np.float64))
         points = self._to_plane(lat_a, lon_a)
         x_out = np.empty(len(points))
         offset_out = np.empty(len(points))
+        resolved = self._locate_by_cell(points, x_out, offset_out)
+        rest = np.flatnonzero(~resolved)
         block = max(1, _BLOCK_ELEMENTS // len(self._starts))
-        for first in range(0, len(points), block):
-            chunk = points[first : first + block]
+        for first in range(0, len(rest), block):
+            which = rest[first : first + block]
+            chunk = points[which]
             relative = chunk[:, None, :] - self._starts[None, :, :]
             fraction = np.einsum("pij,ij->pi", relative, self._steps) / self._step_len2
             fraction = np.clip(fraction, 0.0, 1.0)
@@ -108,14 +122,91 @@ class CorridorGeometry:
             distance2 = np.sum((nearest - chunk[:, None, :]) ** 2, axis=2)
             best = np.argmin(distance2, axis=1)
             rows = np.arange(len(chunk))
-            x_out[first : first + block] = self.x_m[best] + fraction[rows, best] * (
+            x_out[which] = self.x_m[best] + fraction[rows, best] * (
                 self.x_m[best + 1] - self.x_m[best]
             )
-            offset_out[first : first + block] = np.sqrt(distance2[rows, best])
+            offset_out[which] = np.sqrt(distance2[rows, best])
         finite = np.isfinite(x_out) & np.isfinite(offset_out)
         inside = (x_out > self.x_m[0]) & (x_out < self.x_m[-1])
         on = finite & inside & (offset_out <= self.max_offset_m)
         return Located(x_out, offset_out, on)
+
+    def _build_index(self) -> None:
+        """List, per square cell of a grid over the corridor, the sub-segments near it.
+
+        A sub-segment is listed for a cell when it passes within max_offset_m + half the
+        cell's diagonal (+1 m for rounding) of the cell's centre, so it is listed for every
+        cell holding a point within max_offset_m of it. The cell edge grows with the corridor
+        to keep the table small.
+        """
+        reach = self.max_offset_m
+        low = self._points.min(axis=0) - reach
+        span = self._points.max(axis=0) + reach - low
+        cell_m = _CELL_M
+        while np.prod(np.ceil(span / cell_m) + 1) * len(self._starts) > _INDEX_ELEMENTS:
+            cell_m *= 2
+        shape = (np.ceil(span / cell_m) + 1).astype(np.int64)
+        columns, rows = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
+        centres = low + (np.column_stack([columns.ravel(), rows.ravel()]) + 0.5) * cell_m
+        relative = centres[:, None, :] - self._starts[None, :, :]
+        fraction = np.clip(
+            np.einsum("pij,ij->pi", relative, self._steps) / self._step_len2, 0.0, 1.0
+        )
+        nearest = self._starts[None] + fraction[..., None] * self._steps[None]
+        distance2 = np.sum((nearest - centres[:, None, :]) ** 2, axis=2)
+        near = distance2 <= (reach + cell_m * math.sqrt(0.5) + 1.0) ** 2
+        counts = near.sum(axis=1)
+        candidates = np.zeros((len(centres), max(1, int(counts.max()))), dtype=np.int64)
+        for cell in np.flatnonzero(counts):
+            listed = np.flatnonzero(near[cell])  # ascending: argmin ties break as above
+            candidates[cell, : len(listed)] = listed
+        self._cell_m = cell_m
+        self._grid_low = low
+        self._grid_shape = shape
+        self._candidates = candidates
+        self._candidate_counts = counts
+
+    def _locate_by_cell(
+        self, points: FloatArray, x_out: FloatArray, offset_out: FloatArray
+    ) -> NDArray[np.bool_]:
+        """Fill x_out/offset_out for the fixes resolved by their cell's list; returns which."""
+        resolved = np.zeros(len(points), dtype=bool)
+        with np.errstate(invalid="ignore"):
+            cell_xy = np.floor((points - self._grid_low) / self._cell_m)
+        in_grid = np.all(np.isfinite(cell_xy), axis=1)
+        in_grid[in_grid] = np.all(
+            (cell_xy[in_grid] >= 0) & (cell_xy[in_grid] < self._grid_shape), axis=1
+        )
+        which = np.flatnonzero(in_grid)
+        cells = cell_xy[which, 0].astype(np.int64) * self._grid_shape[1] + cell_xy[which, 1].astype(
+            np.int64
+        )
+        counts = self._candidate_counts[cells]
+        which, cells, counts = which[counts > 0], cells[counts > 0], counts[counts > 0]
+        if len(which) == 0:
+            return resolved
+        chunk = points[which]
+        listed = self._candidates[cells]
+        starts = self._starts[listed]
+        steps = self._steps[listed]
+        relative = chunk[:, None, :] - starts
+        fraction = np.einsum("pkj,pkj->pk", relative, steps) / self._step_len2[listed]
+        fraction = np.clip(fraction, 0.0, 1.0)
+        nearest = starts + fraction[..., None] * steps
+        distance2 = np.sum((nearest - chunk[:, None, :]) ** 2, axis=2)
+        distance2[np.arange(listed.shape[1])[None, :] >= counts[:, None]] = np.inf
+        best_k = np.argmin(distance2, axis=1)
+        rows = np.arange(len(chunk))
+        best_distance2 = distance2[rows, best_k]
+        near = best_distance2 <= self.max_offset_m**2
+        best = listed[rows, best_k][near]
+        done = which[near]
+        x_out[done] = self.x_m[best] + fraction[rows, best_k][near] * (
+            self.x_m[best + 1] - self.x_m[best]
+        )
+        offset_out[done] = np.sqrt(best_distance2[near])
+        resolved[done] = True
+        return resolved
 
     def position(self, x_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Latitude and longitude at positions x_m (linear between vertices)."""
