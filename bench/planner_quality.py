@@ -1,6 +1,8 @@
 """The TSE quality report on the real drives: MAE of INRIX alone, predicted, fused.
 
-    .venv/bin/python bench/planner_quality.py [--shared ../shared] [--latency 180]
+    .venv/bin/python -m bench.planner_quality [--shared ../shared] [--latency 180]
+
+(as a module: run as a script, bench/planner.py would shadow the `planner` package)
 
 Prints one row per drive and the pooled mean absolute error (m/s) of each variant against the
 probe car's 60 s mean speeds (protocol in planner/evaluation.py; figures in docs/planner.md).

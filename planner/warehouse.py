@@ -1,14 +1,17 @@
 """The planner's database edge: read one cycle's inputs, publish its plan, replay a stored one.
 
-One cycle runs in the caller's transaction (`run_cycle(session, ...)`), so the fleet's window
-observations, the plan_run row and all lanes' fact_speed_planner rows commit together: a vehicle
-never sees half a plan. A PostgreSQL advisory lock per corridor, taken for the transaction, lets
-only one planner publish for a corridor even when several replicas run the schedule.
+One cycle runs in the caller's transaction (`run_cycle(session, ...)`): the plan_run row and all
+lanes' fact_speed_planner rows commit together, so a vehicle never sees half a plan. A
+PostgreSQL advisory lock per corridor, taken for the transaction, lets only one planner publish
+for a corridor even when several replicas run the schedule. The fleet's per-vehicle observations
+of the window (fact_vehicle_observation) are written right after, in their own transaction
+(`store_window_observations`): at 10,000 vehicles they are ~170,000 rows whose foreign-key
+checks alone take seconds, which must not delay the plan (docs/performance.md).
 
 Everything a plan was made from is recorded so `replay_plan` can recompute it from the
 warehouse: INRIX rows measured in the history window and received before the run started, the
-fleet's observations of the ping window (fact_vehicle_observation), the earlier plans whose
-smoothed profiles told standing bottlenecks from moving waves, the algorithm and parameters.
+fleet's observations of the ping window, the earlier plans whose smoothed profiles told
+standing bottlenecks from moving waves, the algorithm and parameters.
 """
 
 from __future__ import annotations
@@ -16,12 +19,13 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
 
 import numpy as np
-from sqlalchemy import text
+from sqlalchemy import Row, text
 from sqlalchemy.orm import Session
 
 from planner.inputs import (
@@ -40,7 +44,7 @@ PLANNER_LOCK_SPACE = 0x5350
 # A replayed target matches when within this of the stored one (stored as 4-byte REAL).
 REPLAY_TOLERANCE_MPS = 1e-3
 
-CycleStatus = Literal["published", "skipped", "busy"]
+CycleStatus = Literal["published", "skipped", "failed", "busy"]
 
 
 class UnknownCorridor(LookupError):
@@ -202,28 +206,44 @@ def load_inrix(
     return InrixWindow(history, ignored)
 
 
-EXTRACT_OBSERVATIONS = text(
+# Per vehicle, lane and sub-segment of the window (cell = -1: off the corridor, x_m NULL or
+# beyond its ends); the cycle pools these per lane and cell, the observation table keeps them.
+PER_VEHICLE = """
+    SELECT p.vehicle_id,
+           coalesce(p.lane, v.assigned_lane) AS lane,
+           CASE WHEN p.x_m IS NULL OR p.x_m < :first_start OR p.x_m >= :last_end THEN -1
+                ELSE width_bucket(p.x_m::float8, CAST(:starts AS float8[])) END AS cell,
+           sum(p.speed_mps::float8) AS speed_sum,
+           count(*) AS pings
+    FROM fact_vehicle_ping p
+    JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id
+    WHERE v.corridor_id = :corridor AND p.ts > :window_start AND p.ts <= :window_end
+    GROUP BY 1, 2, 3
+"""
+
+POOL_PINGS = text(
+    f"""
+    WITH per_vehicle AS ({PER_VEHICLE})
+    SELECT lane, cell, sum(speed_sum) / sum(pings) AS mean_speed_mps, sum(pings) AS ping_count,
+           count(DISTINCT vehicle_id) AS vehicles
+    FROM per_vehicle
+    WHERE cell >= 1 AND lane BETWEEN 1 AND :lanes
+    GROUP BY GROUPING SETS ((lane, cell), ())
+    UNION ALL
+    SELECT NULL, -1, NULL, sum(pings), NULL FROM per_vehicle WHERE cell = -1
     """
-    WITH window_pings AS (
-        SELECT p.vehicle_id,
-               p.speed_mps,
-               coalesce(p.lane, v.assigned_lane) AS lane,
-               width_bucket(p.x_m::float8, CAST(:starts AS float8[])) AS cell
-        FROM fact_vehicle_ping p
-        JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id
-        WHERE v.corridor_id = :corridor
-          AND p.ts > :window_start AND p.ts <= :window_end
-          AND p.x_m IS NOT NULL
-          AND p.x_m >= :first_start AND p.x_m < :last_end
-    )
-    INSERT INTO fact_vehicle_observation AS o
+)
+
+STORE_OBSERVATIONS = text(
+    f"""
+    WITH per_vehicle AS ({PER_VEHICLE})
+    INSERT INTO fact_vehicle_observation
         (vehicle_id, window_end, i24_segment_id, lane, window_start, corridor_id,
          mean_speed_mps, ping_count)
     SELECT vehicle_id, :window_end, (CAST(:segment_ids AS integer[]))[cell], lane,
-           :window_start, :corridor, avg(speed_mps), count(*)
-    FROM window_pings
-    WHERE lane BETWEEN 1 AND :lanes
-    GROUP BY vehicle_id, cell, lane
+           :window_start, :corridor, speed_sum / pings, pings
+    FROM per_vehicle
+    WHERE cell >= 1 AND lane BETWEEN 1 AND :lanes
     ON CONFLICT (vehicle_id, window_end, i24_segment_id, lane) DO UPDATE
         SET window_start = excluded.window_start,
             mean_speed_mps = excluded.mean_speed_mps,
@@ -233,74 +253,87 @@ EXTRACT_OBSERVATIONS = text(
 
 POOLED_OBSERVATIONS = text(
     """
-    SELECT lane, i24_segment_id,
-           sum(mean_speed_mps::float8 * ping_count) / sum(ping_count) AS mean_speed_mps,
-           sum(ping_count) AS ping_count,
-           count(DISTINCT vehicle_id) AS vehicles
+    SELECT lane, cell, sum(mean_speed_mps::float8 * ping_count) / sum(ping_count)
+               AS mean_speed_mps,
+           sum(ping_count) AS ping_count, count(DISTINCT vehicle_id) AS vehicles
     FROM fact_vehicle_observation
+    JOIN unnest(CAST(:segment_ids AS integer[])) WITH ORDINALITY AS grid (i24_segment_id, cell)
+        USING (i24_segment_id)
     WHERE corridor_id = :corridor AND window_end = :window_end
-    GROUP BY GROUPING SETS ((lane, i24_segment_id), ())
+    GROUP BY GROUPING SETS ((lane, cell), ())
     """
 )
 
 
-def extract_observations(
-    session: Session, grid: CorridorGrid, window_start: datetime, window_end: datetime
-) -> PingWindow:
-    """Write each vehicle's mean speed per sub-segment and lane in the window; pool them.
-
-    Pings off the corridor (x_m NULL) or in a lane the corridor lacks do not feed the TSE; a
-    ping without a lane counts in its vehicle's assigned lane.
-    """
+def _window_params(
+    grid: CorridorGrid, window_start: datetime, window_end: datetime
+) -> dict[str, Any]:
     gaps = grid.start_x_m[1:] > grid.end_x_m[:-1]
     if gaps.any():
         raise ValueError(f"corridor {grid.corridor_id}: sub-segments must be contiguous")
-    session.execute(
-        EXTRACT_OBSERVATIONS,
-        {
-            "corridor": grid.corridor_id,
-            "window_start": window_start,
-            "window_end": window_end,
-            "starts": grid.start_x_m.tolist(),
-            "segment_ids": grid.segment_ids.tolist(),
-            "first_start": float(grid.start_x_m[0]),
-            "last_end": float(grid.end_x_m[-1]),
-            "lanes": grid.lanes,
-        },
-    )
-    off_corridor = session.scalar(
-        text(
-            "SELECT count(*) FROM fact_vehicle_ping p "
-            "JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
-            "WHERE v.corridor_id = :corridor AND p.ts > :window_start AND p.ts <= :window_end "
-            "AND p.x_m IS NULL"
-        ),
-        {"corridor": grid.corridor_id, "window_start": window_start, "window_end": window_end},
-    )
-    return _pooled(session, grid, window_end, int(off_corridor or 0))
+    return {
+        "corridor": grid.corridor_id,
+        "window_start": window_start,
+        "window_end": window_end,
+        "starts": grid.start_x_m.tolist(),
+        "segment_ids": grid.segment_ids.tolist(),
+        "first_start": float(grid.start_x_m[0]),
+        "last_end": float(grid.end_x_m[-1]),
+        "lanes": grid.lanes,
+    }
 
 
-def _pooled(
-    session: Session, grid: CorridorGrid, window_end: datetime, off_corridor: int
-) -> PingWindow:
-    rows = session.execute(
-        POOLED_OBSERVATIONS, {"corridor": grid.corridor_id, "window_end": window_end}
-    ).all()
-    cell_of_segment = {int(segment): cell for cell, segment in enumerate(grid.segment_ids)}
+def _ping_window(rows: Sequence[Row[Any]]) -> PingWindow:
+    """Pooled rows (lane, 1-based cell, ...) plus the totals row and the off-corridor row."""
     cells = [row for row in rows if row.lane is not None]
-    totals = next((row for row in rows if row.lane is None), None)
+    totals = next((row for row in rows if row.lane is None and row.cell is None), None)
+    off = next((row for row in rows if row.cell == -1), None)
     observations = LaneObservations(
         lane=np.array([row.lane for row in cells], dtype=np.int64),
-        cell=np.array([cell_of_segment[row.i24_segment_id] for row in cells], dtype=np.int64),
+        cell=np.array([row.cell - 1 for row in cells], dtype=np.int64),
         mean_speed_mps=np.array([row.mean_speed_mps for row in cells], dtype=np.float64),
         ping_count=np.array([row.ping_count for row in cells], dtype=np.int64),
     )
     return PingWindow(
         observations=observations,
-        vehicles=int(totals.vehicles) if totals and totals.ping_count else 0,
-        pings=int(totals.ping_count or 0) if totals else 0,
-        pings_off_corridor=off_corridor,
+        vehicles=int(totals.vehicles or 0) if totals is not None else 0,
+        pings=int(totals.ping_count or 0) if totals is not None else 0,
+        pings_off_corridor=int(off.ping_count or 0) if off is not None else 0,
     )
+
+
+def pool_pings(
+    session: Session, grid: CorridorGrid, window_start: datetime, window_end: datetime
+) -> PingWindow:
+    """The fleet's speeds per lane and sub-segment in the window, straight from the pings.
+
+    Pings off the corridor (x_m NULL) or in a lane the corridor lacks do not feed the TSE; a
+    ping without a lane counts in its vehicle's assigned lane.
+    """
+    params = _window_params(grid, window_start, window_end)
+    return _ping_window(session.execute(POOL_PINGS, params).all())
+
+
+def store_observations(
+    session: Session, grid: CorridorGrid, window_start: datetime, window_end: datetime
+) -> int:
+    """Write each vehicle's mean speed per sub-segment and lane in the window (paper:
+    fact_vehicle_observation); returns the rows written."""
+    result = session.execute(STORE_OBSERVATIONS, _window_params(grid, window_start, window_end))
+    return int(result.rowcount)  # type: ignore[attr-defined]
+
+
+def stored_observations(session: Session, grid: CorridorGrid, window_end: datetime) -> PingWindow:
+    """The window's observations as stored, pooled per lane and sub-segment."""
+    rows = session.execute(
+        POOLED_OBSERVATIONS,
+        {
+            "corridor": grid.corridor_id,
+            "window_end": window_end,
+            "segment_ids": grid.segment_ids.tolist(),
+        },
+    ).all()
+    return _ping_window(rows)
 
 
 def load_smoothed(session: Session, grid: CorridorGrid, plan_ids: list[int]) -> list[FloatArray]:
@@ -440,6 +473,19 @@ def _publish_rows(session: Session, grid: CorridorGrid, plan_id: int, plan: Plan
     )
 
 
+def store_window_observations(session: Session, outcome: CycleOutcome) -> int:
+    """Write the per-vehicle observations of a published or skipped cycle's ping window."""
+    if outcome.status not in ("published", "skipped"):
+        return 0
+    grid = load_grid(session, outcome.corridor_id)
+    return store_observations(
+        session,
+        grid,
+        datetime.fromisoformat(outcome.inputs["ping_window_start"]),
+        datetime.fromisoformat(outcome.inputs["ping_window_end"]),
+    )
+
+
 def run_cycle(
     session: Session,
     corridor_id: str,
@@ -470,7 +516,7 @@ def run_cycle(
     grid = load_grid(session, corridor_id)
     inrix = load_inrix(session, corridor_id, now, params, received_by=now)
     window_start = now - timedelta(seconds=params.ping_window_s)
-    pings = extract_observations(session, grid, window_start, now)
+    pings = pool_pings(session, grid, window_start, now)
     previous = recent_plan_ids(session, corridor_id, now, params)
     inputs: dict[str, Any] = {
         "inrix_as_of": None,
@@ -588,8 +634,13 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
         params,
         received_by=datetime.fromisoformat(inputs["inrix_received_by"]),
     )
+    window_start = datetime.fromisoformat(inputs["ping_window_start"])
     window_end = datetime.fromisoformat(inputs["ping_window_end"])
-    pings = _pooled(session, grid, window_end, 0)
+    pings = stored_observations(session, grid, window_end)
+    if pings.pings != inputs["pings"]:
+        # The observations are written just after publication; if that failed, the pings
+        # themselves (still within retention) are the record.
+        pings = pool_pings(session, grid, window_start, window_end)
     previous = [int(plan) for plan in inputs.get("previous_plans", [])]
     plan = plan_speeds(
         PlannerInputs(

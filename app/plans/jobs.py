@@ -1,7 +1,8 @@
 """The planner as a job: one cycle per corridor, logged, counted, never fatal to its schedule.
 
 Used by `smoothfleet planner once|run` and by the schedule inside `smoothfleet serve`. Each
-corridor's cycle is one transaction (planner.warehouse.run_cycle); a failing cycle is rolled
+corridor's cycle is one transaction (planner.warehouse.run_cycle), its window's per-vehicle
+observations a second one right after publication; a failing cycle is rolled
 back, logged with its traceback, recorded as a `failed` plan_run and counted in /metrics, and
 the last good plan simply ages out (valid_until) so vehicles fall back to their stock ACC.
 """
@@ -20,7 +21,13 @@ from app.core.config import Settings
 from app.core.db import make_sync_engine, session_scope
 from app.plans import metrics
 from planner import PlannerParams
-from planner.warehouse import CycleOutcome, corridor_ids, record_failure, run_cycle
+from planner.warehouse import (
+    CycleOutcome,
+    corridor_ids,
+    record_failure,
+    run_cycle,
+    store_window_observations,
+)
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +82,11 @@ def run_planner(
                 log.exception("could not record the failed planner cycle for %s", corridor_id)
         metrics.PLANNER_RUN_SECONDS.observe(time.perf_counter() - clock)
         _count(outcome)
+        try:
+            with session_scope(engine) as session:
+                store_window_observations(session, outcome)
+        except Exception:
+            log.exception("could not store the window's observations for %s", corridor_id)
         outcomes.append(outcome)
     return outcomes
 

@@ -18,6 +18,7 @@ from planner.warehouse import (
     load_grid,
     replay_plan,
     run_cycle,
+    store_window_observations,
 )
 from tests.planner.facts import CORRIDOR, inrix_snapshot, pings, standing_slowdown
 
@@ -25,9 +26,12 @@ NOW = datetime(2026, 11, 24, 13, 0, tzinfo=UTC)
 PARAMS = PlannerParams()
 
 
-def cycle(engine: Engine, now: datetime, **options: object) -> CycleOutcome:
+def cycle(
+    engine: Engine, now: datetime, *, observations: bool = True, **options: object
+) -> CycleOutcome:
+    """One cycle as the job runs it: publish, then store the window's observations."""
     with Session(engine) as session, session.begin():
-        return run_cycle(
+        outcome = run_cycle(
             session,
             CORRIDOR,
             algorithm=str(options.pop("algorithm", "kernel_smooth_buffer")),
@@ -36,6 +40,10 @@ def cycle(engine: Engine, now: datetime, **options: object) -> CycleOutcome:
             now=now,
             **options,  # type: ignore[arg-type]
         )
+    if observations:
+        with Session(engine) as session, session.begin():
+            store_window_observations(session, outcome)
+    return outcome
 
 
 def minutes_of_slowdown(engine: Engine, until: datetime, minutes: int) -> None:
@@ -193,6 +201,16 @@ def test_replay_recomputes_a_plan_from_the_warehouse(seeded_engine: Engine) -> N
         tampered = replay_plan(session, outcome.plan_id or 0)
     assert not tampered.matches
     assert tampered.max_difference_mps == pytest.approx(0.5, abs=1e-3)
+
+
+def test_replay_without_stored_observations_pools_the_pings(seeded_engine: Engine) -> None:
+    minutes_of_slowdown(seeded_engine, NOW, 3)
+    pings(seeded_engine, "SF-003", NOW, np.linspace(8000, 8400, 60), 9.0)
+    outcome = cycle(seeded_engine, NOW, observations=False)
+    with seeded_engine.connect() as connection:
+        assert connection.scalar(text("SELECT count(*) FROM fact_vehicle_observation")) == 0
+    with Session(seeded_engine) as session:
+        assert replay_plan(session, outcome.plan_id or 0).matches
 
 
 def test_replay_of_a_plan_that_was_not_published_says_so(seeded_engine: Engine) -> None:
