@@ -6,7 +6,7 @@ ingest is testable on its own and the hot path allocates no ORM objects.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import NamedTuple
@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from app.auth import Principal
 from app.ingest.directory import CorridorInfo, FleetDirectory
-from app.vehicles.schemas import MAX_PINGS_PER_BATCH, Ping
+from app.vehicles.schemas import MAX_PINGS_PER_BATCH, Ping, PingBatch
 
 REQUIRED_FIELDS = ("vehicle_id", "ts", "lat", "lon", "speed_mps")
 
@@ -27,6 +27,10 @@ class BodyError(ValueError):
 
 class ForeignVehicle(PermissionError):
     """A vehicle token posted a ping of another vehicle (answered 403, nothing stored)."""
+
+    def __init__(self, message: str, pings: int) -> None:
+        super().__init__(message)
+        self.pings = pings
 
 
 class PingRow(NamedTuple):
@@ -105,18 +109,17 @@ def parse_body(body: bytes) -> list[object]:
     return [document]
 
 
-def check_authority(items: Sequence[object], principal: Principal) -> None:
+def _refuse_foreign(vehicle_ids: Iterable[object], principal: Principal, count: int) -> None:
     """Refuse the whole request if a vehicle token carries another vehicle's ping."""
     if principal.role != "vehicle":
         return
-    for item in items:
-        if isinstance(item, dict):
-            vehicle_id = item.get("vehicle_id")
-            if vehicle_id is not None and vehicle_id != principal.vehicle_id:
-                raise ForeignVehicle(
-                    f"this token belongs to vehicle {principal.vehicle_id} and may not post "
-                    f"pings of {vehicle_id!r}; nothing of this request was stored"
-                )
+    for vehicle_id in vehicle_ids:
+        if vehicle_id is not None and vehicle_id != principal.vehicle_id:
+            raise ForeignVehicle(
+                f"this token belongs to vehicle {principal.vehicle_id} and may not post "
+                f"pings of {vehicle_id!r}; nothing of this request was stored",
+                count,
+            )
 
 
 def _describe(error: ValidationError) -> str:
@@ -126,24 +129,58 @@ def _describe(error: ValidationError) -> str:
     return f"{where}: {message}" if where else message
 
 
-def validate_items(
-    items: Sequence[object],
-    directory: FleetDirectory,
-    window: TimeWindow,
-    received_at: datetime,
-) -> tuple[list[PingRow], list[Rejected]]:
-    """Rows for the good items and a rejection (index, reason) for each bad one."""
-    rows: list[PingRow] = []
+def _all_valid(body: bytes) -> list[Ping] | None:
+    """Every ping of a body in which all pings are valid, parsed in one pass; None otherwise.
+
+    The common case (a car's own well-formed upload) is validated straight from the bytes by
+    pydantic-core; any doubt (an invalid item, another shape) returns None, and the body then
+    takes the item-by-item path, which decides what is accepted and how errors are worded.
+    """
+    try:
+        if b'"pings"' in body:
+            return PingBatch.model_validate_json(body).pings
+        return [Ping.model_validate_json(body)]
+    except ValidationError:
+        return None
+
+
+def read_pings(body: bytes, principal: Principal) -> tuple[list[tuple[int, Ping]], list[Rejected]]:
+    """The body's well-formed pings (with their index) and the rejection of each other item.
+
+    BodyError when the body is not a ping or a batch; ForeignVehicle when a vehicle token
+    carries another vehicle's ping (valid or not).
+    """
+    quick = _all_valid(body)
+    if quick is not None:
+        _refuse_foreign((ping.vehicle_id for ping in quick), principal, len(quick))
+        return list(enumerate(quick)), []
+    items = parse_body(body)
+    _refuse_foreign(
+        (item.get("vehicle_id") for item in items if isinstance(item, dict)), principal, len(items)
+    )
+    pings: list[tuple[int, Ping]] = []
     rejected: list[Rejected] = []
     for index, item in enumerate(items):
         if not isinstance(item, dict):
             rejected.append(Rejected(index, "a ping must be a JSON object"))
             continue
         try:
-            ping = Ping.model_validate(item)
+            pings.append((index, Ping.model_validate(item)))
         except ValidationError as error:
             rejected.append(Rejected(index, _describe(error)))
-            continue
+    return pings, rejected
+
+
+def check_in_context(
+    pings: Sequence[tuple[int, Ping]],
+    directory: FleetDirectory,
+    window: TimeWindow,
+    received_at: datetime,
+) -> tuple[list[PingRow], list[Rejected]]:
+    """Rows for the pings that fit the roster, the corridor and the clock; rejections else."""
+    rows: list[PingRow] = []
+    rejected: list[Rejected] = []
+    for index, ping in pings:
         corridor = directory.corridor_of(ping.vehicle_id)
         if corridor is None:
             rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}"))
@@ -193,12 +230,3 @@ def validate_items(
             )
         )
     return rows, rejected
-
-
-def vehicle_ids(items: Sequence[object]) -> set[str]:
-    """The string vehicle_ids named in the items (to make sure the directory knows them)."""
-    return {
-        item["vehicle_id"]
-        for item in items
-        if isinstance(item, dict) and isinstance(item.get("vehicle_id"), str)
-    }

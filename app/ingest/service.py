@@ -18,10 +18,8 @@ from app.ingest.pings import (
     ForeignVehicle,
     Rejected,
     TimeWindow,
-    check_authority,
-    parse_body,
-    validate_items,
-    vehicle_ids,
+    check_in_context,
+    read_pings,
 )
 from app.ingest.writer import PingWriter, RefusedByDatabase
 
@@ -50,28 +48,28 @@ class Ingest:
 
     async def pings(self, body: bytes, principal: Principal, received_at: datetime) -> IngestResult:
         """Store the body's good pings; BodyError (422) or ForeignVehicle (403) refuse it all."""
-        items = parse_body(body)
         try:
-            check_authority(items, principal)
-        except ForeignVehicle:
-            metrics.PINGS.labels("refused").inc(len(items))
+            pings, rejected_fields = read_pings(body, principal)
+        except ForeignVehicle as refusal:
+            metrics.PINGS.labels("refused").inc(refusal.pings)
             raise
-        directory = await self.directory.directory(vehicle_ids(items))
+        directory = await self.directory.directory({ping.vehicle_id for _, ping in pings})
         window = TimeWindow.around(
             received_at, retention_days=self.retention_days, max_future_s=self.max_future_s
         )
-        rows, rejected = validate_items(items, directory, window, received_at)
+        rows, rejected_context = check_in_context(pings, directory, window, received_at)
         try:
             outcome = await self.writer.write(rows)
         except RefusedByDatabase:
             # The roster changed under the cache (a vehicle removed): check again with a fresh
             # directory, so the removed vehicle's pings become per-item rejections.
             directory = await self.directory.directory(reload=True)
-            rows, rejected = validate_items(items, directory, window, received_at)
+            rows, rejected_context = check_in_context(pings, directory, window, received_at)
             try:
                 outcome = await self.writer.write(rows)
             except RefusedByDatabase as error:
                 raise RowsRefused(f"refused by the database: {error}") from None
+        rejected = sorted(rejected_fields + rejected_context, key=lambda r: r.index)
         metrics.PINGS.labels("accepted").inc(outcome.accepted)
         metrics.PINGS.labels("duplicate").inc(outcome.duplicates)
         metrics.PINGS.labels("rejected").inc(len(rejected))

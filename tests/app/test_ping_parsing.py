@@ -1,0 +1,95 @@
+"""Parsing pings: the one-pass path and the item-by-item path agree on every input.
+
+Well-formed uploads are validated straight from the bytes; anything else is parsed and checked
+item by item. Whichever path a body takes, a ping must be accepted or refused the same way.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import orjson
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from pydantic import ValidationError
+
+from app.auth import Principal
+from app.ingest.pings import BodyError, ForeignVehicle, read_pings
+from app.vehicles.schemas import Ping
+
+ADMIN = Principal(token_id=1, role="admin", vehicle_id=None)
+CAR = Principal(token_id=2, role="vehicle", vehicle_id="SF-001")
+
+json_scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**40), max_value=2**40),
+    st.floats(allow_nan=False, allow_infinity=False, width=64),
+    st.text(max_size=12),
+    st.sampled_from(["2026-11-23T09:00:00Z", "2026-11-23T09:00:00", "25", "true", "SF-001"]),
+)
+field_names = st.sampled_from(
+    [
+        "vehicle_id",
+        "ts",
+        "lat",
+        "lon",
+        "speed_mps",
+        "lane",
+        "acc_engaged",
+        "acc_gap_setting",
+        "controller",
+        "plan_id",
+        "lead_distance_m",
+    ]
+)
+base_ping = {
+    "vehicle_id": "SF-001",
+    "ts": "2026-11-23T09:00:00Z",
+    "lat": 36.0,
+    "lon": -86.6,
+    "speed_mps": 25.0,
+}
+
+
+def outcome(parse: Any) -> Ping | str:
+    try:
+        ping: Ping = parse()
+        return ping
+    except ValidationError as error:
+        return str(error.errors(include_url=False)[0]["loc"])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.dictionaries(field_names, json_scalars, max_size=6))
+def test_from_bytes_and_from_parsed_json_agree(changes: dict[str, Any]) -> None:
+    raw = orjson.dumps({**base_ping, **changes})
+    from_bytes = outcome(lambda: Ping.model_validate_json(raw))
+    from_objects = outcome(lambda: Ping.model_validate(orjson.loads(raw)))
+    assert from_bytes == from_objects
+
+
+def test_a_batch_with_one_bad_item_is_read_item_by_item() -> None:
+    good = dict(base_ping)
+    bad = {**base_ping, "speed_mps": 91}
+    pings, rejected = read_pings(orjson.dumps({"pings": [good, bad, good]}), ADMIN)
+    assert [index for index, _ in pings] == [0, 2]
+    assert [(r.index, r.error.split(":")[0]) for r in rejected] == [(1, "speed_mps")]
+
+
+def test_a_foreign_ping_refuses_the_request_on_either_path() -> None:
+    foreign = {**base_ping, "vehicle_id": "SF-002"}
+    for body in ({"pings": [base_ping, foreign]}, {"pings": [base_ping, {**foreign, "lat": 99}]}):
+        with pytest.raises(ForeignVehicle) as refusal:
+            read_pings(orjson.dumps(body), CAR)
+        assert refusal.value.pings == 2
+
+
+def test_a_body_naming_pings_that_is_a_single_ping_still_parses() -> None:
+    # The one-pass path guesses the shape from the bytes; a wrong guess falls back safely.
+    pings, rejected = read_pings(orjson.dumps({**base_ping, "controller": '"pings"'}), ADMIN)
+    assert len(pings) == 1
+    assert rejected == []
+    with pytest.raises(BodyError):
+        read_pings(b'{"note": "\\"pings\\""}', ADMIN)
