@@ -194,6 +194,7 @@ class Agent:
         self._actuator_fault_until = -math.inf
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
+        self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
         self._config_schedule = Schedule()
         self._plan_schedule = Schedule()
         self._status_schedule = Schedule()
@@ -293,11 +294,16 @@ class Agent:
         assignment = self.assignment
         if assignment is None or fix is None:
             return None, False
-        located = assignment.corridor.locate(fix.lat, fix.lon)
-        x_m = float(located.x_m[0])
+        cached = self._located
+        if cached is not None and cached[0] is fix and cached[1] is assignment.corridor:
+            x_m, on_corridor = cached[2], cached[3]
+        else:  # a new fix: map-match it once (the receiver reports at 1-10 Hz)
+            located = assignment.corridor.locate(fix.lat, fix.lon)
+            x_m, on_corridor = float(located.x_m[0]), bool(located.on_corridor[0])
+            self._located = (fix, assignment.corridor, x_m, on_corridor)
         if reading is not None:
             x_m += reading.speed_mps * max(now - fix.time_s, 0.0)
-        return x_m, bool(located.on_corridor[0])
+        return x_m, on_corridor
 
     @staticmethod
     def _in_lane(fix: GpsFix | None, assignment: Assignment | None) -> bool:

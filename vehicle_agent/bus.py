@@ -21,9 +21,18 @@ def parse_channel(spec: str) -> tuple[str, str]:
     return interface, channel
 
 
+# Interfaces that filter in the kernel or the adapter. Elsewhere python-can filters in software,
+# and then `recv(timeout=0)` can answer None while frames are still queued (it gives up after
+# the first filtered-out frame), which would starve the agent's drain loop: there the agent gets
+# every frame and ignores the ids it does not watch itself.
+FILTERING_INTERFACES = frozenset({"socketcan"})
+
+
 def open_bus(spec: str, filters: Sequence[dict[str, Any]] | None = None) -> can.BusABC:
-    """A python-can bus for `spec`, passing only `filters` when given."""
+    """A python-can bus for `spec`, passing only `filters` where the interface filters."""
     interface, channel = parse_channel(spec)
+    if interface not in FILTERING_INTERFACES:
+        filters = None
     try:
         return can.Bus(interface=interface, channel=channel, can_filters=filters)
     except (can.CanError, OSError, ValueError, ImportError) as error:

@@ -4,17 +4,18 @@ time: the test bench for the agent's control loop."""
 from __future__ import annotations
 
 import itertools
+import json
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from functools import lru_cache
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import can
 
-from app.seed import seed_corridor_document
 from sim.emulator.car import CarEmulator
 from sim.emulator.leaders import Leader
 from vehicle_agent.agent import Agent
@@ -28,6 +29,15 @@ from vehicle_agent.spool import PingSpool
 
 CORRIDOR = "I-24-WB"
 _channels = itertools.count()
+
+
+@lru_cache(maxsize=1)
+def seed_corridor_document() -> dict[str, Any]:
+    """The packaged seed corridor, read without the server's code (the bench uses this rig)."""
+    document: dict[str, Any] = json.loads(
+        resources.files("seed_data").joinpath("i24_wb_corridor.json").read_text()
+    )
+    return document
 
 
 @lru_cache(maxsize=1)
