@@ -65,6 +65,8 @@ DEFAULT_WAVE_SPEED_MPS = -5.0
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
+# The longest Retry-After honoured (s): a server asking for more is polled again after this.
+MAX_RETRY_AFTER_S = 300.0
 MAX_PINGS_PER_BATCH = 1000
 # Upload at most this many batches per network() call, so status and plan polls stay timely.
 MAX_BATCHES_PER_CALL = 5
@@ -615,7 +617,7 @@ class Agent:
         if fetched.status == "unavailable":
             self.lane_plan = None
             if fetched.retry_after_s:
-                self._plan_schedule.next_s = now + min(fetched.retry_after_s, MAX_BACKOFF_S)
+                self._plan_schedule.next_s = now + min(fetched.retry_after_s, MAX_RETRY_AFTER_S)
         elif fetched.status == "unchanged" and held is not None:
             held.confirmed_s = now
         elif fetched.plan is not None:

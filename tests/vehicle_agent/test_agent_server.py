@@ -156,3 +156,36 @@ def test_every_spooled_ping_reaches_the_database_once_across_outage_and_restart(
     stored = ping_keys(seeded_engine)
     assert len(stored) == 30
     assert sorted(datetime.fromisoformat(ts) for ts in spooled) == stored
+
+
+def test_without_a_plan_the_car_stays_on_its_acc_until_one_is_published(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    token = issue(seeded_engine, "vehicle", "SF-099")  # RAV4, lane 3
+    with (
+        live_server(seeded_database_url, planner_enabled=False, planner_period_s=60) as base,
+        httpx.Client(base_url=base) as http,
+        rig(
+            "toyota_rav4",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-099",
+            server=ServerClient(http, "SF-099", token),
+            speed_mps=24.0,
+        ) as r,
+    ):
+        r.emulator.driver_engage(set_speed_mph=54)
+        r.run(5.0, network=True)
+        # 503 + Retry-After: 60: no plan held, the stock ACC drives, no request was sent.
+        assert r.agent.lane_plan is None
+        assert r.agent.state.mode is Mode.STOCK
+        assert r.agent.state.reason == "no fresh plan"
+        assert r.emulator.agent_frames == 0
+        plan_id = publish_free_flow_plan(seeded_database_url, seeded_engine)
+        r.run(50.0, network=True)
+        assert r.agent.lane_plan is None  # Retry-After honoured
+        r.run(15.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        assert r.agent.lane_plan is not None
+        assert r.agent.lane_plan.plan_id == plan_id
+        assert r.agent.state.mode is Mode.ENGAGED
