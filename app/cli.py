@@ -16,6 +16,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
@@ -38,6 +39,7 @@ from app.core.db import (
     redact,
     session_scope,
 )
+from app.core.metrics import MULTIPROCESS_DIR_ENV
 from app.core.security import TOKEN_ROLES, issue_token
 from app.feeds.commands import inrix
 from app.plans.commands import planner
@@ -393,16 +395,25 @@ def run_server(url: str, current: Settings, *, migrate: bool) -> None:
     # Workers are separate processes: they read the resolved URL from the environment.
     os.environ["SMOOTHFLEET_DATABASE_URL"] = url
     get_settings.cache_clear()
-    uvicorn.run(
-        "app.main:create_app",
-        factory=True,
-        host=current.host,
-        port=current.port,
-        workers=current.workers,
-        log_level="info",
-        access_log=False,
-        proxy_headers=True,
-    )
+    metrics_dir = None
+    if current.workers > 1 and not os.environ.get(MULTIPROCESS_DIR_ENV):
+        # /metrics sums every worker's counters through this directory (app/core/metrics.py).
+        metrics_dir = tempfile.mkdtemp(prefix="smoothfleet-metrics-")
+        os.environ[MULTIPROCESS_DIR_ENV] = metrics_dir
+    try:
+        uvicorn.run(
+            "app.main:create_app",
+            factory=True,
+            host=current.host,
+            port=current.port,
+            workers=current.workers,
+            log_level="info",
+            access_log=False,
+            proxy_headers=True,
+        )
+    finally:
+        if metrics_dir is not None:
+            shutil.rmtree(metrics_dir, ignore_errors=True)
 
 
 @cli.command("serve")

@@ -2,13 +2,24 @@
 
 Metrics are module-level, registered once per process. Labels are bounded: routes are the
 declared path templates (unmatched paths share one label) and outcomes are fixed words.
+
+With several uvicorn workers, `smoothfleet serve` points PROMETHEUS_MULTIPROC_DIR at a fresh
+directory before the workers start: each worker then writes its values there and /metrics
+(`exposition`) sums all workers, whichever of them answers the scrape.
 """
 
 from __future__ import annotations
 
+import os
 import time
 
-from prometheus_client import Counter, Histogram
+from prometheus_client import (
+    CollectorRegistry,
+    Counter,
+    Histogram,
+    generate_latest,
+    multiprocess,
+)
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 PINGS = Counter(
@@ -42,6 +53,16 @@ PING_GROUP_SECONDS = Histogram(
 )
 
 UNMATCHED_ROUTE = "unmatched"
+MULTIPROCESS_DIR_ENV = "PROMETHEUS_MULTIPROC_DIR"
+
+
+def exposition() -> bytes:
+    """The Prometheus text of this process, or of every worker when they share a directory."""
+    if os.environ.get(MULTIPROCESS_DIR_ENV):
+        registry = CollectorRegistry()
+        multiprocess.MultiProcessCollector(registry)  # type: ignore[no-untyped-call]
+        return generate_latest(registry)
+    return generate_latest()
 
 
 class RequestMetrics:
