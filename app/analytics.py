@@ -8,7 +8,7 @@ timezone-aware UTC timestamps.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import date, datetime
+from datetime import UTC, date, datetime, timedelta
 from typing import IO, Any
 
 import pandas as pd
@@ -27,19 +27,29 @@ class AnalyticsView:
     grain: str
     time_column: str
     has_vehicle: bool
+    # analytics.<function>(since, until): the view over a window, reading only its pings.
+    window_function: str | None = None
 
 
 VIEWS: dict[str, AnalyticsView] = {
     view.name: view
     for view in (
-        AnalyticsView("engagement_daily", "vehicle x UTC day", "day", True),
-        AnalyticsView("engagement_fleet_daily", "UTC day", "day", False),
-        AnalyticsView("ping_rate_hourly", "vehicle x UTC hour", "hour", True),
-        AnalyticsView("fleet_ping_hourly", "UTC hour", "hour", False),
+        AnalyticsView(
+            "engagement_daily", "vehicle x UTC day", "day", True, "engagement_daily_between"
+        ),
+        AnalyticsView(
+            "engagement_fleet_daily", "UTC day", "day", False, "engagement_fleet_daily_between"
+        ),
+        AnalyticsView(
+            "ping_rate_hourly", "vehicle x UTC hour", "hour", True, "ping_rate_hourly_between"
+        ),
+        AnalyticsView("fleet_ping_hourly", "UTC hour", "hour", False, "fleet_ping_hourly_between"),
         AnalyticsView("inrix_latency", "corridor x INRIX snapshot", "measured_at", False),
         AnalyticsView("plan_adherence", "ping following a plan", "ts", True),
-        AnalyticsView("plan_adherence_daily", "vehicle x UTC day", "day", True),
-        AnalyticsView("edie_boxes", "corridor x 10 s x 200 m box", "t_start", False),
+        AnalyticsView(
+            "plan_adherence_daily", "vehicle x UTC day", "day", True, "plan_adherence_daily_between"
+        ),
+        AnalyticsView("edie_boxes", "corridor x 10 s x 200 m box", "t_start", False, "edie_field"),
     )
 }
 
@@ -57,11 +67,35 @@ def view(name: str) -> AnalyticsView:
         raise UnknownView(f"unknown analytics view {name!r}; choose one of: {known}") from None
 
 
-def _bound(value: datetime | date, column: str) -> datetime | date:
-    """Day columns compare with dates; a datetime bound is cut to its UTC day there."""
-    if column == "day" and isinstance(value, datetime):
-        return value.date()
-    return value
+def _as_utc(value: datetime | date) -> datetime:
+    if isinstance(value, datetime):
+        return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+    return datetime(value.year, value.month, value.day, tzinfo=UTC)
+
+
+def bucket_window(
+    column: str, since: datetime | date | None, until: datetime | date | None
+) -> tuple[datetime | str, datetime | str]:
+    """The ping-time window of whole days or hours: rows with since <= bucket < until.
+
+    A day view keeps the days from since's date up to (not including) until's date; an hour
+    view the hours that start before `until`. Other views take the bounds as they are.
+    """
+    lower: datetime | str = "-infinity"
+    upper: datetime | str = "infinity"
+    if since is not None:
+        lower = _as_utc(since)
+        if column == "day":
+            lower = lower.replace(hour=0, minute=0, second=0, microsecond=0)
+        elif column == "hour":
+            lower = lower.replace(minute=0, second=0, microsecond=0)
+    if until is not None:
+        upper = _as_utc(until)
+        if column == "day":
+            upper = upper.replace(hour=0, minute=0, second=0, microsecond=0)
+        elif column == "hour" and upper != upper.replace(minute=0, second=0, microsecond=0):
+            upper = upper.replace(minute=0, second=0, microsecond=0) + timedelta(hours=1)
+    return lower, upper
 
 
 def view_query(
@@ -76,25 +110,22 @@ def view_query(
     if vehicle_id is not None and not chosen.has_vehicle:
         raise UnknownView(f"analytics view {name} has no vehicle_id column")
     params: dict[str, Any] = {}
-    if name == "edie_boxes":
-        # The view is the function over all time; a window goes to the function itself, which
-        # then reads only that window's pings (partition pruning, no full scan).
-        params = {
-            "since": since if since is not None else "-infinity",
-            "until": until if until is not None else "infinity",
-        }
-        return (
-            "SELECT * FROM analytics.edie_field(CAST(:since AS timestamptz), "
-            "CAST(:until AS timestamptz)) ORDER BY corridor_id, t_start, x_start_m",
-            params,
-        )
     conditions: list[str] = []
-    if since is not None:
-        conditions.append(f"{chosen.time_column} >= :since")
-        params["since"] = _bound(since, chosen.time_column)
-    if until is not None:
-        conditions.append(f"{chosen.time_column} < :until")
-        params["until"] = _bound(until, chosen.time_column)
+    if chosen.window_function is not None and (since is not None or until is not None):
+        # The view's function over the window reads only that window's pings.
+        params["since"], params["until"] = bucket_window(chosen.time_column, since, until)
+        source = (
+            f"analytics.{chosen.window_function}"
+            "(CAST(:since AS timestamptz), CAST(:until AS timestamptz))"
+        )
+    else:
+        source = f"analytics.{name}"
+        if since is not None:
+            conditions.append(f"{chosen.time_column} >= :since")
+            params["since"] = since
+        if until is not None:
+            conditions.append(f"{chosen.time_column} < :until")
+            params["until"] = until
     if vehicle_id is not None:
         conditions.append("vehicle_id = :vehicle_id")
         params["vehicle_id"] = vehicle_id
@@ -102,7 +133,9 @@ def view_query(
     order = f"vehicle_id, {chosen.time_column}" if chosen.has_vehicle else chosen.time_column
     if name == "inrix_latency":
         order = "corridor_id, measured_at"
-    return f"SELECT * FROM analytics.{name}{where} ORDER BY {order}", params
+    if name == "edie_boxes":
+        order = "corridor_id, t_start, x_start_m"
+    return f"SELECT * FROM {source}{where} ORDER BY {order}", params
 
 
 def read_view(

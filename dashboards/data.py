@@ -13,6 +13,7 @@ from prometheus_client import REGISTRY
 from sqlalchemy import RowMapping, select, text
 from sqlalchemy.ext.asyncio import AsyncSession
 
+from app.analytics import view_query
 from app.models import Corridor, PlanRun
 
 METRES_PER_MILE = 1609.344
@@ -83,14 +84,16 @@ async def status_history(
 async def vehicle_engagement(
     session: AsyncSession, vehicle_id: str, since: datetime
 ) -> Sequence[RowMapping]:
-    """analytics.engagement_daily of the vehicle from `since` (oldest first)."""
-    return await _rows(
-        session,
-        "SELECT * FROM analytics.engagement_daily WHERE vehicle_id = :vehicle "
-        "AND day >= :since ORDER BY day",
-        vehicle=vehicle_id,
-        since=since.date(),
-    )
+    """analytics.engagement_daily of the vehicle from `since`'s day (oldest first)."""
+    return await _view(session, "engagement_daily", since, vehicle_id=vehicle_id)
+
+
+async def _view(
+    session: AsyncSession, name: str, since: datetime, *, vehicle_id: str | None = None
+) -> Sequence[RowMapping]:
+    """An analytics view from `since`, through its windowed function (see app.analytics)."""
+    sql, params = view_query(name, since=since, vehicle_id=vehicle_id)
+    return await _rows(session, sql, **params)
 
 
 # --- plans --------------------------------------------------------------------------------------
@@ -326,32 +329,25 @@ def rejected_inputs() -> RejectedInputs:
 
 
 async def fleet_engagement(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """analytics.engagement_fleet_daily from `since`."""
-    return await _rows(
-        session,
-        "SELECT * FROM analytics.engagement_fleet_daily WHERE day >= :since ORDER BY day",
-        since=since.date(),
-    )
+    """analytics.engagement_fleet_daily from `since`'s day."""
+    return await _view(session, "engagement_fleet_daily", since)
 
 
 async def fleet_pings_hourly(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """analytics.fleet_ping_hourly from `since`."""
-    return await _rows(
-        session,
-        "SELECT * FROM analytics.fleet_ping_hourly WHERE hour >= :since ORDER BY hour",
-        since=since,
-    )
+    """analytics.fleet_ping_hourly from `since`'s hour."""
+    return await _view(session, "fleet_ping_hourly", since)
 
 
 async def fleet_adherence(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """Plan adherence per day over the fleet (pooled over pings)."""
+    """Plan adherence per day over the fleet (pooled over pings) from `since`'s day."""
+    sql, params = view_query("plan_adherence_daily", since=since)
     return await _rows(
         session,
         "SELECT day, sum(pings) AS pings, "
         "sum(mean_abs_speed_error_mps * pings) / sum(pings) AS mean_abs_speed_error_mps, "
         "sum(mean_speed_error_mps * pings) / sum(pings) AS mean_speed_error_mps "
-        "FROM analytics.plan_adherence_daily WHERE day >= :since GROUP BY day ORDER BY day",
-        since=since.date(),
+        f"FROM ({sql}) daily GROUP BY day ORDER BY day",
+        **params,
     )
 
 

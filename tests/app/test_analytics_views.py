@@ -464,3 +464,19 @@ def test_the_sql_energy_model_matches_the_simulators(connection: Connection) -> 
             expected = RAV4_2019.fuel_rate_gps(speeds, accel, grade)
             found = [fuel(connection, float(v), float(accel), grade) for v in speeds]
             np.testing.assert_allclose(found, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_a_window_keeps_whole_days_and_hours(connection: Connection, store: Store) -> None:
+    # Pings at 13:00 and 13:30 of DAY1: a window starting at 13:20 still returns the whole
+    # day (20 pings) and the whole 13:00 hour, as filtering the view by day or hour would.
+    store(engaged_drive("SF-001", T0, 10, 5))
+    store(engaged_drive("SF-001", T0 + timedelta(minutes=30), 10, 5))
+    since = T0 + timedelta(minutes=20)
+
+    days = analytics.read_view(connection, "engagement_daily", since=since)
+    hours = analytics.read_view(connection, "fleet_ping_hourly", since=since, until=since)
+    none = analytics.read_view(connection, "fleet_ping_hourly", since=T0 + timedelta(hours=1))
+
+    assert list(days["pings"]) == [20]
+    assert list(hours["pings"]) == [20]
+    assert none.empty
