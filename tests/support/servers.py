@@ -63,11 +63,16 @@ def smoothfleet_command() -> list[str]:
 
 
 def run_cli(
-    *args: str, env: dict[str, str], timeout: float = 120
+    *args: str, env: dict[str, str], timeout: float = 120, stdin: str | None = None
 ) -> subprocess.CompletedProcess[str]:
-    """Run `smoothfleet ARGS...` and capture its output."""
+    """Run `smoothfleet ARGS...` (optionally feeding `stdin`) and capture its output."""
     return subprocess.run(
-        [*smoothfleet_command(), *args], env=env, capture_output=True, text=True, timeout=timeout
+        [*smoothfleet_command(), *args],
+        env=env,
+        input=stdin,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
     )
 
 
