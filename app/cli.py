@@ -483,10 +483,24 @@ DEMO_ADMIN = "admin"
 @cli.command("demo")
 @click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
 @click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
-def demo(host: str | None, port: int | None) -> None:
-    """Everything on one machine: embedded database, migrations, seed, API and dashboard."""
+@click.option(
+    "--duration",
+    type=click.FloatRange(min=1),
+    help="Stop after this many seconds (default: run until Ctrl-C).",
+)
+@click.option(
+    "--vehicles",
+    type=click.IntRange(1, 100),
+    default=100,
+    show_default=True,
+    help="How many roster vehicles the simulated fleet drives.",
+)
+def demo(host: str | None, port: int | None, duration: float | None, vehicles: int) -> None:
+    """Everything on one machine: embedded database, migrations, seed, API, dashboard, planner,
+    a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent."""
     from app.migrate import upgrade
     from app.seed import seed
+    from sim.fleet.demo import DemoError, run_demo
 
     current = _with_overrides(host=host, port=port)
     ensure_port_free(current.host, current.port)
@@ -505,7 +519,14 @@ def demo(host: str | None, port: int | None) -> None:
             f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)"
         )
         console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
-        run_server(url, current, migrate=False)
+        try:
+            summary = run_demo(
+                url, current, duration_s=duration, vehicles=vehicles, say=console.print
+            )
+        except DemoError as error:
+            raise CliError(f"demo: {error}") from None
+        for line in summary.lines():
+            console.print(line)
 
 
 def _with_overrides(**overrides: object) -> Settings:

@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sim.drives import Drive
 
@@ -36,17 +36,28 @@ SAMPLE_PERIOD_S = 5.0
 SAMPLE_SPACING_M = 50.0
 
 
+class WaveField:
+    """v(t, x) behind a drive, with the drive's characteristic x_L(tau) + c tau precomputed."""
+
+    def __init__(self, drive: Drive, wave_speed_mps: float = WAVE_SPEED_MPS) -> None:
+        self.drive_time = np.arange(drive.steps + 1, dtype=np.float64) * drive.dt_s
+        self.characteristic = drive.position_m + wave_speed_mps * self.drive_time
+        self.speed = drive.speed_mps
+        self.wave_speed_mps = wave_speed_mps
+
+    def speed_mps(self, time_s: ArrayLike, x_m: ArrayLike) -> FloatArray:
+        """The leader's speed where the upstream-moving state through (t, x) met it."""
+        key = np.asarray(x_m, dtype=np.float64) + self.wave_speed_mps * np.asarray(time_s)
+        met_at = np.interp(key, self.characteristic, self.drive_time)
+        speed: FloatArray = np.interp(met_at, self.drive_time, self.speed)
+        return speed
+
+
 def wave_field_speed(
-    drive: Drive, time_s: FloatArray, x_m: FloatArray, wave_speed_mps: float = WAVE_SPEED_MPS
+    drive: Drive, time_s: ArrayLike, x_m: ArrayLike, wave_speed_mps: float = WAVE_SPEED_MPS
 ) -> FloatArray:
-    """v(t, x): the leader's speed where the upstream-moving state through (t, x) met it."""
-    drive_time = np.arange(drive.steps + 1) * drive.dt_s
-    characteristic = drive.position_m + wave_speed_mps * drive_time
-    met_at = np.interp(
-        np.asarray(x_m) + wave_speed_mps * np.asarray(time_s), characteristic, drive_time
-    )
-    speed: FloatArray = np.interp(met_at, drive_time, drive.speed_mps)
-    return speed
+    """v(t, x) for one query (build a `WaveField` to ask many)."""
+    return WaveField(drive, wave_speed_mps).speed_mps(time_s, x_m)
 
 
 @dataclass(frozen=True)
@@ -96,16 +107,14 @@ def inrix_snapshots(
     starts = np.arange(first_minute_s, last_minute_s + 1e-9, INRIX_PERIOD_S)
     sample_t = np.arange(0.0, INRIX_PERIOD_S, SAMPLE_PERIOD_S) + 0.5 * SAMPLE_PERIOD_S
     speeds = np.empty((len(starts), len(bounds_m) - 1))
+    wave_field = WaveField(drive, wave_speed_mps)
     for segment in range(len(bounds_m) - 1):
         low, high = float(bounds_m[segment]), float(bounds_m[segment + 1])
         count = max(1, int(round((high - low) / SAMPLE_SPACING_M)))
         sample_x = low + (np.arange(count) + 0.5) * (high - low) / count
         times = starts[:, None, None] + sample_t[None, :, None]
-        field = wave_field_speed(
-            drive,
-            np.broadcast_to(times, (len(starts), len(sample_t), count)),
-            sample_x,
-            wave_speed_mps,
+        field = wave_field.speed_mps(
+            np.broadcast_to(times, (len(starts), len(sample_t), count)), sample_x
         )
         speeds[:, segment] = field.mean(axis=(1, 2))
     return InrixFeed(

@@ -1,7 +1,7 @@
 """The demo's road: real stop-and-go traffic laid over the seed corridor, as INRIX reports it and
 as the fleet's cars meet it.
 
-The traffic is the wave field of a real I-24 drive (`sim.traffic.wave_field_speed`), replayed in
+The traffic is the wave field of a real I-24 drive (`sim.traffic.WaveField`), replayed in
 a loop so waves keep travelling upstream through the corridor for as long as the demo runs. From
 it come:
 - the simulated INRIX feed: per seed segment, the mean speed over the minute that ended 180 s
@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.drives import Drive, drive_from_speeds
-from sim.traffic import INRIX_LATENCY_S, INRIX_PERIOD_S, SAMPLE_SPACING_M, wave_field_speed
+from sim.traffic import INRIX_LATENCY_S, INRIX_PERIOD_S, SAMPLE_SPACING_M, WaveField
 
 FloatArray = NDArray[np.float64]
 
@@ -32,6 +32,12 @@ LOOP_HOURS = 6.0
 SAMPLE_PERIOD_S = 5.0
 # INRIX confidence score for real-time readings (the paper's data: 30 real-time).
 REAL_TIME_SCORE = 30
+
+
+def synthetic_waves(duration_s: float = 1200.0) -> Drive:
+    """Stop-and-go without the shared data: speed swinging 5-25 m/s every 4 minutes."""
+    time_s = np.arange(0.0, duration_s, 0.1)
+    return drive_from_speeds("synthetic waves", 15.0 + 10.0 * np.sin(2 * np.pi * time_s / 240.0))
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,7 @@ class CorridorTraffic:
         self.looped = drive_from_speeds(
             f"{drive.name} x{laps}", np.tile(drive.speed_mps[:-1], laps), drive.dt_s
         )
+        self.field = WaveField(self.looped)
         self.period_s = self.looped.duration_s
         self.start_offset_s = start_offset_s
         self.source = drive.name
@@ -58,7 +65,7 @@ class CorridorTraffic:
     def speed_mps(self, time_s: float | FloatArray, x_m: FloatArray) -> FloatArray:
         """Traffic speed at demo time(s) `time_s` and corridor positions `x_m`."""
         field_time = (np.asarray(time_s) + self.start_offset_s) % self.period_s
-        return wave_field_speed(self.looped, field_time, np.asarray(x_m, dtype=np.float64))
+        return self.field.speed_mps(field_time, x_m)
 
     def segment_speeds_mps(self, minute_end_s: float, segments: Sequence[Segment]) -> FloatArray:
         """Mean speed of each segment over the minute ending at `minute_end_s`."""

@@ -1,0 +1,469 @@
+"""`smoothfleet demo`: the whole loop on one machine.
+
+Given a migrated and seeded database (the CLI starts the embedded PostgreSQL), the demo
+- issues a bearer token to every active roster vehicle and one to the INRIX feed;
+- starts the server (`smoothfleet serve`: API, dashboard and the planner schedule) as its own
+  process, so its CPU share can be read apart from the fleet's;
+- posts a simulated INRIX feed to POST /api/v1/feeds/inrix every minute (the last 15 minutes at
+  once when it starts, as a feed that was already running would have), from the traffic of
+  `sim.fleet.traffic`: a real stop-and-go drive's waves looping over the corridor;
+- runs the fleet in worker processes (`sim.fleet.worker`): every vehicle the real agent on its
+  own virtual CAN bus with a car emulator, talking HTTP with its own token;
+- stops on Ctrl-C or after `duration_s`, and prints what happened: pings stored and from how
+  many vehicles, plans published, engagement share, the fleet's fuel economy and speed, and
+  the CPU share of the server and of the fleet.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import httpx
+from sqlalchemy import Engine, select, text
+
+from app.core.config import Settings
+from app.core.db import make_sync_engine, session_scope
+from app.core.security import issue_token
+from app.models.dimensions import InrixSegment, Vehicle
+from sim.drives import Drive, load_drive
+from sim.energy import GALLONS_PER_GRAM_GASOLINE, METRES_PER_MILE
+from sim.fleet.traffic import CorridorTraffic, Segment, synthetic_waves
+from sim.fleet.worker import VehicleSpec, WorkerSpec
+
+CORRIDOR = "I-24-WB"
+# The strongest stop-and-go drive of the shared data, 300 s in: waves from the first minute.
+TRAFFIC_DRIVE = (
+    Path(__file__).resolve().parents[3]
+    / "shared/data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+)
+TRAFFIC_OFFSET_S = 300.0
+FEED_PERIOD_S = 60.0
+FEED_BACKFILL_MINUTES = 15
+FLEET_WORKERS = 2
+# Cars start this far inside the corridor's ends (m).
+START_MARGIN_M = 300.0
+READY_TIMEOUT_S = 90.0
+STOP_TIMEOUT_S = 90.0
+
+# A fleet worker process and the file its summary goes to.
+WorkerProcess = tuple[subprocess.Popen[bytes], Path]
+
+
+@dataclass(frozen=True)
+class DemoSummary:
+    """What a demo run did."""
+
+    duration_s: float
+    vehicles: int
+    pings_stored: int
+    vehicles_pinging: int
+    plans_published: int
+    inrix_snapshots: int
+    engaged_share: float
+    pings_engaged_share: float
+    fuel_economy_mpg: float
+    mean_speed_mps: float
+    server_cpu_share: float | None
+    fleet_cpu_share: float | None
+    late_control_steps: float
+    # Seconds between a car's control steps, and the CPU one step of the whole worker takes.
+    mean_step_interval_s: float
+    step_cpu_s: float
+
+    def lines(self) -> list[str]:
+        """The closing summary, one fact per line."""
+        cpu = (
+            f"CPU (share of one core): server {_share(self.server_cpu_share)}, "
+            f"fleet {_share(self.fleet_cpu_share)}"
+        )
+        return [
+            f"ran {self.duration_s:.0f} s with {self.vehicles} vehicles",
+            f"pings stored: {self.pings_stored} from {self.vehicles_pinging} vehicles",
+            f"plans published: {self.plans_published} (INRIX snapshots posted and stored: "
+            f"{self.inrix_snapshots})",
+            f"engaged on the plan: {100 * self.engaged_share:.0f} % of vehicle-time "
+            f"({100 * self.pings_engaged_share:.0f} % of stored pings)",
+            f"fleet so far: {self.fuel_economy_mpg:.1f} mpg (RAV4 fuel model), mean speed "
+            f"{self.mean_speed_mps:.1f} m/s",
+            cpu,
+            f"control steps: every {self.mean_step_interval_s:.2f} s on average (goal 0.10 s, "
+            f"{100 * self.late_control_steps:.0f} % late); one step of a worker's cars takes "
+            f"{1000 * self.step_cpu_s:.0f} ms of CPU",
+        ]
+
+
+def _share(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.0f} %"
+
+
+def process_cpu_s(pid: int) -> float | None:
+    """User + system CPU seconds of a running process (Linux /proc), None elsewhere."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    ticks = os.sysconf("SC_CLK_TCK")
+    return (int(fields[11]) + int(fields[12])) / ticks
+
+
+def fleet_specs(
+    engine: Engine,
+    settings: Settings,
+    run_dir: Path,
+    epoch: float,
+    drive_path: Path | None,
+    vehicles: int,
+    workers: int,
+) -> tuple[list[WorkerSpec], str, list[Segment]]:
+    """Tokens for the fleet and the feed, and the workers' specs (cars spread per lane)."""
+    with session_scope(engine) as session:
+        roster = [
+            vehicle
+            for vehicle in session.scalars(select(Vehicle).order_by(Vehicle.vehicle_id))
+            if vehicle.is_active and not vehicle.is_in_maintenance
+        ][:vehicles]
+        segments = [
+            Segment(row.xd_code, row.start_x_m, row.end_x_m)
+            for row in session.scalars(
+                select(InrixSegment)
+                .where(InrixSegment.corridor_id == CORRIDOR)
+                .order_by(InrixSegment.start_x_m)
+            )
+        ]
+        length = max(segment.end_x_m for segment in segments)
+        by_lane: dict[int, list[Vehicle]] = {}
+        for vehicle in roster:
+            by_lane.setdefault(vehicle.assigned_lane, []).append(vehicle)
+        specs: list[VehicleSpec] = []
+        for lane, lane_vehicles in sorted(by_lane.items()):
+            spacing = (length - 2 * START_MARGIN_M) / len(lane_vehicles)
+            for order, vehicle in enumerate(lane_vehicles):
+                specs.append(
+                    VehicleSpec(
+                        vehicle_id=vehicle.vehicle_id,
+                        make=vehicle.make,
+                        model=vehicle.model,
+                        year=vehicle.year,
+                        lane=lane,
+                        token=issue_token(
+                            session, "vehicle", vehicle_id=vehicle.vehicle_id, name="demo"
+                        ),
+                        position_m=START_MARGIN_M + (order + 0.5 * (lane % 2)) * spacing,
+                    )
+                )
+        feed_token = issue_token(session, "feed", name="demo INRIX feed")
+    base = f"http://{settings.host}:{settings.port}"
+    worker_specs = [
+        WorkerSpec(
+            server_url=base,
+            corridor_id=CORRIDOR,
+            epoch_unix_s=epoch,
+            drive_path=str(drive_path) if drive_path is not None else None,
+            traffic_offset_s=TRAFFIC_OFFSET_S,
+            spool_dir=str(run_dir / "spools"),
+            dbc_cache=str(settings.data_dir / "dbc"),
+            vehicles=specs[part::workers],
+        )
+        for part in range(workers)
+        if specs[part::workers]
+    ]
+    return worker_specs, feed_token, segments
+
+
+class InrixFeed:
+    """Posts the simulated INRIX every minute to the real feed endpoint."""
+
+    def __init__(
+        self,
+        base_url: str,
+        token: str,
+        traffic: CorridorTraffic,
+        segments: Sequence[Segment],
+        epoch: float,
+    ) -> None:
+        self.http = httpx.Client(
+            base_url=base_url, headers={"Authorization": f"Bearer {token}"}, timeout=10.0
+        )
+        self.traffic = traffic
+        self.segments = list(segments)
+        self.epoch = epoch
+        self.stop = threading.Event()
+        self.posted = 0
+        self.errors: list[str] = []
+
+    def post(self, demo_time_s: float) -> None:
+        """One snapshot: the minute that ended INRIX's latency before `demo_time_s`."""
+        wall = datetime.fromtimestamp(self.epoch + demo_time_s, UTC)
+        body = self.traffic.inrix_response(demo_time_s, wall, self.segments)
+        try:
+            response = self.http.post("/api/v1/feeds/inrix", json=body)
+        except httpx.HTTPError as error:
+            self.errors.append(f"{type(error).__name__}: {error}")
+            return
+        if response.status_code == 200:
+            self.posted += 1
+        else:
+            self.errors.append(f"HTTP {response.status_code}: {response.text[:200]}")
+
+    def backfill(self) -> None:
+        """The last minutes at once, as a feed that was already running would have posted."""
+        now = time.time() - self.epoch
+        for minutes_ago in range(FEED_BACKFILL_MINUTES, 0, -1):
+            self.post(now - minutes_ago * FEED_PERIOD_S)
+
+    def run(self) -> None:
+        """One snapshot a minute until stopped."""
+        while not self.stop.is_set():
+            self.post(time.time() - self.epoch)
+            self.stop.wait(FEED_PERIOD_S)
+        self.http.close()
+
+
+def wait_ready(base_url: str, server: subprocess.Popen[bytes], timeout_s: float) -> None:
+    """Until /readyz answers 200; fails if the server process ends first."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if server.poll() is not None:
+            raise RuntimeError(f"the server exited with code {server.returncode}")
+        try:
+            if httpx.get(f"{base_url}/readyz", timeout=2.0).status_code == 200:
+                return
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.3)
+    raise RuntimeError(f"the server at {base_url} was not ready after {timeout_s:.0f} s")
+
+
+class DemoError(RuntimeError):
+    """The demo could not run (the server or a fleet worker failed); the message says which."""
+
+
+def run_demo(
+    url: str,
+    settings: Settings,
+    *,
+    duration_s: float | None,
+    vehicles: int = 100,
+    drive_path: Path | None = TRAFFIC_DRIVE,
+    say: Callable[[str], None] = print,
+) -> DemoSummary:
+    """Server, feed and fleet until Ctrl-C or `duration_s`; returns the summary."""
+    run_dir = settings.data_dir / "demo" / datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if drive_path is not None and not drive_path.is_file():
+        say(f"no {drive_path}: the traffic is synthetic stop-and-go waves instead")
+        drive_path = None
+    engine = make_sync_engine(url)
+    epoch = time.time()
+    started = datetime.fromtimestamp(epoch, UTC)
+    specs, feed_token, segments = fleet_specs(
+        engine, settings, run_dir, epoch, drive_path, vehicles, FLEET_WORKERS
+    )
+    base = f"http://{settings.host}:{settings.port}"
+    env = {**os.environ, "SMOOTHFLEET_DATABASE_URL": url}
+    server = subprocess.Popen(
+        [
+            *smoothfleet_command(),
+            "serve",
+            "--no-migrate",
+            "--host",
+            settings.host,
+            "--port",
+            str(settings.port),
+        ],
+        env=env,
+        stdout=(run_dir / "server.log").open("wb"),
+        stderr=subprocess.STDOUT,
+    )
+    workers: list[WorkerProcess] = []
+    traffic = CorridorTraffic(traffic_drive(drive_path), start_offset_s=TRAFFIC_OFFSET_S)
+    feed = InrixFeed(base, feed_token, traffic, segments, epoch)
+    feed_thread = threading.Thread(target=feed.run, name="inrix-feed", daemon=True)
+    try:
+        wait_ready(base, server, READY_TIMEOUT_S)
+        feed.backfill()
+        # A first plan now rather than at the schedule's next minute (the schedule's first run
+        # came before any INRIX had arrived).
+        subprocess.run(
+            [*smoothfleet_command(), "planner", "once"],
+            env=env,
+            stdout=(run_dir / "planner-once.log").open("wb"),
+            stderr=subprocess.STDOUT,
+            check=False,
+        )
+        feed_thread.start()
+        workers = [start_worker(run_dir, index, spec) for index, spec in enumerate(specs)]
+        say(
+            f"fleet: {sum(len(spec.vehicles) for spec in specs)} vehicles in {len(workers)} "
+            f"processes; logs in {run_dir}"
+        )
+        measured_from = time.monotonic()
+        pids = [server.pid] + [process.pid for process, _ in workers]
+        cpu_start = {pid: process_cpu_s(pid) for pid in pids}
+        deadline = math.inf if duration_s is None else measured_from + duration_s
+        try:
+            while time.monotonic() < deadline:
+                for process, _ in workers:
+                    if process.poll() is not None:
+                        raise DemoError(
+                            f"a fleet worker exited (code {process.returncode}); see {run_dir}"
+                        )
+                time.sleep(min(1.0, max(0.0, deadline - time.monotonic())))
+        except KeyboardInterrupt:
+            say("interrupted")
+        elapsed = time.monotonic() - measured_from
+        cpu_end = {pid: process_cpu_s(pid) for pid in pids}
+        say("stopping: the agents hand their cars back and upload their spools ...")
+        summaries = stop_workers(workers)
+        feed.stop.set()
+        feed_thread.join(timeout=15)
+        if feed.errors:
+            say(f"INRIX feed: {len(feed.errors)} failed posts, last: {feed.errors[-1]}")
+        return summarise(
+            engine,
+            started,
+            elapsed,
+            summaries,
+            cpu_share([server.pid], cpu_start, cpu_end, elapsed),
+            cpu_share([p.pid for p, _ in workers], cpu_start, cpu_end, elapsed),
+        )
+    finally:
+        for process, _ in workers:
+            if process.poll() is None:
+                process.kill()
+        feed.stop.set()
+        server.send_signal(signal.SIGTERM)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+        engine.dispose()
+
+
+def start_worker(run_dir: Path, index: int, spec: WorkerSpec) -> WorkerProcess:
+    """A fleet worker process; its spec (with the cars' tokens) is readable by the user only."""
+    spec_path = run_dir / f"worker-{index}.json"
+    spec_path.touch(mode=0o600)
+    spec_path.write_text(spec.model_dump_json())
+    summary_path = run_dir / f"worker-{index}.summary.json"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "sim.fleet.worker", str(spec_path), str(summary_path)],
+        stdout=(run_dir / f"worker-{index}.log").open("wb"),
+        stderr=subprocess.STDOUT,
+    )
+    return process, summary_path
+
+
+def stop_workers(workers: Sequence[WorkerProcess]) -> list[dict[str, Any]]:
+    """SIGTERM every worker, wait for it, and read its summary."""
+    for process, _ in workers:
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+    summaries = []
+    for process, summary_path in workers:
+        try:
+            process.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            continue
+        if summary_path.exists():
+            summaries.append(json.loads(summary_path.read_text()))
+    return summaries
+
+
+def traffic_drive(drive_path: Path | None) -> Drive:
+    """The drive whose waves make the demo's traffic (synthetic waves without the data)."""
+    return load_drive(drive_path) if drive_path is not None else synthetic_waves()
+
+
+def cpu_share(
+    pids: Sequence[int],
+    start: dict[int, float | None],
+    end: dict[int, float | None],
+    elapsed: float,
+) -> float | None:
+    """CPU seconds the processes used per second of `elapsed` (1.0 = one core)."""
+    used = 0.0
+    for pid in pids:
+        before, after = start.get(pid), end.get(pid)
+        if before is None or after is None or elapsed <= 0:
+            return None
+        used += after - before
+    return used / elapsed
+
+
+def summarise(
+    engine: Engine,
+    started: datetime,
+    elapsed: float,
+    workers: list[dict[str, Any]],
+    server_cpu: float | None,
+    fleet_cpu: float | None,
+) -> DemoSummary:
+    """The closing summary from the database and the workers' own counts."""
+    with engine.connect() as connection:
+        pings, vehicles_pinging, engaged = connection.execute(
+            text(
+                "SELECT count(*), count(DISTINCT vehicle_id), "
+                "coalesce(avg(is_controller_engaged::int), 0) "
+                "FROM fact_vehicle_ping WHERE ts >= :started"
+            ),
+            {"started": started},
+        ).one()
+        plans = connection.execute(
+            text(
+                "SELECT count(*) FROM plan_run WHERE status = 'published' "
+                "AND published_at >= :started"
+            ),
+            {"started": started},
+        ).scalar_one()
+        snapshots = connection.execute(
+            text(
+                "SELECT count(DISTINCT measured_at) FROM fact_inrix_estimate "
+                "WHERE received_at >= :started"
+            ),
+            {"started": started},
+        ).scalar_one()
+    fleet = sum(w["vehicles"] for w in workers)
+    steps = sum(w["control_steps"] * w["vehicles"] for w in workers)
+    distance = sum(w["distance_m"] for w in workers)
+    fuel = sum(w["fuel_g"] for w in workers)
+    worker_steps = sum(w["control_steps"] for w in workers)
+    return DemoSummary(
+        duration_s=elapsed,
+        vehicles=fleet,
+        pings_stored=int(pings),
+        vehicles_pinging=int(vehicles_pinging),
+        plans_published=int(plans),
+        inrix_snapshots=int(snapshots),
+        engaged_share=sum(w["engaged_share"] * w["control_steps"] * w["vehicles"] for w in workers)
+        / max(1, steps),
+        pings_engaged_share=float(engaged),
+        fuel_economy_mpg=(distance / METRES_PER_MILE) / (fuel * GALLONS_PER_GRAM_GASOLINE)
+        if fuel > 0
+        else 0.0,
+        mean_speed_mps=distance / max(1e-9, sum(w["driving_s"] for w in workers)),
+        server_cpu_share=server_cpu,
+        fleet_cpu_share=fleet_cpu,
+        late_control_steps=sum(w["late_steps"] for w in workers) / max(1, worker_steps),
+        mean_step_interval_s=sum(w["control_wall_s"] for w in workers) / max(1, worker_steps),
+        step_cpu_s=sum(w["control_cpu_s"] for w in workers) / max(1, worker_steps),
+    )
+
+
+def smoothfleet_command() -> list[str]:
+    """How to run this installation's `smoothfleet`."""
+    script = Path(sys.executable).parent / "smoothfleet"
+    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]

@@ -1,0 +1,60 @@
+"""`smoothfleet demo` closes the whole loop: server, planner, INRIX feed and a fleet of real agents.
+
+A short run with a few vehicles (the full 100-vehicle run is for the command line): at the end
+the plans are published, every vehicle of the fleet has pings stored, some of them driving on
+the plan, and the feed's snapshots are in the warehouse.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from sqlalchemy import Engine, text
+
+from tests.support.servers import cli_env, free_port, run_cli
+
+VEHICLES = 6
+
+
+@pytest.mark.slow
+def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path) -> None:
+    result = run_cli(
+        "demo",
+        "--port",
+        str(free_port()),
+        "--duration",
+        "30",
+        "--vehicles",
+        str(VEHICLES),
+        env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url, SMOOTHFLEET_DATA_DIR=str(tmp_path)),
+        timeout=400,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert f"with {VEHICLES} vehicles" in result.stdout
+    assert f"from {VEHICLES} vehicles" in result.stdout
+    with engine.connect() as connection:
+        pinging = connection.execute(
+            text("SELECT vehicle_id, count(*) FROM fact_vehicle_ping GROUP BY vehicle_id")
+        ).all()
+        engaged = connection.execute(
+            text("SELECT count(*) FROM fact_vehicle_ping WHERE is_controller_engaged")
+        ).scalar_one()
+        plans = connection.execute(
+            text("SELECT count(*) FROM plan_run WHERE status = 'published'")
+        ).scalar_one()
+        snapshots = connection.execute(
+            text("SELECT count(DISTINCT measured_at) FROM fact_inrix_estimate")
+        ).scalar_one()
+        statuses = connection.execute(
+            text("SELECT count(DISTINCT vehicle_id) FROM fact_vehicle_status")
+        ).scalar_one()
+    assert len(pinging) == VEHICLES
+    assert all(count >= 10 for _, count in pinging)
+    assert plans >= 1
+    assert engaged > 0
+    assert snapshots >= 15  # the 15-minute backfill and the live minutes
+    assert statuses == VEHICLES
+    # every agent handed its car back and uploaded its spool before the demo ended
+    for spool in tmp_path.glob("demo/*/spools/*.sqlite"):
+        assert spool.stat().st_size > 0
