@@ -70,6 +70,7 @@ router = APIRouter(include_in_schema=False)
 TRACE_WINDOW = timedelta(minutes=30)
 PLAN_HISTORY = timedelta(minutes=60)
 ANALYTICS_DAYS = 30
+ADHERENCE_DAYS = 7  # every ping looked up in its plan: a week is the page's budget
 HEATMAP_COLUMNS = 240
 HEATMAP_ROWS = 180
 
@@ -706,7 +707,7 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
     engagement = await data.fleet_engagement(session, since)
     hourly_since = (now - timedelta(hours=48)).replace(minute=0, second=0, microsecond=0)
     hourly = await data.fleet_pings_hourly(session, hourly_since)
-    adherence = await data.fleet_adherence(session, since)
+    adherence = await data.fleet_adherence(session, now - timedelta(days=ADHERENCE_DAYS))
     context: dict[str, Any] = {
         "page": "analytics",
         "engagement": engagement,

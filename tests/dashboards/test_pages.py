@@ -296,7 +296,7 @@ def test_every_page_works_on_an_empty_database(empty_site: str, path: str, says:
         ("/plans", "No plan published yet"),
         ("/vehicles/SF-010", "No pings from this vehicle yet"),
         ("/feeds", "No pings in the last hour"),
-        ("/analytics", "No ping has followed a plan yet"),
+        ("/analytics", "No ping has followed a plan in the last 7 days"),
     ],
 )
 def test_pages_of_a_fleet_without_data_say_what_to_do(site: str, path: str, says: str) -> None:
