@@ -425,6 +425,9 @@ def ensure_port_free(host: str, port: int) -> None:
             raise CliError(f"cannot listen on {host}:{port}: {error.strerror}") from None
 
 
+WORKER_STARTUP_TIMEOUT_S = 120
+
+
 def run_server(url: str, current: Settings, *, migrate: bool) -> None:
     """Migrate (under a lock, so replicas do it once) and run uvicorn until stopped."""
     import uvicorn
@@ -451,6 +454,9 @@ def run_server(url: str, current: Settings, *, migrate: bool) -> None:
             log_level="info",
             access_log=False,
             proxy_headers=True,
+            # A worker imports the whole app (pandas, the dashboard) before it answers the
+            # supervisor; uvicorn's 5 s default restarts it forever on a loaded small machine.
+            timeout_worker_healthcheck=WORKER_STARTUP_TIMEOUT_S,
         )
     finally:
         if metrics_dir is not None:

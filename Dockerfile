@@ -1,0 +1,27 @@
+# smoothfleet server image: API, dashboard, planner and the simulated fleet share it.
+FROM python:3.11-slim-bookworm AS build
+WORKDIR /src
+COPY pyproject.toml README.md ./
+COPY app ./app
+COPY planner ./planner
+COPY dashboards ./dashboards
+COPY vehicle_agent ./vehicle_agent
+COPY sim ./sim
+COPY migrations ./migrations
+COPY seed_data ./seed_data
+RUN pip wheel --no-cache-dir --wheel-dir /wheels '.[server]'
+
+FROM python:3.11-slim-bookworm
+RUN useradd --create-home --uid 10001 smoothfleet
+COPY --from=build /wheels /wheels
+RUN pip install --no-cache-dir --no-index --find-links /wheels 'smoothfleet[server]' \
+    && rm -rf /wheels
+USER smoothfleet
+ENV PYTHONUNBUFFERED=1 \
+    SMOOTHFLEET_HOST=0.0.0.0 \
+    SMOOTHFLEET_PORT=8000
+EXPOSE 8000
+HEALTHCHECK --interval=10s --timeout=3s --retries=3 \
+    CMD python -c "import httpx,sys; sys.exit(httpx.get('http://127.0.0.1:8000/readyz').status_code != 200)"
+ENTRYPOINT ["smoothfleet"]
+CMD ["serve"]
