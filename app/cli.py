@@ -553,7 +553,12 @@ cli.add_command(planner)
 
 
 def _exit_on_sigterm(signum: int, frame: FrameType | None) -> NoReturn:
-    """SIGTERM unwinds like Ctrl-C, so the embedded database is stopped on the way out."""
+    """SIGTERM unwinds like Ctrl-C, so the embedded database is stopped on the way out.
+
+    Further SIGTERMs and Ctrl-Cs are ignored from here on: the clean-up must not be cut short.
+    """
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     raise SystemExit(128 + signum)
 
 

@@ -8,6 +8,8 @@ stopped when the last process holding it exits (the wheel counts handles across 
 
 from __future__ import annotations
 
+import json
+import logging
 import subprocess
 import warnings
 from collections.abc import Iterator
@@ -21,6 +23,10 @@ from psycopg import sql
 from app.core.db import DatabaseUnavailable, libpq_url
 
 DATABASE_NAME = "smoothfleet"
+# The wheel's record of which processes hold the server (it stops when the last one leaves).
+HANDLE_LIST = ".handle_pids.json"
+
+log = logging.getLogger(__name__)
 
 
 def pgdata_dir(data_dir: Path) -> Path:
@@ -57,6 +63,25 @@ def bin_dir() -> Path:
     return Path(_import_wheel()._commands.POSTGRES_BIN_PATH)
 
 
+def _heal_handle_list(wheel: Any, pgdata: Path) -> None:
+    """Reset the wheel's list of processes holding the server if it is unreadable.
+
+    The wheel rewrites `.handle_pids.json` in place; a process killed mid-write leaves it empty
+    and every later start would fail on it. The processes it named are then unknown, so the
+    list starts afresh (a server still used by one of them may be stopped early by the next
+    command to exit; the data are safe either way).
+    """
+    handles = pgdata / HANDLE_LIST
+    with wheel.PostgresServer._lock:
+        if not handles.exists():
+            return
+        try:
+            json.loads(handles.read_text())
+        except ValueError:
+            log.warning("embedded PostgreSQL: %s was damaged; starting a new list", handles)
+            handles.unlink()
+
+
 @contextmanager
 def embedded_server(pgdata: Path, *, delete_on_exit: bool = False) -> Iterator[str]:
     """Start (or join) the server of cluster `pgdata`; yield the URL of its `postgres` database.
@@ -71,6 +96,7 @@ def embedded_server(pgdata: Path, *, delete_on_exit: bool = False) -> Iterator[s
         raise DatabaseUnavailable(
             f"SMOOTHFLEET_DATA_DIR: cannot create {pgdata.parent}: {error.strerror}"
         ) from None
+    _heal_handle_list(wheel, pgdata)
     try:
         server = wheel.get_server(pgdata, cleanup_mode="delete" if delete_on_exit else "stop")
     except (subprocess.CalledProcessError, subprocess.TimeoutExpired, OSError) as error:

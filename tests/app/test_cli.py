@@ -178,3 +178,14 @@ def test_embedded_database_serves_and_stops_on_sigterm(tmp_path: Path) -> None:
     assert again.returncode == 0
     assert "/smoothfleet" in again.stdout
     assert (data_dir / "pgdata" / "PG_VERSION").exists()
+
+
+def test_a_damaged_handle_list_of_the_embedded_server_is_healed(tmp_path: Path) -> None:
+    env = cli_env(SMOOTHFLEET_DATA_DIR=str(tmp_path / "data"))
+    first = run_cli("db", "url", env=env)
+    assert first.returncode == 0, first.stderr
+    # What a process killed while the wheel rewrote its handle list leaves behind.
+    (tmp_path / "data" / "pgdata" / ".handle_pids.json").write_text("")
+    again = run_cli("db", "url", env=env)
+    assert again.returncode == 0, again.stderr
+    assert "/smoothfleet" in again.stdout
