@@ -18,14 +18,17 @@ PLANNER_LAST_PUBLISHED = Gauge(
     "smoothfleet_planner_last_published_timestamp_seconds",
     "Unix time of the last published plan, by corridor.",
     ["corridor"],
+    multiprocess_mode="max",  # serve's workers each run the schedule: the newest counts
 )
 PLANNER_INRIX_IGNORED = Gauge(
     "smoothfleet_planner_inrix_ignored",
     "INRIX readings the last cycle refused from its history window, by corridor and reason.",
     ["corridor", "reason"],
+    multiprocess_mode="mostrecent",
 )
 PLANNER_INPUT_PINGS = Gauge(
     "smoothfleet_planner_window_pings",
     "Pings in the last cycle's window, by corridor and whether they were on the corridor.",
     ["corridor", "where"],
+    multiprocess_mode="mostrecent",
 )
