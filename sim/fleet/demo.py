@@ -286,6 +286,8 @@ def run_demo(
         env=env,
         stdout=(run_dir / "server.log").open("wb"),
         stderr=subprocess.STDOUT,
+        # Ctrl-C reaches only the demo, which then stops the fleet before the server.
+        start_new_session=True,
     )
     workers: list[WorkerProcess] = []
     traffic = CorridorTraffic(traffic_drive(drive_path), start_offset_s=TRAFFIC_OFFSET_S)
@@ -302,6 +304,7 @@ def run_demo(
             stdout=(run_dir / "planner-once.log").open("wb"),
             stderr=subprocess.STDOUT,
             check=False,
+            start_new_session=True,
         )
         feed_thread.start()
         workers = [start_worker(run_dir, index, spec) for index, spec in enumerate(specs)]
@@ -321,7 +324,7 @@ def run_demo(
                             f"a fleet worker exited (code {process.returncode}); see {run_dir}"
                         )
                 time.sleep(min(1.0, max(0.0, deadline - time.monotonic())))
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, SystemExit):  # Ctrl-C, or SIGTERM through the CLI's handler
             say("interrupted")
         elapsed = time.monotonic() - measured_from
         cpu_end = {pid: process_cpu_s(pid) for pid in pids}
@@ -362,6 +365,7 @@ def start_worker(run_dir: Path, index: int, spec: WorkerSpec) -> WorkerProcess:
         [sys.executable, "-m", "sim.fleet.worker", str(spec_path), str(summary_path)],
         stdout=(run_dir / f"worker-{index}.log").open("wb"),
         stderr=subprocess.STDOUT,
+        start_new_session=True,
     )
     return process, summary_path
 
