@@ -12,6 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from sim.drives import DriveError, load_drives
 from sim.evaluate import ControllerVariant, evaluate
+from sim.recorded import load_recorded_drives
 from sim.report import (
     MAX_LOSS_PCT,
     best_pair,
@@ -26,7 +27,9 @@ from sim.scenarios import SCENARIOS, scenario_cases
 console = Console(width=max(Console().width, 160))
 
 # ../shared beside the clone (README): the real drives the evaluation replays.
-SHARED_DRIVES = Path(__file__).resolve().parents[2] / "shared" / "data" / "trajectories"
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+SHARED_DRIVES = SHARED_DATA / "trajectories"
+SHARED_INRIX_DRIVES = SHARED_DATA / "trajectories_with_inrix"
 DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel", "simple:acc", "microaccel_acc:acc")
 
 
@@ -62,6 +65,14 @@ def _planner_params(text: str) -> dict[str, Any]:
     help="Folder of real drive CSVs (10 Hz).",
 )
 @click.option(
+    "--inrix-drives",
+    "inrix_dir",
+    type=click.Path(path_type=Path),
+    default=SHARED_INRIX_DRIVES,
+    show_default=True,
+    help="Folder of drives recorded with their INRIX minutes (scenario shockwave_inrix).",
+)
+@click.option(
     "--scenario",
     "scenarios",
     multiple=True,
@@ -94,6 +105,7 @@ def _planner_params(text: str) -> dict[str, Any]:
 )
 def evaluate_command(
     drives_dir: Path,
+    inrix_dir: Path,
     scenarios: tuple[str, ...],
     planners: tuple[str, ...],
     controllers: tuple[str, ...],
@@ -114,11 +126,13 @@ def evaluate_command(
             param_hint="--planner",
         )
     params = _planner_params(planner_params)
+    chosen = list(scenarios) or list(SCENARIOS)
     try:
         drives = load_drives(drives_dir)
+        recorded = load_recorded_drives(inrix_dir) if "shockwave_inrix" in chosen else []
     except DriveError as error:
         raise click.ClickException(str(error)) from None
-    cases = scenario_cases(list(scenarios) or list(SCENARIOS), drives)
+    cases = scenario_cases(chosen, drives, recorded)
     total = len(cases) * (1 + len(chosen_planners) * len(variants))
     with Progress(
         TextColumn("{task.description}"),

@@ -202,7 +202,7 @@ def run_case(
         return RunResult(case, NO_PLANNER, BASELINE, case_kpis(case, run))
     if planner is None:
         raise ValueError("an AV variant needs a planner variant")
-    schedule = SimulatedPlanner.for_drive(case.drive, planner, planner_params)
+    schedule = SimulatedPlanner.for_drive(case.drive, planner, planner_params, case.inrix)
     policies = [
         agent_policy(
             variant.controller,

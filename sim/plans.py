@@ -98,11 +98,17 @@ class SimulatedPlanner:
 
     @classmethod
     def for_drive(
-        cls, drive: Drive, algorithm: str, params: Mapping[str, Any] | None = None
+        cls,
+        drive: Drive,
+        algorithm: str,
+        params: Mapping[str, Any] | None = None,
+        feed: InrixFeed | None = None,
     ) -> SimulatedPlanner:
-        """A planner over the drive's simulated road and INRIX, with validated parameters."""
+        """A planner over the drive's road, with validated parameters, reading `feed` (the real
+        INRIX of the drive) or INRIX simulated from the drive."""
         checked = PlannerParams.parse(dict(params or {}))
-        return cls(algorithm, checked, simulated_grid(drive), simulated_inrix(drive, checked))
+        inrix = feed if feed is not None else simulated_inrix(drive, checked)
+        return cls(algorithm, checked, simulated_grid(drive), inrix)
 
     def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
         """An AV's ping (the agent posts one per second)."""

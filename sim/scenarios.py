@@ -4,10 +4,12 @@
 - freeflow: the platoon behind a real all-high-speed drive;
 - bottleneck: the platoon behind a real high-speed drive through a region whose speed limit
   falls as the density of vehicles inside rises (the paper's weaving area, where on- and
-  off-ramps close together force lane changes).
+  off-ramps close together force lane changes);
+- shockwave_inrix: the platoon behind a real drive recorded with the INRIX feed of the same
+  minutes, the planner reading the real feed instead of the simulated one.
 
-A scenario is one function from the available drives to its cases, registered in `SCENARIOS`:
-a new scenario is one function and one registry line.
+A scenario is one function from the available drives (plain, and recorded with INRIX) to its
+cases, registered in `SCENARIOS`: a new scenario is one function and one registry line.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sim.drives import Drive
+from sim.recorded import RecordedDrive
+from sim.traffic import InrixFeed
 
 FloatArray = NDArray[np.float64]
 
@@ -96,6 +100,8 @@ class Case:
     scenario: str
     drive: Drive
     bottleneck: Bottleneck | None = None
+    # The real INRIX minutes of the drive; None: INRIX simulated from the drive (sim.traffic).
+    inrix: InrixFeed | None = None
 
     @property
     def name(self) -> str:
@@ -103,17 +109,17 @@ class Case:
         return f"{self.scenario}/{self.drive.name}"
 
 
-def shockwave_cases(drives: Sequence[Drive]) -> list[Case]:
+def shockwave_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
     """Every real stop-and-go drive."""
     return [Case("shockwave", drive) for drive in drives if drive.kind == "shockwave"]
 
 
-def freeflow_cases(drives: Sequence[Drive]) -> list[Case]:
+def freeflow_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
     """Every real all-high-speed drive."""
     return [Case("freeflow", drive) for drive in drives if drive.kind == "freeflow"]
 
 
-def bottleneck_cases(drives: Sequence[Drive]) -> list[Case]:
+def bottleneck_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
     """Every high-speed drive, with a density-limited region halfway along it."""
     cases = []
     for drive in drives:
@@ -124,18 +130,30 @@ def bottleneck_cases(drives: Sequence[Drive]) -> list[Case]:
     return cases
 
 
-SCENARIOS: dict[str, Callable[[Sequence[Drive]], list[Case]]] = {
+def shockwave_inrix_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
+    """Every recorded stop-and-go drive, with its real INRIX minutes."""
+    return [
+        Case("shockwave_inrix", one.drive, inrix=one.feed)
+        for one in recorded
+        if one.drive.kind == "shockwave"
+    ]
+
+
+SCENARIOS: dict[str, Callable[[Sequence[Drive], Sequence[RecordedDrive]], list[Case]]] = {
     "shockwave": shockwave_cases,
     "freeflow": freeflow_cases,
     "bottleneck": bottleneck_cases,
+    "shockwave_inrix": shockwave_inrix_cases,
 }
 
 
-def scenario_cases(names: Sequence[str], drives: Sequence[Drive]) -> list[Case]:
+def scenario_cases(
+    names: Sequence[str], drives: Sequence[Drive], recorded: Sequence[RecordedDrive] = ()
+) -> list[Case]:
     """The cases of the named scenarios, in the order given."""
     unknown = [name for name in names if name not in SCENARIOS]
     if unknown:
         raise ValueError(
             f"unknown scenario {', '.join(unknown)} (known: {', '.join(sorted(SCENARIOS))})"
         )
-    return [case for name in names for case in SCENARIOS[name](drives)]
+    return [case for name in names for case in SCENARIOS[name](drives, recorded)]

@@ -133,9 +133,15 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
     assert (out / "heatmap.png").exists()
     with (out / "evaluation.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    # shockwave (stop-and-go slice), freeflow and bottleneck (fast slice): baseline + 1 each
-    assert sorted({row["scenario"] for row in rows}) == ["bottleneck", "freeflow", "shockwave"]
-    assert len(rows) == 6
+    # shockwave (stop-and-go slice), freeflow and bottleneck (fast drive), and the two drives
+    # recorded with their INRIX: baseline + 1 each
+    assert sorted({row["scenario"] for row in rows}) == [
+        "bottleneck",
+        "freeflow",
+        "shockwave",
+        "shockwave_inrix",
+    ]
+    assert len(rows) == 10
     assert "shockwave" in (out / "summary.md").read_text()
 
 

@@ -1,0 +1,83 @@
+"""Real drives with the real INRIX minutes recorded beside them (../shared/data/
+trajectories_with_inrix/): the planner in the loop reads what INRIX actually said.
+
+The recorded segment positions are in the frame of the I-24 reference line; the simulator works
+in distance along the drive. The drive's first GPS fix, located on the seed corridor (the same
+reference line resampled), gives the offset between the two. Each row of speed.csv is the
+response received at that time (relative to the drive's start), so it reaches the planner then:
+the feed's own ~3-minute lag is inside the numbers, as on the road.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from sim.drives import Drive, DriveError, InrixRecording, load_drive, load_inrix_recording
+from sim.traffic import InrixFeed
+from vehicle_agent.corridor import CorridorGeometry
+
+
+@dataclass(frozen=True)
+class RecordedDrive:
+    """A real drive and the INRIX feed of the same minutes, in the drive's frame."""
+
+    drive: Drive
+    feed: InrixFeed
+
+
+def seed_corridor() -> tuple[CorridorGeometry, float]:
+    """The seed corridor's geometry and where its x_m = 0 lies on the reference line."""
+    document = json.loads(resources.files("seed_data").joinpath("i24_wb_corridor.json").read_text())
+    corridor = document["corridor"]
+    geometry = CorridorGeometry.from_segments(
+        corridor["corridor_id"], corridor["lanes"], document["i24_segments"]
+    )
+    return geometry, float(corridor["reference_line_origin_m"])
+
+
+def feed_in_drive_frame(recording: InrixRecording, start_reference_m: float) -> InrixFeed:
+    """The recorded minutes as a feed whose positions count from the drive's start."""
+    starts = recording.segment_start_m - start_reference_m
+    last_length = float(np.median(np.diff(starts)))
+    ends = np.append(starts[1:], starts[-1] + last_length)
+    return InrixFeed(
+        segment_start_m=starts,
+        segment_end_m=ends,
+        measured_at_s=recording.time_s,
+        speed_mps=recording.speed_mps,
+        latency_s=0.0,
+    )
+
+
+def load_recorded_drive(
+    directory: Path, geometry: CorridorGeometry, origin_m: float
+) -> RecordedDrive:
+    """One folder of trajectories_with_inrix, its feed placed along the drive."""
+    drive = load_drive(directory / "trajectory.csv")
+    first = pd.read_csv(
+        directory / "trajectory.csv", usecols=["LatitudeGPS", "LongitudeGPS"], nrows=1
+    )
+    located = geometry.locate(first["LatitudeGPS"].to_numpy(), first["LongitudeGPS"].to_numpy())
+    if not bool(located.on_corridor[0]):
+        raise DriveError(f"{directory.name}: the drive does not start on the seed corridor")
+    start_reference = float(located.x_m[0]) + origin_m
+    return RecordedDrive(
+        drive, feed_in_drive_frame(load_inrix_recording(directory), start_reference)
+    )
+
+
+def load_recorded_drives(directory: Path) -> list[RecordedDrive]:
+    """Every drive folder of trajectories_with_inrix, in name order."""
+    folders = (
+        sorted(path for path in directory.iterdir() if path.is_dir()) if directory.is_dir() else []
+    )
+    if not folders:
+        raise DriveError(f"{directory}: no drive folders with INRIX recordings")
+    geometry, origin = seed_corridor()
+    return [load_recorded_drive(folder, geometry, origin) for folder in folders]
