@@ -27,7 +27,6 @@ from vehicle_agent.controllers import (
 RADAR_RANGE_M = 100.0
 # The agent pings once per second; at 10 Hz that is every 10th step.
 PING_EVERY_STEPS = 10
-STEP_S = 0.1
 
 
 class PlanSource(Protocol):

@@ -38,7 +38,6 @@ from vehicle_agent.plan import LanePlan, Plan, PlanLane
 FloatArray = NDArray[np.float64]
 
 PLANNER_PERIOD_S = 60.0
-PING_PERIOD_S = 1.0
 # The simulated road: sub-segments of 100 m (as the seed corridor's), one lane (a platoon), and
 # the seed corridor's legal target range (70 mph limit, 20 mph lowest target).
 CELL_M = 100.0
