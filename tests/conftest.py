@@ -7,6 +7,8 @@ postgresql://postgres@localhost/postgres) to run against an existing server inst
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -37,15 +39,18 @@ def dbc_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
-def pg_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+def pg_server() -> Iterator[str]:
     """URL of a PostgreSQL server's maintenance database, for the whole session."""
     external = os.environ.get("SMOOTHFLEET_TEST_DATABASE_URL")
     if external:
         yield external
         return
-    pgdata = tmp_path_factory.mktemp("postgres") / "pgdata"
+    # Not under pytest's numbered temp folders: a concurrent pytest session prunes old ones,
+    # which would delete this server's cluster under it.
+    pgdata = Path(tempfile.mkdtemp(prefix="smoothfleet-test-pg-")) / "pgdata"
     with embedded_server(pgdata, delete_on_exit=True) as url:
         yield url
+    shutil.rmtree(pgdata.parent, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

@@ -10,30 +10,47 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, Request, Response
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel
-from sqlalchemy.exc import DBAPIError, InterfaceError, OperationalError
+from pydantic import BaseModel, ConfigDict
+from sqlalchemy.exc import DataError, DBAPIError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 log = logging.getLogger(__name__)
 
 RETRY_AFTER_S = 5
 
 
-class ErrorResponse(BaseModel):
-    """The body of every non-validation error."""
+class FieldError(BaseModel):
+    """One rejected field of a request (FastAPI's validation error item)."""
 
-    detail: str
+    model_config = ConfigDict(extra="allow")
+
+    loc: list[str | int]
+    msg: str
+    type: str
+
+
+class ErrorResponse(BaseModel):
+    """The body of every error: a sentence, or for a malformed request the list of its fields."""
+
+    detail: str | list[FieldError]
 
 
 def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
-    """OpenAPI `responses=` entries declaring the error shape for the given status codes."""
+    """OpenAPI `responses=` entries declaring the error shape for the given status codes.
+
+    422 is always declared: any request can be malformed, and its body has this same shape.
+    """
+    codes = tuple(sorted({*codes, 422}))
     descriptions = {
         401: "missing or invalid bearer token",
         403: "the token may not do this",
         404: "not found",
         409: "conflict",
+        422: "malformed request: a sentence, or the list of rejected fields",
         413: "request body too large",
         429: "too many requests",
         503: "database unavailable or nothing valid to serve; retry after Retry-After",
@@ -57,8 +74,19 @@ def _is_outage(error: DBAPIError) -> bool:
     )
 
 
+# FastAPI answers a body it cannot even decode (not UTF-8, ...) with this 400; the interface
+# promises 422 for a body that is not the expected JSON at all.
+UNREADABLE_BODY = "There was an error parsing the body"
+
+
 def install_error_handlers(app: FastAPI) -> None:
-    """Map database outages to 503 instead of 500."""
+    """Database outages are 503, undecodable bodies and unstorable values 422, never 500."""
+
+    async def on_http_error(request: Request, error: Exception) -> Response:
+        assert isinstance(error, StarletteHTTPException)
+        if error.status_code == 400 and error.detail == UNREADABLE_BODY:
+            return JSONResponse({"detail": "request body is not valid JSON text"}, 422)
+        return await http_exception_handler(request, error)
 
     async def on_pool_timeout(request: Request, error: Exception) -> JSONResponse:
         log.warning("database pool exhausted or unreachable: %s", error)
@@ -69,12 +97,17 @@ def install_error_handlers(app: FastAPI) -> None:
         if _is_outage(error):
             log.warning("database unavailable: %s", str(error).splitlines()[0])
             return service_unavailable("database unavailable, retry later")
+        if isinstance(error, DataError):
+            # e.g. a NUL character, which PostgreSQL text cannot hold: the input's fault.
+            reason = str(error.orig).strip().splitlines()[0] if error.orig else "invalid value"
+            return JSONResponse({"detail": f"a value cannot be stored: {reason}"}, 422)
         raise error
 
     async def on_os_error(request: Request, error: Exception) -> JSONResponse:
         log.warning("database connection failed: %s", error)
         return service_unavailable("database unavailable, retry later")
 
+    app.add_exception_handler(StarletteHTTPException, on_http_error)
     app.add_exception_handler(PoolTimeoutError, on_pool_timeout)
     app.add_exception_handler(DBAPIError, on_dbapi_error)
     app.add_exception_handler(ConnectionError, on_os_error)
