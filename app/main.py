@@ -14,6 +14,7 @@ from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
 from app.core.errors import install_error_handlers
+from app.core.headers import SecurityHeaders, install_api_docs
 from app.core.metrics import RequestMetrics
 from app.corridors.router import router as corridors_router
 from app.feeds.router import router as feeds_router
@@ -95,12 +96,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         version="1",
         summary="Traffic-smoothing fleet: pings, INRIX feed, speed plans, fleet health.",
         lifespan=lifespan,
+        docs_url=None,
+        redoc_url=None,
     )
     app.state.settings = settings
     install_error_handlers(app)
     app.add_middleware(PingFastPath)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics)
+    app.add_middleware(SecurityHeaders)
+    install_api_docs(app)
     app.include_router(health_router)
     app.include_router(vehicles_router)
     app.include_router(corridors_router)

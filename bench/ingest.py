@@ -293,6 +293,8 @@ def main() -> None:
                 **os.environ,
                 "SMOOTHFLEET_DATABASE_URL": url,
                 "SMOOTHFLEET_WORKERS": str(args.workers),
+                # One operator token carries the whole load: measure ingest, not the limiter.
+                "SMOOTHFLEET_RATE_LIMIT_PER_TOKEN_PER_S": "0",
             }
             ours_port, naive_port = free_port(), free_port()
             ours_url, naive_url = (f"http://127.0.0.1:{p}" for p in (ours_port, naive_port))

@@ -21,6 +21,7 @@ from fastapi.templating import Jinja2Templates
 
 from app.core.config import Settings
 from app.core.db import SessionDep
+from app.core.ratelimit import RateLimiter, retry_after_header
 from app.fleet.readiness import CHECKS, Thresholds, describe_age
 from app.fleet.service import (
     PROBLEM_FILTERS,
@@ -181,6 +182,17 @@ def _login_page(request: Request, next_path: str, message: str, status_code: int
     return response
 
 
+def _login_limiter(request: Request) -> RateLimiter:
+    """Login attempts per client address (the per-account slowdown is in app.users)."""
+    state = request.app.state
+    limiter: RateLimiter | None = getattr(state, "login_rate_limiter", None)
+    if limiter is None:
+        per_minute = state.settings.login_attempts_per_minute
+        limiter = RateLimiter(per_minute / 60.0, max(1.0, per_minute))
+        state.login_rate_limiter = limiter
+    return limiter
+
+
 @router.post("/login")
 async def login_submit(
     request: Request,
@@ -192,6 +204,13 @@ async def login_submit(
 ) -> Response:
     """Check the password; a failure says so, and repeated failures must wait."""
     check_login_csrf(request, csrf_token)
+    wait_s = _login_limiter(request).wait_s(request.client.host if request.client else "")
+    if wait_s:
+        response = _login_page(
+            request, safe_next(next), "Too many login attempts from here: wait a minute.", 429
+        )
+        response.headers.update(retry_after_header(wait_s))
+        return response
     result = await log_in(session, username.strip(), password, datetime.now(UTC))
     if result.user is None:
         status_code = 429 if result.retry_after_s else 401

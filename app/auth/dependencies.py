@@ -12,7 +12,8 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
-from app.auth.tokens import Principal, token_cache_for
+from app.auth.tokens import Principal, token_cache_for, token_rate_limiter
+from app.core.ratelimit import retry_after_header
 from app.core.security import TokenRole
 
 bearer_scheme = HTTPBearer(auto_error=False, description="A smoothfleet API token (sf_...).")
@@ -30,7 +31,10 @@ async def authenticate(
     principal = await token_cache_for(request.app.state).principal(credentials.credentials)
     if principal is None:
         raise HTTPException(401, "invalid or revoked token", CHALLENGE)
-    # Kept on the request for what runs later (per-token rate limits, access logs).
+    wait_s = token_rate_limiter(request.app.state).wait_s(principal.token_id)
+    if wait_s:
+        raise HTTPException(429, "too many requests for this token", retry_after_header(wait_s))
+    # Kept on the request for what runs later (access logs).
     request.state.principal = principal
     return principal
 

@@ -23,6 +23,7 @@ from sqlalchemy.ext.asyncio import AsyncEngine
 from starlette.datastructures import State
 
 from app.core.config import Settings
+from app.core.ratelimit import RateLimiter
 from app.core.security import TokenRole, hash_token
 
 # Looks a token up and notes its use at most once a minute (not on every ping).
@@ -124,6 +125,16 @@ def bearer_token(authorization: str | None) -> str | None:
     scheme, _, token = authorization.partition(" ")
     token = token.strip()
     return token if scheme.lower() == "bearer" and token else None
+
+
+def token_rate_limiter(state: State) -> RateLimiter:
+    """The app's per-token request limiter, made on first use from its settings."""
+    limiter: RateLimiter | None = getattr(state, "token_rate_limiter", None)
+    if limiter is None:
+        settings: Settings = state.settings
+        limiter = RateLimiter(settings.rate_limit_per_token_per_s, settings.rate_limit_burst)
+        state.token_rate_limiter = limiter
+    return limiter
 
 
 def token_cache_for(state: State) -> TokenCache:

@@ -53,6 +53,11 @@ class Settings(BaseSettings):
     ingest_write_concurrency: int = Field(2, ge=1, le=32)
     roster_cache_ttl_s: float = Field(30.0, gt=0, le=3600)
     token_cache_ttl_s: float = Field(5.0, ge=0, le=300)
+    # Per token and process (app/core/ratelimit.py): a car needs ~2 requests/s; 0 disables.
+    rate_limit_per_token_per_s: float = Field(20.0, ge=0)
+    rate_limit_burst: int = Field(200, ge=1)
+    # Dashboard login attempts per client address and process (per-account slowdown is separate).
+    login_attempts_per_minute: float = Field(10.0, ge=0)
 
     # Speed planner
     planner_period_s: float = Field(60.0, gt=0, le=3600)

@@ -42,9 +42,10 @@ class ErrorResponse(BaseModel):
 def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
     """OpenAPI `responses=` entries declaring the error shape for the given status codes.
 
-    422 is always declared: any request can be malformed, and its body has this same shape.
+    422 is always declared: any request can be malformed, and its body has this same shape; so
+    is 429 wherever a token is needed (app/core/ratelimit.py).
     """
-    codes = tuple(sorted({*codes, 422}))
+    codes = tuple(sorted({*codes, 422, *((429,) if 401 in codes else ())}))
     descriptions = {
         401: "missing or invalid bearer token",
         403: "the token may not do this",

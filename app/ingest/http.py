@@ -19,7 +19,9 @@ from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.datastructures import State
 
 from app.auth import CHALLENGE, PING_WRITER_ROLES, bearer_token, token_cache_for
+from app.auth.tokens import token_rate_limiter
 from app.core.errors import RETRY_AFTER_S
+from app.core.ratelimit import retry_after_header
 from app.ingest.pings import BodyError, ForeignVehicle
 from app.ingest.service import Ingest, RowsRefused
 from app.ingest.writer import WriterStopped
@@ -75,6 +77,9 @@ async def reply_to_pings(state: State, authorization: str | None, body: bytes) -
             return _error(401, "invalid or revoked token", CHALLENGE)
         if principal.role not in PING_WRITER_ROLES:
             return _error(403, f"a {principal.role} token may not do this (needs {_NEEDED})")
+        wait_s = token_rate_limiter(state).wait_s(principal.token_id)
+        if wait_s:
+            return _error(429, "too many requests for this token", retry_after_header(wait_s))
         result = await ingest.pings(body, principal, received_at)
     except BodyError as error:
         return _error(422, str(error))
