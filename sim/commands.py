@@ -179,3 +179,49 @@ def evaluate_command(
             f"{best['network_speed_mps_change_pct']:+.1f} %, collisions {best['collisions']}"
         )
     console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")
+
+
+@sim.command("fleet")
+@click.option(
+    "--server",
+    "server_url",
+    required=True,
+    help="Base URL of a running smoothfleet API, e.g. http://api:8000.",
+)
+@click.option(
+    "--duration",
+    type=click.FloatRange(min=1),
+    help="Stop after this many seconds (default: run until Ctrl-C).",
+)
+@click.option(
+    "--vehicles",
+    type=click.IntRange(1, 100),
+    default=100,
+    show_default=True,
+    help="How many roster vehicles to drive.",
+)
+def fleet_command(server_url: str, duration: float | None, vehicles: int) -> None:
+    """A simulated fleet and INRIX feed against a running server (docker compose `fleet`).
+
+    Every car runs the real vehicle agent on its own virtual CAN bus with a car emulator and
+    its own token, issued in the database the server uses (SMOOTHFLEET_DATABASE_URL).
+    """
+    from app.cli import CliError, database, settings
+    from sim.fleet.demo import DemoError, new_run_dir, run_fleet
+
+    current = settings()
+    with database(current) as url:
+        try:
+            summary = run_fleet(
+                url,
+                current,
+                server_url.rstrip("/"),
+                run_dir=new_run_dir(current),
+                duration_s=duration,
+                vehicles=vehicles,
+                say=console.print,
+            )
+        except DemoError as error:
+            raise CliError(f"sim fleet: {error}") from None
+    for line in summary.lines():
+        console.print(line)

@@ -121,6 +121,7 @@ def process_cpu_s(pid: int) -> float | None:
 def fleet_specs(
     engine: Engine,
     settings: Settings,
+    base_url: str,
     run_dir: Path,
     epoch: float,
     drive_path: Path | None,
@@ -164,10 +165,9 @@ def fleet_specs(
                     )
                 )
         feed_token = issue_token(session, "feed", name="demo INRIX feed")
-    base = f"http://{settings.host}:{settings.port}"
     worker_specs = [
         WorkerSpec(
-            server_url=base,
+            server_url=base_url,
             corridor_id=CORRIDOR,
             epoch_unix_s=epoch,
             drive_path=str(drive_path) if drive_path is not None else None,
@@ -231,23 +231,23 @@ class InrixFeed:
         self.http.close()
 
 
+class DemoError(RuntimeError):
+    """The demo could not run (the server or a fleet worker failed); the message says which."""
+
+
 def wait_ready(base_url: str, server: subprocess.Popen[bytes], timeout_s: float) -> None:
     """Until /readyz answers 200; fails if the server process ends first."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         if server.poll() is not None:
-            raise RuntimeError(f"the server exited with code {server.returncode}")
+            raise DemoError(f"the server exited with code {server.returncode}")
         try:
             if httpx.get(f"{base_url}/readyz", timeout=2.0).status_code == 200:
                 return
         except httpx.HTTPError:
             pass
         time.sleep(0.3)
-    raise RuntimeError(f"the server at {base_url} was not ready after {timeout_s:.0f} s")
-
-
-class DemoError(RuntimeError):
-    """The demo could not run (the server or a fleet worker failed); the message says which."""
+    raise DemoError(f"the server at {base_url} was not ready after {timeout_s:.0f} s")
 
 
 def run_demo(
@@ -260,8 +260,84 @@ def run_demo(
     say: Callable[[str], None] = print,
 ) -> DemoSummary:
     """Server, feed and fleet until Ctrl-C or `duration_s`; returns the summary."""
+    run_dir = new_run_dir(settings)
+    base = f"http://{settings.host}:{settings.port}"
+    env = {**os.environ, "SMOOTHFLEET_DATABASE_URL": url}
+    with (run_dir / "server.log").open("wb") as server_log:
+        server = subprocess.Popen(
+            [
+                *smoothfleet_command(),
+                "serve",
+                "--no-migrate",
+                "--host",
+                settings.host,
+                "--port",
+                str(settings.port),
+            ],
+            env=env,
+            stdout=server_log,
+            stderr=subprocess.STDOUT,
+            # Ctrl-C reaches only the demo, which then stops the fleet before the server.
+            start_new_session=True,
+        )
+    try:
+        wait_ready(base, server, READY_TIMEOUT_S)
+
+        def first_plan() -> None:
+            # A plan now rather than at the schedule's next minute (the schedule's first run
+            # came before any INRIX had arrived).
+            with (run_dir / "planner-once.log").open("wb") as planner_log:
+                subprocess.run(
+                    [*smoothfleet_command(), "planner", "once"],
+                    env=env,
+                    stdout=planner_log,
+                    stderr=subprocess.STDOUT,
+                    check=False,
+                    start_new_session=True,
+                )
+
+        return run_fleet(
+            url,
+            settings,
+            base,
+            run_dir=run_dir,
+            duration_s=duration_s,
+            vehicles=vehicles,
+            drive_path=drive_path,
+            say=say,
+            server_pid=server.pid,
+            after_backfill=first_plan,
+        )
+    finally:
+        server.send_signal(signal.SIGTERM)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+
+
+def new_run_dir(settings: Settings) -> Path:
+    """Where a run keeps its logs, the workers' specs and the cars' spools."""
     run_dir = settings.data_dir / "demo" / datetime.now(UTC).strftime("%Y%m%dT%H%M%S")
     run_dir.mkdir(parents=True, exist_ok=True)
+    return run_dir
+
+
+def run_fleet(
+    url: str,
+    settings: Settings,
+    base_url: str,
+    *,
+    run_dir: Path,
+    duration_s: float | None,
+    vehicles: int = 100,
+    drive_path: Path | None = TRAFFIC_DRIVE,
+    say: Callable[[str], None] = print,
+    server_pid: int | None = None,
+    after_backfill: Callable[[], None] | None = None,
+) -> DemoSummary:
+    """The simulated INRIX feed and fleet against the server at `base_url` (tokens issued in
+    the database at `url`), until Ctrl-C or `duration_s`; returns the summary."""
     if drive_path is not None and not drive_path.is_file():
         say(f"no {drive_path}: the traffic is synthetic stop-and-go waves instead")
         drive_path = None
@@ -269,43 +345,16 @@ def run_demo(
     epoch = time.time()
     started = datetime.fromtimestamp(epoch, UTC)
     specs, feed_token, segments = fleet_specs(
-        engine, settings, run_dir, epoch, drive_path, vehicles, FLEET_WORKERS
-    )
-    base = f"http://{settings.host}:{settings.port}"
-    env = {**os.environ, "SMOOTHFLEET_DATABASE_URL": url}
-    server = subprocess.Popen(
-        [
-            *smoothfleet_command(),
-            "serve",
-            "--no-migrate",
-            "--host",
-            settings.host,
-            "--port",
-            str(settings.port),
-        ],
-        env=env,
-        stdout=(run_dir / "server.log").open("wb"),
-        stderr=subprocess.STDOUT,
-        # Ctrl-C reaches only the demo, which then stops the fleet before the server.
-        start_new_session=True,
+        engine, settings, base_url, run_dir, epoch, drive_path, vehicles, FLEET_WORKERS
     )
     workers: list[WorkerProcess] = []
     traffic = CorridorTraffic(traffic_drive(drive_path), start_offset_s=TRAFFIC_OFFSET_S)
-    feed = InrixFeed(base, feed_token, traffic, segments, epoch)
+    feed = InrixFeed(base_url, feed_token, traffic, segments, epoch)
     feed_thread = threading.Thread(target=feed.run, name="inrix-feed", daemon=True)
     try:
-        wait_ready(base, server, READY_TIMEOUT_S)
         feed.backfill()
-        # A first plan now rather than at the schedule's next minute (the schedule's first run
-        # came before any INRIX had arrived).
-        subprocess.run(
-            [*smoothfleet_command(), "planner", "once"],
-            env=env,
-            stdout=(run_dir / "planner-once.log").open("wb"),
-            stderr=subprocess.STDOUT,
-            check=False,
-            start_new_session=True,
-        )
+        if after_backfill is not None:
+            after_backfill()
         feed_thread.start()
         workers = [start_worker(run_dir, index, spec) for index, spec in enumerate(specs)]
         say(
@@ -313,7 +362,8 @@ def run_demo(
             f"processes; logs in {run_dir}"
         )
         measured_from = time.monotonic()
-        pids = [server.pid] + [process.pid for process, _ in workers]
+        server_pids = [] if server_pid is None else [server_pid]
+        pids = server_pids + [process.pid for process, _ in workers]
         cpu_start = {pid: process_cpu_s(pid) for pid in pids}
         deadline = math.inf if duration_s is None else measured_from + duration_s
         try:
@@ -339,7 +389,7 @@ def run_demo(
             started,
             elapsed,
             summaries,
-            cpu_share([server.pid], cpu_start, cpu_end, elapsed),
+            cpu_share(server_pids, cpu_start, cpu_end, elapsed) if server_pids else None,
             cpu_share([p.pid for p, _ in workers], cpu_start, cpu_end, elapsed),
         )
     finally:
@@ -347,11 +397,6 @@ def run_demo(
             if process.poll() is None:
                 process.kill()
         feed.stop.set()
-        server.send_signal(signal.SIGTERM)
-        try:
-            server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            server.kill()
         engine.dispose()
 
 
@@ -361,12 +406,13 @@ def start_worker(run_dir: Path, index: int, spec: WorkerSpec) -> WorkerProcess:
     spec_path.touch(mode=0o600)
     spec_path.write_text(spec.model_dump_json())
     summary_path = run_dir / f"worker-{index}.summary.json"
-    process = subprocess.Popen(
-        [sys.executable, "-m", "sim.fleet.worker", str(spec_path), str(summary_path)],
-        stdout=(run_dir / f"worker-{index}.log").open("wb"),
-        stderr=subprocess.STDOUT,
-        start_new_session=True,
-    )
+    with (run_dir / f"worker-{index}.log").open("wb") as log:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sim.fleet.worker", str(spec_path), str(summary_path)],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
     return process, summary_path
 
 

@@ -66,9 +66,16 @@ def test_services_share_the_database_and_run_in_production(compose: dict[str, An
     assert api["SMOOTHFLEET_ENVIRONMENT"] == planner["SMOOTHFLEET_ENVIRONMENT"] == "production"
     assert compose["services"]["api"]["command"] == ["serve", "--workers", "2", "--no-planner"]
     assert compose["services"]["planner"]["command"] == ["planner", "run"]
+    assert compose["services"]["fleet"]["command"] == [
+        "sim",
+        "fleet",
+        "--server",
+        "http://api:8000",
+    ]
+    assert compose["services"]["fleet"]["profiles"] == ["fleet"]
 
 
-@pytest.mark.parametrize("service", ["api", "planner"])
+@pytest.mark.parametrize("service", ["api", "planner", "fleet"])
 def test_every_service_command_is_a_real_cli_command(compose: dict[str, Any], service: str) -> None:
     result = run_cli(*compose["services"][service]["command"], "--help", env=cli_env())
     assert result.returncode == 0, result.stderr
@@ -184,3 +191,54 @@ def test_the_services_work_together(
             if process is not None:
                 process.terminate()
                 process.wait(timeout=60)
+
+
+@pytest.mark.slow
+def test_the_fleet_profile_drives_cars_against_the_api(
+    compose: dict[str, Any], empty_database: str, tmp_path: Path
+) -> None:
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    api = start(
+        compose,
+        "api",
+        empty_database,
+        tmp_path / "api.log",
+        SMOOTHFLEET_HOST="127.0.0.1",
+        SMOOTHFLEET_PORT=str(port),
+    )
+    try:
+        wait_until_ready(base, timeout_s=120)
+        seeded = run_cli("seed", env=cli_env(SMOOTHFLEET_DATABASE_URL=empty_database))
+        assert seeded.returncode == 0, seeded.stderr
+        fleet = compose["services"]["fleet"]
+        command = [base if part == "http://api:8000" else part for part in fleet["command"]]
+        environment = service_environment(fleet) | {
+            "SMOOTHFLEET_DATABASE_URL": empty_database,
+            "SMOOTHFLEET_DATA_DIR": str(tmp_path / "fleet"),
+        }
+        result = run_cli(
+            *command,
+            "--duration",
+            "20",
+            "--vehicles",
+            "4",
+            env=cli_env(**environment),
+            timeout=300,
+        )
+        assert result.returncode == 0, result.stdout + result.stderr
+        assert "from 4 vehicles" in result.stdout, result.stdout
+    finally:
+        api.terminate()
+        api.wait(timeout=60)
+    engine = make_sync_engine(empty_database)
+    with engine.connect() as connection:
+        vehicles, snapshots = connection.execute(
+            text(
+                "SELECT (SELECT count(DISTINCT vehicle_id) FROM fact_vehicle_ping), "
+                "(SELECT count(DISTINCT measured_at) FROM fact_inrix_estimate)"
+            )
+        ).one()
+    engine.dispose()
+    assert vehicles == 4
+    assert snapshots >= 15  # the feed's backfill of the last quarter hour
