@@ -40,7 +40,7 @@ from vehicle_agent.controllers import (
     Observation,
     build_controller,
 )
-from vehicle_agent.corridor import CorridorGeometry
+from vehicle_agent.corridor import CorridorGeometry, trusted_heading
 from vehicle_agent.gps import GpsFix, GpsSource
 from vehicle_agent.plan import LanePlan, Plan, PlanError
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
@@ -300,7 +300,12 @@ class Agent:
         if cached is not None and cached[0] is fix and cached[1] is assignment.corridor:
             x_m, on_corridor = cached[2], cached[3]
         else:  # a new fix: map-match it once (the receiver reports at 1-10 Hz)
-            located = assignment.corridor.locate(fix.lat, fix.lon)
+            heading = (
+                trusted_heading(fix.heading_deg, fix.speed_mps)
+                if fix.heading_deg is not None and fix.speed_mps is not None
+                else None
+            )
+            located = assignment.corridor.locate(fix.lat, fix.lon, heading)
             x_m, on_corridor = float(located.x_m[0]), bool(located.on_corridor[0])
             self._located = (fix, assignment.corridor, x_m, on_corridor)
         if reading is not None:

@@ -24,6 +24,11 @@ EARTH_RADIUS_M = 6_371_008.8
 # (../shared/data/geo) runs 20-50 m beside the westbound lanes, so 100 m keeps every real I-24
 # drive on the corridor while an exit ramp or a parallel road a few hundred metres away is off.
 ON_CORRIDOR_MAX_OFFSET_M = 100.0
+# A fix whose GPS heading differs more than this from the corridor's direction of travel is on
+# the opposite carriageway (or turning off), not on this corridor.
+MAX_HEADING_DIFFERENCE_DEG = 90.0
+# GPS headings below this speed are noise (a stopped car's heading wanders).
+MIN_SPEED_FOR_HEADING_MPS = 2.0
 # Points projected per block: bounds the (points x segments) work array to a few MB.
 _BLOCK_ELEMENTS = 2_000_000
 # Grid cell edge of the candidate index (a few sub-segments per cell), and the most
@@ -32,6 +37,14 @@ _CELL_M = 250.0
 _INDEX_ELEMENTS = 4_000_000
 
 FloatArray = NDArray[np.float64]
+
+
+def trusted_heading(heading_deg: ArrayLike, speed_mps: ArrayLike) -> FloatArray:
+    """Headings worth checking against the corridor: NaN where unknown or the car too slow."""
+    heading = np.asarray(heading_deg, dtype=np.float64)
+    speed = np.asarray(speed_mps, dtype=np.float64)
+    trusted: FloatArray = np.where(speed >= MIN_SPEED_FOR_HEADING_MPS, heading, np.nan)
+    return trusted
 
 
 @dataclass(frozen=True)
@@ -96,8 +109,15 @@ class CorridorGeometry:
         north = np.radians(lat - self._lat0) * EARTH_RADIUS_M
         return np.column_stack([east, north])
 
-    def locate(self, lat: ArrayLike, lon: ArrayLike) -> Located:
+    def locate(
+        self, lat: ArrayLike, lon: ArrayLike, heading_deg: ArrayLike | None = None
+    ) -> Located:
         """Project fixes onto the corridor (vectorised over fixes).
+
+        With `heading_deg` (NaN where unknown, e.g. a car too slow for GPS to tell), a fix
+        heading against the corridor's direction of travel is off it: the opposite carriageway
+        runs within `max_offset_m` of the reference line, and its traffic must not feed this
+        corridor's estimate nor let a car engage.
 
         Each fix is first tried against the few sub-segments listed for its grid cell (see
         `_build_index`); a fix not within `max_offset_m` of one of them (off the corridor, or
@@ -129,6 +149,11 @@ class CorridorGeometry:
         finite = np.isfinite(x_out) & np.isfinite(offset_out)
         inside = (x_out > self.x_m[0]) & (x_out < self.x_m[-1])
         on = finite & inside & (offset_out <= self.max_offset_m)
+        if heading_deg is not None:
+            heading = np.broadcast_to(np.asarray(heading_deg, dtype=np.float64), x_out.shape)
+            along = self.heading_deg(np.where(finite, x_out, self.x_m[0]))
+            difference = np.abs((heading - along + 180.0) % 360.0 - 180.0)
+            on &= ~(difference > MAX_HEADING_DIFFERENCE_DEG)  # NaN (unknown) passes
         return Located(x_out, offset_out, on)
 
     def _build_index(self) -> None:

@@ -39,11 +39,17 @@ class CorridorInfo:
     lanes: int
     geometry: CorridorGeometry | None
 
-    def x_m(self, lat: NDArray[np.float64], lon: NDArray[np.float64]) -> list[float | None]:
-        """Map-matched positions of the fixes; None where a fix is off the corridor."""
+    def x_m(
+        self,
+        lat: NDArray[np.float64],
+        lon: NDArray[np.float64],
+        heading_deg: NDArray[np.float64] | None = None,
+    ) -> list[float | None]:
+        """Map-matched positions of the fixes; None where a fix is off the corridor (or, with
+        trusted headings, driving the other way)."""
         if self.geometry is None:
             return [None] * len(lat)
-        located = self.geometry.locate(lat, lon)
+        located = self.geometry.locate(lat, lon, heading_deg)
         return [
             float(x) if on else None
             for x, on in zip(located.x_m.tolist(), located.on_corridor.tolist(), strict=True)

@@ -29,6 +29,7 @@ from sqlalchemy.ext.asyncio import AsyncConnection, AsyncEngine
 from app.core import metrics
 from app.ingest.pings import PingRow
 from app.ingest.sql import COPY_INCOMING, COPY_TYPES, CREATE_INCOMING, INSERT_FROM_INCOMING
+from vehicle_agent.corridor import trusted_heading
 
 log = logging.getLogger(__name__)
 
@@ -219,6 +220,14 @@ def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
         corridor = rows[positions[0]].corridor
         lat = np.fromiter((rows[p].lat for p in positions), dtype=np.float64, count=len(positions))
         lon = np.fromiter((rows[p].lon for p in positions), dtype=np.float64, count=len(positions))
-        for position, value in zip(positions, corridor.x_m(lat, lon), strict=True):
+        heading = trusted_heading(
+            np.fromiter(
+                (np.nan if rows[p].heading_deg is None else rows[p].heading_deg for p in positions),
+                dtype=np.float64,
+                count=len(positions),
+            ),
+            np.fromiter((rows[p].speed_mps for p in positions), np.float64, len(positions)),
+        )
+        for position, value in zip(positions, corridor.x_m(lat, lon, heading), strict=True):
             x_m[position] = value
     return x_m

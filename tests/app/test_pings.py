@@ -98,6 +98,23 @@ def test_the_position_along_the_corridor_is_map_matched_at_ingest(
     assert by_ts[off["ts"]] is None
 
 
+def test_a_ping_driving_against_the_corridor_is_stored_off_it(
+    api: httpx.Client, car: dict[str, str], seeded_engine: Engine
+) -> None:
+    # Westbound I-24 runs north-west here (about 323 degrees); the other carriageway south-east.
+    along, against = ping(heading_deg=323.0), ping(heading_deg=143.0)
+    slow_against = ping(heading_deg=143.0, speed_mps=0.5)  # a stopped car's heading is noise
+    answer = api.post(
+        "/api/v1/pings", json={"pings": [along, against, slow_against]}, headers=car
+    )
+
+    assert answer.json()["accepted"] == 3
+    by_ts = {row["ts"].isoformat(): row["x_m"] for row in stored(seeded_engine)}
+    assert by_ts[along["ts"]] == pytest.approx(ON_CORRIDOR_X_M, abs=0.5)
+    assert by_ts[against["ts"]] is None
+    assert by_ts[slow_against["ts"]] == pytest.approx(ON_CORRIDOR_X_M, abs=0.5)
+
+
 def test_a_resent_ping_is_a_duplicate_never_a_second_row(
     api: httpx.Client, car: dict[str, str], seeded_engine: Engine
 ) -> None:

@@ -7,7 +7,7 @@ import itertools
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta
 from functools import lru_cache
 from importlib import resources
@@ -81,6 +81,7 @@ class EmulatorGps:
         self.emulator = emulator
         self.clock = clock
         self.offset_m = 0.0
+        self.heading_offset_deg = 0.0
         self.lane: int | None = None
 
     def latest(self) -> GpsFix | None:
@@ -89,25 +90,11 @@ class EmulatorGps:
             return None
         if self.offset_m:
             # ~111 km per degree of latitude: move the fix north by offset_m.
-            fix = GpsFix(
-                fix.time_s,
-                fix.lat + self.offset_m / 111_000.0,
-                fix.lon,
-                speed_mps=fix.speed_mps,
-                heading_deg=fix.heading_deg,
-                satellites=fix.satellites,
-                lane=fix.lane,
-            )
+            fix = replace(fix, lat=fix.lat + self.offset_m / 111_000.0)
+        if self.heading_offset_deg and fix.heading_deg is not None:
+            fix = replace(fix, heading_deg=(fix.heading_deg + self.heading_offset_deg) % 360.0)
         if self.lane is not None:
-            fix = GpsFix(
-                fix.time_s,
-                fix.lat,
-                fix.lon,
-                speed_mps=fix.speed_mps,
-                heading_deg=fix.heading_deg,
-                satellites=fix.satellites,
-                lane=self.lane,
-            )
+            fix = replace(fix, lane=self.lane)
         return fix
 
 

@@ -135,6 +135,18 @@ def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_c
         assert r.agent.state.reason == "off the assigned corridor"
 
 
+def test_driving_against_the_corridor_hands_back_within_one_period(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    # Same place, opposite heading: the other carriageway runs beside the reference line.
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        turned_at = r.clock.monotonic()
+        r.gps.heading_offset_deg = 180.0
+        assert hand_back_time(r, turned_at) <= CONTROL_PERIOD_S
+        assert r.agent.state.reason == "off the assigned corridor"
+
+
 def test_another_lane_hands_back(tmp_path: Path, dbc_cache: Path) -> None:
     with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r)
