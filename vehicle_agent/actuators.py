@@ -208,5 +208,8 @@ class AccelLimiter:
                 max(value, last_value - limits.max_jerk_down_mps3 * dt),
                 last_value + limits.max_jerk_up_mps3 * dt,
             )
+            # The range wins over the jerk limit: starting from a measured acceleration outside
+            # it (a car accelerating hard when taken over) must not carry the request out too.
+            value = min(max(value, limits.min_accel_mps2), limits.max_accel_mps2)
         self._last = (now, value)
         return value

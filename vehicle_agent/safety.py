@@ -123,6 +123,8 @@ class SafetyLayer:
         else:
             measured = context.measured_accel_mps2
             reference = measured if measured is not None and math.isfinite(measured) else 0.0
+            # Judged from inside the allowed range, as the limiter moves from it.
+            reference = min(max(reference, limits.min_accel_mps2), limits.max_accel_mps2)
             dt = self.car.command_period_s
         tolerance = self.limits.jerk_tolerance_mps2
         if not (

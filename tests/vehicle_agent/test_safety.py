@@ -12,6 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
@@ -222,3 +223,33 @@ def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -
     board.hold(CruiseButton.GAP, SafetyContext(3.0, car_state(3.0)))
     assert writes == [(17, True), (17, False), (22, True)]
     assert safety.refused == {"press": 1, "button": 1, "ACC": 1}
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    measured=st.floats(min_value=-6.0, max_value=4.0),
+    requests=st.lists(st.floats(min_value=-4.0, max_value=2.0), min_size=1, max_size=60),
+)
+def test_what_the_limiter_lets_through_the_safety_layer_accepts(
+    measured: float,
+    requests: list[float],
+    buses: tuple[can.BusABC, can.BusABC],
+    dbc_cache: Path,
+) -> None:
+    """Taking over a car that already accelerates outside [-3, 1.5] m/s^2 (a hard launch, an
+    emergency stop): the limiter starts from that measurement, and none of its requests may be
+    refused by the independent check, which would hand the car back for nothing."""
+    agent_bus, car_bus = buses
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)))
+    limiter = AccelLimiter()
+    limiter.reset(measured, 0.0)
+    for index, request in enumerate(requests, start=1):
+        now = index * car.command_period_s
+        value = limiter.limit(now, request)
+        assert -3.0 <= value <= 1.5
+        assert port.request(value, SafetyContext(now, car_state(now), measured))
+    assert len(received(car_bus)) == len(requests)
