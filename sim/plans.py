@@ -31,7 +31,7 @@ from planner import (
 )
 from sim.drives import Drive
 from sim.traffic import INRIX_LATENCY_S, InrixFeed, inrix_snapshots, segment_bounds
-from vehicle_agent.agent import DEFAULT_WAVE_SPEED_MPS
+from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 from vehicle_agent.controllers import TargetProfile
 from vehicle_agent.plan import LanePlan, Plan, PlanLane
 

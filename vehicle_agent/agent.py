@@ -42,7 +42,7 @@ from vehicle_agent.controllers import (
 )
 from vehicle_agent.corridor import CorridorGeometry, trusted_heading
 from vehicle_agent.gps import GpsFix, GpsSource
-from vehicle_agent.plan import LanePlan, Plan, PlanError
+from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
@@ -60,8 +60,6 @@ GPS_MAX_AGE_S = 2.0
 ECHO_GRACE_S = 0.3
 # The safety layer refusing a command keeps the agent off for this long (s).
 ACTUATOR_FAULT_HOLD_S = 1.0
-# Waves travel upstream at about this speed (m/s); plan lookups move downstream by it x age.
-DEFAULT_WAVE_SPEED_MPS = -5.0
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0

@@ -17,6 +17,11 @@ from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, ValidationErro
 
 from vehicle_agent.controllers import TargetProfile
 
+# Waves travel upstream at about this speed (m/s; negative = upstream): 15 km/h, the speed the
+# Speed Planner's INRIX prediction assumes (planner/params.py), so a plan is aged the way it was
+# made. Plan lookups move downstream by it x the plan's age.
+DEFAULT_WAVE_SPEED_MPS = -15.0 / 3.6
+
 # Fastest plausible target (m/s, about 134 mph): anything above is garbage.
 MAX_TARGET_SPEED_MPS = 60.0
 # Sub-segment steps are drawn this far (m) before the next segment starts, so np.interp sees

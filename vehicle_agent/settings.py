@@ -11,6 +11,7 @@ from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from vehicle_agent.cars import CARS, CruiseButton
+from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
 PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
 
@@ -41,7 +42,7 @@ class AgentSettings(BaseSettings):
     spool_max_rows: int = Field(100_000, ge=100)
     dbc_cache_dir: Path | None = None
     http_timeout_s: float = Field(3.0, gt=0, le=60)
-    wave_speed_mps: float = Field(-5.0, le=0, ge=-20)
+    wave_speed_mps: float = Field(DEFAULT_WAVE_SPEED_MPS, le=0, ge=-20)
     # GPIO button board instead of CAN button frames, e.g. "plus=17,minus=27,gap=22".
     button_board: str | None = None
     log_level: str = "INFO"

@@ -120,8 +120,8 @@ def test_planner_runs_every_minute_and_the_plan_ages() -> None:
     np.testing.assert_allclose(first.target_speed_mps, 25.0, atol=1e-6)
     later = planner.profile(59.9)
     assert planner.plans_run == 1
-    # the agent's lookup: downstream by its wave speed (5 m/s upstream) x the plan's age
-    assert later.shift_m == pytest.approx(59.9 * 5.0)
+    # the agent's lookup: downstream by its wave speed (15 km/h upstream) x the plan's age
+    assert later.shift_m == pytest.approx(59.9 * 15.0 / 3.6)
     planner.profile(60.0)
     assert planner.plans_run == 2
 
