@@ -18,6 +18,7 @@ from fastapi import APIRouter, FastAPI, Form, Query, Request
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from sqlalchemy.ext.asyncio import AsyncSession
 
 from app.core.config import Settings
 from app.core.db import SessionDep
@@ -72,6 +73,7 @@ TRACE_WINDOW = timedelta(minutes=30)
 PLAN_HISTORY = timedelta(minutes=60)
 ANALYTICS_DAYS = 30
 ADHERENCE_DAYS = 7  # every ping looked up in its plan: a week is the page's budget
+ANALYTICS_REFRESH_S = 60.0  # the analytics page's figures are recomputed at most this often
 HEATMAP_COLUMNS = 240
 HEATMAP_ROWS = 180
 
@@ -720,8 +722,25 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
 
 @router.get("/analytics")
 async def analytics_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
-    """Engagement per day, pings and vehicles per hour, plan adherence, Edie fields."""
+    """Engagement per day, pings and vehicles per hour, plan adherence, Edie fields.
+
+    The figures cover days and hours (and a week of plan adherence, the costly part), so each
+    server process computes them at most once every ANALYTICS_REFRESH_S and serves that copy;
+    the page says when it was computed.
+    """
+    cached: tuple[datetime, dict[str, Any]] | None = getattr(
+        request.app.state, "analytics_page", None
+    )
     now = datetime.now(UTC)
+    if cached is None or (now - cached[0]).total_seconds() >= ANALYTICS_REFRESH_S:
+        cached = (now, await _analytics_context(session, now))
+        request.app.state.analytics_page = cached
+    computed_at, context = cached
+    return _render(request, "analytics.html", user, computed_at=computed_at, **context)
+
+
+async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, Any]:
+    """What the analytics page shows, as of `now`."""
     since = now - timedelta(days=ANALYTICS_DAYS)
     engagement = await data.fleet_engagement(session, since)
     hourly_since = (now - timedelta(hours=48)).replace(minute=0, second=0, microsecond=0)
@@ -786,7 +805,7 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
             colour="#dc2626",
         )
     await _edie_charts(session, context)
-    return _render(request, "analytics.html", user, **context)
+    return context
 
 
 async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
