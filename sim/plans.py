@@ -31,9 +31,8 @@ from planner import (
 )
 from sim.drives import Drive
 from sim.traffic import INRIX_LATENCY_S, InrixFeed, inrix_snapshots, segment_bounds
-from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 from vehicle_agent.controllers import TargetProfile
-from vehicle_agent.plan import LanePlan, Plan, PlanLane
+from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanLane
 
 FloatArray = NDArray[np.float64]
 
