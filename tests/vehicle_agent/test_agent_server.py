@@ -190,4 +190,9 @@ def test_without_a_plan_the_car_stays_on_its_acc_until_one_is_published(
         r.run(60.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
         assert r.agent.lane_plan is not None
         assert r.agent.lane_plan.plan_id == plan_id
-        assert r.agent.state.mode is Mode.ENGAGED
+        held = r.agent.lane_plan
+        assert r.agent.state.mode is Mode.ENGAGED, (
+            f"{r.agent.state}; car clock {r.clock.now()} monotonic {r.clock.monotonic()}; plan "
+            f"published {held.plan.published_at} valid until {held.plan.valid_until}, "
+            f"confirmed at {held.confirmed_s}"
+        )
