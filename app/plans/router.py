@@ -18,6 +18,7 @@ from app.core.db import SessionDep
 from app.core.errors import error_responses, service_unavailable
 from app.plans.schemas import PlanHistoryOut, PlanOut
 from app.plans.service import (
+    PlanDocuments,
     corridor_lanes,
     latest_valid_plan_id,
     plan_document,
@@ -52,6 +53,14 @@ async def _readable_corridor(
     return own
 
 
+def _documents(request: Request) -> PlanDocuments:
+    """This application's cache of rendered plan documents (made on first use)."""
+    documents: PlanDocuments | None = getattr(request.app.state, "plan_documents", None)
+    if documents is None:
+        documents = request.app.state.plan_documents = PlanDocuments()
+    return documents
+
+
 def _matches(if_none_match: str | None, etag: str) -> bool:
     if not if_none_match:
         return False
@@ -78,7 +87,7 @@ async def _serve_latest(
     headers = {"ETag": etag, "Cache-Control": "no-cache"}
     if _matches(request.headers.get("if-none-match"), etag):
         return Response(status_code=304, headers=headers)
-    body = await plan_document(session, corridor_id, plan_id, lane)
+    body = await plan_document(session, _documents(request), corridor_id, plan_id, lane)
     return Response(body, media_type="application/json", headers=headers)
 
 

@@ -1,6 +1,7 @@
 """Read plans for the API: the latest valid plan of a corridor, a lane's targets, the history.
 
-A published plan never changes, so its rendered document is cached per (plan_id, lane): the
+A published plan never changes, so its rendered document is cached per (plan_id, lane) in the
+application (one cache per app and database: plan ids are only unique within a database): the
 fleet polling every few seconds costs one indexed lookup of the latest plan_id per request.
 """
 
@@ -21,7 +22,26 @@ CACHED_DOCUMENTS = 64
 # Targets and positions are served to the millimetre per second / millimetre.
 DECIMALS = 3
 
-_documents: OrderedDict[tuple[int, int | None], bytes] = OrderedDict()
+
+class PlanDocuments:
+    """The most recently served plan documents of one application, least recent dropped."""
+
+    def __init__(self, size: int = CACHED_DOCUMENTS) -> None:
+        self.size = size
+        self._bodies: OrderedDict[tuple[int, int | None], bytes] = OrderedDict()
+
+    def get(self, plan_id: int, lane: int | None) -> bytes | None:
+        """The cached document, or None."""
+        body = self._bodies.get((plan_id, lane))
+        if body is not None:
+            self._bodies.move_to_end((plan_id, lane))
+        return body
+
+    def put(self, plan_id: int, lane: int | None, body: bytes) -> None:
+        """Keep a rendered document."""
+        self._bodies[(plan_id, lane)] = body
+        while len(self._bodies) > self.size:
+            self._bodies.popitem(last=False)
 
 
 async def corridor_lanes(session: AsyncSession, corridor_id: str) -> int | None:
@@ -80,13 +100,16 @@ def _buffers(
 
 
 async def plan_document(
-    session: AsyncSession, corridor_id: str, plan_id: int, lane: int | None
+    session: AsyncSession,
+    documents: PlanDocuments,
+    corridor_id: str,
+    plan_id: int,
+    lane: int | None,
 ) -> bytes:
     """The plan as JSON (interfaces.md shape), all lanes or one."""
-    key = (plan_id, lane)
-    if key in _documents:
-        _documents.move_to_end(key)
-        return _documents[key]
+    cached = documents.get(plan_id, lane)
+    if cached is not None:
+        return cached
     run = (
         await session.execute(
             text(
@@ -138,9 +161,7 @@ async def plan_document(
         "lanes": [lane_plan.model_dump() for lane_plan in lanes],
     }
     body = orjson.dumps(document)
-    _documents[key] = body
-    while len(_documents) > CACHED_DOCUMENTS:
-        _documents.popitem(last=False)
+    documents.put(plan_id, lane, body)
     return body
 
 

@@ -15,9 +15,11 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
+from app.core.db import make_sync_engine
 from app.plans.jobs import run_planner
 from planner.inputs import MPH
-from tests.planner.facts import inrix_snapshot, standing_slowdown
+from tests.planner.facts import INRIX_CODES, inrix_snapshot, standing_slowdown
+from tests.support.databases import database_from_template
 from tests.support.fleet import drive, post_pings
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
@@ -207,3 +209,33 @@ def test_without_a_valid_plan_vehicles_are_told_to_retry(
                 )
             )
         assert client.get("/api/v1/vehicles/SF-002/plan", headers=bearer(token)).status_code == 503
+
+
+def test_two_databases_served_from_one_process_never_mix_their_plans(
+    pg_server: str, seeded_template: str
+) -> None:
+    """Plan ids are unique only within a database: each app keeps its own rendered plans (a
+    process-wide cache once served one database's plan 1 for another's)."""
+    served: list[tuple[int, float]] = []
+    for speeds in ([25.0] * len(INRIX_CODES), standing_slowdown()):
+        with database_from_template(pg_server, seeded_template) as url:
+            engine = make_sync_engine(url)
+            now = datetime.now(UTC).replace(microsecond=0)
+            for minute in range(8, 2, -1):
+                inrix_snapshot(engine, now - timedelta(minutes=minute), speeds)
+            (outcome,) = run_planner(engine, load_settings(database_url=url), now=now)
+            viewer = bearer(issue(engine, "viewer"))
+            engine.dispose()
+            with live_server(url, planner_enabled=False) as base:
+                body = httpx.get(
+                    f"{base}{LATEST}",
+                    params={"corridor": "I-24-WB", "lane": 1},
+                    headers=viewer,
+                    timeout=30,
+                ).json()
+            assert body["plan_id"] == outcome.plan_id
+            served.append((body["plan_id"], min(body["lanes"][0]["target_speed_mps"])))
+    (free_id, free_min), (slow_id, slow_min) = served
+    assert free_id == slow_id  # the same id in both databases ...
+    assert free_min > 20.0  # ... free flow in the first
+    assert slow_min < 15.0  # ... and the slowdown in the second, not the first's document
