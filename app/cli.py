@@ -53,7 +53,7 @@ from app.users.service import (
 )
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
-from sim.commands import sim
+from sim.commands import fleet_options, sim
 
 console = Console()
 
@@ -489,18 +489,7 @@ DEMO_ADMIN = "admin"
 @cli.command("demo")
 @click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
 @click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
-@click.option(
-    "--duration",
-    type=click.FloatRange(min=1),
-    help="Stop after this many seconds (default: run until Ctrl-C).",
-)
-@click.option(
-    "--vehicles",
-    type=click.IntRange(1, 100),
-    default=100,
-    show_default=True,
-    help="How many roster vehicles the simulated fleet drives.",
-)
+@fleet_options
 def demo(host: str | None, port: int | None, duration: float | None, vehicles: int) -> None:
     """Everything on one machine: embedded database, migrations, seed, API, dashboard, planner,
     a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent."""

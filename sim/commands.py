@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -181,6 +182,22 @@ def evaluate_command(
     console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")
 
 
+def fleet_options(command: Callable[..., None]) -> Callable[..., None]:
+    """`--duration` and `--vehicles` of a simulated fleet run (`sim fleet`, `demo`)."""
+    command = click.option(
+        "--vehicles",
+        type=click.IntRange(1, 100),
+        default=100,
+        show_default=True,
+        help="How many roster vehicles the simulated fleet drives.",
+    )(command)
+    return click.option(
+        "--duration",
+        type=click.FloatRange(min=1),
+        help="Stop after this many seconds (default: run until Ctrl-C).",
+    )(command)
+
+
 @sim.command("fleet")
 @click.option(
     "--server",
@@ -188,18 +205,7 @@ def evaluate_command(
     required=True,
     help="Base URL of a running smoothfleet API, e.g. http://api:8000.",
 )
-@click.option(
-    "--duration",
-    type=click.FloatRange(min=1),
-    help="Stop after this many seconds (default: run until Ctrl-C).",
-)
-@click.option(
-    "--vehicles",
-    type=click.IntRange(1, 100),
-    default=100,
-    show_default=True,
-    help="How many roster vehicles to drive.",
-)
+@fleet_options
 def fleet_command(server_url: str, duration: float | None, vehicles: int) -> None:
     """A simulated fleet and INRIX feed against a running server (docker compose `fleet`).
 

@@ -140,10 +140,10 @@ def provider_snapshot(measured_at: datetime) -> dict[str, Any]:
     }
 
 
-@pytest.mark.slow
-def test_the_services_work_together(
-    compose: dict[str, Any], empty_database: str, tmp_path: Path
-) -> None:
+@pytest.fixture
+def seeded_api(compose: dict[str, Any], empty_database: str, tmp_path: Path) -> Iterator[str]:
+    """The api service's command on an empty database (it migrates it), seeded the way
+    operators do (`docker compose run api seed`); yields its base URL."""
     port = free_port()
     base = f"http://127.0.0.1:{port}"
     api = start(
@@ -154,12 +154,23 @@ def test_the_services_work_together(
         SMOOTHFLEET_HOST="127.0.0.1",
         SMOOTHFLEET_PORT=str(port),
     )
-    planner: subprocess.Popen[bytes] | None = None
     try:
         wait_until_ready(base, timeout_s=120)
-        # Operators seed once (`docker compose run api seed`); the same command here.
         seeded = run_cli("seed", env=cli_env(SMOOTHFLEET_DATABASE_URL=empty_database))
         assert seeded.returncode == 0, seeded.stderr
+        yield base
+    finally:
+        api.terminate()
+        api.wait(timeout=60)
+
+
+@pytest.mark.slow
+def test_the_services_work_together(
+    compose: dict[str, Any], empty_database: str, seeded_api: str, tmp_path: Path
+) -> None:
+    base = seeded_api
+    planner: subprocess.Popen[bytes] | None = None
+    try:
         engine = make_sync_engine(empty_database)
         feed, car = issue(engine, "feed"), issue(engine, "vehicle", "SF-002")
         now = datetime.now(UTC).replace(second=0, microsecond=0)
@@ -187,50 +198,26 @@ def test_the_services_work_together(
             assert revision.scalar_one()
         engine.dispose()
     finally:
-        for process in (planner, api):
-            if process is not None:
-                process.terminate()
-                process.wait(timeout=60)
+        if planner is not None:
+            planner.terminate()
+            planner.wait(timeout=60)
 
 
 @pytest.mark.slow
 def test_the_fleet_profile_drives_cars_against_the_api(
-    compose: dict[str, Any], empty_database: str, tmp_path: Path
+    compose: dict[str, Any], empty_database: str, seeded_api: str, tmp_path: Path
 ) -> None:
-    port = free_port()
-    base = f"http://127.0.0.1:{port}"
-    api = start(
-        compose,
-        "api",
-        empty_database,
-        tmp_path / "api.log",
-        SMOOTHFLEET_HOST="127.0.0.1",
-        SMOOTHFLEET_PORT=str(port),
+    fleet = compose["services"]["fleet"]
+    command = [seeded_api if part == "http://api:8000" else part for part in fleet["command"]]
+    environment = service_environment(fleet) | {
+        "SMOOTHFLEET_DATABASE_URL": empty_database,
+        "SMOOTHFLEET_DATA_DIR": str(tmp_path / "fleet"),
+    }
+    result = run_cli(
+        *command, "--duration", "20", "--vehicles", "4", env=cli_env(**environment), timeout=300
     )
-    try:
-        wait_until_ready(base, timeout_s=120)
-        seeded = run_cli("seed", env=cli_env(SMOOTHFLEET_DATABASE_URL=empty_database))
-        assert seeded.returncode == 0, seeded.stderr
-        fleet = compose["services"]["fleet"]
-        command = [base if part == "http://api:8000" else part for part in fleet["command"]]
-        environment = service_environment(fleet) | {
-            "SMOOTHFLEET_DATABASE_URL": empty_database,
-            "SMOOTHFLEET_DATA_DIR": str(tmp_path / "fleet"),
-        }
-        result = run_cli(
-            *command,
-            "--duration",
-            "20",
-            "--vehicles",
-            "4",
-            env=cli_env(**environment),
-            timeout=300,
-        )
-        assert result.returncode == 0, result.stdout + result.stderr
-        assert "from 4 vehicles" in result.stdout, result.stdout
-    finally:
-        api.terminate()
-        api.wait(timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "from 4 vehicles" in result.stdout, result.stdout
     engine = make_sync_engine(empty_database)
     with engine.connect() as connection:
         vehicles, snapshots = connection.execute(
