@@ -185,9 +185,7 @@ def test_without_a_plan_the_car_stays_on_its_acc_until_one_is_published(
         plan_id = publish_free_flow_plan(seeded_database_url, seeded_engine)
         r.run(50.0, network=True)
         assert r.agent.lane_plan is None  # Retry-After honoured
-        # Within a minute of simulated time (a plan request the loaded server answers too late
-        # is retried after its back-off; the run stops as soon as the car is engaged).
-        r.run(60.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        r.run(15.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
         assert r.agent.lane_plan is not None
         assert r.agent.lane_plan.plan_id == plan_id
         held = r.agent.lane_plan
