@@ -67,6 +67,13 @@ class PlannerParams(BaseModel):
     ramp_decel_mps2: float = Field(0.1, gt=0, le=2, description="gentle approach to the buffer")
     floor_fraction: float = Field(0.8, ge=0, le=1, description="target >= this x smoothed speed")
 
+    # Every target: the corridor's range, its top raised by this allowance. 0 keeps targets at
+    # the posted limit; the paper's fleet allowed "modest speeds in excess of the posted speed
+    # limit of 70 mph", up to 73 mph (its ACC clip, eq. v_final): 3 mph = 1.34112 m/s.
+    speed_limit_allowance_mps: float = Field(
+        0.0, ge=0, le=5 * MPH, description="targets may exceed the posted limit by this much"
+    )
+
     @model_validator(mode="after")
     def _standing_within_cycles(self) -> PlannerParams:
         if self.standing_required > self.standing_cycles:

@@ -87,9 +87,13 @@ def identify_bottlenecks(
     return current, standing_bottlenecks(current, previous, inputs.grid, params)
 
 
-def clip_to_legal_range(target_mps: FloatArray, grid: CorridorGrid) -> FloatArray:
-    """Every target within the corridor's legal range (dim_corridor)."""
-    clipped: FloatArray = np.clip(target_mps, grid.min_target_speed_mps, grid.speed_limit_mps)
+def clip_to_legal_range(
+    target_mps: FloatArray, grid: CorridorGrid, params: PlannerParams
+) -> FloatArray:
+    """Every target within the corridor's legal range (dim_corridor), its top raised by the
+    configured allowance over the posted limit (the paper's fleet: 73 mph on a 70 mph road)."""
+    ceiling = grid.speed_limit_mps + params.speed_limit_allowance_mps
+    clipped: FloatArray = np.clip(target_mps, grid.min_target_speed_mps, ceiling)
     return clipped
 
 

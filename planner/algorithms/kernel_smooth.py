@@ -22,7 +22,7 @@ def kernel_smooth(inputs: PlannerInputs, params: PlannerParams) -> Plan:
         inrix_as_of_s=inrix_as_of_s,
         tse_mps=tse,
         smoothed_mps=smoothed,
-        target_mps=clip_to_legal_range(smoothed, inputs.grid),
+        target_mps=clip_to_legal_range(smoothed, inputs.grid, params),
         is_buffer=nothing,
         bottleneck_candidates=nothing,
         standing_bottlenecks=nothing,

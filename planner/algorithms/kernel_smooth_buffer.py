@@ -31,7 +31,7 @@ def kernel_smooth_buffer(inputs: PlannerInputs, params: PlannerParams) -> Plan:
         inrix_as_of_s=inrix_as_of_s,
         tse_mps=tse,
         smoothed_mps=smoothed,
-        target_mps=clip_to_legal_range(target, inputs.grid),
+        target_mps=clip_to_legal_range(target, inputs.grid, params),
         is_buffer=is_buffer,
         bottleneck_candidates=candidates,
         standing_bottlenecks=standing,

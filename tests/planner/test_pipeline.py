@@ -71,6 +71,22 @@ def test_every_target_is_within_the_legal_range() -> None:
     assert plan.tse_mps.min() < GRID.min_target_speed_mps  # the TSE itself is not clipped
 
 
+@pytest.mark.parametrize("algorithm", ["kernel_smooth", "kernel_smooth_buffer"])
+def test_traffic_above_the_limit_is_planned_at_the_limit_plus_the_allowance(algorithm: str) -> None:
+    now_s = 1000.0
+    history = InrixHistory(now_s - 60.0 * np.arange(5, 0, -1), np.full((5, 15), 33.0), CENTERS)
+    inputs = PlannerInputs(GRID, history, LaneObservations(), now_s)
+    at_limit = plan_speeds(inputs, algorithm)
+    assert at_limit.target_mps.max() == pytest.approx(70 * 0.44704)  # the posted limit
+    # The paper's fleet: up to 73 mph on the 70 mph road.
+    allowed = plan_speeds(inputs, algorithm, PlannerParams(speed_limit_allowance_mps=3 * 0.44704))
+    assert allowed.target_mps.max() == pytest.approx(73 * 0.44704)
+    assert allowed.target_mps.min() == pytest.approx(73 * 0.44704)
+    assert allowed.params.stored()["speed_limit_allowance_mps"] == pytest.approx(1.34112)
+    with pytest.raises(InvalidParams, match="speed_limit_allowance_mps"):
+        PlannerParams.parse({"speed_limit_allowance_mps": -1})
+
+
 def test_fleet_observations_make_the_tse_lane_level() -> None:
     observations = LaneObservations(lane=[2], cell=[40], mean_speed_mps=[12.0], ping_count=[60])
     now_s = 1000.0
