@@ -299,12 +299,11 @@ class Agent:
             x_m, on_corridor = cached[2], cached[3]
         else:  # a new fix: map-match it once (the receiver reports at 1-10 Hz)
             heading = (
-                trusted_heading(fix.heading_deg, fix.speed_mps)
+                float(trusted_heading(fix.heading_deg, fix.speed_mps))
                 if fix.heading_deg is not None and fix.speed_mps is not None
                 else None
             )
-            located = assignment.corridor.locate(fix.lat, fix.lon, heading)
-            x_m, on_corridor = float(located.x_m[0]), bool(located.on_corridor[0])
+            x_m, _, on_corridor = assignment.corridor.locate_fix(fix.lat, fix.lon, heading)
             self._located = (fix, assignment.corridor, x_m, on_corridor)
         if reading is not None:
             x_m += reading.speed_mps * max(now - fix.time_s, 0.0)

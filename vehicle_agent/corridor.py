@@ -11,6 +11,7 @@ local equirectangular plane, which is exact to well under a metre over a few ten
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -156,6 +157,53 @@ class CorridorGeometry:
             on &= ~(difference > MAX_HEADING_DIFFERENCE_DEG)  # NaN (unknown) passes
         return Located(x_out, offset_out, on)
 
+    def locate_fix(
+        self, lat: float, lon: float, heading_deg: float | None = None
+    ) -> tuple[float, float, bool]:
+        """One fix: (x_m, offset_m, on_corridor), the same answer as `locate` for it.
+
+        The car map-matches one fix per control step (10 Hz); for one point numpy's per-call
+        overhead is most of `locate`'s cost, so this walks its grid cell's few sub-segments in
+        plain floats. A fix its cell does not resolve (off the corridor, outside the grid, not a
+        number) goes through `locate`.
+        """
+        east = math.radians(lon - self._lon0) * EARTH_RADIUS_M * self._cos_lat0
+        north = math.radians(lat - self._lat0) * EARTH_RADIUS_M
+        best: tuple[float, int, float] | None = None
+        if math.isfinite(east) and math.isfinite(north):
+            column = math.floor((east - self._grid_low_east) / self._cell_m)
+            row = math.floor((north - self._grid_low_north) / self._cell_m)
+            if 0 <= column < self._grid_columns and 0 <= row < self._grid_rows:
+                for index in self._cell_lists[column * self._grid_rows + row]:
+                    start_east, start_north, step_east, step_north, step_len2 = self._segments[
+                        index
+                    ]
+                    rel_east, rel_north = east - start_east, north - start_north
+                    fraction = (rel_east * step_east + rel_north * step_north) / step_len2
+                    fraction = min(max(fraction, 0.0), 1.0)
+                    gap_east = start_east + fraction * step_east - east
+                    gap_north = start_north + fraction * step_north - north
+                    distance2 = gap_east * gap_east + gap_north * gap_north
+                    if best is None or distance2 < best[0]:  # ties: the lower index, as argmin
+                        best = (distance2, index, fraction)
+        if best is None or best[0] > self.max_offset_m**2:
+            located = self.locate(lat, lon, heading_deg)
+            return float(located.x_m[0]), float(located.offset_m[0]), bool(located.on_corridor[0])
+        distance2, index, fraction = best
+        x_m = self._vertex_x[index] + fraction * (self._vertex_x[index + 1] - self._vertex_x[index])
+        on = self._vertex_x[0] < x_m < self._vertex_x[-1]
+        if on and heading_deg is not None and not math.isnan(heading_deg):
+            along = self._segment_heading_deg(x_m)
+            difference = abs((heading_deg - along + 180.0) % 360.0 - 180.0)
+            on = difference <= MAX_HEADING_DIFFERENCE_DEG
+        return x_m, math.sqrt(distance2), on
+
+    def _segment_heading_deg(self, x_m: float) -> float:
+        """`heading_deg` for one position, in plain floats."""
+        index = min(max(bisect.bisect_right(self._vertex_x, x_m) - 1, 0), len(self._segments) - 1)
+        _, _, step_east, step_north, _ = self._segments[index]
+        return math.degrees(math.atan2(step_east, step_north)) % 360.0
+
     def _build_index(self) -> None:
         """List, per square cell of a grid over the corridor, the sub-segments near it.
 
@@ -190,6 +238,20 @@ class CorridorGeometry:
         self._grid_shape = shape
         self._candidates = candidates
         self._candidate_counts = counts
+        # The same index in plain Python for `locate_fix`.
+        self._grid_low_east, self._grid_low_north = float(low[0]), float(low[1])
+        self._grid_columns, self._grid_rows = int(shape[0]), int(shape[1])
+        self._cell_lists = [
+            tuple(int(index) for index in candidates[cell, :count])
+            for cell, count in enumerate(counts)
+        ]
+        self._segments = [
+            (float(start[0]), float(start[1]), float(step[0]), float(step[1]), float(length2))
+            for start, step, length2 in zip(
+                self._starts, self._steps, self._step_len2, strict=True
+            )
+        ]
+        self._vertex_x = [float(x) for x in self.x_m]
 
     def _locate_by_cell(
         self, points: FloatArray, x_out: FloatArray, offset_out: FloatArray

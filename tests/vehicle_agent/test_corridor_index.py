@@ -90,3 +90,26 @@ def test_a_long_winding_corridor_gets_a_coarser_grid_and_the_same_answers() -> N
 def test_fixes_without_a_position_are_off_the_corridor(seed_corridor: CorridorGeometry) -> None:
     located = seed_corridor.locate([np.nan, 35.98], [-86.57, np.inf])
     assert not located.on_corridor.any()
+
+
+def test_one_fix_at_a_time_gives_the_vectorised_answer(seed_corridor: CorridorGeometry) -> None:
+    rng = np.random.default_rng(11)
+    x = rng.uniform(-1_000, seed_corridor.length_m + 1_000, 300)
+    lat, lon = seed_corridor.position(x)
+    lat = lat + rng.normal(0, 1e-3, 300) * rng.choice([0.1, 1, 4], 300)
+    lon = lon + rng.normal(0, 1e-3, 300) * rng.choice([0.1, 1, 4], 300)
+    # Headings along, across and against the corridor, and unknown.
+    heading = rng.choice([np.nan, 0.0, 90.0, 180.0, 270.0], 300) + rng.uniform(0, 90, 300)
+    lat[:3], lon[:3] = [np.nan, 35.98, 0.0], [-86.57, np.inf, 0.0]  # no position, far away
+
+    located = seed_corridor.locate(lat, lon, heading)
+    for k in range(len(lat)):
+        x_m, offset_m, on = seed_corridor.locate_fix(float(lat[k]), float(lon[k]), heading[k])
+        assert on == located.on_corridor[k], k
+        if np.isfinite(located.x_m[k]):
+            assert x_m == pytest.approx(located.x_m[k], abs=1e-6)
+            assert offset_m == pytest.approx(located.offset_m[k], abs=1e-6)
+        assert seed_corridor.locate_fix(float(lat[k]), float(lon[k]))[2] == (
+            seed_corridor.locate(lat[k], lon[k]).on_corridor[0]
+        )
+    assert 0.1 < located.on_corridor.mean() < 0.9
