@@ -43,6 +43,9 @@ class PingSpool:
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=FULL")
         self._db.executescript(SCHEMA)
+        # Kept in memory: count(*) reads the whole table, ~11 ms at 100,000 pings on x86 (and
+        # every add needs it), so a car offline for a day would spend most of its time counting.
+        (self._backlog,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
 
     def close(self) -> None:
         """Close the file."""
@@ -56,18 +59,19 @@ class PingSpool:
             self._db.execute("BEGIN IMMEDIATE")
             try:
                 self._db.execute("INSERT INTO ping (body) VALUES (?)", (body,))
-                (count,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
-                excess = count - self.max_rows
+                backlog = self._backlog + 1
+                excess = backlog - self.max_rows
                 if excess > 0:
-                    self._db.execute(
+                    backlog -= self._db.execute(
                         "DELETE FROM ping WHERE id IN (SELECT id FROM ping ORDER BY id LIMIT ?)",
                         (excess,),
-                    )
+                    ).rowcount
                     self._bump("dropped", excess)
                 self._db.execute("COMMIT")
             except BaseException:
                 self._db.execute("ROLLBACK")
                 raise
+            self._backlog = backlog
 
     def _bump(self, name: str, amount: int) -> None:
         self._db.execute(
@@ -90,16 +94,23 @@ class PingSpool:
             return
         with self._lock:
             self._db.execute("BEGIN IMMEDIATE")
-            self._db.executemany("DELETE FROM ping WHERE id = ?", [(i,) for i in ids])
-            if rejected:
-                self._bump("rejected", rejected)
-            self._db.execute("COMMIT")
+            try:
+                # Ids the bound already dropped delete nothing, and are not counted.
+                removed = self._db.executemany(
+                    "DELETE FROM ping WHERE id = ?", [(i,) for i in ids]
+                ).rowcount
+                if rejected:
+                    self._bump("rejected", rejected)
+                self._db.execute("COMMIT")
+            except BaseException:
+                self._db.execute("ROLLBACK")
+                raise
+            self._backlog -= removed
 
     def backlog(self) -> int:
         """Pings waiting for upload."""
         with self._lock:
-            (count,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
-        return int(count)
+            return int(self._backlog)
 
     def counter(self, name: str) -> int:
         """A running total: `dropped` (past the bound) or `rejected` (by the server)."""

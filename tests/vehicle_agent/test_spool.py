@@ -40,3 +40,29 @@ def test_a_crashed_agent_loses_nothing_written(tmp_path: Path) -> None:
     assert [ping["n"] for _, ping in restarted.oldest(10)] == [0, 1, 2]
     restarted.add({"n": 3})
     assert restarted.backlog() == 4
+
+
+def test_the_backlog_matches_the_file_through_drops_removals_and_a_restart(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "spool.sqlite"
+    spool = PingSpool(path, max_rows=4)
+
+    def on_disk() -> int:
+        return int(spool._db.execute("SELECT count(*) FROM ping").fetchone()[0])
+
+    for index in range(6):
+        spool.add({"n": index})
+    sent = [row_id for row_id, _ in spool.oldest(3)]
+    spool.add({"n": 6})  # drops the oldest, which is also the first of the batch in flight
+    assert spool.backlog() == on_disk() == 4
+    spool.remove(sent)  # its id is gone already: two pings leave, not three
+    assert spool.backlog() == on_disk() == 2
+    assert [ping["n"] for _, ping in spool.oldest(10)] == [5, 6]
+    # Restarted with a smaller bound: the count comes from the file, the bound holds at once.
+    smaller = PingSpool(path, max_rows=1)
+    assert smaller.backlog() == 2
+    smaller.add({"n": 7})
+    assert smaller.backlog() == 1
+    assert [ping["n"] for _, ping in smaller.oldest(10)] == [7]
+    assert smaller.counter("dropped") == 5
