@@ -43,8 +43,8 @@ class PingSpool:
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=FULL")
         self._db.executescript(SCHEMA)
-        # Kept in memory: count(*) reads the whole table, ~11 ms at 100,000 pings on x86 (and
-        # every add needs it), so a car offline for a day would spend most of its time counting.
+        # Kept in memory: count(*) reads the whole table, ~11 ms at 100,000 pings on x86, and
+        # every add (1 Hz) and status report needs it; the write itself takes ~0.3 ms.
         (self._backlog,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
 
     def close(self) -> None:
