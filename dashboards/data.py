@@ -9,11 +9,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from prometheus_client import REGISTRY
 from sqlalchemy import RowMapping, select, text
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from app.analytics import view_query
+from app.core.metrics import server_registry
 from app.models import Corridor, PlanRun
 
 METRES_PER_MILE = 1609.344
@@ -299,7 +299,7 @@ async def pings_per_minute(session: AsyncSession, since: datetime) -> Sequence[R
 
 @dataclass(frozen=True)
 class RejectedInputs:
-    """Inputs refused by this server process since it started (Prometheus counters)."""
+    """Inputs refused by this server since it started, all its workers (Prometheus counters)."""
 
     pings_accepted: float
     pings_duplicate: float
@@ -310,10 +310,11 @@ class RejectedInputs:
 
 
 def rejected_inputs() -> RejectedInputs:
-    """Read the ingest counters of this process."""
+    """Read the ingest counters of this server (all its workers, as /metrics does)."""
+    registry = server_registry()
 
     def sample(name: str, outcome: str) -> float:
-        return REGISTRY.get_sample_value(name, {"outcome": outcome}) or 0.0
+        return registry.get_sample_value(name, {"outcome": outcome}) or 0.0
 
     return RejectedInputs(
         pings_accepted=sample("smoothfleet_pings_total", "accepted"),

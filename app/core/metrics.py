@@ -14,6 +14,7 @@ import os
 import time
 
 from prometheus_client import (
+    REGISTRY,
     CollectorRegistry,
     Counter,
     Histogram,
@@ -56,13 +57,18 @@ UNMATCHED_ROUTE = "unmatched"
 MULTIPROCESS_DIR_ENV = "PROMETHEUS_MULTIPROC_DIR"
 
 
-def exposition() -> bytes:
-    """The Prometheus text of this process, or of every worker when they share a directory."""
+def server_registry() -> CollectorRegistry:
+    """The metrics of this process, or of every worker when they share a directory."""
     if os.environ.get(MULTIPROCESS_DIR_ENV):
         registry = CollectorRegistry()
         multiprocess.MultiProcessCollector(registry)  # type: ignore[no-untyped-call]
-        return generate_latest(registry)
-    return generate_latest()
+        return registry
+    return REGISTRY
+
+
+def exposition() -> bytes:
+    """The Prometheus text of `server_registry`."""
+    return generate_latest(server_registry())
 
 
 class RequestMetrics:

@@ -24,6 +24,7 @@ from sqlalchemy import text
 
 from app.core.db import make_sync_engine
 from app.core.embedded import database_url as url_of
+from tests.dashboards.support import PASSWORDS, log_in
 from tests.deploy.compose import ComposeError, load, service_environment
 from tests.planner.facts import INRIX_CODES, standing_slowdown
 from tests.support.databases import admin_execute
@@ -229,3 +230,35 @@ def test_the_fleet_profile_drives_cars_against_the_api(
     engine.dispose()
     assert vehicles == 4
     assert snapshots >= 15  # the feed's backfill of the last quarter hour
+
+
+@pytest.mark.slow
+def test_the_feeds_page_counts_every_workers_rejections(
+    compose: dict[str, Any], empty_database: str, seeded_api: str
+) -> None:
+    # The api service runs two workers; each request below comes on a new connection, so both
+    # take some. The operator's count must not depend on which worker renders the page.
+    engine = make_sync_engine(empty_database)
+    car = issue(engine, "vehicle", "SF-003")
+    engine.dispose()
+    added = run_cli(
+        "users", "add", "viewer", "--role", "viewer", "--password-stdin",
+        env=cli_env(SMOOTHFLEET_DATABASE_URL=empty_database),
+        stdin=PASSWORDS["viewer"] + "\n",
+    )  # fmt: skip
+    assert added.returncode == 0, added.stderr
+    start = datetime.now(UTC) - timedelta(seconds=60)
+    for second, bad in enumerate(drive("SF-003", start, 8400, 95.0, 20)):  # > 90 m/s
+        with httpx.Client(base_url=seeded_api, timeout=30) as client:
+            answer = client.post("/api/v1/pings", json=bad, headers=bearer(car))
+            assert answer.status_code == 200, (second, answer.text)
+            assert answer.json()["rejected"], (second, answer.text)
+    shown = set()
+    for _ in range(6):
+        with httpx.Client(base_url=seeded_api, timeout=30) as client:
+            assert log_in(client, "viewer", PASSWORDS["viewer"]).status_code == 303
+            page = client.get("/feeds").text
+            found = re.search(r'data-field="pings-rejected">(\d+)<', page)
+            assert found, page
+            shown.add(int(found.group(1)))
+    assert shown == {20}
