@@ -24,6 +24,7 @@ from app.ingest import PingFastPath, ingest_running
 from app.maintenance import maintain_async
 from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
+from app.plans.service import PlanDocuments
 from app.vehicles.router import router as vehicles_router
 from dashboards.pages import install as install_dashboard
 
@@ -100,6 +101,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         redoc_url=None,
     )
     app.state.settings = settings
+    app.state.plan_documents = PlanDocuments()
     install_error_handlers(app)
     app.add_middleware(PingFastPath)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)

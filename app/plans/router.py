@@ -54,10 +54,8 @@ async def _readable_corridor(
 
 
 def _documents(request: Request) -> PlanDocuments:
-    """This application's cache of rendered plan documents (made on first use)."""
-    documents: PlanDocuments | None = getattr(request.app.state, "plan_documents", None)
-    if documents is None:
-        documents = request.app.state.plan_documents = PlanDocuments()
+    """This application's cache of rendered plan documents (made by create_app)."""
+    documents: PlanDocuments = request.app.state.plan_documents
     return documents
 
 
