@@ -247,8 +247,8 @@ def test_the_feeds_page_counts_every_workers_rejections(
         stdin=PASSWORDS["viewer"] + "\n",
     )  # fmt: skip
     assert added.returncode == 0, added.stderr
-    start = datetime.now(UTC) - timedelta(seconds=60)
-    for second, bad in enumerate(drive("SF-003", start, 8400, 95.0, 20)):  # > 90 m/s
+    first_ts = datetime.now(UTC) - timedelta(seconds=60)
+    for second, bad in enumerate(drive("SF-003", first_ts, 8400, 95.0, 20)):  # > 90 m/s
         with httpx.Client(base_url=seeded_api, timeout=30) as client:
             answer = client.post("/api/v1/pings", json=bad, headers=bearer(car))
             assert answer.status_code == 200, (second, answer.text)
