@@ -10,6 +10,10 @@ compared with the probe's mean speed over that minute. The variants:
 - `fused`: the prediction fused with the probe's own earlier pings (1 Hz);
 - `inrix_without_latency`: the snapshot of minute t itself, as if INRIX had no delay
   (a reference for what prediction could at best recover, not something a planner can see).
+
+A decision time at which the planner has no usable INRIX reading (the feed had not reported
+within its history window: some recordings hold one reading every 5 minutes) publishes no plan
+on the server, so it is not scored; `DriveErrors.no_estimate_times_s` lists those times.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy as np
 from planner.inputs import CorridorGrid, FloatArray, InrixHistory, LaneObservations
 from planner.params import PlannerParams
 from planner.pipeline import PlannerInputs, enhance_tse
+from planner.predict import NoInrixEstimate
 
 VARIANTS = ("inrix", "predicted", "fused", "inrix_without_latency")
 
@@ -49,6 +54,8 @@ class DriveErrors:
     decision_times_s: FloatArray
     truth_mps: FloatArray
     estimates_mps: dict[str, FloatArray]
+    # Decision times skipped because the planner had no usable INRIX reading (no plan then).
+    no_estimate_times_s: FloatArray
 
     def mean_absolute_error(self, variant: str) -> float:
         """MAE of one variant over the drive's decision times."""
@@ -86,6 +93,7 @@ def evaluate_drive(
     last = float(drive.time_s[-1]) - horizon_s
     times = np.arange(first, last + 1e-9, step_s)
     decided: list[float] = []
+    skipped: list[float] = []
     truths: list[float] = []
     estimates: dict[str, list[float]] = {variant: [] for variant in VARIANTS}
     no_pings = LaneObservations()
@@ -96,8 +104,6 @@ def evaluate_drive(
         if not on_grid.any():
             continue
         cells = cells[on_grid]
-        decided.append(float(now_s))
-        truths.append(float(drive.speed_mps[ahead][on_grid].mean()))
         visible = inrix.until(now_s - latency_s)
         x_seen, speed_seen = _pings(drive, now_s - params.ping_window_s, now_s, ping_period_s)
         own_pings = LaneObservations.from_pings(
@@ -109,13 +115,23 @@ def evaluate_drive(
             "fused": (visible, own_pings, params),
             "inrix_without_latency": (inrix.until(now_s), no_pings, raw),
         }
-        for variant, (history, observations, variant_params) in cases.items():
-            tse, _ = enhance_tse(
-                PlannerInputs(grid, history, observations, float(now_s)), variant_params
-            )
+        try:
+            found = {
+                variant: enhance_tse(
+                    PlannerInputs(grid, history, observations, float(now_s)), variant_params
+                )[0]
+                for variant, (history, observations, variant_params) in cases.items()
+            }
+        except NoInrixEstimate:
+            skipped.append(float(now_s))
+            continue
+        decided.append(float(now_s))
+        truths.append(float(drive.speed_mps[ahead][on_grid].mean()))
+        for variant, tse in found.items():
             estimates[variant].append(float(tse[lane - 1, cells].mean()))
     return DriveErrors(
         decision_times_s=np.asarray(decided),
         truth_mps=np.asarray(truths),
         estimates_mps={variant: np.asarray(values) for variant, values in estimates.items()},
+        no_estimate_times_s=np.asarray(skipped),
     )

@@ -73,7 +73,7 @@ class Provider:
 
 @pytest.fixture
 def snapshot(shared_dir: Path) -> RecordedSnapshot:
-    drive = sorted((shared_dir / "data/trajectories_with_inrix").glob("2021-04-22*"))[0]
+    drive = next((shared_dir / "data/trajectories_with_inrix").glob("2021-04-22*masterArray_1*"))
     return snapshots_from_drive(drive)[0]
 
 

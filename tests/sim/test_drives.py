@@ -12,19 +12,32 @@ from sim.drives import DriveError, load_drive, load_drives, load_inrix_recording
 HEADER = "Time,Velocity\n"
 
 
-def test_the_six_shared_drives(shared_dir: Path) -> None:
+def test_the_shared_drives(shared_dir: Path) -> None:
     drives = load_drives(shared_dir / "data" / "trajectories")
-    assert len(drives) == 6
-    kinds = {drive.name[:19]: drive.kind for drive in drives}
-    # the two drives that never slow below 22 m/s are free flow; the rest have waves
-    assert kinds == {
-        "2021-03-08-22-35-14": "shockwave",
-        "2021-03-09-13-35-04": "freeflow",
-        "2021-03-12-22-20-57": "shockwave",
-        "2021-04-05-21-39-05": "shockwave",
-        "2021-04-07-12-33-03": "freeflow",
-        "2021-04-19-22-09-19": "shockwave",
+    assert len(drives) == 32
+    kinds = {drive.name: drive.kind for drive in drives}
+    # the six drives first shared: the two that never slow below 22 m/s are free flow
+    assert {
+        name: kinds[name]
+        for name in (
+            "2021-03-08-22-35-14_masterArray_0_5373",
+            "2021-03-09-13-35-04_masterArray_0_4633",
+            "2021-03-12-22-20-57_masterArray_0_7509",
+            "2021-04-05-21-39-05_masterArray_1_9955",
+            "2021-04-07-12-33-03_masterArray_0_4031",
+            "2021-04-19-22-09-19_masterArray_0_5905",
+        )
+    } == {
+        "2021-03-08-22-35-14_masterArray_0_5373": "shockwave",
+        "2021-03-09-13-35-04_masterArray_0_4633": "freeflow",
+        "2021-03-12-22-20-57_masterArray_0_7509": "shockwave",
+        "2021-04-05-21-39-05_masterArray_1_9955": "shockwave",
+        "2021-04-07-12-33-03_masterArray_0_4031": "freeflow",
+        "2021-04-19-22-09-19_masterArray_0_5905": "shockwave",
     }
+    # all 32: 20 with at least one slowdown wave, 12 free flow (16 sessions on 14 dates)
+    assert sum(kind == "shockwave" for kind in kinds.values()) == 20
+    assert len({name[:10] for name in kinds}) == 14
     for drive in drives:
         assert drive.dt_s == 0.1
         # each covers the same I-24 section: 13.09-13.10 km by GPS, about 1 % less by the

@@ -113,12 +113,22 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
     drives.mkdir()
     for drive in short_drives(shared_dir):
         write_drive(drive, drives / f"{drive.name[:19]}.csv")
+    # the two recordings with INRIX first shared, both stop-and-go
+    recorded = tmp_path / "recorded"
+    recorded.mkdir()
+    for name in (
+        "2021-03-15-12-46-38_2T3MWRFVXLW056972_masterArray_0_4917",
+        "2021-04-22-12-47-13_2T3MWRFVXLW056972_masterArray_1_5292",
+    ):
+        (recorded / name).symlink_to(shared_dir / "data/trajectories_with_inrix" / name)
     out = tmp_path / "out"
     result = run_cli(
         "sim",
         "evaluate",
         "--drives",
         str(drives),
+        "--inrix-drives",
+        str(recorded),
         "--planner",
         "kernel_smooth",
         "--controller",

@@ -30,20 +30,38 @@ def test_feed_positions_count_from_the_drives_start() -> None:
     assert feed.visible_rows(-0.1).tolist() == [True, False]
 
 
+# The two recordings first shared.
+FIRST_SHARED = (
+    "2021-03-15-12-46-38_2T3MWRFVXLW056972_masterArray_0_4917",
+    "2021-04-22-12-47-13_2T3MWRFVXLW056972_masterArray_1_5292",
+)
+
+
 def test_the_shared_recordings(shared_dir: Path) -> None:
     recorded = load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
-    assert len(recorded) == 2
-    for one in recorded:
+    assert len(recorded) == 9
+    by_name = {one.drive.name: one for one in recorded}
+    for name in FIRST_SHARED:
         # both drives start by GPS ~780 m along the reference line, just before the segment
         # that begins at 824 m: it lies 40-50 m ahead of the drive's start
-        assert 35.0 < one.feed.segment_start_m[4] < 55.0
+        assert 35.0 < by_name[name].feed.segment_start_m[4] < 55.0
+    for one in recorded:
+        # every recording starts inside the segment before that one (34-46 m short of it)
+        assert one.feed.segment_start_m[3] < 0.0 < one.feed.segment_start_m[4] < 55.0
         assert one.feed.speed_mps.shape[1] == 21
     cases = scenario_cases(["shockwave_inrix"], [], recorded)
-    assert [case.inrix is not None for case in cases] == [True, True]
+    # the longer cuts of 2021-03-08 never slow into a wave; the other seven do
+    assert len(cases) == 7
+    assert all(case.inrix is not None for case in cases)
+    assert set(FIRST_SHARED) <= {case.drive.name for case in cases}
 
 
 def test_the_planner_reads_the_recorded_minutes(shared_dir: Path) -> None:
-    one = load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")[0]
+    one = next(
+        one
+        for one in load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
+        if one.drive.name == FIRST_SHARED[0]
+    )
     planner = SimulatedPlanner.for_drive(one.drive, "kernel_smooth_buffer", feed=one.feed)
     assert planner.feed is one.feed
     for time_s in np.arange(0.0, one.drive.duration_s, 60.0):

@@ -57,7 +57,7 @@ def test_scenarios_from_the_shared_drives(shared_dir: Path) -> None:
     by_scenario: dict[str, int] = {}
     for case in cases:
         by_scenario[case.scenario] = by_scenario.get(case.scenario, 0) + 1
-    assert by_scenario == {"shockwave": 4, "freeflow": 2, "bottleneck": 2}
+    assert by_scenario == {"shockwave": 20, "freeflow": 12, "bottleneck": 12}
     bottleneck = next(case for case in cases if case.bottleneck is not None)
     assert bottleneck.drive.kind == "freeflow"
     with pytest.raises(ValueError, match="unknown scenario rush"):
