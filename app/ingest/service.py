@@ -15,13 +15,14 @@ from app.core import metrics
 from app.core.config import Settings
 from app.ingest.directory import FleetDirectoryCache
 from app.ingest.pings import (
+    BodyError,
     ForeignVehicle,
     Rejected,
     TimeWindow,
     check_in_context,
     read_pings,
 )
-from app.ingest.writer import PingWriter, RefusedByDatabase
+from app.ingest.writer import PingWriter, RefusedByDatabase, UnstorableValue
 
 
 class RowsRefused(RuntimeError):
@@ -60,6 +61,11 @@ class Ingest:
         rows, rejected_context = check_in_context(pings, directory, window, received_at)
         try:
             outcome = await self.writer.write(rows)
+        except UnstorableValue as error:
+            metrics.PINGS.labels("refused").inc(len(pings))
+            raise BodyError(
+                f"a value cannot be stored: {error}; nothing of this request was stored"
+            ) from None
         except RefusedByDatabase:
             # The roster changed under the cache (a vehicle removed): check again with a fresh
             # directory, so the removed vehicle's pings become per-item rejections.

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -28,7 +29,13 @@ from sqlalchemy.ext.asyncio import AsyncConnection, AsyncEngine
 
 from app.core import metrics
 from app.ingest.pings import PingRow
-from app.ingest.sql import COPY_INCOMING, COPY_TYPES, CREATE_INCOMING, INSERT_FROM_INCOMING
+from app.ingest.sql import (
+    COPY_INCOMING,
+    COPY_TYPES,
+    CREATE_INCOMING,
+    INSERT_FROM_INCOMING,
+    PING_COLUMNS,
+)
 from vehicle_agent.corridor import trusted_heading
 
 log = logging.getLogger(__name__)
@@ -45,6 +52,15 @@ class WriterStopped(RuntimeError):
 
 class RefusedByDatabase(RuntimeError):
     """The database refused a request's rows (a constraint); nothing of them was written."""
+
+
+class UnstorableValue(RefusedByDatabase):
+    """A value of the request's rows cannot be stored (e.g. a NUL in text); `field` names it."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,16 +149,18 @@ class PingWriter:
     async def _answer(self, group: list[_Submission]) -> None:
         try:
             outcomes = await self._write_group(group)
-        except psycopg.IntegrityError as error:
+        except (psycopg.DataError, psycopg.IntegrityError, UnicodeEncodeError) as error:
+            # Rows the checks let through were refused (a value PostgreSQL cannot store, or a
+            # vehicle just removed from the roster). The group is split in halves and each
+            # half retried, so the other requests commit and only the request(s) holding
+            # such rows fail: one request's bad row never costs another car its ping.
             if len(group) == 1:
-                reason = str(error).strip().splitlines()[0] if str(error).strip() else "refused"
-                _fail(group, RefusedByDatabase(reason))
+                _fail(group, _refusal(error, group[0].rows))
                 return
-            # A row the checks let through was refused (e.g. its vehicle was just removed from
-            # the roster): write each request alone so that only its own request fails.
-            log.warning("group of %d requests refused; writing them one by one", len(group))
-            for submission in group:
-                await self._answer([submission])
+            log.info("group of %d requests refused; retrying it in halves", len(group))
+            middle = len(group) // 2
+            await self._answer(group[:middle])
+            await self._answer(group[middle:])
             return
         except Exception as error:  # every waiting request gets it (outages become 503)
             _fail(group, error)
@@ -208,6 +226,34 @@ def _fail(group: Sequence[_Submission], error: Exception) -> None:
     for submission in group:
         if not submission.answer.done():
             submission.answer.set_exception(error)
+
+
+# COPY names a refused value's column in its error context: "COPY ping_incoming, line 3,
+# column controller: ...".
+_COPY_COLUMN = re.compile(r"column (\w+)")
+_TEXT_FIELDS = tuple(
+    (PingRow._fields.index(name), name) for name, pg_type in PING_COLUMNS if pg_type == "text"
+)
+
+
+def _refusal(error: Exception, rows: Sequence[PingRow]) -> RefusedByDatabase:
+    """What a lone request is told when its rows were refused, naming the field if known."""
+    if isinstance(error, UnicodeEncodeError):  # refused while encoding, before PostgreSQL
+        for row in rows:
+            for position, name in _TEXT_FIELDS:
+                value = row[position]
+                if isinstance(value, str) and not value.isascii():
+                    try:
+                        value.encode()
+                    except UnicodeEncodeError:
+                        return UnstorableValue(name, "text holds a lone UTF-16 surrogate")
+        return UnstorableValue("text", "text holds a lone UTF-16 surrogate")
+    assert isinstance(error, psycopg.Error)
+    reason = error.diag.message_primary or type(error).__name__
+    if isinstance(error, psycopg.DataError):
+        column = _COPY_COLUMN.search(error.diag.context or "")
+        return UnstorableValue(column.group(1) if column else "value", reason)
+    return RefusedByDatabase(reason)
 
 
 def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
