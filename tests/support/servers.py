@@ -59,7 +59,7 @@ def cli_env(**extra: str) -> dict[str, str]:
 def smoothfleet_command() -> list[str]:
     """How to invoke the installed CLI from this interpreter."""
     script = Path(sys.executable).parent / "smoothfleet"
-    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "smoothfleet.cli"]
 
 
 def run_cli(

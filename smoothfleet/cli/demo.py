@@ -516,4 +516,4 @@ def summarise(
 def smoothfleet_command() -> list[str]:
     """How to run this installation's `smoothfleet`."""
     script = Path(sys.executable).parent / "smoothfleet"
-    return [str(script)] if script.exists() else [sys.executable, "-m", "app.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "smoothfleet.cli"]

@@ -92,7 +92,7 @@ def inrix() -> None:
 )
 def poll(period: float | None, count: int | None, record: Path | None) -> None:
     """Fetch SMOOTHFLEET_INRIX_URL every period (key: SMOOTHFLEET_INRIX_KEY) and store it."""
-    from app.cli import database, settings
+    from smoothfleet.cli.common import database, settings
 
     current: Settings = settings()
     if not current.inrix_url:
@@ -141,7 +141,7 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
 )
 def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
     """Store a recording's snapshots in the order they were received."""
-    from app.cli import CliError, database, settings
+    from smoothfleet.cli.common import CliError, database, settings
 
     try:
         snapshots = read_recording(recording)
@@ -169,7 +169,7 @@ def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 def convert(drive_dir: Path, recording: Path) -> None:
     """Make a recording from a drive of ../shared/data/trajectories_with_inrix/."""
-    from app.cli import CliError
+    from smoothfleet.cli.common import CliError
 
     try:
         count = write_recording(recording, snapshots_from_drive(drive_dir))

@@ -17,8 +17,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
 from types import FrameType
@@ -26,14 +24,12 @@ from typing import NoReturn
 
 import click
 from psycopg.errors import UndefinedTable
-from rich.console import Console
 from rich.table import Table
 from sqlalchemy.exc import IntegrityError, ProgrammingError
 
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import (
     DatabaseUnavailable,
-    check_reachable,
     libpq_url,
     make_sync_engine,
     redact,
@@ -41,8 +37,6 @@ from app.core.db import (
 )
 from app.core.metrics import MULTIPROCESS_DIR_ENV
 from app.core.security import TOKEN_ROLES, issue_token
-from app.feeds.commands import inrix
-from app.plans.commands import planner
 from app.users.service import (
     OPS_ROLES,
     UserError,
@@ -53,31 +47,10 @@ from app.users.service import (
 )
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
-from sim.commands import fleet_options, sim
-
-console = Console()
-
-
-class CliError(Exception):
-    """An expected failure: its message is printed as one line and the exit code is 1."""
-
-
-@contextmanager
-def database(settings: Settings) -> Iterator[str]:
-    """The URL of the database to use, starting the embedded server if none is configured."""
-    if settings.database_url is not None:
-        check_reachable(settings.database_url, settings.db_connect_timeout_s)
-        yield settings.database_url
-        return
-    from app.core.embedded import embedded_postgres
-
-    with embedded_postgres(settings.data_dir) as url:
-        yield url
-
-
-def settings() -> Settings:
-    """The settings of this invocation."""
-    return get_settings()
+from smoothfleet.cli.common import CliError, console, database, settings
+from smoothfleet.cli.inrix import inrix
+from smoothfleet.cli.planner import planner
+from smoothfleet.cli.sim import fleet_options, sim
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -495,7 +468,7 @@ def demo(host: str | None, port: int | None, duration: float | None, vehicles: i
     a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent."""
     from app.migrate import upgrade
     from app.seed import seed
-    from sim.fleet.demo import DemoError, run_demo
+    from smoothfleet.cli.demo import DemoError, run_demo
 
     current = _with_overrides(host=host, port=port)
     ensure_port_free(current.host, current.port)
@@ -582,6 +555,3 @@ def main() -> None:
             raise
         fail(f"unexpected {type(error).__name__}: {error} (set SMOOTHFLEET_DEBUG=1 for details)")
 
-
-if __name__ == "__main__":
-    main()

@@ -28,7 +28,7 @@ from sim.scenarios import SCENARIOS, scenario_cases
 console = Console(width=max(Console().width, 160))
 
 # ../shared beside the clone (README): the real drives the evaluation replays.
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 SHARED_DRIVES = SHARED_DATA / "trajectories"
 SHARED_INRIX_DRIVES = SHARED_DATA / "trajectories_with_inrix"
 DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel", "simple:acc", "microaccel_acc:acc")
@@ -212,8 +212,8 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     Every car runs the real vehicle agent on its own virtual CAN bus with a car emulator and
     its own token, issued in the database the server uses (SMOOTHFLEET_DATABASE_URL).
     """
-    from app.cli import CliError, database, settings
-    from sim.fleet.demo import DemoError, new_run_dir, run_fleet
+    from smoothfleet.cli.common import CliError, database, settings
+    from smoothfleet.cli.demo import DemoError, new_run_dir, run_fleet
 
     current = settings()
     with database(current) as url:

@@ -36,8 +36,8 @@ def planner() -> None:
 
 def _check_corridors(url: str, corridors: tuple[str, ...]) -> None:
     """Fail with one line when a named corridor is not in the warehouse."""
-    from app.cli import CliError
     from app.core.db import make_sync_engine, session_scope
+    from smoothfleet.cli.common import CliError
 
     engine = make_sync_engine(url)
     try:
@@ -53,9 +53,9 @@ def _check_corridors(url: str, corridors: tuple[str, ...]) -> None:
 
 
 def _cycle(url: str, current: Settings, corridors: tuple[str, ...], min_interval_s: float) -> int:
-    from app.cli import console
     from app.core.db import make_sync_engine
     from app.plans.jobs import run_planner
+    from smoothfleet.cli.common import console
 
     engine = make_sync_engine(url)
     try:
@@ -73,7 +73,7 @@ def _cycle(url: str, current: Settings, corridors: tuple[str, ...], min_interval
 @click.option("--corridor", "corridors", multiple=True, help="Only this corridor (repeatable).")
 def once(corridors: tuple[str, ...]) -> None:
     """Run one planner cycle for every corridor (or those named) and publish."""
-    from app.cli import database, settings
+    from smoothfleet.cli.common import database, settings
 
     current = settings()
     with database(current) as url:
@@ -89,7 +89,7 @@ def run(corridors: tuple[str, ...]) -> None:
     """Run the planner every SMOOTHFLEET_PLANNER_PERIOD_S seconds until stopped."""
     from apscheduler.schedulers.blocking import BlockingScheduler
 
-    from app.cli import console, database, settings
+    from smoothfleet.cli.common import console, database, settings
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s %(message)s")
     current = settings()
@@ -121,9 +121,9 @@ def run(corridors: tuple[str, ...]) -> None:
 @click.option("--plan-id", "plan_id", required=True, type=int, help="The plan to recompute.")
 def replay(plan_id: int) -> None:
     """Recompute a published plan from the warehouse and report whether it matches."""
-    from app.cli import CliError, console, database, settings
     from app.core.db import make_sync_engine, session_scope
     from planner.warehouse import replay_plan
+    from smoothfleet.cli.common import CliError, console, database, settings
 
     with database(settings()) as url:
         engine = make_sync_engine(url)

@@ -1,0 +1,1 @@
+"""`smoothfleet`: the server-side command line, one module per command group."""
