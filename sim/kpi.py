@@ -2,12 +2,15 @@
 Selection" defines them, plus comfort and safety figures.
 
 All functions take arrays with one row per time step and one column per vehicle and are pure.
-The KPIs of a platoon run cover the simulated vehicles (AVs and humans): the leader replays a
-measured drive that is the same in every run, so it is the boundary condition, not an outcome.
 
-- fuel economy: total distance of all vehicles / total fuel of all vehicles, in mpg (paper eq.);
+- fuel economy: total distance of all vehicles / total fuel of all vehicles, in mpg (paper eq.),
+  over the simulated vehicles (AVs and humans): the leader replays a measured drive that is the
+  same in every run, so its fuel is the boundary condition, not an outcome;
 - throughput: vehicles crossing a point per hour, averaged over five equi-spaced points (for a
-  finite platoon: (n - 1) vehicles over the time between the first and the last crossing);
+  finite platoon: (n - 1) intervals over the time between the first and the last crossing),
+  counting **every** vehicle that crosses, the leader included (paper "Candidate Controller
+  Selection": "counting the number of vehicles crossing various positions"), so a gap an AV
+  opens behind the leader costs throughput like any other;
 - network speed: total distance / total driving time;
 - comfort: RMS acceleration and RMS jerk; safety: minimum gap and minimum time-to-collision.
 """
@@ -133,7 +136,8 @@ def min_time_to_collision_s(
 def platoon_kpis(
     run: PlatoonRun, model: FuelModel = RAV4_2019, *, throughput_point_m: float | None = None
 ) -> Kpis:
-    """The KPIs of a platoon run over its simulated vehicles (columns 1..N-1).
+    """The KPIs of a platoon run: fuel, speed, comfort and safety over its simulated vehicles
+    (columns 1..N-1), throughput over every vehicle, the leader included.
 
     Throughput is the average over five equi-spaced points, or, given `throughput_point_m`,
     the flow over that one point (the bottleneck's: just downstream of the region).
@@ -142,9 +146,9 @@ def platoon_kpis(
     speed = run.speed_mps[:, 1:]
     gaps = run.gap_m
     throughput = (
-        throughput_vph(position, run.dt_s)
+        throughput_vph(run.position_m, run.dt_s)
         if throughput_point_m is None
-        else throughput_at_vph(position, run.dt_s, throughput_point_m)
+        else throughput_at_vph(run.position_m, run.dt_s, throughput_point_m)
     )
     return Kpis(
         fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),

@@ -82,25 +82,36 @@ def test_time_to_collision_only_when_closing_in() -> None:
     assert min_time_to_collision_s(gaps, leader, follower) == float("inf")
 
 
-def test_platoon_kpis_cover_the_simulated_cars_not_the_leader() -> None:
-    # leader far ahead and standing still (it would wreck every KPI if it were counted)
-    leader = np.array([[1000.0], [1000.0], [1000.0]])
-    run = PlatoonRun(
+def cruising_platoon(leader_ahead_m: float) -> PlatoonRun:
+    """Leader, car A and car B at 10 m/s for 9 s; B 15 m behind A, the leader ahead of A."""
+    time_s = np.arange(10.0)[:, None]
+    fronts = np.array([[leader_ahead_m, 0.0, -15.0]])
+    return PlatoonRun(
         drive_name="hand-built",
         dt_s=1.0,
         is_av=np.array([False, True, False]),
-        position_m=np.hstack([leader, POSITIONS]),
-        speed_mps=np.hstack([np.zeros((3, 1)), SPEEDS]),
+        position_m=fronts + 10.0 * time_s,
+        speed_mps=np.full((10, 3), 10.0),
         vehicle_length_m=5.0,
         gap_violation_m=1.0,
     )
-    kpis = platoon_kpis(run)
+
+
+def test_platoon_kpis_count_the_leader_in_throughput_only() -> None:
+    # the leader 15 m ahead of car A: 1.5 s ahead of it at every point, like car B behind A
+    kpis = platoon_kpis(cruising_platoon(15.0))
+    # fuel, speed and comfort over the two simulated cars (the leader's drive is the same in
+    # every run): 2 cars x 9 s x C(10) over 2 x 90 m, the same ratio as the 2 s case above
     assert kpis.fuel_economy_mpg == pytest.approx(59.691725, rel=1e-6)
-    assert kpis.throughput_vph == pytest.approx(2400.0)
     assert kpis.network_speed_mps == pytest.approx(10.0)
     assert kpis.accel_rms_mps2 == 0.0
-    # car B is 15 m behind car A's front bumper: gap 10 m, no one closes in on the car ahead
-    # except car A on the standing leader: (1000 - 20 - 5) m / 10 m/s = 97.5 s
+    # throughput over all three: 2 intervals of 1.5 s at every point -> 2400 veh/h
+    assert kpis.throughput_vph == pytest.approx(2400.0)
     assert kpis.min_gap_m == pytest.approx(10.0)
-    assert kpis.min_ttc_s == pytest.approx(97.5)
     assert kpis.collisions == 0
+
+
+def test_a_gap_opened_behind_the_leader_costs_throughput() -> None:
+    # the same two cars, but the leader 45 m ahead of car A (4.5 s): crossings at 0, 4.5, 6 s
+    # -> 2 intervals over 6 s = 1200 veh/h; without the leader it would still read 2400
+    assert platoon_kpis(cruising_platoon(45.0)).throughput_vph == pytest.approx(1200.0)
