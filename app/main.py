@@ -1,4 +1,8 @@
-"""The FastAPI application: API, dashboard and the in-process schedule (maintenance, planner)."""
+"""The FastAPI application of the API and the in-process schedule (maintenance, planner).
+
+The dashboard is mounted on it one level up, by `smoothfleet.server`: `dashboards` uses `app`'s
+services, so `app` must not import `dashboards` back.
+"""
 
 from __future__ import annotations
 
@@ -26,15 +30,14 @@ from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
 from app.plans.service import PlanDocuments
 from app.vehicles.router import router as vehicles_router
-from dashboards.pages import install as install_dashboard
 
 log = logging.getLogger(__name__)
 
 MAINTENANCE_PERIOD_S = 3600
 
 
-def create_app(settings: Settings | None = None) -> FastAPI:
-    """Build the application for the database named in the settings."""
+def create_api(settings: Settings | None = None) -> FastAPI:
+    """Build the API for the database named in the settings."""
     settings = settings or get_settings()
     if settings.database_url is None:
         raise SettingsError(
@@ -113,6 +116,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(corridors_router)
     app.include_router(feeds_router)
     app.include_router(fleet_router)
-    install_dashboard(app)
     app.include_router(plans_router)
     return app

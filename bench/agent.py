@@ -34,7 +34,7 @@ import numpy as np
 
 from sim.emulator.car import CarEmulator
 from sim.emulator.leaders import ConstantSpeedLeader
-from tests.vehicle_agent.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_config
+from sim.emulator.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_config
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock, SystemClock

@@ -36,11 +36,11 @@ from app.core.config import load_settings
 from app.core.db import libpq_url, make_sync_engine, session_scope
 from app.core.embedded import database_url, embedded_server, ensure_database
 from app.core.security import issue_token
-from app.main import create_app
 from app.migrate import upgrade
 from app.plans.jobs import run_planner
 from app.seed import seed, seed_corridor_document
 from app.users.service import save_user
+from smoothfleet.server import create_app
 from vehicle_agent.corridor import CorridorGeometry
 
 PAGES = (

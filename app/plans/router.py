@@ -54,7 +54,7 @@ async def _readable_corridor(
 
 
 def _documents(request: Request) -> PlanDocuments:
-    """This application's cache of rendered plan documents (made by create_app)."""
+    """This application's cache of rendered plan documents (made by create_api)."""
     documents: PlanDocuments = request.app.state.plan_documents
     return documents
 

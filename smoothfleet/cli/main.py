@@ -419,7 +419,7 @@ def run_server(url: str, current: Settings, *, migrate: bool) -> None:
         os.environ[MULTIPROCESS_DIR_ENV] = metrics_dir
     try:
         uvicorn.run(
-            "app.main:create_app",
+            "smoothfleet.server:create_app",
             factory=True,
             host=current.host,
             port=current.port,

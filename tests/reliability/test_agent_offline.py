@@ -10,9 +10,9 @@ import httpx
 import pytest
 from sqlalchemy import Engine, text
 
+from sim.emulator.rig import rig
 from tests.support.servers import free_port, live_server
 from tests.support.tokens import issue
-from tests.vehicle_agent.rig import rig
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 

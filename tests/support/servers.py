@@ -17,7 +17,7 @@ import httpx
 import uvicorn
 
 from app.core.config import load_settings
-from app.main import create_app
+from smoothfleet.server import create_app
 
 
 def free_port() -> int:

@@ -9,7 +9,7 @@ import can
 import pytest
 
 from sim.emulator.leaders import ConstantSpeedLeader
-from tests.vehicle_agent.rig import Rig, rig, uniform_plan
+from sim.emulator.rig import Rig, rig, uniform_plan
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import Mode

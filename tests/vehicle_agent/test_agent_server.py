@@ -12,10 +12,10 @@ from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
+from sim.emulator.rig import rig
 from tests.planner.facts import INRIX_CODES, inrix_snapshot
 from tests.support.servers import live_server
 from tests.support.tokens import issue
-from tests.vehicle_agent.rig import rig
 from vehicle_agent.engage import Mode
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool

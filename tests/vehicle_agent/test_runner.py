@@ -10,7 +10,7 @@ from pathlib import Path
 import can
 
 from sim.emulator.car import CarEmulator
-from tests.vehicle_agent.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_config
+from sim.emulator.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_config
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
 from vehicle_agent.clock import SystemClock

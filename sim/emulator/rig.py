@@ -1,5 +1,5 @@
 """An agent driving an emulated car on a virtual CAN bus along the seed corridor, in simulated
-time: the test bench for the agent's control loop."""
+time: the bench for the agent's control loop, shared by its tests and bench/agent.py."""
 
 from __future__ import annotations
 
