@@ -40,8 +40,8 @@ from app.migrate import upgrade
 from app.plans.jobs import run_planner
 from app.seed import seed, seed_corridor_document
 from app.users.service import save_user
+from contract.corridor import CorridorGeometry
 from smoothfleet.server import create_app
-from vehicle_agent.corridor import CorridorGeometry
 
 PAGES = (
     "/api/v1/fleet",

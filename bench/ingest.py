@@ -41,7 +41,7 @@ from app.core.embedded import database_url, embedded_server, ensure_database
 from app.core.security import issue_token
 from app.migrate import upgrade
 from app.seed import seed
-from vehicle_agent.corridor import CorridorGeometry
+from contract.corridor import CorridorGeometry
 
 REPO = Path(__file__).resolve().parents[1]
 VEHICLES = 100

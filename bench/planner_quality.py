@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from app.seed import seed_corridor_document
+from contract.corridor import CorridorGeometry
 from planner.evaluation import VARIANTS, evaluate_drive
 from planner.inputs import CorridorGrid
 from planner.params import PlannerParams
 from planner.recorded import load_recorded_drive
-from vehicle_agent.corridor import CorridorGeometry
 
 ROOT = Path(__file__).resolve().parents[1]
 

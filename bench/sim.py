@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from contract.idm import I24_IDM, MIN_MODEL_GAP_M, equilibrium_gap_m
 from sim.av import agent_policy
 from sim.drives import Drive, load_drive
-from sim.idm import I24_IDM, MIN_MODEL_GAP_M, equilibrium_gap_m
 from sim.plans import SimulatedPlanner
 from sim.platoon import VEHICLE_LENGTH_M, platoon_roles, simulate_platoon
 

@@ -38,7 +38,7 @@ from app.core.embedded import embedded_postgres
 from app.core.security import issue_token
 from app.migrate import upgrade
 from app.seed import seed, seed_corridor_document
-from vehicle_agent.corridor import CorridorGeometry
+from contract.corridor import CorridorGeometry
 
 PROBE_VEHICLE = "SF-001"
 PROBE_PINGS = 20

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from contract.corridor import CorridorGeometry
 from planner.evaluation import Drive
 from planner.inputs import FloatArray, InrixHistory
-from vehicle_agent.corridor import CorridorGeometry
 
 KMH = 1 / 3.6  # m/s per km/h
 

@@ -23,8 +23,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 from sim.drives import Drive
-from sim.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -208,7 +208,7 @@ def simulate_platoon(
         np.multiply(v_follow, idm.time_gap_s, out=work)
         desired += work
         desired += idm.min_gap_m
-        # (s*/s)^2 with the collision guard of sim.idm
+        # (s*/s)^2 with the collision guard of contract.idm
         np.maximum(gap, MIN_MODEL_GAP_M, out=work)
         np.divide(desired, work, out=desired)
         np.multiply(desired, desired, out=desired)

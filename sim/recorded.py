@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from contract.corridor import CorridorGeometry
 from sim.drives import Drive, DriveError, InrixRecording, load_drive, load_inrix_recording
 from sim.traffic import InrixFeed
-from vehicle_agent.corridor import CorridorGeometry
 
 
 @dataclass(frozen=True)

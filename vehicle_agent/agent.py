@@ -26,6 +26,7 @@ from typing import Any
 
 import can
 
+from contract.corridor import CorridorGeometry, trusted_heading
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
@@ -40,7 +41,6 @@ from vehicle_agent.controllers import (
     Observation,
     build_controller,
 )
-from vehicle_agent.corridor import CorridorGeometry, trusted_heading
 from vehicle_agent.gps import GpsFix, GpsSource
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort

@@ -14,7 +14,7 @@ from typing import Any, Literal
 import httpx
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from vehicle_agent.corridor import CorridorGeometry
+from contract.corridor import CorridorGeometry
 from vehicle_agent.plan import Plan, PlanError, parse_plan
 
 

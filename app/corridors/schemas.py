@@ -25,7 +25,7 @@ class InrixSegmentOut(BaseModel):
 
 
 class SubSegmentOut(BaseModel):
-    """A fine sub-segment (the planner's grid); `vehicle_agent.corridor` builds on these."""
+    """A fine sub-segment (the planner's grid); `contract.corridor` builds on these."""
 
     model_config = ConfigDict(from_attributes=True)
 

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from sqlalchemy import text
 from sqlalchemy.ext.asyncio import AsyncEngine
 
-from vehicle_agent.corridor import CorridorGeometry
+from contract.corridor import CorridorGeometry
 
 MIN_RELOAD_INTERVAL_S = 2.0
 

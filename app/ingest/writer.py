@@ -36,7 +36,7 @@ from app.ingest.sql import (
     INSERT_FROM_INCOMING,
     PING_COLUMNS,
 )
-from vehicle_agent.corridor import trusted_heading
+from contract.corridor import trusted_heading
 
 log = logging.getLogger(__name__)
 

@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from contract.units import MPS_PER_MPH, mps_to_mph
 from vehicle_agent.actuators import (
     LONG_PRESS_S,
     LONG_STEP_MPH,
@@ -39,7 +40,6 @@ from vehicle_agent.actuators import (
 )
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers import AccSetPoint
-from vehicle_agent.units import MPS_PER_MPH, mps_to_mph
 
 MIN_SET_SPEED_MPH = 20
 MAX_SET_SPEED_MPH = 90

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import can
 
+from contract.corridor import CorridorGeometry
 from sim.emulator.acc import StockAcc, StockAccParams
 from sim.emulator.frames import FRAMES, CarSnapshot
 from sim.emulator.leaders import ConstantSpeedLeader, Leader
 from vehicle_agent.cars import CarInterface, CruiseButton, car_for
 from vehicle_agent.codec import FrameError, codec_for
-from vehicle_agent.corridor import CorridorGeometry
 from vehicle_agent.gps import GpsFix
 
 log = logging.getLogger(__name__)

@@ -16,12 +16,12 @@ from typing import Any
 
 import can
 
+from contract.corridor import CorridorGeometry
 from sim.emulator.car import CarEmulator
 from sim.emulator.leaders import Leader
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock
-from vehicle_agent.corridor import CorridorGeometry
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.plan import Plan
 from vehicle_agent.server import ControllerConfig, ServerClient, VehicleConfig

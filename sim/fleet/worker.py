@@ -32,6 +32,7 @@ import httpx
 import numpy as np
 from pydantic import BaseModel
 
+from contract.corridor import CorridorGeometry
 from sim.drives import load_drive
 from sim.emulator.car import CarEmulator
 from sim.energy import RAV4_2019
@@ -39,7 +40,6 @@ from sim.fleet.traffic import CorridorTraffic, TrafficLeaders, synthetic_waves
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock
-from vehicle_agent.corridor import CorridorGeometry
 from vehicle_agent.engage import Mode
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.server import ServerClient, ServerError

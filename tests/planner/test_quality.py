@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from app.seed import seed_corridor_document
+from contract.corridor import CorridorGeometry
 from planner.evaluation import DriveErrors, evaluate_drive
 from planner.inputs import CorridorGrid
 from planner.recorded import load_recorded_drive
-from vehicle_agent.corridor import CorridorGeometry
 
 # The two recordings the per-drive claims were first made on.
 FIRST_SHARED = (

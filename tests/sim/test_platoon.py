@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from contract.idm import I24_IDM, equilibrium_gap_m
 from sim.drives import drive_from_speeds, load_drive
-from sim.idm import I24_IDM, equilibrium_gap_m
 from sim.platoon import (
     VEHICLE_LENGTH_M,
     AvObservation,

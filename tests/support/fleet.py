@@ -14,8 +14,8 @@ from typing import Any
 import httpx
 
 from app.seed import seed_corridor_document
+from contract.corridor import CorridorGeometry
 from tests.support.tokens import bearer
-from vehicle_agent.corridor import CorridorGeometry
 
 CORRIDOR = "I-24-WB"
 

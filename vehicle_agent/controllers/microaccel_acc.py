@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from contract.units import mps_to_mph
 from vehicle_agent.controllers.base import (
     MAX_GAP_SETTING,
     MIN_GAP_SETTING,
@@ -30,7 +31,6 @@ from vehicle_agent.controllers.base import (
     Observation,
 )
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator, MicroAccelParams, base_accel
-from vehicle_agent.units import mps_to_mph
 
 
 class MicroAccelAccParams(BaseModel):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from contract.units import mps_to_mph
 from vehicle_agent.controllers.base import (
     MAX_GAP_SETTING,
     MIN_GAP_SETTING,
@@ -27,7 +28,6 @@ from vehicle_agent.controllers.microaccel import (
     safety_accel,
     target_accel,
 )
-from vehicle_agent.units import mps_to_mph
 
 
 class SimpleParams(BaseModel):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.idm import I24_IDM, IdmParams, equilibrium_gap_m, idm_accel
+from contract.idm import I24_IDM, IdmParams, equilibrium_gap_m, idm_accel
 
 
 def test_closing_in_on_a_slower_leader() -> None:

@@ -1,8 +1,7 @@
 """Corridor geometry: map a GPS fix to its position x_m along a corridor, and back.
 
 Shared by the car (geofence, plan lookup) and the server (ping map-matching, observations,
-simulated fleets). It lives with the agent because the agent never imports the server, and it
-needs nothing but numpy.
+simulated fleets), so it lives in the contract both import; it needs nothing but numpy.
 
 The corridor is the polyline through its sub-segments' end points (<= 100 m apart on the seed
 corridor, so the chord error on highway curves is a few metres). Positions are projected in a

@@ -1,4 +1,5 @@
-"""Unit conversions the car needs: US ACC set speeds move in whole mph, CAN speaks km/h."""
+"""Units, defined once for server and car: US ACC set speeds and INRIX move in mph, CAN speaks
+km/h, the warehouse and every model speak SI."""
 
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from app.seed import seed_corridor_document
-from vehicle_agent.corridor import CorridorGeometry, trusted_heading
+from contract.corridor import CorridorGeometry, trusted_heading
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import pytest
 from numpy.typing import NDArray
 
 from app.seed import seed_corridor_document
-from vehicle_agent.corridor import EARTH_RADIUS_M, CorridorGeometry
+from contract.corridor import EARTH_RADIUS_M, CorridorGeometry
 
 
 def reference(
