@@ -17,6 +17,7 @@ from sqlalchemy.ext.asyncio import async_sessionmaker
 from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
+from app.core.deadline import RequestDeadline
 from app.core.errors import install_error_handlers
 from app.core.headers import SecurityHeaders, install_api_docs
 from app.core.metrics import RequestMetrics
@@ -107,6 +108,7 @@ def create_api(settings: Settings | None = None) -> FastAPI:
     app.state.plan_documents = PlanDocuments()
     install_error_handlers(app)
     app.add_middleware(PingFastPath)
+    app.add_middleware(RequestDeadline, deadline_s=settings.api_deadline_s)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics)
     app.add_middleware(SecurityHeaders)

@@ -35,6 +35,10 @@ class Settings(BaseSettings):
     db_pool_size: int = Field(10, ge=1, le=200)
     db_connect_timeout_s: float = Field(5.0, gt=0, le=120)
     db_statement_timeout_s: float = Field(30.0, gt=0, le=3600)
+    # An API request not answered this long after its body arrived is answered 503 +
+    # Retry-After (app/core/deadline.py): a frozen database never enforces the statement
+    # timeout. 0 disables.
+    api_deadline_s: float = Field(1.5, ge=0, le=300)
 
     # HTTP
     host: str = "127.0.0.1"

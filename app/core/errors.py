@@ -18,7 +18,10 @@ from sqlalchemy.exc import DataError, DBAPIError, InterfaceError, OperationalErr
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.core.logs import RepeatedMessages
+
 log = logging.getLogger(__name__)
+log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a request
 
 RETRY_AFTER_S = 5
 

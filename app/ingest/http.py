@@ -21,12 +21,14 @@ from starlette.datastructures import State
 from app.auth import CHALLENGE, PING_WRITER_ROLES, bearer_token, token_cache_for
 from app.auth.tokens import token_rate_limiter
 from app.core.errors import RETRY_AFTER_S
+from app.core.logs import RepeatedMessages
 from app.core.ratelimit import retry_after_header
 from app.ingest.pings import BodyError, ForeignVehicle
 from app.ingest.service import Ingest, RowsRefused
 from app.ingest.writer import WriterStopped
 
 log = logging.getLogger(__name__)
+log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a request
 
 JSON = (b"content-type", b"application/json")
 _NEEDED = " or ".join(PING_WRITER_ROLES)

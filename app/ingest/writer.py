@@ -136,6 +136,12 @@ class PingWriter:
                 submission = self._queue.get_nowait()
                 group.append(submission)
                 size += len(submission.rows)
+            # A request that gave up waiting (its deadline passed: answered 503, not
+            # acknowledged) is not written; its car resends.
+            group = [submission for submission in group if not submission.answer.done()]
+            if not group:
+                self._slots.release()
+                continue
             task = asyncio.create_task(self._flush(group))
             self._flushes.add(task)
             task.add_done_callback(self._flushes.discard)

