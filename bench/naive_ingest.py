@@ -18,7 +18,7 @@ from sqlalchemy import text
 from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.db import SessionDep, make_async_engine
-from app.vehicles.schemas import Ping
+from contract.vehicles import Ping
 
 INSERT_ONE = text(
     """

@@ -34,7 +34,7 @@ from app.fleet.service import (
     select_entries,
     set_maintenance,
 )
-from app.vehicles.schemas import VEHICLE_ID_PATTERN
+from contract.vehicles import VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["operations"])
 

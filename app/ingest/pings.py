@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from app.auth import Principal
 from app.ingest.directory import CorridorInfo, FleetDirectory
-from app.vehicles.schemas import MAX_PINGS_PER_BATCH, Ping, PingBatch
+from contract.vehicles import MAX_PINGS_PER_BATCH, Ping, PingBatch
 
 REQUIRED_FIELDS = ("vehicle_id", "ts", "lat", "lon", "speed_mps")
 

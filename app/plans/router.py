@@ -16,7 +16,7 @@ from app.auth import AuthDep, Principal
 from app.core.config import Settings
 from app.core.db import SessionDep
 from app.core.errors import error_responses, service_unavailable
-from app.plans.schemas import PlanHistoryOut, PlanOut
+from app.plans.schemas import PlanHistoryOut
 from app.plans.service import (
     PlanDocuments,
     corridor_lanes,
@@ -25,7 +25,8 @@ from app.plans.service import (
     plan_history,
     vehicle_assignment,
 )
-from app.vehicles.schemas import VEHICLE_ID_PATTERN
+from contract.plans import PlanOut
+from contract.vehicles import VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["plans"])
 

@@ -15,7 +15,8 @@ import orjson
 from sqlalchemy import text
 from sqlalchemy.ext.asyncio import AsyncSession
 
-from app.plans.schemas import BufferOut, LanePlanOut, PlanRunOut
+from app.plans.schemas import PlanRunOut
+from contract.plans import BufferOut, LanePlanOut
 
 # Rendered plan documents kept per process (a few lanes of the last few plans).
 CACHED_DOCUMENTS = 64

@@ -10,7 +10,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 
 from app.core.config import Settings
 from app.models import Vehicle, VehicleStatus
-from app.vehicles.schemas import ControllerConfig, VehicleConfig, VehicleStatusReport
+from contract.vehicles import ControllerConfig, VehicleConfig, VehicleStatusReport
 
 # The API keeps the interface's names; the warehouse names booleans is_*/has_*.
 STATUS_COLUMNS = {

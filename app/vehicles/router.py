@@ -14,7 +14,7 @@ from app.core.db import SessionDep
 from app.core.errors import error_responses
 from app.ingest.http import reply_to_pings
 from app.vehicles.reports import store_status, vehicle_config, vehicle_exists
-from app.vehicles.schemas import (
+from contract.vehicles import (
     MAX_PINGS_PER_BATCH,
     VEHICLE_ID_PATTERN,
     Ping,

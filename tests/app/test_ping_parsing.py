@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from app.auth import Principal
 from app.ingest.pings import BodyError, ForeignVehicle, read_pings
-from app.vehicles.schemas import Ping
+from contract.vehicles import Ping
 
 ADMIN = Principal(token_id=1, role="admin", vehicle_id=None)
 CAR = Principal(token_id=2, role="vehicle", vehicle_id="SF-001")

@@ -1,0 +1,121 @@
+"""What a vehicle posts and reads (docs/interfaces.md, "Vehicles"): its pings, its status
+report, and the config it runs. The server validates with these models and the agent builds its
+messages with them, so the two cannot drift apart.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
+
+VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
+# A batch is the agent's store-and-forward upload: at most this many pings per request.
+MAX_PINGS_PER_BATCH = 1000
+
+
+class Ping(BaseModel):
+    """One 1 Hz ping of a vehicle; `ts` is the car's GPS-disciplined clock.
+
+    Unknown fields are ignored, so a newer agent may send fields this server does not know yet.
+    Lane and the time window are checked against the corridor and the clock at ingest.
+    """
+
+    model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
+
+    vehicle_id: str = Field(pattern=VEHICLE_ID_PATTERN)
+    ts: AwareDatetime
+    lat: float = Field(ge=-90, le=90)
+    lon: float = Field(ge=-180, le=180)
+    speed_mps: float = Field(ge=0, le=90)
+    accel_mps2: float | None = Field(None, ge=-50, le=50)
+    heading_deg: float | None = Field(None, ge=0, le=360)
+    lane: int | None = Field(None, ge=1, le=12)
+    acc_engaged: bool | None = None
+    controller_engaged: bool | None = None
+    controller: str | None = Field(None, max_length=64)
+    acc_speed_setting_mph: float | None = Field(None, ge=0, le=200)
+    acc_gap_setting: int | None = Field(None, ge=1, le=3)
+    lead_present: bool | None = Field(None, description="the car's 'minicar' lead flag")
+    lead_distance_m: float | None = Field(None, ge=0, le=1000)
+    lead_rel_speed_mps: float | None = Field(None, ge=-90, le=90)
+    plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
+
+
+class PingBatch(BaseModel):
+    """The store-and-forward upload: up to 1000 pings in one request."""
+
+    pings: list[Ping] = Field(max_length=MAX_PINGS_PER_BATCH)
+
+
+class Rejection(BaseModel):
+    """A ping refused on its own (the others of its batch are kept)."""
+
+    index: int
+    error: str
+
+
+class PingAnswer(BaseModel):
+    """Sent only after the accepted rows are committed."""
+
+    accepted: int
+    duplicates: int
+    rejected: list[Rejection]
+
+
+class VehicleStatusReport(BaseModel):
+    """The piStatus report a car posts every ~10 s (all but `ts` optional)."""
+
+    model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
+
+    ts: AwareDatetime
+    agent_version: str | None = Field(None, max_length=64)
+    uptime_s: float | None = Field(None, ge=0)
+    can_ok: bool | None = None
+    can_msgs_per_s: float | None = Field(None, ge=0)
+    gps_fix: bool | None = None
+    gps_satellites: int | None = Field(None, ge=0, le=255)
+    acc_available: bool | None = None
+    controller: str | None = Field(None, max_length=64)
+    controller_running: bool | None = None
+    plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
+    plan_age_s: float | None = Field(None, ge=0)
+    spool_backlog: int | None = Field(None, ge=0, le=2**31 - 1)
+    disk_free_mb: float | None = Field(None, ge=0)
+    cpu_temp_c: float | None = Field(None, ge=-60, le=150)
+    ups_on_battery: bool | None = None
+    server_rtt_ms: float | None = Field(None, ge=0)
+
+
+class StatusAnswer(BaseModel):
+    """1 stored, or 0 and 1 duplicate when the same report (vehicle, ts) was already stored."""
+
+    accepted: int
+    duplicates: int
+
+
+class ControllerConfig(BaseModel):
+    """Which controller the agent runs, and its parameters."""
+
+    name: str
+    params: dict[str, Any]
+
+
+class VehicleConfig(BaseModel):
+    """What a vehicle should run: its identity, assignment, controller and agent periods."""
+
+    vehicle_id: str
+    make: str
+    model: str
+    year: int
+    actuation: Literal["acc", "accel"]
+    corridor_id: str
+    route: str
+    assigned_lane: int
+    controller: ControllerConfig
+    active: bool = Field(description="false: the agent leaves the car to its stock ACC")
+    in_maintenance: bool
+    ping_period_s: float
+    status_period_s: float
+    plan_poll_s: float
+    stale_plan_after_s: float
