@@ -49,6 +49,7 @@ from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
 from vehicle_agent.server import ServerClient, ServerError, VehicleConfig
 from vehicle_agent.spool import PingSpool
 from vehicle_agent.state import CarStateReader
+from vehicle_agent.stopping import reading_needs_hand_back
 
 log = logging.getLogger(__name__)
 
@@ -250,6 +251,7 @@ class Agent:
                 in_lane=self._in_lane(fix, assignment),
                 plan_fresh=plan_fresh,
                 actuator_ok=now >= self._actuator_fault_until,
+                stop_within_authority=not reading_needs_hand_back(reading, self.car.actuation),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
             self.engage_policy,

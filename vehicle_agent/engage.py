@@ -7,8 +7,9 @@ button: the agent keeps off until `override_holdoff_s` after the driver's last t
 Every step the inputs are checked in a fixed order; the first that fails hands the car back in
 that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged by
 the driver, GPS healthy, on the assigned corridor, in the assigned lane, plan fresh, actuator
-healthy. Taking over needs all of them to have held for `engage_after_s` without interruption, so
-a flickering input cannot toggle control on and off at the loop rate.
+healthy, and the stop the leader ahead needs within the braking the agent may command. Taking
+over needs all of them to have held for `engage_after_s` without interruption, so a flickering
+input cannot toggle control on and off at the loop rate.
 """
 
 from __future__ import annotations
@@ -38,6 +39,9 @@ class EngageInputs:
     in_lane: bool
     plan_fresh: bool
     actuator_ok: bool
+    # The stop the radar's leader needs is within the braking the agent may command
+    # (vehicle_agent.stopping).
+    stop_within_authority: bool
     driver_active: bool
 
 
@@ -51,6 +55,7 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("in_lane", "not in the assigned lane"),
     ("plan_fresh", "no fresh plan"),
     ("actuator_ok", "actuator refused by the safety layer"),
+    ("stop_within_authority", "stopping needs more braking than the agent may command"),
 )
 
 

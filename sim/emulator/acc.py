@@ -40,6 +40,7 @@ from vehicle_agent.actuators import (
 )
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers import AccSetPoint
+from vehicle_agent.stopping import STOCK_ACC_MAX_BRAKING_MPS2
 
 MIN_SET_SPEED_MPH = 20
 MAX_SET_SPEED_MPH = 90
@@ -56,7 +57,7 @@ class StockAccParams:
     time_gaps_s: tuple[float, float, float] = (1.2, 1.5, 2.0)
     # The radar sees a leader within about 80-100 m (paper Table 2, "minicar").
     sensor_range_m: float = 100.0
-    min_accel_mps2: float = -3.5
+    min_accel_mps2: float = -STOCK_ACC_MAX_BRAKING_MPS2
     max_accel_mps2: float = 2.0
     closing_slack_mps2: float = 0.5
 

@@ -1,0 +1,66 @@
+"""The stopping check: hand-worked braking needs against each actuation's authority."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vehicle_agent.cars import CarReading
+from vehicle_agent.stopping import (
+    STOCK_ACC_MAX_BRAKING_MPS2,
+    braking_authority_mps2,
+    reading_needs_hand_back,
+    required_braking_mps2,
+    stop_exceeds_authority,
+)
+
+
+def test_authority_per_actuation() -> None:
+    # acceleration requests are limited to -3 m/s^2; a stock ACC brakes 3.5 m/s^2 (ISO 15622)
+    assert braking_authority_mps2("accel") == 3.0
+    assert braking_authority_mps2("acc") == STOCK_ACC_MAX_BRAKING_MPS2 == 3.5
+
+
+def test_required_braking_hand_worked() -> None:
+    # 28 m/s toward a stopped queue seen at 100 m: 28^2 / (2 x 98) = 4.0 m/s^2
+    assert required_braking_mps2(28.0, 100.0, 0.0) == pytest.approx(4.0)
+    # closing at 5 m/s with 27 m of gap: 25 / (2 x 25) = 0.5 m/s^2
+    assert required_braking_mps2(25.0, 27.0, 20.0) == pytest.approx(0.5)
+    # not closing: no braking needed; closing with the room gone: unbounded
+    assert required_braking_mps2(20.0, 30.0, 22.0) == 0.0
+    assert required_braking_mps2(20.0, 1.5, 10.0) == math.inf
+
+
+def test_the_crash_of_issue_12_hands_back_at_once() -> None:
+    # the stale-plan case: 28 m/s, stopped queue first seen at 100 m
+    assert stop_exceeds_authority(28.0, 100.0, 0.0, braking_authority_mps2("accel"))
+    assert stop_exceeds_authority(28.0, 100.0, 0.0, braking_authority_mps2("acc"))
+    # the same queue seen at 150 m needs 2.65 m/s^2: within both
+    assert not stop_exceeds_authority(28.0, 150.0, 0.0, braking_authority_mps2("accel"))
+    # a make that only flags a leader cannot be checked by the agent
+    assert not stop_exceeds_authority(28.0, None, None, 3.0)
+
+
+def test_from_a_car_reading() -> None:
+    closing = CarReading(
+        speed_mps=28.0,
+        acc_available=True,
+        acc_engaged=True,
+        acc_speed_setting_mph=63.0,
+        acc_gap_setting=3,
+        lead_present=True,
+        lead_distance_m=100.0,
+        lead_rel_speed_mps=-28.0,
+    )
+    assert reading_needs_hand_back(closing, "accel")
+    flag_only = CarReading(
+        speed_mps=28.0,
+        acc_available=True,
+        acc_engaged=True,
+        acc_speed_setting_mph=63.0,
+        acc_gap_setting=3,
+        lead_present=True,
+    )
+    assert not reading_needs_hand_back(flag_only, "acc")
+    assert not reading_needs_hand_back(None, "accel")
