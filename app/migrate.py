@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from importlib import resources
 from pathlib import Path
 
 from alembic import command
@@ -10,9 +11,9 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine, text
 
-import migrations
-
-MIGRATIONS_DIR = Path(migrations.__file__).parent
+# The migration scripts are this package's data: Alembic runs them (their env.py imports
+# app.models), so they are located as files, never imported from here.
+MIGRATIONS_DIR = Path(str(resources.files("migrations")))
 
 
 def alembic_config(url: str | None = None) -> Config:
