@@ -13,6 +13,7 @@ from contextlib import asynccontextmanager
 from apscheduler.schedulers.asyncio import AsyncIOScheduler
 from fastapi import FastAPI
 from sqlalchemy.ext.asyncio import async_sessionmaker
+from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 
 from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
@@ -112,6 +113,9 @@ def create_api(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics)
     app.add_middleware(SecurityHeaders)
+    if settings.trusted_proxies.strip():
+        # Outermost, so every layer sees the client's address and scheme as the proxy saw them.
+        app.add_middleware(ProxyHeadersMiddleware, trusted_hosts=settings.trusted_proxies)
     install_api_docs(app)
     app.include_router(health_router)
     app.include_router(vehicles_router)

@@ -47,6 +47,10 @@ class Settings(BaseSettings):
     public_url: str | None = None
     secret_key: SecretStr = SecretStr("development")
     max_body_bytes: int = Field(1_048_576, ge=1024)
+    # Peers whose X-Forwarded-For / X-Forwarded-Proto are believed (comma-separated addresses
+    # or networks, e.g. "10.0.0.5,10.1.0.0/16"): the TLS-terminating proxy in front of the API.
+    # Empty: nobody's, so a client cannot pick the address the login limit counts it under.
+    trusted_proxies: str = ""
 
     # Pings
     ping_retention_days: int = Field(90, ge=1, le=36500)

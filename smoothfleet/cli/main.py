@@ -426,7 +426,9 @@ def run_server(url: str, current: Settings, *, migrate: bool) -> None:
             workers=current.workers,
             log_level="info",
             access_log=False,
-            proxy_headers=True,
+            # Forwarded-for headers are the app's to believe, from SMOOTHFLEET_TRUSTED_PROXIES
+            # only (uvicorn's own default trusts any peer on 127.0.0.1).
+            proxy_headers=False,
             # A worker imports the whole app (pandas, the dashboard) before it answers the
             # supervisor; uvicorn's 5 s default restarts it forever on a loaded small machine.
             timeout_worker_healthcheck=WORKER_STARTUP_TIMEOUT_S,

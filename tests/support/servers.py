@@ -33,7 +33,15 @@ def live_server(database_url: str, **settings: Any) -> Iterator[str]:
     app = create_app(load_settings(database_url=database_url, **settings))
     port = free_port()
     server = uvicorn.Server(
-        uvicorn.Config(app, host="127.0.0.1", port=port, log_level="warning", lifespan="on")
+        # As `smoothfleet serve` runs it: forwarded-for headers are the app's to believe.
+        uvicorn.Config(
+            app,
+            host="127.0.0.1",
+            port=port,
+            log_level="warning",
+            lifespan="on",
+            proxy_headers=False,
+        )
     )
     thread = threading.Thread(target=server.run, name="live-server", daemon=True)
     thread.start()
