@@ -12,18 +12,21 @@ import math
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Annotated, Any, Literal
+from zoneinfo import ZoneInfo
 
 import numpy as np
 from fastapi import APIRouter, FastAPI, Form, Query, Request
 from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
+from jinja2 import pass_context
+from jinja2.runtime import Context
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from app.core.config import Settings
 from app.core.db import SessionDep
 from app.core.ratelimit import RateLimiter, retry_after_header
-from app.fleet.readiness import CHECKS, Thresholds, describe_age
+from app.fleet.readiness import CHECKS, Thresholds, describe_age, reason_counts
 from app.fleet.service import (
     PROBLEM_FILTERS,
     AssignmentError,
@@ -82,12 +85,21 @@ def _mph(value: float | None) -> str:
     return "—" if value is None else f"{value * MPH_PER_MPS:.1f}"
 
 
-def _utc(value: datetime | None) -> str:
-    return "—" if value is None else value.astimezone(UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+def display_zone(settings: Settings) -> ZoneInfo:
+    """The time zone people read times in (the corridor's)."""
+    return ZoneInfo(settings.dashboard_timezone)
+
+
+@pass_context
+def _localtime(context: Context, value: datetime | None) -> str:
+    if value is None:
+        return "—"
+    zone = display_zone(context["request"].app.state.settings)
+    return value.astimezone(zone).strftime("%Y-%m-%d %H:%M:%S %Z")
 
 
 templates.env.filters["mph"] = _mph
-templates.env.filters["utc"] = _utc
+templates.env.filters["localtime"] = _localtime
 templates.env.filters["age"] = describe_age
 
 
@@ -254,6 +266,7 @@ def _fleet_filters(
     return {
         "entries": chosen,
         "counts": count(chosen),
+        "reasons": reason_counts([entry.readiness for entry in chosen]),
         "total": len(entries),
         "routes": sorted({entry.vehicle.route for entry in entries}),
         "makes": sorted({entry.vehicle.make for entry in entries}),
@@ -278,6 +291,7 @@ async def _fleet_context(
     context = _fleet_filters(entries, route, make, problem)
     context["generated_at"] = now
     context["refresh_s"] = _settings(request).dashboard_refresh_s
+    context["hold_s"] = _settings(request).readiness_hold_s
     return context
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
+from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
@@ -93,13 +94,21 @@ class Settings(BaseSettings):
     readiness_spool_backlog: tuple[int, int] = (120, 1800)
     readiness_cpu_temp_c: tuple[float, float] = (70.0, 80.0)
     readiness_disk_free_mb: tuple[float, float] = (2000.0, 500.0)
-    readiness_can_msgs_per_s: tuple[float, float] = (200.0, 20.0)
+    # CAN frames received, as shares of the make's scheduled rate (app.fleet.readiness.
+    # CanSchedule): red at 1/10, where on average each watched message is 10 periods late and the
+    # agent calls its inputs stale (vehicle_agent.cars.STALE_PERIODS); amber at half, frames lost.
+    readiness_can_share: tuple[float, float] = (0.5, 0.1)
+    # A status-report check changes level only once the new level has held this long (s): about
+    # six reports, so a server or car slowed for a minute never flips a car's verdict.
+    readiness_hold_s: float = Field(60.0, ge=0)
     readiness_gps_satellites: tuple[int, int] = (6, 4)
     readiness_agent_version: str | None = None  # the version every car should run (None: any)
 
     # Dashboard
     dashboard_session_max_age_s: float = Field(43200.0, gt=0)
     dashboard_refresh_s: float = Field(5.0, gt=0)
+    # Times people read are shown in the corridor's local time (I-24 runs through Nashville).
+    dashboard_timezone: str = "America/Chicago"
 
     @field_validator(
         "readiness_ping_age_s",
@@ -114,13 +123,20 @@ class Settings(BaseSettings):
             raise ValueError("give [amber, red] with amber below red")
         return value
 
-    @field_validator(
-        "readiness_disk_free_mb", "readiness_can_msgs_per_s", "readiness_gps_satellites"
-    )
+    @field_validator("readiness_disk_free_mb", "readiness_can_share", "readiness_gps_satellites")
     @classmethod
     def _red_below_amber(cls, value: tuple[float, float]) -> tuple[float, float]:
         if not value[0] > value[1]:
             raise ValueError("give [amber, red] with amber above red")
+        return value
+
+    @field_validator("dashboard_timezone")
+    @classmethod
+    def _known_timezone(cls, value: str) -> str:
+        try:
+            ZoneInfo(value)
+        except (ZoneInfoNotFoundError, ValueError):
+            raise ValueError(f"{value!r} is not an IANA time zone (e.g. America/Chicago)") from None
         return value
 
     @field_validator("database_url")

@@ -3,23 +3,60 @@
 Headquarters cleared each car for deployment on piStatus and watched it during the experiment
 for hardware problems (paper, "Vehicle-side implementation"). Each check here reads the car's
 last ping and last status report and grades one thing against thresholds from the settings
-(`SMOOTHFLEET_READINESS_*`). A car is cleared when it is active, not in maintenance, and no
-check is red; amber checks are warnings an operator should look at.
+(`SMOOTHFLEET_READINESS_*`); the CAN rate is graded against the car's own make (its CAN
+schedule). A car is cleared when it is active, not in maintenance, and no check is red; amber
+checks are warnings an operator should look at. A check that is not green says why in words
+(`reason`: "CAN 19/s < 45/s for Rogue", "plan 212 s old").
+
+Hysteresis: the checks graded from status reports change level only when the new level has held
+over every report for `hold_s` (SMOOTHFLEET_READINESS_HOLD_S), so one slow report from a busy
+server or a loaded car never flips a verdict. The level is replayed from the reports of the last
+few hold periods, so every server process and every restart agree. The two age checks (last
+ping, last status) need no hold: an age is itself a time held.
 
 Adding a check is one function and one entry in CHECKS.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from datetime import datetime
-from typing import Literal
+from typing import Literal, NamedTuple
 
 from app.core.config import Settings
+from vehicle_agent.cars import CARS
 
 Level = Literal["green", "amber", "red", "unknown"]
 Verdict = Literal["cleared", "not cleared", "maintenance", "inactive"]
+
+# Levels from best to worst; hysteresis compares levels by this order.
+SEVERITY: dict[Level, int] = {"green": 0, "unknown": 1, "amber": 2, "red": 3}
+
+
+@dataclass(frozen=True)
+class CanSchedule:
+    """The frames per second a make's car sends the agent, by the car's own message periods.
+
+    Source: the periods of the messages the agent watches, in the make's table in
+    `vehicle_agent.cars` (nissan.py, gm.py, toyota.py: e.g. the Rogue's wheel speeds every 20 ms,
+    ProPilot state every 50 ms, its HUD every 100 ms; 150 frames/s in all). opendbc's DBCs carry
+    no GenMsgCycleTime (cantools reads `cycle_time` None for all 15 messages), and the recorded
+    sample in ../shared/data/can has whole-second timestamps over a decimated stream (948 frames
+    of SPEED in 63 s, where the RAV4 sends 50/s), so neither can replace the table.
+    """
+
+    model: str
+    scheduled_per_s: float
+
+    @classmethod
+    def of_make(cls, make: str, model: str) -> CanSchedule | None:
+        """The schedule of the fleet car of this make and model, or None for an unknown car."""
+        for car in CARS.values():
+            if car.make.lower() == make.lower() and car.model.lower() == model.lower():
+                rate = sum(1.0 / rule.period_s for rule in car.messages.values())
+                return cls(car.model, rate)
+        return None
 
 
 @dataclass(frozen=True)
@@ -32,9 +69,10 @@ class Thresholds:
     spool_backlog: tuple[float, float]
     cpu_temp_c: tuple[float, float]
     disk_free_mb: tuple[float, float]
-    can_msgs_per_s: tuple[float, float]
+    can_share: tuple[float, float]
     gps_satellites: tuple[float, float]
     agent_version: str | None
+    hold_s: float = 0.0
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Thresholds:
@@ -46,10 +84,16 @@ class Thresholds:
             spool_backlog=settings.readiness_spool_backlog,
             cpu_temp_c=settings.readiness_cpu_temp_c,
             disk_free_mb=settings.readiness_disk_free_mb,
-            can_msgs_per_s=settings.readiness_can_msgs_per_s,
+            can_share=settings.readiness_can_share,
             gps_satellites=settings.readiness_gps_satellites,
             agent_version=settings.readiness_agent_version,
+            hold_s=settings.readiness_hold_s,
         )
+
+    def can_rates(self, schedule: CanSchedule) -> tuple[float, float]:
+        """(amber, red) frames per second for a make: shares of its scheduled rate."""
+        amber, red = self.can_share
+        return amber * schedule.scheduled_per_s, red * schedule.scheduled_per_s
 
 
 @dataclass(frozen=True)
@@ -101,17 +145,24 @@ class VehicleFacts:
     is_in_maintenance: bool
     last_ping: LastPing | None
     last_status: LastStatus | None
+    make: str = ""
+    model: str = ""
+    # The reports before last_status in the hysteresis window, oldest first.
+    earlier_statuses: tuple[LastStatus, ...] = ()
 
 
 @dataclass(frozen=True)
 class CheckResult:
-    """One graded check: `value` is what the car reported, `detail` why it got its level."""
+    """One graded check: `value` is what the car reported, `detail` its thresholds, `reason` why
+    it is not green in words (empty when green), `pending` a level change waiting out its hold."""
 
     name: str
     label: str
     level: Level
     value: str
     detail: str
+    reason: str = ""
+    pending: str = ""
 
 
 @dataclass(frozen=True)
@@ -120,7 +171,14 @@ class Readiness:
 
     checks: tuple[CheckResult, ...]
     verdict: Verdict
-    problems: tuple[str, ...]
+    problems: tuple[str, ...]  # the reasons of the red checks
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        """Why the car is not cleared (or what to look at), worst first, in words."""
+        shown = [c for c in self.checks if c.level in ("red", "amber")]
+        shown.sort(key=lambda c: -SEVERITY[c.level])
+        return tuple(c.reason for c in shown)
 
     @property
     def is_cleared(self) -> bool:
@@ -156,8 +214,9 @@ def grade_falling(value: float, band: tuple[float, float]) -> Level:
 
 
 def describe_age(seconds: float) -> str:
-    """An age for people: 12 s, 4 min, 3 h, 2 d."""
-    if seconds < 120:
+    """An age for people: 212 s, 14 min, 3 h, 2 d (seconds up to ten minutes: a plan's age
+    matters to the second around its 180 s limit)."""
+    if seconds < 600:
         return f"{seconds:.0f} s"
     if seconds < 7200:
         return f"{seconds / 60:.0f} min"
@@ -166,170 +225,237 @@ def describe_age(seconds: float) -> str:
     return f"{seconds / 86400:.0f} d"
 
 
-Evaluate = Callable[[VehicleFacts, datetime, Thresholds], tuple[Level, str, str]]
+class Grade(NamedTuple):
+    """A check's answer for one moment: level, the value shown, thresholds, reason in words."""
+
+    level: Level
+    value: str
+    detail: str
+    reason: str = ""
 
 
-def _unknown(what: str) -> tuple[Level, str, str]:
-    return "unknown", "—", f"the car did not report {what}"
+Evaluate = Callable[[VehicleFacts, datetime, Thresholds], Grade]
 
 
-def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def _unknown(label: str, what: str) -> Grade:
+    return Grade("unknown", "—", f"the car did not report {what}", f"{label} not reported")
+
+
+def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest ping (the car's GPS time)."""
     if facts.last_ping is None:
-        return "red", "never", "no ping received"
+        return Grade("red", "never", "no ping received", "never pinged")
     age = (now - facts.last_ping.ts).total_seconds()
     level = grade_rising(age, limits.ping_age_s)
     amber, red = limits.ping_age_s
-    return level, describe_age(age), f"amber from {amber:g} s, red from {red:g} s"
+    return Grade(
+        level,
+        describe_age(age),
+        f"amber from {amber:g} s, red from {red:g} s",
+        f"no ping for {describe_age(age)}",
+    )
 
 
-def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest status report (sent every ~10 s by a healthy agent)."""
     if facts.last_status is None:
-        return "red", "never", "no status report received"
+        return Grade("red", "never", "no status report received", "never reported its status")
     age = (now - facts.last_status.ts).total_seconds()
     level = grade_rising(age, limits.status_age_s)
     amber, red = limits.status_age_s
-    return level, describe_age(age), f"amber from {amber:g} s, red from {red:g} s"
+    return Grade(
+        level,
+        describe_age(age),
+        f"amber from {amber:g} s, red from {red:g} s",
+        f"no status for {describe_age(age)}",
+    )
 
 
-def check_gps(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_gps(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """GPS fix and satellites in view."""
     status = facts.last_status
     if status is None or status.has_gps_fix is None:
-        return _unknown("its GPS fix")
+        return _unknown("GPS", "its GPS fix")
     satellites = status.gps_satellites
     shown = f"{satellites} sat" if satellites is not None else ""
     if not status.has_gps_fix:
-        return "red", ("no fix " + shown).strip(), "no GPS fix: no position, no clock sync"
+        return Grade(
+            "red",
+            ("no fix " + shown).strip(),
+            "no GPS fix: no position, no clock sync",
+            "no GPS fix",
+        )
     if satellites is None:
-        return "green", "fix", "fix (satellites not reported)"
+        return Grade("green", "fix", "fix (satellites not reported)")
     amber, red = limits.gps_satellites
     level = grade_falling(satellites, limits.gps_satellites)
-    return level, f"fix, {shown}", f"amber at {amber:g} satellites or fewer, red at {red:g}"
+    return Grade(
+        level,
+        f"fix, {shown}",
+        f"amber at {amber:g} satellites or fewer, red at {red:g}",
+        f"GPS {satellites} satellites ≤ {red if level == 'red' else amber:g}",
+    )
 
 
-def check_can(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
-    """CAN bus readable, and the rate of frames received."""
+def check_can(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
+    """CAN bus readable, and the rate of frames received against the make's own schedule."""
     status = facts.last_status
     if status is None or (status.is_can_ok is None and status.can_msgs_per_s is None):
-        return _unknown("its CAN bus")
+        return _unknown("CAN", "its CAN bus")
     if status.is_can_ok is False:
-        return "red", "down", "the agent cannot read the car's CAN bus"
+        return Grade("red", "down", "the agent cannot read the car's CAN bus", "CAN down")
     if status.can_msgs_per_s is None:
-        return "green", "ok", "CAN ok (rate not reported)"
-    amber, red = limits.can_msgs_per_s
-    level = grade_falling(status.can_msgs_per_s, limits.can_msgs_per_s)
-    detail = f"amber at {amber:g}/s or less, red at {red:g}/s"
-    return level, f"{status.can_msgs_per_s:.0f}/s", detail
+        return Grade("green", "ok", "CAN ok (rate not reported)")
+    rate = status.can_msgs_per_s
+    schedule = CanSchedule.of_make(facts.make, facts.model)
+    if schedule is None:
+        return Grade(
+            "amber",
+            f"{rate:.0f}/s",
+            f"no CAN schedule for a {facts.make} {facts.model}",
+            f"CAN rate unknown for {facts.make} {facts.model}",
+        )
+    amber, red = limits.can_rates(schedule)
+    level = grade_falling(rate, (amber, red))
+    detail = (
+        f"the {schedule.model} sends {schedule.scheduled_per_s:.0f}/s: "
+        f"amber at {amber:.0f}/s or less, red at {red:.0f}/s"
+    )
+    bound = red if level == "red" else amber
+    return Grade(
+        level, f"{rate:.0f}/s", detail, f"CAN {rate:.0f}/s ≤ {bound:.0f}/s for {schedule.model}"
+    )
 
 
-def check_acc(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_acc(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """The car's adaptive cruise control is available to the controller."""
     status = facts.last_status
     if status is None or status.is_acc_available is None:
-        return _unknown("ACC availability")
+        return _unknown("ACC", "ACC availability")
     if status.is_acc_available:
-        return "green", "yes", "ACC available"
-    return "red", "no", "ACC not available: the controller cannot act"
+        return Grade("green", "yes", "ACC available")
+    return Grade("red", "no", "ACC not available: the controller cannot act", "ACC not available")
 
 
-def check_controller(
-    facts: VehicleFacts, now: datetime, limits: Thresholds
-) -> tuple[Level, str, str]:
+def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """The assigned controller runs."""
     status = facts.last_status
     if status is None or status.is_controller_running is None:
-        return _unknown("its controller")
+        return _unknown("controller", "its controller")
     name = status.controller or "?"
     if not status.is_controller_running:
-        return "red", f"{name} stopped", "the controller is not running"
+        return Grade(
+            "red", f"{name} stopped", "the controller is not running", f"controller {name} stopped"
+        )
     if status.controller is not None and status.controller != facts.assigned_controller:
-        return (
+        return Grade(
             "amber",
             f"{name} runs",
             f"runs {name}, assigned {facts.assigned_controller} (config not picked up yet?)",
+            f"runs {name}, assigned {facts.assigned_controller}",
         )
-    return "green", f"{name} runs", "the assigned controller runs"
+    return Grade("green", f"{name} runs", "the assigned controller runs")
 
 
-def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the speed plan the car holds (it falls back to stock ACC when it is stale)."""
     status = facts.last_status
     if status is None:
-        return _unknown("its plan")
+        return _unknown("plan", "its plan")
     if status.plan_age_s is None:
-        return "amber", "none", "no plan held: the car drives on stock ACC"
+        return Grade("amber", "none", "no plan held: the car drives on stock ACC", "no plan held")
     amber, red = limits.plan_age_s
     level = grade_rising(status.plan_age_s, limits.plan_age_s)
-    return level, describe_age(status.plan_age_s), f"amber from {amber:g} s, red from {red:g} s"
+    age = describe_age(status.plan_age_s)
+    return Grade(level, age, f"amber from {amber:g} s, red from {red:g} s", f"plan {age} old")
 
 
-def check_spool(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_spool(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Pings waiting on the car for upload (store and forward)."""
     status = facts.last_status
     if status is None or status.spool_backlog is None:
-        return _unknown("its spool backlog")
+        return _unknown("spool", "its spool backlog")
     amber, red = limits.spool_backlog
     level = grade_rising(status.spool_backlog, limits.spool_backlog)
-    return level, str(status.spool_backlog), f"amber from {amber:g}, red from {red:g} pings"
+    return Grade(
+        level,
+        str(status.spool_backlog),
+        f"amber from {amber:g}, red from {red:g} pings",
+        f"{status.spool_backlog} pings waiting to upload",
+    )
 
 
-def check_disk(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_disk(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Free disk on the car's computer (recordings and the spool)."""
     status = facts.last_status
     if status is None or status.disk_free_mb is None:
-        return _unknown("its free disk")
+        return _unknown("disk", "its free disk")
     amber, red = limits.disk_free_mb
     level = grade_falling(status.disk_free_mb, limits.disk_free_mb)
-    return level, f"{status.disk_free_mb:.0f} MB", f"amber at {amber:g} MB or less, red at {red:g}"
+    return Grade(
+        level,
+        f"{status.disk_free_mb:.0f} MB",
+        f"amber at {amber:g} MB or less, red at {red:g}",
+        f"disk {status.disk_free_mb:.0f} MB free",
+    )
 
 
-def check_temperature(
-    facts: VehicleFacts, now: datetime, limits: Thresholds
-) -> tuple[Level, str, str]:
+def check_temperature(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """CPU temperature (a Raspberry Pi throttles from about 80 °C)."""
     status = facts.last_status
     if status is None or status.cpu_temp_c is None:
-        return _unknown("its temperature")
+        return _unknown("CPU temp", "its temperature")
     amber, red = limits.cpu_temp_c
     level = grade_rising(status.cpu_temp_c, limits.cpu_temp_c)
-    return level, f"{status.cpu_temp_c:.0f} °C", f"amber from {amber:g} °C, red from {red:g} °C"
+    return Grade(
+        level,
+        f"{status.cpu_temp_c:.0f} °C",
+        f"amber from {amber:g} °C, red from {red:g} °C",
+        f"CPU {status.cpu_temp_c:.0f} °C",
+    )
 
 
-def check_agent(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_agent(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """The agent version, against the one every car should run (if configured)."""
     status = facts.last_status
     if status is None or status.agent_version is None:
-        return _unknown("its agent version")
+        return _unknown("agent", "its agent version")
     expected = limits.agent_version
     if expected is not None and status.agent_version != expected:
-        return "amber", status.agent_version, f"expected {expected}: update over the air"
-    return "green", status.agent_version, "agent version as expected"
+        return Grade(
+            "amber",
+            status.agent_version,
+            f"expected {expected}: update over the air",
+            f"agent {status.agent_version}, expected {expected}",
+        )
+    return Grade("green", status.agent_version, "agent version as expected")
 
 
-def check_power(facts: VehicleFacts, now: datetime, limits: Thresholds) -> tuple[Level, str, str]:
+def check_power(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """On UPS battery means the car was switched off (the computer uploads and shuts down)."""
     status = facts.last_status
     if status is None or status.is_ups_on_battery is None:
-        return _unknown("its power source")
+        return _unknown("power", "its power source")
     if status.is_ups_on_battery:
-        return "amber", "battery", "on UPS battery: the car is switched off"
-    return "green", "car", "powered by the car"
+        return Grade(
+            "amber", "battery", "on UPS battery: the car is switched off", "on UPS battery"
+        )
+    return Grade("green", "car", "powered by the car")
 
 
 @dataclass(frozen=True)
 class Check:
-    """A named check and how to grade it."""
+    """A named check and how to grade it; `from_report` checks read only the status report."""
 
     name: str
     label: str
     evaluate: Evaluate
+    from_report: bool = True
 
 
 CHECKS: tuple[Check, ...] = (
-    Check("ping", "last ping", check_ping),
-    Check("status", "last status", check_status),
+    Check("ping", "last ping", check_ping, from_report=False),
+    Check("status", "last status", check_status, from_report=False),
     Check("gps", "GPS", check_gps),
     Check("can", "CAN", check_can),
     Check("acc", "ACC", check_acc),
@@ -344,13 +470,78 @@ CHECKS: tuple[Check, ...] = (
 CHECK_NAMES = tuple(check.name for check in CHECKS)
 
 
+class HeldLevel(NamedTuple):
+    """A level after hysteresis, and the change waiting out its hold (if any)."""
+
+    level: Level
+    report: int  # the report whose grade is shown for `level`
+    pending: Level | None = None
+    pending_for_s: float = 0.0
+
+
+def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float) -> HeldLevel:
+    """The level a check holds after its reports (oldest first), with hysteresis.
+
+    The first report sets the level. Later reports on one side of it (all better, or all worse)
+    form a run; once a run spans `hold_s` seconds the level becomes the mildest level of the run
+    (the one that held over all of it), so a car whose rate dips for one report, or flickers
+    between amber and red, keeps its level until the change has lasted.
+    """
+    if not levels:
+        raise ValueError("hold_levels needs at least one report")
+    held, held_index = levels[0], 0
+    run_start: int | None = None
+    run_side = 0
+    mildest = 0
+    for index in range(1, len(levels)):
+        step = SEVERITY[levels[index]] - SEVERITY[held]
+        if step == 0:
+            run_start, held_index = None, index
+            continue
+        side = 1 if step > 0 else -1
+        if run_start is None or side != run_side:
+            run_start, run_side, mildest = index, side, index
+        elif abs(step) <= abs(SEVERITY[levels[mildest]] - SEVERITY[held]):
+            mildest = index
+        if times_s[index] - times_s[run_start] >= hold_s:
+            held, held_index, run_start = levels[mildest], mildest, None
+    if run_start is None:
+        return HeldLevel(held, held_index)
+    pending_for = times_s[-1] - times_s[run_start]
+    return HeldLevel(held, held_index, levels[mildest], pending_for)
+
+
+def _graded(check: Check, facts: VehicleFacts, now: datetime, limits: Thresholds) -> CheckResult:
+    latest = check.evaluate(facts, now, limits)
+    if not check.from_report or facts.last_status is None or not facts.earlier_statuses:
+        return CheckResult(check.name, check.label, *latest)
+    reports = (*facts.earlier_statuses, facts.last_status)
+    grades = [check.evaluate(replace(facts, last_status=r), r.ts, limits) for r in reports[:-1]]
+    grades.append(latest)
+    held = hold_levels(
+        [r.ts.timestamp() for r in reports], [g.level for g in grades], limits.hold_s
+    )
+    shown = grades[held.report]
+    pending = ""
+    if held.pending is not None:
+        pending = (
+            f"{held.pending} for {held.pending_for_s:.0f} s of the {limits.hold_s:g} s "
+            "it must hold to change"
+        )
+    return CheckResult(
+        check.name, check.label, held.level, latest.value, latest.detail, shown.reason, pending
+    )
+
+
 def assess(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Readiness:
-    """Grade every check and decide whether the vehicle is cleared for deployment."""
+    """Grade every check (with hysteresis) and decide whether the vehicle is cleared."""
     results = []
     for check in CHECKS:
-        level, value, detail = check.evaluate(facts, now, limits)
-        results.append(CheckResult(check.name, check.label, level, value, detail))
-    problems = tuple(f"{r.label}: {r.detail}" for r in results if r.level == "red")
+        result = _graded(check, facts, now, limits)
+        if result.level == "green":
+            result = replace(result, reason="")
+        results.append(result)
+    problems = tuple(r.reason for r in results if r.level == "red")
     verdict: Verdict
     if not facts.is_active:
         verdict = "inactive"
@@ -361,3 +552,15 @@ def assess(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Readiness:
     else:
         verdict = "cleared"
     return Readiness(tuple(results), verdict, problems)
+
+
+def reason_counts(readinesses: Sequence[Readiness]) -> Mapping[str, int]:
+    """How many cars each check keeps from being cleared (the count above the fleet table)."""
+    counts: dict[str, int] = {}
+    for readiness in readinesses:
+        if readiness.verdict != "not cleared":
+            continue
+        for check in readiness.checks:
+            if check.level == "red":
+                counts[check.name] = counts.get(check.name, 0) + 1
+    return counts

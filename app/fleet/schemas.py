@@ -106,6 +106,8 @@ class CheckOut(BaseModel):
     level: Literal["green", "amber", "red", "unknown"]
     value: str
     detail: str
+    reason: str = Field(description="why the check is not green, in words; empty when green")
+    pending: str = Field(description="a level change waiting out the hysteresis hold, if any")
 
 
 class FleetVehicleOut(BaseModel):
@@ -216,6 +218,8 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
                 level=check.level,
                 value=check.value,
                 detail=check.detail,
+                reason=check.reason,
+                pending=check.pending,
             )
             for check in entry.readiness.checks
         ],

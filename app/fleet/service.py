@@ -17,6 +17,7 @@ from sqlalchemy.orm import aliased
 
 from app.fleet.readiness import (
     CHECK_NAMES,
+    CHECKS,
     LastPing,
     LastStatus,
     Readiness,
@@ -33,6 +34,8 @@ METRES_PER_MILE = 1609.344
 # The newest ping is looked for in this window first, so the query touches only the last days'
 # ping partitions; vehicles silent for longer are looked up again without the bound.
 RECENT_PING_WINDOW = timedelta(days=2)
+# Status reports replayed for hysteresis: this many hold periods back (readiness.hold_levels).
+HOLD_PERIODS_REPLAYED = 3
 
 STATUS_FIELDS = tuple(
     name for name in LastStatus.__dataclass_fields__ if name not in ("ts", "received_at")
@@ -75,6 +78,8 @@ class FleetEntry:
             return any(check.level == "amber" for check in self.readiness.checks)
         if problem in CHECK_NAMES:
             return self.readiness.level_of(problem) in ("amber", "red")
+        if problem.endswith("-red") and problem[:-4] in CHECK_NAMES:
+            return self.readiness.level_of(problem[:-4]) == "red"
         raise ValueError(f"unknown problem filter {problem!r}")
 
 
@@ -83,6 +88,7 @@ PROBLEM_FILTERS: dict[str, str] = {
     "amber": "any amber check",
     "maintenance": "in maintenance",
     **{name: f"{name} amber or red" for name in CHECK_NAMES},
+    **{f"{check.name}-red": f"not cleared: {check.label}" for check in CHECKS},
 }
 
 
@@ -189,6 +195,28 @@ def _latest_query(
     return query
 
 
+async def _earlier_statuses(
+    session: AsyncSession, vehicle_ids: Sequence[str], since: datetime
+) -> dict[str, list[LastStatus]]:
+    """Each vehicle's status reports since `since`, oldest first (the primary key's order)."""
+    if not vehicle_ids:
+        return {}
+    rows = await session.scalars(
+        select(VehicleStatus)
+        .where(VehicleStatus.vehicle_id.in_(vehicle_ids), VehicleStatus.ts >= since)
+        .order_by(VehicleStatus.vehicle_id, VehicleStatus.ts)
+    )
+    history: dict[str, list[LastStatus]] = {}
+    for row in rows:
+        status = _to_last_status(row)
+        assert status is not None
+        history.setdefault(row.vehicle_id, []).append(status)
+    return history
+
+
+VERDICT_ORDER = {"not cleared": 0, "maintenance": 1, "inactive": 2, "cleared": 3}
+
+
 async def fleet(
     session: AsyncSession,
     now: datetime,
@@ -196,7 +224,8 @@ async def fleet(
     *,
     vehicle_id: str | None = None,
 ) -> list[FleetEntry]:
-    """Every vehicle (or one) with its last ping, last status and readiness, in id order."""
+    """Every vehicle (or one) with its last ping, last status and readiness: the cars that are
+    not cleared first (an operator's question at 6 a.m.), then in id order."""
     ids = None if vehicle_id is None else [vehicle_id]
     rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, ids))).all()
     silent = [row[0].vehicle_id for row in rows if row[3] is None]
@@ -204,6 +233,11 @@ async def fleet(
     if silent:
         for row in (await session.execute(_latest_query(None, silent))).all():
             older[row[0].vehicle_id] = row[3]
+    history = await _earlier_statuses(
+        session,
+        [row[0].vehicle_id for row in rows if row[4] is not None],
+        now - timedelta(seconds=HOLD_PERIODS_REPLAYED * limits.hold_s),
+    )
     entries = []
     for vehicle, lanes, postmile_at_start, ping_row, status_row in rows:
         last_ping = _to_last_ping(
@@ -217,6 +251,13 @@ async def fleet(
             is_in_maintenance=vehicle.is_in_maintenance,
             last_ping=last_ping,
             last_status=last_status,
+            make=vehicle.make,
+            model=vehicle.model,
+            earlier_statuses=tuple(
+                status
+                for status in history.get(vehicle.vehicle_id, ())
+                if last_status is not None and status.ts < last_status.ts
+            ),
         )
         entries.append(
             FleetEntry(
@@ -228,6 +269,7 @@ async def fleet(
                 readiness=assess(facts, now, limits),
             )
         )
+    entries.sort(key=lambda entry: VERDICT_ORDER[entry.readiness.verdict])
     return entries
 
 

@@ -81,7 +81,7 @@ def test_a_fleet_never_heard_from_is_listed_and_not_cleared(api: Api) -> None:
     assert first["last_ping"] is None
     assert first["last_status"] is None
     assert checks(first)["status"] == "red"
-    assert "last status: no status report received" in first["problems"]
+    assert first["problems"] == ["never pinged", "never reported its status"]
 
 
 def test_a_reporting_car_is_cleared_and_turns_red_when_its_status_goes_stale(api: Api) -> None:
@@ -200,3 +200,34 @@ def test_a_car_in_maintenance_is_not_cleared_until_it_is_back(api: Api) -> None:
 
     api.put("/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": False})
     assert vehicle(api.get("/api/v1/fleet").json(), "SF-001")["verdict"] == "cleared"
+
+
+def report_can_rates(api: Api, vehicle_id: str, rates: list[float], now: datetime) -> None:
+    """Status reports every 10 s up to 2 s ago with these CAN rates (oldest first)."""
+    post_pings(
+        api.client, api.tokens["admin"], drive(vehicle_id, now - timedelta(seconds=3), 0, 25, 3)
+    )
+    for back, rate in enumerate(reversed(rates)):
+        ts = now - timedelta(seconds=2 + 10 * back)
+        post_status(
+            api.client, api.tokens["admin"], vehicle_id, **healthy_status(ts, can_msgs_per_s=rate)
+        )
+
+
+def test_a_dip_in_one_report_does_not_flip_a_car_but_a_lasting_fault_does(api: Api) -> None:
+    now = datetime.now(UTC).replace(microsecond=0)
+    # Rogues send 150 frames/s (red at 15/s). SF-001 dips once; SF-002 stays low for 60 s.
+    report_can_rates(api, "SF-001", [150.0] * 6 + [5.0], now)
+    report_can_rates(api, "SF-002", [150.0] + [5.0] * 7, now)
+
+    fleet = api.get("/api/v1/fleet").json()
+    dipped = vehicle(fleet, "SF-001")
+    assert dipped["verdict"] == "cleared"
+    (can,) = [check for check in dipped["checks"] if check["name"] == "can"]
+    assert (can["level"], can["value"]) == ("green", "5/s")
+    assert can["pending"].startswith("red for 0 s")
+    faulty = vehicle(fleet, "SF-002")
+    assert faulty["verdict"] == "not cleared"
+    assert faulty["problems"] == ["CAN 5/s ≤ 15/s for Rogue"]
+    verdicts = [v["verdict"] for v in fleet["vehicles"]]
+    assert verdicts == sorted(verdicts, key=lambda v: v != "not cleared")

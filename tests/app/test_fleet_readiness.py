@@ -10,15 +10,19 @@ import pytest
 from app.core.config import load_settings
 from app.fleet.readiness import (
     CHECK_NAMES,
+    CanSchedule,
     LastPing,
     LastStatus,
+    Level,
     Thresholds,
     VehicleFacts,
     assess,
     describe_age,
     grade_falling,
     grade_rising,
+    hold_levels,
 )
+from vehicle_agent.cars import STALE_PERIODS
 
 NOW = datetime(2022, 11, 16, 13, 0, 0, tzinfo=UTC)
 LIMITS = Thresholds.from_settings(load_settings())
@@ -30,7 +34,7 @@ def healthy_status(**changes: object) -> LastStatus:
         received_at=NOW - timedelta(seconds=5),
         agent_version="1.0.0",
         is_can_ok=True,
-        can_msgs_per_s=1800.0,
+        can_msgs_per_s=150.0,
         has_gps_fix=True,
         gps_satellites=11,
         is_acc_available=True,
@@ -48,6 +52,8 @@ def healthy_status(**changes: object) -> LastStatus:
 def healthy_facts(**changes: object) -> VehicleFacts:
     facts = VehicleFacts(
         vehicle_id="SF-001",
+        make="Nissan",
+        model="Rogue",
         assigned_controller="microaccel_acc",
         is_active=True,
         is_in_maintenance=False,
@@ -111,8 +117,8 @@ def test_a_stale_status_turns_amber_then_red_and_blocks_clearance(age_s: int, le
         ({"gps_satellites": 5}, "gps", "amber"),
         ({"gps_satellites": 4}, "gps", "red"),
         ({"is_can_ok": False}, "can", "red"),
-        ({"can_msgs_per_s": 150.0}, "can", "amber"),
-        ({"can_msgs_per_s": 10.0}, "can", "red"),
+        ({"can_msgs_per_s": 75.0}, "can", "amber"),
+        ({"can_msgs_per_s": 15.0}, "can", "red"),
         ({"is_acc_available": False}, "acc", "red"),
         ({"is_controller_running": False}, "controller", "red"),
         ({"controller": "simple"}, "controller", "amber"),
@@ -138,11 +144,10 @@ def test_each_check_grades_what_the_car_reported(
     others = {c.level for c in readiness.checks if c.name != check}
     assert others == {"green"}
     assert readiness.is_cleared == (level != "red")
+    result = readiness.checks[CHECK_NAMES.index(check)]
+    assert (result.reason in readiness.reasons) == (level in ("amber", "red"))
     if level == "red":
-        assert any(
-            problem.startswith(readiness.checks[CHECK_NAMES.index(check)].label)
-            for problem in readiness.problems
-        )
+        assert readiness.problems == (result.reason,)
 
 
 def test_agent_version_is_amber_only_when_a_version_is_required() -> None:
@@ -168,7 +173,105 @@ def test_maintenance_and_inactive_cars_are_never_cleared() -> None:
 
 @pytest.mark.parametrize(
     ("seconds", "text"),
-    [(5, "5 s"), (119, "119 s"), (600, "10 min"), (10800, "3 h"), (259200, "3 d")],
+    [(5, "5 s"), (212, "212 s"), (599, "599 s"), (600, "10 min"), (10800, "3 h"), (259200, "3 d")],
 )
 def test_ages_read_well(seconds: float, text: str) -> None:
     assert describe_age(seconds) == text
+
+
+def test_a_rogue_is_graded_against_its_own_can_schedule() -> None:
+    # Rogue: 2 wheel-speed messages every 20 ms, ProPilot and throttle every 50 ms, HUD every
+    # 100 ms = 50 + 50 + 20 + 20 + 10 = 150 frames/s; amber at half (75), red at a tenth (15).
+    assert CanSchedule.of_make("Nissan", "Rogue") == CanSchedule("Rogue", 150.0)
+    readiness = assess(healthy_facts(last_status=healthy_status(can_msgs_per_s=12.0)), NOW, LIMITS)
+    assert readiness.problems == ("CAN 12/s ≤ 15/s for Rogue",)
+
+
+def test_each_make_has_its_own_can_thresholds() -> None:
+    # XT5: 50 + 20 + 10 + 20 + 20 = 120/s; RAV4: 50 + 30 + 30 + 10 + 20 = 140/s.
+    status = healthy_status(can_msgs_per_s=13.0)
+    xt5 = assess(healthy_facts(make="Cadillac", model="XT5", last_status=status), NOW, LIMITS)
+    rav4 = assess(healthy_facts(make="Toyota", model="RAV4", last_status=status), NOW, LIMITS)
+    assert xt5.level_of("can") == "amber"  # 13 > 12 = 120 / 10
+    assert xt5.reasons == ("CAN 13/s ≤ 60/s for XT5",)
+    assert rav4.level_of("can") == "red"  # 13 <= 14 = 140 / 10
+    assert rav4.problems == ("CAN 13/s ≤ 14/s for RAV4",)
+
+
+def test_the_red_can_share_is_where_the_agent_calls_its_inputs_stale() -> None:
+    assert LIMITS.can_share[1] == pytest.approx(1 / STALE_PERIODS)
+
+
+def test_a_car_of_an_unknown_make_gets_an_amber_can_check_that_says_so() -> None:
+    facts = healthy_facts(make="Ford", model="Focus")
+    readiness = assess(facts, NOW, LIMITS)
+    assert readiness.level_of("can") == "amber"
+    assert readiness.reasons == ("CAN rate unknown for Ford Focus",)
+
+
+def test_reasons_read_as_words() -> None:
+    status = healthy_status(plan_age_s=212.0, is_acc_available=False)
+    readiness = assess(healthy_facts(last_status=status), NOW, LIMITS)
+    assert readiness.problems == ("ACC not available", "plan 212 s old")
+    silent = healthy_facts(last_status=healthy_status(ts=NOW - timedelta(minutes=12)))
+    assert assess(silent, NOW, LIMITS).problems == ("no status for 12 min",)
+
+
+def reports(*rates: float, every_s: float = 10.0) -> VehicleFacts:
+    """A Rogue whose status reports, every_s apart and ending now, gave these CAN rates."""
+    statuses = [
+        healthy_status(
+            ts=NOW - timedelta(seconds=every_s * (len(rates) - 1 - i)), can_msgs_per_s=rate
+        )
+        for i, rate in enumerate(rates)
+    ]
+    return healthy_facts(last_status=statuses[-1], earlier_statuses=tuple(statuses[:-1]))
+
+
+HOLD = replace(LIMITS, hold_s=60.0)
+
+
+def test_one_slow_report_does_not_flip_a_cleared_car() -> None:
+    readiness = assess(reports(150, 150, 150, 10), NOW, HOLD)
+    assert readiness.is_cleared
+    can = readiness.checks[CHECK_NAMES.index("can")]
+    assert can.level == "green"
+    assert can.value == "10/s"  # the newest report is shown, its level waits
+    assert can.pending == "red for 0 s of the 60 s it must hold to change"
+
+
+def test_a_fault_that_holds_for_the_hold_time_flips_the_car() -> None:
+    # red at -60, -50, ..., 0 s: the run spans 60 s
+    assert not assess(reports(150, *[10] * 7), NOW, HOLD).is_cleared
+    assert assess(reports(150, *[10] * 6), NOW, HOLD).is_cleared  # 50 s: not yet
+
+
+def test_a_car_flickering_between_amber_and_red_settles_at_amber() -> None:
+    readiness = assess(reports(150, 10, 60, 10, 60, 10, 60, 10), NOW, HOLD)
+    assert readiness.level_of("can") == "amber"
+    assert readiness.is_cleared
+
+
+def test_a_red_car_comes_back_only_after_holding_green() -> None:
+    assert not assess(reports(10, 150, 150, 150), NOW, HOLD).is_cleared
+    assert assess(reports(10, *[150] * 7), NOW, HOLD).is_cleared
+
+
+@pytest.mark.parametrize(
+    ("levels", "held"),
+    [
+        (["green"], "green"),
+        (["green", "red"], "green"),
+        (["green", "red", "green", "red"], "green"),
+        (["red", "green", "green", "green"], "green"),  # 0, 30, 60 s later: held 60 s
+        (["red", "green", "amber", "green"], "amber"),  # both better than red for 60 s
+        (["green", "amber", "red", "red"], "amber"),  # worse for 60 s: at least amber
+    ],
+)
+def test_hold_levels_by_hand(levels: list[Level], held: Level) -> None:
+    times = [30.0 * i for i in range(len(levels))]
+    assert hold_levels(times, levels, 60.0).level == held
+
+
+def test_without_a_hold_the_newest_report_decides() -> None:
+    assert hold_levels([0.0, 10.0], ["green", "red"], 0.0).level == "red"
