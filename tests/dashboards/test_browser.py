@@ -116,14 +116,19 @@ def test_fleet_page_fills_live_and_a_stale_status_turns_red(
 
         expect(row).to_have_attribute("data-verdict", "cleared", timeout=10_000)
         expect(page.locator('[data-count="cleared"]')).to_have_text("2")
-        expect(row.locator('td[data-check="gps"]')).to_have_text("fix, 11 sat")
+        gps = row.locator('[data-check="gps"]')
+        expect(gps).to_have_attribute("data-level", "green")
+        expect(gps).to_have_attribute(
+            "title", "GPS: fix, 11 sat (amber at 6 satellites or fewer, red at 4)"
+        )
         assert page.evaluate("window.notReloaded") is True
         screenshot(page, "fleet-live.png")
 
         # The car stops reporting: its status check goes amber, then red, and it loses clearance.
-        status = row.locator('td[data-check="status"]')
+        status = row.locator('[data-check="status"]')
         expect(status).to_have_attribute("data-level", "red", timeout=15_000)
         expect(row).to_have_attribute("data-verdict", "not cleared")
+        expect(row.locator('[data-field="reasons"]')).to_contain_text("no status for")
         assert page.evaluate("window.notReloaded") is True
         screenshot(page, "fleet-stale.png")
 
@@ -133,6 +138,68 @@ def test_fleet_page_fills_live_and_a_stale_status_turns_red(
         makes = page.locator("tr[data-vehicle] td:nth-child(2)").all_inner_texts()
         assert makes
         assert all(make.startswith("Toyota") for make in makes)
+
+
+def test_an_operators_morning(
+    page: Page, browser: BrowserContext, seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Which cars can go out, and if not, why: filter, read the reason, fix the car, and watch
+    the fleet page (open in another tab) follow without a reload."""
+    add_users(seeded_engine)
+    with (
+        live_server(seeded_database_url, planner_enabled=False, dashboard_refresh_s=1.0) as base,
+        httpx.Client(base_url=base, timeout=30) as client,
+    ):
+        token = issue(seeded_engine, "admin")
+        now = datetime.now(UTC).replace(microsecond=0)
+        for vehicle_id in ("SF-001", "SF-002"):
+            report(client, token, vehicle_id)
+        post_pings(client, token, drive("SF-003", now - timedelta(seconds=5), 4000.0, 24.0, 5))
+        post_status(client, token, "SF-003", **healthy_status(now, acc_available=False))
+
+        log_in(page, base, "operator")
+        page.get_by_label("Problem").select_option("not-cleared")
+        expect(page).to_have_url(f"{base}/fleet?route=&make=&problem=not-cleared")
+        rows = page.locator("tr[data-vehicle]")
+        expect(rows).to_have_count(98)
+        expect(page.locator('[data-reason="acc"]')).to_have_text("ACC 1")
+        row = page.locator('tr[data-vehicle="SF-003"]')
+        expect(row.locator('[data-field="reasons"]')).to_have_text("ACC not available")
+        for width in (1400, 1024):
+            page.set_viewport_size({"width": width, "height": 900})
+            reasons = row.locator('[data-field="reasons"]').bounding_box()
+            assert reasons is not None
+            assert reasons["x"] + reasons["width"] <= width, f"reasons cut off at {width} px"
+            screenshot(page, f"morning-not-cleared-{width}.png")
+
+        fleet_tab = browser.new_page()
+        fleet_tab.set_viewport_size({"width": 1024, "height": 900})
+        fleet_tab.goto(f"{base}/fleet")
+        watched = fleet_tab.locator('tr[data-vehicle="SF-003"]')
+        expect(watched).to_have_attribute("data-verdict", "not cleared")
+        fleet_tab.evaluate("window.notReloaded = true")
+
+        row.get_by_role("link", name="SF-003").click()
+        expect(page).to_have_url(f"{base}/vehicles/SF-003")
+        expect(page.locator("ul.problems")).to_have_text("ACC not available")
+        page.get_by_label("In maintenance").check()
+        page.get_by_label("Note").fill("ACC fault: dealer Tuesday")
+        page.get_by_role("button", name="Save maintenance").click()
+        expect(page.get_by_role("status")).to_have_text("Maintenance saved.")
+        page.locator('form.assignment select[name="controller"]').select_option("simple")
+        page.get_by_role("button", name="Save assignment").click()
+        expect(page.get_by_role("status")).to_have_text("Assignment saved.")
+
+        expect(watched).to_have_attribute("data-verdict", "maintenance", timeout=10_000)
+        expect(watched.locator('[data-field="reasons"]')).to_have_text(
+            "in maintenance: ACC fault: dealer Tuesday"
+        )
+        expect(watched.locator('[data-field="controller"]')).to_have_text("simple")
+        assert fleet_tab.evaluate("window.notReloaded") is True
+        screenshot(fleet_tab, "morning-fleet-after-1024.png")
+        fleet_tab.set_viewport_size({"width": 1400, "height": 900})
+        screenshot(fleet_tab, "morning-fleet-after-1400.png")
+        fleet_tab.close()
 
 
 def test_an_operator_changes_an_assignment(
