@@ -31,7 +31,7 @@ VARIANTS = ("inrix", "predicted", "fused", "inrix_without_latency")
 
 
 @dataclass(frozen=True)
-class Drive:
+class ProbeDrive:
     """A probe vehicle's samples on the corridor: time (s), position x_m and speed (m/s)."""
 
     time_s: FloatArray
@@ -63,7 +63,7 @@ class DriveErrors:
 
 
 def _pings(
-    drive: Drive, start_s: float, end_s: float, period_s: float
+    drive: ProbeDrive, start_s: float, end_s: float, period_s: float
 ) -> tuple[FloatArray, FloatArray]:
     """The drive's samples in [start, end), thinned to one per ping period."""
     inside = np.nonzero((drive.time_s >= start_s) & (drive.time_s < end_s))[0]
@@ -75,7 +75,7 @@ def _pings(
 
 
 def evaluate_drive(
-    drive: Drive,
+    drive: ProbeDrive,
     inrix: InrixHistory,
     grid: CorridorGrid,
     params: PlannerParams | None = None,

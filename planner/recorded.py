@@ -1,14 +1,11 @@
 """Recorded drives with the INRIX minutes of the same time, as planner inputs.
 
-Reads a folder of ../shared/data/trajectories_with_inrix: `trajectory.csv` (10 Hz; Time in
-unix seconds, Velocity in km/h, GPS latitude/longitude) and `speed.csv` (one row per minute:
-seconds relative to the drive's start, then one speed in m/s per INRIX column). Times are
+Reads a folder of ../shared/data/trajectories_with_inrix with `contract.recorded`. Times are
 returned relative to the drive's start, so the INRIX minutes and the drive share one clock.
 """
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,36 +13,18 @@ from pathlib import Path
 import numpy as np
 
 from contract.corridor import CorridorGeometry
-from planner.evaluation import Drive
+from contract.recorded import read_inrix_minutes, read_trajectory
+from planner.evaluation import ProbeDrive
 from planner.inputs import FloatArray, InrixHistory
-
-KMH = 1 / 3.6  # m/s per km/h
 
 
 @dataclass(frozen=True)
-class RecordedDrive:
+class RecordedProbe:
     """One folder: the probe's drive on the corridor and the INRIX history of its minutes."""
 
     name: str
-    drive: Drive
+    drive: ProbeDrive
     inrix: InrixHistory
-
-
-def _columns(path: Path, names: Sequence[str]) -> dict[str, FloatArray]:
-    """The named numeric columns of a CSV file (an empty cell is NaN)."""
-    with path.open(newline="") as handle:
-        rows = list(csv.reader(handle))
-    header = [name.strip() for name in rows[0]]
-    missing = [name for name in names if name not in header]
-    if missing:
-        raise ValueError(f"{path}: no column {', '.join(missing)}")
-    columns = {}
-    for name in names:
-        index = header.index(name)
-        columns[name] = np.array(
-            [float(row[index]) if row[index].strip() else np.nan for row in rows[1:]]
-        )
-    return columns
 
 
 def load_recorded_drive(
@@ -53,23 +32,21 @@ def load_recorded_drive(
     geometry: CorridorGeometry,
     inrix_columns: Sequence[int],
     segment_center_x_m: FloatArray,
-) -> RecordedDrive:
+) -> RecordedProbe:
     """The drive's on-corridor samples and the INRIX speeds of the corridor's segments.
 
     `inrix_columns[j]` is the speed.csv column of the corridor's j-th INRIX segment, whose
     centre is `segment_center_x_m[j]`.
     """
-    trajectory = _columns(
-        folder / "trajectory.csv", ("Time", "Velocity", "LatitudeGPS", "LongitudeGPS")
-    )
-    time_s = trajectory["Time"] - trajectory["Time"][0]
-    located = geometry.locate(trajectory["LatitudeGPS"], trajectory["LongitudeGPS"])
-    on = located.on_corridor & np.isfinite(trajectory["Velocity"])
-    drive = Drive(time_s[on], located.x_m[on], trajectory["Velocity"][on] * KMH)
-    speeds = _columns(folder / "speed.csv", ["time", *(str(column) for column in inrix_columns)])
+    trajectory = read_trajectory(folder / "trajectory.csv")
+    minutes = read_inrix_minutes(folder)
+    time_s = trajectory.time_unix_s - trajectory.time_unix_s[0]
+    located = geometry.locate(trajectory.latitude_deg, trajectory.longitude_deg)
+    on = located.on_corridor & np.isfinite(trajectory.speed_mps)
+    drive = ProbeDrive(time_s[on], located.x_m[on], trajectory.speed_mps[on])
     inrix = InrixHistory(
-        measured_at_s=speeds["time"],
-        speed_mps=np.column_stack([speeds[str(column)] for column in inrix_columns]),
+        measured_at_s=minutes.time_s,
+        speed_mps=minutes.speed_mps[:, list(inrix_columns)],
         segment_center_x_m=np.asarray(segment_center_x_m, dtype=np.float64),
     )
-    return RecordedDrive(folder.name, drive, inrix)
+    return RecordedProbe(folder.name, drive, inrix)

@@ -1,5 +1,5 @@
-"""Real I-24 drives (10 Hz) that lead the simulated platoons, and the INRIX minutes recorded
-alongside two of them. Reading files happens here and nowhere else in the simulator.
+"""Real I-24 drives (10 Hz) that lead the simulated platoons, read with `contract.recorded` and
+checked here for what a replay needs (no gaps, finite non-negative speeds).
 
 The data (../shared/data/README.md) is the CIRCLES instrumented RAV4 on I-24 near Nashville:
 `Time` in unix seconds at 0.1 s steps, `Velocity` in km/h. A drive is replayed from its speed
@@ -9,20 +9,19 @@ acceleration are consistent with each other (GPS distance is noisier than the wh
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import pandas as pd
 from numpy.typing import NDArray
+
+from contract.recorded import RecordedTrajectory, RecordingError, read_trajectory
 
 FloatArray = NDArray[np.float64]
 
 DriveKind = Literal["shockwave", "freeflow"]
 
-KMH_PER_MPS = 3.6
 # The recorder logs at 10 Hz; a step further than this from 0.1 s is a gap in the recording.
 STEP_S = 0.1
 STEP_TOLERANCE_S = 0.011
@@ -102,17 +101,19 @@ def drive_from_speeds(name: str, speed_mps: FloatArray, dt_s: float = STEP_S) ->
 
 def load_drive(path: Path) -> Drive:
     """Read a drive CSV (`Time` in unix s, `Velocity` in km/h) and check it can be replayed."""
-    if not path.is_file():
-        raise DriveError(f"{path}: no such drive file")
     try:
-        table = pd.read_csv(path, usecols=["Time", "Velocity"])
-    except ValueError as error:
-        raise DriveError(f"{path}: {error}") from None
-    time_s = table["Time"].to_numpy(dtype=np.float64)
-    speed_kmh = table["Velocity"].to_numpy(dtype=np.float64)
+        return replayable(read_trajectory(path))
+    except RecordingError as error:
+        raise DriveError(str(error)) from None
+
+
+def replayable(recorded: RecordedTrajectory) -> Drive:
+    """The recorded drive as a leader to replay, refused if it has holes or gaps."""
+    path = recorded.path
+    time_s, speed_mps = recorded.time_unix_s, recorded.speed_mps
     if len(time_s) < 2:
         raise DriveError(f"{path}: fewer than two samples")
-    bad = ~np.isfinite(time_s) | ~np.isfinite(speed_kmh) | (speed_kmh < 0)
+    bad = ~np.isfinite(time_s) | ~np.isfinite(speed_mps) | (speed_mps < 0)
     if np.any(bad):
         row = int(np.argmax(bad)) + 2  # 1-based, after the header line
         raise DriveError(f"{path} row {row}: Time and Velocity must be finite, speed >= 0")
@@ -124,9 +125,8 @@ def load_drive(path: Path) -> Drive:
             f"{path} row {row}: time step {steps[np.argmax(off)]:.3f} s, expected {STEP_S} s "
             "(a gap in the recording)"
         )
-    name = path.parent.name if path.name == "trajectory.csv" else path.stem
     return Drive(
-        name=name, dt_s=STEP_S, start_unix_s=float(time_s[0]), speed_mps=speed_kmh / KMH_PER_MPS
+        name=recorded.name, dt_s=STEP_S, start_unix_s=float(time_s[0]), speed_mps=speed_mps
     )
 
 
@@ -136,39 +136,3 @@ def load_drives(directory: Path) -> list[Drive]:
     if not files:
         raise DriveError(f"{directory}: no drive CSV files")
     return [load_drive(path) for path in files]
-
-
-@dataclass(frozen=True)
-class InrixRecording:
-    """INRIX speeds recorded during a drive: one row per minute, one column per segment.
-
-    `segment_start_m` is in the frame of the I-24 reference line (../shared/data/geo), and
-    `time_s` is relative to the drive's first sample (negative: minutes before the drive).
-    """
-
-    segment_start_m: FloatArray
-    time_s: FloatArray
-    speed_mps: FloatArray
-    score: FloatArray
-
-
-def load_inrix_recording(directory: Path) -> InrixRecording:
-    """Read segments.json, speed.csv and confidence.csv of a trajectories_with_inrix folder."""
-    try:
-        starts = np.asarray(json.loads((directory / "segments.json").read_text()), dtype=float)
-        speed = pd.read_csv(directory / "speed.csv", skipinitialspace=True)
-        score = pd.read_csv(directory / "confidence.csv", skipinitialspace=True)
-    except (OSError, ValueError) as error:
-        raise DriveError(f"{directory}: {error}") from None
-    speeds = speed.drop(columns="time").to_numpy(dtype=np.float64)
-    scores = score.drop(columns="time").to_numpy(dtype=np.float64)
-    if speeds.shape[1] != len(starts) or scores.shape != speeds.shape:
-        raise DriveError(
-            f"{directory}: {len(starts)} segments but speed.csv has {speeds.shape[1]} columns"
-        )
-    return InrixRecording(
-        segment_start_m=starts,
-        time_s=speed["time"].to_numpy(dtype=np.float64),
-        speed_mps=speeds,
-        score=scores,
-    )

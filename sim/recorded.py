@@ -16,10 +16,10 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from contract.corridor import CorridorGeometry
-from sim.drives import Drive, DriveError, InrixRecording, load_drive, load_inrix_recording
+from contract.recorded import InrixMinutes, RecordingError, read_inrix_minutes, read_trajectory
+from sim.drives import Drive, DriveError, replayable
 from sim.traffic import InrixFeed
 
 
@@ -41,7 +41,7 @@ def seed_corridor() -> tuple[CorridorGeometry, float]:
     return geometry, float(corridor["reference_line_origin_m"])
 
 
-def feed_in_drive_frame(recording: InrixRecording, start_reference_m: float) -> InrixFeed:
+def feed_in_drive_frame(recording: InrixMinutes, start_reference_m: float) -> InrixFeed:
     """The recorded minutes as a feed whose positions count from the drive's start."""
     starts = recording.segment_start_m - start_reference_m
     last_length = float(np.median(np.diff(starts)))
@@ -59,17 +59,17 @@ def load_recorded_drive(
     directory: Path, geometry: CorridorGeometry, origin_m: float
 ) -> RecordedDrive:
     """One folder of trajectories_with_inrix, its feed placed along the drive."""
-    drive = load_drive(directory / "trajectory.csv")
-    first = pd.read_csv(
-        directory / "trajectory.csv", usecols=["LatitudeGPS", "LongitudeGPS"], nrows=1
-    )
-    located = geometry.locate(first["LatitudeGPS"].to_numpy(), first["LongitudeGPS"].to_numpy())
+    try:
+        trajectory = read_trajectory(directory / "trajectory.csv")
+        minutes = read_inrix_minutes(directory)
+    except RecordingError as error:
+        raise DriveError(str(error)) from None
+    drive = replayable(trajectory)
+    located = geometry.locate(trajectory.latitude_deg[:1], trajectory.longitude_deg[:1])
     if not bool(located.on_corridor[0]):
         raise DriveError(f"{directory.name}: the drive does not start on the seed corridor")
     start_reference = float(located.x_m[0]) + origin_m
-    return RecordedDrive(
-        drive, feed_in_drive_frame(load_inrix_recording(directory), start_reference)
-    )
+    return RecordedDrive(drive, feed_in_drive_frame(minutes, start_reference))
 
 
 def load_recorded_drives(directory: Path) -> list[RecordedDrive]:

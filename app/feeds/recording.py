@@ -14,9 +14,7 @@ segment codes are SF-I24WB-NN, NN being the column of those files (seed_data/bui
 
 from __future__ import annotations
 
-import csv
-import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -25,10 +23,7 @@ from typing import Any
 import orjson
 
 from app.feeds.inrix import MPS_PER_MPH, S_PER_MINUTE
-
-
-class RecordingError(ValueError):
-    """A recording or a drive folder cannot be read; the message names the file and line."""
+from contract.recorded import RecordingError, read_inrix_minutes, read_trajectory
 
 
 @dataclass(frozen=True)
@@ -90,35 +85,6 @@ def segment_code(column: int) -> str:
     return f"SF-I24WB-{column:02d}"
 
 
-def _table(path: Path) -> tuple[list[float], list[list[float]]]:
-    """A feed CSV: the relative times and, per row, one value per segment column."""
-    try:
-        with path.open(newline="") as handle:
-            rows = list(csv.reader(handle))
-    except OSError as error:
-        raise RecordingError(f"{path}: {error.strerror}") from None
-    times, values = [], []
-    for number, row in enumerate(rows[1:], start=2):
-        try:
-            numbers = [float(cell) for cell in row]
-        except ValueError:
-            raise RecordingError(f"{path.name} line {number}: not all numbers") from None
-        times.append(numbers[0])
-        values.append(numbers[1:])
-    return times, values
-
-
-def _drive_start(trajectory: Path) -> float:
-    """Unix time of the drive's first sample (the feed files' times are relative to it)."""
-    try:
-        with trajectory.open(newline="") as handle:
-            reader = csv.DictReader(handle)
-            first = next(reader)
-        return float(first["Time"])
-    except (OSError, StopIteration, KeyError, ValueError) as error:
-        raise RecordingError(f"{trajectory}: no first Time sample ({error})") from None
-
-
 def _iso(moment: float) -> str:
     return (
         datetime.fromtimestamp(moment, UTC)
@@ -129,18 +95,18 @@ def _iso(moment: float) -> str:
 
 def snapshots_from_drive(directory: Path) -> list[RecordedSnapshot]:
     """The per-minute INRIX readings of a recorded drive as provider-format snapshots."""
-    start = _drive_start(directory / "trajectory.csv")
-    times, speeds = _table(directory / "speed.csv")
-    score_times, scores = _table(directory / "confidence.csv")
-    c_times, c_values = _table(directory / "cvalue.csv")
-    if not times == score_times == c_times:
-        raise RecordingError(f"{directory.name}: speed, confidence and cvalue rows differ")
-    try:
-        starts: Sequence[float] = json.loads((directory / "segments.json").read_text())
-    except (OSError, ValueError) as error:
-        raise RecordingError(f"{directory / 'segments.json'}: {error}") from None
+    start = float(read_trajectory(directory / "trajectory.csv").time_unix_s[0])
+    minutes = read_inrix_minutes(directory)
+    starts = minutes.segment_start_m.tolist()
     snapshots = []
-    for relative, speed_row, score_row, c_row in zip(times, speeds, scores, c_values, strict=True):
+    rows = zip(
+        minutes.time_s.tolist(),
+        minutes.speed_mps.tolist(),
+        minutes.score.tolist(),
+        minutes.c_value.tolist(),
+        strict=True,
+    )
+    for relative, speed_row, score_row, c_row in rows:
         measured = _iso(start + relative)
         segments = []
         for column, speed_mps in enumerate(speed_row):

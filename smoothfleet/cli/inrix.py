@@ -23,7 +23,6 @@ from app.feeds.inrix import InrixFormatError, readings
 from app.feeds.poller import InrixPoller, PollFailed
 from app.feeds.recording import (
     RecordedSnapshot,
-    RecordingError,
     read_recording,
     snapshots_from_drive,
     to_line,
@@ -31,6 +30,7 @@ from app.feeds.recording import (
 )
 from app.feeds.replay import replay as replay_snapshots
 from app.feeds.service import StoreResult, shifted, store_readings
+from contract.recorded import RecordingError
 
 
 def _describe(result: StoreResult) -> str:

@@ -556,4 +556,3 @@ def main() -> None:
         if os.environ.get("SMOOTHFLEET_DEBUG"):
             raise
         fail(f"unexpected {type(error).__name__}: {error} (set SMOOTHFLEET_DEBUG=1 for details)")
-

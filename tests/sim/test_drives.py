@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drives import DriveError, load_drive, load_drives, load_inrix_recording
+from sim.drives import DriveError, load_drive, load_drives
 
 HEADER = "Time,Velocity\n"
 
@@ -84,12 +84,3 @@ def test_slices_for_short_runs(shared_dir: Path) -> None:
     np.testing.assert_allclose(part.speed_mps, drive.speed_mps[1000:1601])
     with pytest.raises(DriveError, match="outside the drive"):
         drive.slice(500.0, 100.0)
-
-
-def test_inrix_minutes_beside_a_drive(shared_dir: Path) -> None:
-    folder = next((shared_dir / "data" / "trajectories_with_inrix").iterdir())
-    recording = load_inrix_recording(folder)
-    assert recording.speed_mps.shape == (len(recording.time_s), 21)
-    assert np.all(np.diff(recording.time_s) == pytest.approx(60.0))
-    assert recording.time_s[0] < 0  # the minutes before the drive are there too
-    assert load_drive(folder / "trajectory.csv").name == folder.name

@@ -8,18 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drives import DriveError, InrixRecording
+from contract.recorded import InrixMinutes
+from sim.drives import DriveError
 from sim.plans import SimulatedPlanner
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
 from sim.scenarios import scenario_cases
 
 
 def test_feed_positions_count_from_the_drives_start() -> None:
-    recording = InrixRecording(
+    recording = InrixMinutes(
         segment_start_m=np.array([0.0, 800.0, 1800.0]),
         time_s=np.array([-60.0, 0.0]),
         speed_mps=np.array([[30.0, 20.0, 10.0], [30.0, 20.0, 10.0]]),
         score=np.full((2, 3), 30.0),
+        c_value=np.full((2, 3), 0.9),
     )
     # the drive starts 1000 m along the reference line
     feed = feed_in_drive_frame(recording, 1000.0)
