@@ -17,6 +17,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import psutil
 import psycopg
 from psycopg import sql
 
@@ -64,22 +65,35 @@ def bin_dir() -> Path:
 
 
 def _heal_handle_list(wheel: Any, pgdata: Path) -> None:
-    """Reset the wheel's list of processes holding the server if it is unreadable.
+    """Drop from the wheel's list of processes holding the server those that no longer exist.
 
-    The wheel rewrites `.handle_pids.json` in place; a process killed mid-write leaves it empty
-    and every later start would fail on it. The processes it named are then unknown, so the
-    list starts afresh (a server still used by one of them may be stopped early by the next
-    command to exit; the data are safe either way).
+    The wheel adds a process to `.handle_pids.json` when it joins and removes it at exit; a
+    process killed with SIGKILL never removes itself, so the server would never be stopped
+    again (the last living holder would still see the dead one). Under the wheel's own lock,
+    the list keeps only living processes, so the last holder to leave stops the server. A list
+    left unreadable by a process killed mid-write starts afresh.
     """
     handles = pgdata / HANDLE_LIST
     with wheel.PostgresServer._lock:
         if not handles.exists():
             return
         try:
-            json.loads(handles.read_text())
+            holders = json.loads(handles.read_text())
         except ValueError:
             log.warning("embedded PostgreSQL: %s was damaged; starting a new list", handles)
             handles.unlink()
+            return
+        if not isinstance(holders, list):
+            handles.unlink()
+            return
+        living = [pid for pid in holders if isinstance(pid, int) and psutil.pid_exists(pid)]
+        if living != holders:
+            log.info(
+                "embedded PostgreSQL: dropped %d ended holder(s) from %s",
+                len(holders) - len(living),
+                handles,
+            )
+            handles.write_text(json.dumps(living))
 
 
 @contextmanager

@@ -189,3 +189,37 @@ def test_a_damaged_handle_list_of_the_embedded_server_is_healed(tmp_path: Path) 
     again = run_cli("db", "url", env=env)
     assert again.returncode == 0, again.stderr
     assert "/smoothfleet" in again.stdout
+
+
+@pytest.mark.slow
+def test_the_embedded_server_still_stops_after_a_holder_was_killed(tmp_path: Path) -> None:
+    """A SIGKILLed holder never leaves the handle list itself; the next command drops it."""
+    data_dir = tmp_path / "data"
+    env = cli_env(SMOOTHFLEET_DATA_DIR=str(data_dir))
+    holder = subprocess.Popen(
+        [*smoothfleet_command(), "db", "psql"],
+        env=env,
+        stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    handles = data_dir / "pgdata" / ".handle_pids.json"
+    deadline = time.monotonic() + 60
+    while not (handles.exists() and str(holder.pid) in handles.read_text()):
+        assert time.monotonic() < deadline, "the holder never joined the server"
+        time.sleep(0.2)
+    psql = psutil.Process(holder.pid).children(recursive=True)
+    holder.kill()
+    holder.wait(timeout=10)
+    assert holder.stdin is not None
+    holder.stdin.close()  # its psql, orphaned, reads end-of-input and leaves
+    psutil.wait_procs(psql, timeout=10)
+
+    again = run_cli("db", "url", env=env)
+
+    assert again.returncode == 0, again.stderr
+    assert handles.read_text() == "[]"
+    deadline = time.monotonic() + 20
+    while postgres_processes(data_dir / "pgdata") and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not postgres_processes(data_dir / "pgdata"), "embedded PostgreSQL left running"
