@@ -22,6 +22,7 @@ from vehicle_agent.controllers import (
     TargetProfile,
     build_controller,
 )
+from vehicle_agent.stopping import braking_authority_mps2
 
 # The cars' radar reports a leader within about 80-100 m (paper Table 2, "minicar").
 RADAR_RANGE_M = 100.0
@@ -65,6 +66,10 @@ class StockAcc(Protocol):
         """The gap bars the car shows now."""
         ...
 
+    def cancel(self) -> None:
+        """The driver braked: the ACC disengages (it engages again at the car's speed)."""
+        ...
+
 
 class AgentPolicy:
     """An AV policy that runs a vehicle-agent controller behind the simulated sensors."""
@@ -85,14 +90,28 @@ class AgentPolicy:
         self.plan = plan
         self.senses_lead_state = senses_lead_state
         self.stock_acc = stock_acc
+        self.braking_authority_mps2 = braking_authority_mps2(controller.actuation)
         self._step = 0
+
+    def _ping(self, observation: AvObservation) -> None:
+        """The agent pings once a second whoever drives."""
+        if self._step % PING_EVERY_STEPS == 0:
+            self.plan.record_ping(
+                observation.time_s, observation.position_m, observation.speed_mps
+            )
+        self._step += 1
+
+    def driver_drives(self, observation: AvObservation) -> None:
+        """Handed back: the driver's braking cancels the ACC, the controller starts afresh."""
+        self._ping(observation)
+        self.controller.reset()
+        if self.stock_acc is not None:
+            self.stock_acc.cancel()
 
     def accel_mps2(self, observation: AvObservation) -> float:
         """Sense, decide with the agent's controller, actuate."""
         time_s = observation.time_s
-        if self._step % PING_EVERY_STEPS == 0:
-            self.plan.record_ping(time_s, observation.position_m, observation.speed_mps)
-        self._step += 1
+        self._ping(observation)
         profile = self.plan.profile(time_s)
         lead_present = observation.gap_m <= RADAR_RANGE_M
         measured = lead_present and self.senses_lead_state

@@ -16,15 +16,17 @@ results instead of being hidden by the simulator.
 from __future__ import annotations
 
 import math
+import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
 from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 from sim.drives import Drive
+from vehicle_agent.stopping import required_braking_mps2
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -89,6 +91,15 @@ class PlatoonRun:
     vehicle_length_m: float
     gap_violation_m: float
     events: list[GapEvent] = field(default_factory=list)
+    # Gap of each follower to whatever vehicle is ahead of it (a cut-in included); None: the
+    # platoon's own order throughout (columns 1..N-1 behind 0..N-2).
+    follower_gap_m: FloatArray | None = None
+    # Cars that merged in from the next lane: NaN before they did (not part of the KPIs).
+    cut_in_position_m: FloatArray | None = None
+    cut_in_speed_mps: FloatArray | None = None
+    # Hand-backs of the AVs to their drivers, and the seconds the drivers then drove.
+    takeovers: int = 0
+    driver_seconds: float = 0.0
 
     @property
     def time_s(self) -> FloatArray:
@@ -106,8 +117,15 @@ class PlatoonRun:
     @property
     def gap_m(self) -> FloatArray:
         """Bumper-to-bumper gap of each follower to the vehicle ahead (columns 1..N-1)."""
+        if self.follower_gap_m is not None:
+            return self.follower_gap_m
         gaps: FloatArray = self.position_m[:, :-1] - self.position_m[:, 1:] - self.vehicle_length_m
         return gaps
+
+    @property
+    def cut_ins(self) -> int:
+        """Cars that merged into the platoon from the next lane."""
+        return 0 if self.cut_in_position_m is None else int(self.cut_in_position_m.shape[1])
 
     @property
     def collisions(self) -> int:
@@ -141,6 +159,88 @@ def roles_for_penetration(followers: int, penetration: float) -> BoolArray:
     return platoon_roles(followers - avs, avs)
 
 
+@dataclass(frozen=True)
+class HandBack:
+    """What happens when an AV's stop needs more braking than its actuation has.
+
+    The agent hands the car back at once (`vehicle_agent.stopping`); then the driver, alerted by
+    the car's forward-collision warning, drives: the I-24 IDM human, braking as hard as the stop
+    needs up to the tyres' limit (`MAX_BRAKING_MPS2`). The agent takes over again once the stop
+    need has stayed below `release_share` of its authority for `reengage_after_s`: the agent's
+    own override hold-off (3 s after the driver's last touch) plus its engage delay (1 s),
+    `vehicle_agent.engage.EngagePolicy`. Every hand-back is a takeover in the KPIs.
+
+    The radar sees a leader within `radar_range_m`: the paper's "minicar" flag is nominally
+    80-100 m (Table 2); the RAV4's radar reported leaders up to 113-250 m on 27 of the 32 shared
+    drives (`SpaceGap` below its 252 m "none" value). 100 m is the conservative common range.
+    """
+
+    radar_range_m: float = 100.0
+    release_share: float = 0.5
+    reengage_after_s: float = 4.0
+
+
+@dataclass(frozen=True)
+class CutIns:
+    """Vehicles from the next lane merging into a large gap ahead of an AV.
+
+    Rule: while an AV's time gap exceeds `accept_time_gap_s` (2.0 s: the widest a stock ACC
+    leaves, its 3-bar setting, paper "ACC-Based Controller") and its space gap leaves room for a
+    car with `min_gap_m` on both sides, a driver in the next lane merges in at a Poisson rate of
+    `rate_per_s_per_s` per second of time gap beyond it (at 1 s beyond: one merge per 10 s on
+    average). The merging car takes the middle of the gap at the mean of the AV's and its
+    leader's speeds and then drives as an I-24 IDM human. Cut-ins are frequent even at stock
+    gaps (AAA's 2024 road test of driver-assistance systems: one cut-in every 24.4 minutes
+    of ACC driving, the most common event needing the driver); the rate beyond the ACC's widest
+    gap is our assumption, seeded and configurable, so its effect can be bracketed (0 turns it
+    off). The field team bounded the AV's gap at 120 m in training for the same reason.
+    Cut-in vehicles are not part of the platoon's KPIs (they come from another lane, which
+    loses them); they cost the platoon what they cost on the road: the AV must make room.
+    """
+
+    accept_time_gap_s: float = 2.0
+    rate_per_s_per_s: float = 0.1
+    min_gap_m: float = 19.0
+    seed: int = 0
+
+    def hazard_per_s(self, gap_m: float, speed_mps: float) -> float:
+        """The merge rate into this gap now."""
+        if speed_mps < MIN_CUT_IN_SPEED_MPS or gap_m < self.min_gap_m:
+            return 0.0
+        excess = gap_m / speed_mps - self.accept_time_gap_s
+        return self.rate_per_s_per_s * excess if excess > 0.0 else 0.0
+
+
+# Nobody changes lanes into a gap of a queue that stands still (m/s).
+MIN_CUT_IN_SPEED_MPS = 1.0
+
+
+@runtime_checkable
+class SupervisedPolicy(AvPolicy, Protocol):
+    """An AV policy that can be handed back to its driver (what `HandBack` needs)."""
+
+    @property
+    def braking_authority_mps2(self) -> float:
+        """The hardest braking (positive) the policy's actuation makes."""
+        ...
+
+    def driver_drives(self, observation: AvObservation) -> None:
+        """The driver drives this step: keep reporting, forget the controller's state."""
+        ...
+
+
+@dataclass
+class _AvState:
+    """One AV's supervision and cut-in clocks."""
+
+    column: int
+    policy: AvPolicy
+    engaged: bool = True
+    calm_since_s: float | None = None
+    cut_in_clock: float = 0.0
+    cut_in_threshold: float = 0.0
+
+
 def simulate_platoon(
     drive: Drive,
     roles: BoolArray,
@@ -149,6 +249,8 @@ def simulate_platoon(
     idm: IdmParams = I24_IDM,
     speed_limit: SpeedLimit | None = None,
     av_max_accel: Callable[[float], float] | None = None,
+    hand_back: HandBack | None = None,
+    cut_ins: CutIns | None = None,
     vehicle_length_m: float = VEHICLE_LENGTH_M,
     gap_violation_m: float = GAP_VIOLATION_M,
 ) -> PlatoonRun:
@@ -156,53 +258,94 @@ def simulate_platoon(
 
     `policies` holds one policy per AV, front to back. `av_max_accel(v)` bounds AV requests by
     what the powertrain can give (the energy model's feasible acceleration); requests below
-    -MAX_BRAKING_MPS2 are unphysical and bounded there.
+    -MAX_BRAKING_MPS2 are unphysical and bounded there. With `hand_back`, every AV is supervised
+    as the agent supervises itself (policies must be `SupervisedPolicy`); with `cut_ins`,
+    drivers from the next lane merge into large gaps ahead of AVs. Without them the simulator
+    applies the requests as they come, so an unsafe policy shows up as collisions.
     """
     roles = np.asarray(roles, dtype=bool)
     av_columns = [int(i) + 1 for i in np.flatnonzero(roles)]
     if len(policies) != len(av_columns):
         raise ValueError(f"{len(av_columns)} AVs in the platoon but {len(policies)} policies")
+    if hand_back is not None:
+        for policy in policies:
+            if not isinstance(policy, SupervisedPolicy):
+                raise ValueError(f"{type(policy).__name__} cannot be handed back to a driver")
     n = len(roles) + 1
     steps = drive.steps
     dt = drive.dt_s
-    lead_position = drive.position_m
-    lead_speed = drive.speed_mps
 
-    position = np.empty((steps + 1, n))
-    speed = np.empty((steps + 1, n))
-    position[:, 0] = lead_position
-    speed[:, 0] = lead_speed
-    start_speed = float(lead_speed[0])
+    position = np.full((steps + 1, n), np.nan)
+    speed = np.full((steps + 1, n), np.nan)
+    position[:, 0] = drive.position_m
+    speed[:, 0] = drive.speed_mps
+    start_speed = float(drive.speed_mps[0])
     spacing_speed = min(start_speed, MAX_SPACING_SPEED_SHARE * idm.desired_speed_mps)
     spacing = float(equilibrium_gap_m(idm, spacing_speed)) + vehicle_length_m
     position[0, 1:] = -spacing * np.arange(1, n)
     speed[0, 1:] = start_speed
+    # The vehicle ahead of each column (the leader's entry is unused): the platoon's order
+    # until a cut-in slips a car in ahead of an AV.
+    lead_of = np.arange(-1, n - 1)
+    gap_history = np.full((steps + 1, n), np.nan)
 
-    # IDM constants and work buffers, so the step allocates nothing.
+    # IDM constants and work buffers, so a step allocates nothing (until a cut-in adds a car).
     amax = idm.max_accel_mps2
     inv_v0 = 1.0 / idm.desired_speed_mps
     braking = 1.0 / (2.0 * math.sqrt(amax * idm.comfortable_decel_mps2))
     delta_is_four = idm.delta == 4.0
-    followers = n - 1
-    gap = np.empty(followers)
-    approaching = np.empty(followers)
-    desired = np.empty(followers)
-    work = np.empty(followers)
-    accel = np.empty(followers)
     half_dt2 = 0.5 * dt * dt
-    av_pairs = list(zip(av_columns, policies, strict=True))
     stop_rate = -1.0 / dt
+    rng = np.random.default_rng([cut_ins.seed, zlib.crc32(drive.name.encode())] if cut_ins else 0)
+    avs = [_AvState(column, policy) for column, policy in zip(av_columns, policies, strict=True)]
+    for av in avs:
+        av.cut_in_threshold = float(rng.exponential())
+    takeovers = 0
+    driver_steps = 0
+    # Every column from 1 on follows someone: cut-in cars are appended as columns and follow
+    # from the step they merge (NaN before, which no arithmetic below reads).
+    in_order = True
+    buffers = np.empty((6, n - 1))
 
     for k in range(steps):
         x = position[k]
         v = speed[k]
+        if cut_ins is not None:
+            for av in avs:
+                ahead = int(lead_of[av.column])
+                gap_now = float(x[ahead] - x[av.column]) - vehicle_length_m
+                av.cut_in_clock += cut_ins.hazard_per_s(gap_now, float(v[av.column])) * dt
+                if av.cut_in_clock < av.cut_in_threshold:
+                    continue
+                av.cut_in_clock = 0.0
+                av.cut_in_threshold = float(rng.exponential())
+                new = position.shape[1]
+                column = np.full((steps + 1, 1), np.nan)
+                position = np.hstack([position, column])
+                speed = np.hstack([speed, column])
+                gap_history = np.hstack([gap_history, column])
+                position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
+                speed[k, new] = 0.5 * float(v[ahead] + v[av.column])
+                lead_of = np.append(lead_of, ahead)
+                lead_of[av.column] = new
+                in_order = False
+                buffers = np.empty((6, new))
+                x = position[k]
+                v = speed[k]
+        gap, v_lead, desired, work, accel, limits_work = buffers
         v_follow = v[1:]
-        # gap s and approaching rate v - v_lead
-        np.subtract(x[:-1], x[1:], out=gap)
+        if in_order:
+            np.subtract(x[:-1], x[1:], out=gap)
+            v_lead[:] = v[:-1]
+        else:
+            ahead_of = lead_of[1:]
+            np.subtract(x[ahead_of], x[1:], out=gap)
+            np.take(v, ahead_of, out=v_lead)
         gap -= vehicle_length_m
-        np.subtract(v_follow, v[:-1], out=approaching)
+        gap_history[k, 1:] = gap
         # s* = s0 + v T + max(0, v dv) / (2 sqrt(ab))
-        np.multiply(v_follow, approaching, out=desired)
+        np.subtract(v_follow, v_lead, out=desired)
+        desired *= v_follow
         np.maximum(desired, 0.0, out=desired)
         desired *= braking
         np.multiply(v_follow, idm.time_gap_s, out=work)
@@ -217,7 +360,8 @@ def simulate_platoon(
         if limits is None:
             np.multiply(v_follow, inv_v0, out=work)
         else:
-            np.divide(v_follow, np.minimum(limits, idm.desired_speed_mps), out=work)
+            np.minimum(limits, idm.desired_speed_mps, out=limits_work)
+            np.divide(v_follow, limits_work, out=work)
         if delta_is_four:
             np.multiply(work, work, out=work)
             np.multiply(work, work, out=work)
@@ -227,29 +371,39 @@ def simulate_platoon(
         np.add(work, desired, out=accel)
         np.subtract(1.0, accel, out=accel)
         accel *= amax
-        for column, policy in av_pairs:
-            own = float(v[column])
-            request = policy.accel_mps2(
-                AvObservation(
-                    time_s=k * dt,
-                    position_m=float(x[column]),
-                    speed_mps=own,
-                    gap_m=float(gap[column - 1]),
-                    lead_speed_mps=float(v[column - 1]),
-                )
+        for av in avs:
+            i = av.column - 1
+            own = float(v_follow[i])
+            observation = AvObservation(
+                time_s=k * dt,
+                position_m=float(x[av.column]),
+                speed_mps=own,
+                gap_m=float(gap[i]),
+                lead_speed_mps=float(v_lead[i]),
             )
+            if hand_back is not None:
+                was_engaged = av.engaged
+                _supervise(av, observation, hand_back)
+                if was_engaged and not av.engaged:
+                    takeovers += 1
+                if not av.engaged:
+                    driver_steps += 1
+                    av.policy.driver_drives(observation)  # type: ignore[attr-defined]
+                    continue  # the driver: the IDM acceleration already in `accel`
+            request = av.policy.accel_mps2(observation)
             if not math.isfinite(request):
-                raise ValueError(f"AV {column} requested a non-finite acceleration {request}")
+                raise ValueError(f"AV {av.column} requested a non-finite acceleration {request}")
             if av_max_accel is not None:
                 request = min(request, av_max_accel(own))
-            if limits is not None and math.isfinite(limits[column - 1]):
+            if limits is not None and math.isfinite(limits[i]):
                 # The AV keeps the posted limit like every driver (IDM free-road term).
-                request = min(request, amax * (1.0 - (own / float(limits[column - 1])) ** 4))
-            accel[column - 1] = max(request, -MAX_BRAKING_MPS2)
-        # never reverse: at most the deceleration that stops the car within the step
+                request = min(request, amax * (1.0 - (own / float(limits[i])) ** 4))
+            accel[i] = request
+        # no harder than the tyres give, and never reverse within the step
+        np.maximum(accel, -MAX_BRAKING_MPS2, out=accel)
         np.multiply(v_follow, stop_rate, out=work)
         np.maximum(accel, work, out=accel)
-        # ballistic update into the next row
+        # ballistic update into the next row (NaN columns of cars not yet merged stay NaN)
         x_next = position[k + 1, 1:]
         np.multiply(v_follow, dt, out=x_next)
         np.multiply(accel, half_dt2, out=work)
@@ -259,18 +413,51 @@ def simulate_platoon(
         np.multiply(accel, dt, out=v_next)
         v_next += v_follow
         np.maximum(v_next, 0.0, out=v_next)  # v + (-v/dt) dt can round to -1e-16
+    last = position[steps]
+    gap_history[steps, 1:] = last[lead_of[1:]] - last[1:] - vehicle_length_m
 
     run = PlatoonRun(
         drive_name=drive.name,
         dt_s=dt,
         is_av=np.concatenate([[False], roles]),
-        position_m=position,
-        speed_mps=speed,
+        position_m=position[:, :n],
+        speed_mps=speed[:, :n],
         vehicle_length_m=vehicle_length_m,
         gap_violation_m=gap_violation_m,
+        follower_gap_m=gap_history[:, 1:n],
+        cut_in_position_m=position[:, n:],
+        cut_in_speed_mps=speed[:, n:],
+        takeovers=takeovers,
+        driver_seconds=driver_steps * dt,
     )
     run.events.extend(gap_events(run.gap_m, dt, gap_violation_m))
     return run
+
+
+def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) -> None:
+    """The agent's stopping check on what its radar sees; hand back, or take over again."""
+    policy = av.policy
+    authority = policy.braking_authority_mps2  # type: ignore[attr-defined]
+    seen = observation.gap_m <= hand_back.radar_range_m
+    need = (
+        required_braking_mps2(
+            observation.speed_mps, observation.gap_m, observation.lead_speed_mps
+        )
+        if seen
+        else 0.0
+    )
+    if av.engaged:
+        if need > authority:
+            av.engaged = False
+            av.calm_since_s = None
+        return
+    if need > hand_back.release_share * authority:
+        av.calm_since_s = None
+        return
+    if av.calm_since_s is None:
+        av.calm_since_s = observation.time_s
+    if observation.time_s - av.calm_since_s >= hand_back.reengage_after_s:
+        av.engaged = True
 
 
 def gap_events(gaps: FloatArray, dt_s: float, gap_violation_m: float) -> list[GapEvent]:

@@ -190,6 +190,10 @@ class SimulatedAccCar:
         """The gap bars the car shows."""
         return self.acc.gap_setting
 
+    def cancel(self) -> None:
+        """The driver braked: ACC off until the next set point engages it at the car's speed."""
+        self.acc.cancel()
+
     def accel_mps2(
         self,
         set_point: AccSetPoint,

@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 
 from contract.idm import I24_IDM, equilibrium_gap_m
-from sim.drives import drive_from_speeds, load_drive
+from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.platoon import (
     VEHICLE_LENGTH_M,
     AvObservation,
+    CutIns,
+    HandBack,
     platoon_roles,
     roles_for_penetration,
     simulate_platoon,
@@ -140,3 +142,107 @@ def test_non_finite_request_is_refused() -> None:
     leader = drive_from_speeds("steady", np.full(20, 20.0))
     with pytest.raises(ValueError, match="non-finite"):
         simulate_platoon(leader, platoon_roles(humans=0, avs=1), [Constant(float("nan"))])
+
+
+class Supervised(Constant):
+    """A constant request the simulator may hand back to a driver, as the agent does."""
+
+    braking_authority_mps2 = 3.0
+
+    def __init__(self, accel: float) -> None:
+        super().__init__(accel)
+        self.driver_steps = 0
+
+    def driver_drives(self, observation: AvObservation) -> None:
+        self.driver_steps += 1
+
+
+def queue_ahead() -> Drive:
+    """28 m/s, then a stopped queue: the leader stops within a second and stands."""
+    return drive_from_speeds(
+        "queue", np.concatenate([np.full(200, 28.0), np.linspace(28.0, 0.0, 10), np.zeros(600)])
+    )
+
+
+def test_a_stop_beyond_the_authority_is_handed_back_and_the_driver_stops_in_time() -> None:
+    reckless = Supervised(0.0)  # a stale plan: holds 28 m/s whatever it sees
+    run = simulate_platoon(
+        queue_ahead(), platoon_roles(humans=3, avs=1), [reckless], hand_back=HandBack()
+    )
+    assert run.collisions == 0
+    assert run.takeovers == 1
+    assert reckless.driver_steps > 0
+    assert run.driver_seconds == pytest.approx(reckless.driver_steps * 0.1)
+    # the same policy unsupervised drives into the queue
+    unsupervised = simulate_platoon(queue_ahead(), platoon_roles(humans=3, avs=1), [Constant(0.0)])
+    assert unsupervised.collisions >= 1
+
+
+def test_the_agent_takes_over_again_once_calm() -> None:
+    leader = drive_from_speeds(
+        "stop-and-go",
+        np.concatenate(
+            [
+                np.full(200, 28.0),
+                np.linspace(28.0, 0.0, 10),
+                np.zeros(300),
+                np.linspace(0.0, 20.0, 200),
+                np.full(600, 20.0),
+            ]
+        ),
+    )
+    policy = Supervised(0.0)
+    run = simulate_platoon(leader, platoon_roles(humans=0, avs=1), [policy], hand_back=HandBack())
+    assert run.takeovers == 1
+    # the driver hands control back to the agent, which then holds its speed (a = 0) to the end
+    assert policy.seen[-1].time_s == pytest.approx(run.time_s[-2])
+    assert run.speed_mps[-1, 1] == pytest.approx(run.speed_mps[-50, 1])
+
+
+def test_a_policy_without_a_driver_cannot_be_supervised() -> None:
+    leader = drive_from_speeds("steady", np.full(20, 20.0))
+    with pytest.raises(ValueError, match="cannot be handed back"):
+        simulate_platoon(
+            leader, platoon_roles(humans=0, avs=1), [Constant(0.0)], hand_back=HandBack()
+        )
+
+
+def test_dropping_back_invites_cut_ins() -> None:
+    leader = drive_from_speeds("steady", np.full(3000, 25.0))
+
+    # an AV that falls back to 20 m/s and holds it: its gap grows by 5 m every second
+    class DropBack(Supervised):
+        def accel_mps2(self, observation: AvObservation) -> float:
+            return 0.5 * (20.0 - observation.speed_mps)
+
+    run = simulate_platoon(
+        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
+    )
+    assert run.cut_ins >= 2
+    assert run.cut_in_position_m is not None
+    # each merging car took the middle of the gap: the AV's gap halves (less a car length)
+    first = int(np.argmax(np.isfinite(run.cut_in_position_m[:, 0])))
+    before, after = run.gap_m[first - 1, 0], run.gap_m[first, 0]
+    assert after == pytest.approx((before - VEHICLE_LENGTH_M) / 2, abs=1.0)
+    assert run.collisions == 0
+    # the same seed gives the same merges; no rate, no merges
+    again = simulate_platoon(
+        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
+    )
+    assert again.cut_ins == run.cut_ins
+    none = simulate_platoon(
+        leader,
+        platoon_roles(humans=2, avs=1),
+        [DropBack(0.0)],
+        cut_ins=CutIns(rate_per_s_per_s=0.0),
+    )
+    assert none.cut_ins == 0
+
+
+def test_cut_in_hazard_hand_worked() -> None:
+    model = CutIns()
+    # 25 m/s with 75 m: 3 s time gap, 1 s beyond the ACC's widest: 0.1 merges per second
+    assert model.hazard_per_s(75.0, 25.0) == pytest.approx(0.1)
+    assert model.hazard_per_s(45.0, 25.0) == 0.0  # 1.8 s: within what an ACC leaves
+    assert model.hazard_per_s(15.0, 3.0) == 0.0  # 5 s but no room for a car
+    assert model.hazard_per_s(30.0, 0.5) == 0.0  # a standing queue
