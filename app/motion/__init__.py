@@ -1,0 +1,1 @@
+"""I-24 MOTION analytics: import, Edie fields, the bulk-fuel figure (docs/analytics.md)."""

@@ -1,0 +1,384 @@
+"""`smoothfleet motion import`: MOTION files into the store, once, with every refusal explained.
+
+Each file is read in batches (app.motion.documents), so memory depends on the batch, not on the
+file. Each document is checked; a bad one is counted with its reason and the rest of the file is
+imported. Positions go through the `MotionFrame` onto the corridor (sim.motion.frame), each point
+gets the step it stands for in Edie's sums (app.motion.kinematics), and the rows are written to
+Parquet in a staging folder that becomes visible only when the file is done (app.motion.store).
+
+Re-importing adds nothing: a file whose SHA-256 is already in `imports/` is skipped, and a
+document whose `_id` is already in the store (from another file) is counted as a duplicate.
+If the file's JSON structure breaks part-way, the documents before the break are kept and the
+report says where it broke.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+from numpy.typing import NDArray
+
+from app.motion.documents import (
+    BadDocument,
+    DocumentBatch,
+    MotionFileError,
+    open_motion_file,
+    parse_batch,
+    split_documents,
+)
+from app.motion.kinematics import fuel_model_name, trajectory_steps
+from app.motion.store import (
+    IMPORTS,
+    POINT_SCHEMA,
+    POINTS,
+    STAGING,
+    TRAJECTORIES,
+    TRAJECTORY_SCHEMA,
+    files,
+    write_views_file,
+)
+from sim.motion.frame import METRES_PER_FOOT, MotionFrame
+
+IntArray = NDArray[np.int64]
+SECONDS_PER_DAY = 86_400
+# The manifest keeps this many bad documents' reasons (the counts are always complete).
+REASONS_KEPT = 1000
+HASH_CHUNK_BYTES = 8 * 1024 * 1024
+
+
+@dataclass
+class ImportReport:
+    """What one file added to the store, and what it did not and why."""
+
+    path: Path
+    sha256: str
+    documents: int = 0
+    points: int = 0
+    duplicates: int = 0
+    other_direction: int = 0
+    bad: list[BadDocument] = field(default_factory=list)
+    already_imported: bool = False
+    file_error: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def points_per_s(self) -> float:
+        """Import speed."""
+        return self.points / self.seconds if self.seconds > 0 else 0.0
+
+
+def file_sha256(path: Path) -> str:
+    """SHA-256 of a file, read in chunks."""
+    digest = hashlib.sha256()
+    with open_motion_file(path) as stream:
+        while chunk := stream.read(HASH_CHUNK_BYTES):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def trajectory_key(document_id: str) -> int:
+    """A 64-bit key for a MOTION `_id` (BLAKE2b), joining points to their trajectory."""
+    digest = hashlib.blake2b(document_id.encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big", signed=True)
+
+
+def import_motion_file(
+    path: Path,
+    store: Path,
+    frame: MotionFrame | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> ImportReport:
+    """Import one MOTION file into `store`; `progress` is called with the bytes read so far."""
+    frame = frame or MotionFrame()
+    started = time.perf_counter()
+    report = ImportReport(path=path, sha256=file_sha256(path))
+    manifest = store / IMPORTS / f"{report.sha256}.json"
+    if manifest.exists():
+        report.already_imported = True
+        report.seconds = time.perf_counter() - started
+        return report
+    name = report.sha256[:16]
+    _remove_unfinished(store, name)
+    staging = store / STAGING / name
+    staging.mkdir(parents=True)
+    writer = _DayWriters(staging, name)
+    known = _known_trajectories(store)
+    try:
+        with open_motion_file(path) as stream:
+            for batch in split_documents(stream):
+                _import_batch(batch, frame, known, writer, report, staging / "batch.json")
+                if progress is not None:
+                    progress(batch.bytes_read)
+    except MotionFileError as error:
+        report.file_error = str(error)
+    finally:
+        writer.close()
+    _commit(store, staging)
+    report.seconds = time.perf_counter() - started
+    manifest.parent.mkdir(parents=True, exist_ok=True)
+    manifest.write_text(json.dumps(_manifest(report), indent=1))
+    write_views_file(store)
+    return report
+
+
+def _import_batch(
+    batch: DocumentBatch,
+    frame: MotionFrame,
+    known: set[int],
+    writer: _DayWriters,
+    report: ImportReport,
+    scratch: Path,
+) -> None:
+    table, indices = parse_batch(batch, scratch)
+    offsets = dict(zip(batch.indices, batch.offsets, strict=True))
+    report.bad.extend(batch.bad)
+    if table.num_rows == 0:
+        return
+    document_ids = pc.struct_field(table.column("_id"), "$oid").to_pylist()
+    counts = {
+        column: pc.fill_null(pc.list_value_length(table.column(column)), -1).to_numpy()
+        for column in ("timestamp", "x_position", "y_position")
+    }
+    direction = pc.fill_null(table.column("direction"), 0).to_numpy()
+    keep = np.ones(table.num_rows, dtype=bool)
+
+    def refuse(row: int, reason: str) -> None:
+        keep[row] = False
+        index = indices[row]
+        report.bad.append(BadDocument(index, offsets[index], reason))
+
+    for row in range(table.num_rows):
+        reason = _shape_problem(
+            document_ids[row],
+            counts["timestamp"][row],
+            counts["x_position"][row],
+            counts["y_position"][row],
+            int(direction[row]),
+        )
+        if reason:
+            refuse(row, reason)
+        elif direction[row] != frame.direction:
+            keep[row] = False
+            report.other_direction += 1
+    if not keep.all():
+        table = table.filter(pa.array(keep))
+    rows = np.flatnonzero(keep)
+    lengths = counts["timestamp"][keep].astype(np.int64)
+    time_s = _flat(table, "timestamp")
+    x_ft = _flat(table, "x_position")
+    y_ft = _flat(table, "y_position")
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    # Point-level checks, reduced per document.
+    finite = np.isfinite(time_s) & np.isfinite(x_ft) & np.isfinite(y_ft)
+    step_ok = np.ones(len(time_s), dtype=bool)
+    step_ok[1:] = np.diff(time_s) > 0
+    step_ok[starts] = True
+    good_points = finite & step_ok
+    doc_ok = np.logical_and.reduceat(good_points, starts) if len(starts) else np.zeros(0, bool)
+    keys = np.array([trajectory_key(document_ids[row]) for row in rows], dtype=np.int64)
+    for position in np.flatnonzero(~doc_ok):
+        first, last = starts[position], starts[position] + lengths[position]
+        broken = int(np.argmax(~good_points[first:last]))
+        reason = (
+            f"non-finite or null value at point {broken}"
+            if not finite[first + broken]
+            else f"timestamps do not increase at point {broken}"
+        )
+        refuse(int(rows[position]), reason)
+    fresh = doc_ok.copy()
+    for position in np.flatnonzero(doc_ok):
+        key = int(keys[position])
+        if key in known:
+            fresh[position] = False
+            report.duplicates += 1
+        else:
+            known.add(key)
+    if not fresh.any():
+        return
+    if not fresh.all():
+        point_keep = np.repeat(fresh, lengths)
+        table = table.filter(pa.array(fresh))
+        rows, keys, lengths = rows[fresh], keys[fresh], lengths[fresh]
+        time_s, x_ft, y_ft = time_s[point_keep], x_ft[point_keep], y_ft[point_keep]
+        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+    vehicle_class = pc.fill_null(table.column("coarse_vehicle_class"), -1).to_numpy()
+    x_m = frame.x_m(x_ft)
+    lane = frame.lane(y_ft)
+    steps = trajectory_steps(time_s, x_m, starts, np.repeat(vehicle_class, lengths))
+    trajectory_of_point = np.repeat(keys, lengths)
+    points = pa.table(
+        {
+            "trajectory_id": trajectory_of_point,
+            "t_s": time_s,
+            "x_m": x_m.astype(np.float32),
+            "lane": lane,
+            "speed_mps": steps.speed_mps.astype(np.float32),
+            "accel_mps2": steps.accel_mps2.astype(np.float32),
+            "dt_s": steps.dt_s.astype(np.float32),
+            "dx_m": steps.dx_m.astype(np.float32),
+            "fuel_g": steps.fuel_g.astype(np.float32),
+        },
+        schema=POINT_SCHEMA,
+    )
+    ends = starts + lengths - 1
+    feet = np.float32(METRES_PER_FOOT)
+    trajectories = pa.table(
+        {
+            "trajectory_id": keys,
+            "document_id": [document_ids[row] for row in rows],
+            "source_sha256": [report.sha256] * len(keys),
+            "first_t_s": time_s[starts],
+            "last_t_s": time_s[ends],
+            "first_x_m": x_m[starts],
+            "last_x_m": x_m[ends],
+            "points": lengths.astype(np.int32),
+            "lane": lane[starts + lengths // 2],
+            "vehicle_class": vehicle_class.astype(np.int16),
+            "fuel_model": [fuel_model_name(int(code)) for code in vehicle_class],
+            "length_m": _column(table, "length") * feet,
+            "width_m": _column(table, "width") * feet,
+            "height_m": _column(table, "height") * feet,
+            "direction": np.full(len(keys), frame.direction, dtype=np.int8),
+            "x_score": _column(table, "x_score"),
+            "y_score": _column(table, "y_score"),
+            "is_fleet": pc.fill_null(table.column("smoothfleet_fleet"), False).to_numpy(
+                zero_copy_only=False
+            ),
+            "distance_m": np.add.reduceat(steps.dx_m, starts),
+            "fuel_g": np.add.reduceat(steps.fuel_g, starts),
+        },
+        schema=TRAJECTORY_SCHEMA,
+    )
+    days = (time_s[starts] // SECONDS_PER_DAY).astype(np.int64)
+    for day in np.unique(days):
+        in_day = days == day
+        if in_day.all():
+            writer.write(int(day), points, trajectories)
+        else:
+            in_day_points = pa.array(np.repeat(in_day, lengths))
+            writer.write(int(day), points.filter(in_day_points), trajectories.filter(in_day))
+    report.documents += len(keys)
+    report.points += len(time_s)
+
+
+def _shape_problem(
+    document_id: str | None, timestamps: int, x_positions: int, y_positions: int, direction: int
+) -> str | None:
+    """Why a document cannot be a trajectory, from its shape alone (None when it can)."""
+    if not document_id:
+        return "no _id.$oid"
+    for name, count in (
+        ("timestamp", timestamps),
+        ("x_position", x_positions),
+        ("y_position", y_positions),
+    ):
+        if count < 0:
+            return f"no {name} array"
+    if not timestamps == x_positions == y_positions:
+        return (
+            f"timestamp, x_position and y_position differ in length "
+            f"({timestamps}, {x_positions}, {y_positions})"
+        )
+    if timestamps == 0:
+        return "no points"
+    if direction not in (-1, 1):
+        return "direction must be -1 (westbound) or 1 (eastbound)"
+    return None
+
+
+def _flat(table: pa.Table, column: str) -> NDArray[np.float64]:
+    values = pc.list_flatten(table.column(column))
+    result: NDArray[np.float64] = values.to_numpy()  # nulls become NaN
+    return result
+
+
+def _column(table: pa.Table, column: str) -> NDArray[np.float32]:
+    values = pc.fill_null(table.column(column), float("nan")).to_numpy()
+    result: NDArray[np.float32] = values.astype(np.float32)
+    return result
+
+
+class _DayWriters:
+    """One points and one trajectories Parquet file per UTC day, in the staging folder."""
+
+    def __init__(self, staging: Path, name: str) -> None:
+        self.staging = staging
+        self.name = name
+        self.writers: dict[int, tuple[pq.ParquetWriter, pq.ParquetWriter]] = {}
+
+    def write(self, day: int, points: pa.Table, trajectories: pa.Table) -> None:
+        if day not in self.writers:
+            label = datetime.fromtimestamp(day * SECONDS_PER_DAY, UTC).date().isoformat()
+            pair = []
+            for table, schema in ((POINTS, POINT_SCHEMA), (TRAJECTORIES, TRAJECTORY_SCHEMA)):
+                folder = self.staging / table / f"day={label}"
+                folder.mkdir(parents=True)
+                pair.append(pq.ParquetWriter(folder / f"{self.name}.parquet", schema))
+            self.writers[day] = (pair[0], pair[1])
+        points_writer, trajectories_writer = self.writers[day]
+        points_writer.write_table(points)
+        trajectories_writer.write_table(trajectories)
+
+    def close(self) -> None:
+        for points_writer, trajectories_writer in self.writers.values():
+            points_writer.close()
+            trajectories_writer.close()
+
+
+def _known_trajectories(store: Path) -> set[int]:
+    """Keys of every trajectory already in the store."""
+    known: set[int] = set()
+    for path in files(store, TRAJECTORIES):
+        keys = pq.read_table(path, columns=["trajectory_id"]).column("trajectory_id")
+        known.update(keys.to_numpy().tolist())
+    return known
+
+
+def _remove_unfinished(store: Path, name: str) -> None:
+    """Files of an earlier import of the same file that stopped before its manifest."""
+    for table in (POINTS, TRAJECTORIES):
+        for path in (store / table).glob(f"day=*/{name}.parquet"):
+            path.unlink()
+    shutil.rmtree(store / STAGING / name, ignore_errors=True)
+
+
+def _commit(store: Path, staging: Path) -> None:
+    """Move the staged files into place: trajectories last, as dedup reads them."""
+    for table in (POINTS, TRAJECTORIES):
+        for path in sorted((staging / table).glob("day=*/*.parquet")):
+            target = store / table / path.parent.name / path.name
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(path, target)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
+def _manifest(report: ImportReport) -> dict[str, Any]:
+    return {
+        "file": str(report.path),
+        "sha256": report.sha256,
+        "imported_at": datetime.now(UTC).isoformat(),
+        "documents": report.documents,
+        "points": report.points,
+        "duplicates": report.duplicates,
+        "other_direction": report.other_direction,
+        "bad_documents": len(report.bad),
+        "bad": [
+            {"index": bad.index, "offset": bad.offset, "reason": bad.reason}
+            for bad in report.bad[:REASONS_KEPT]
+        ],
+        "file_error": report.file_error,
+        "seconds": round(report.seconds, 3),
+    }

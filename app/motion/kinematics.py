@@ -1,0 +1,136 @@
+"""What each trajectory point stands for in Edie's sums: its time step, distance, speed and fuel.
+
+Edie's generalised definitions (paper, "Results") need, per box, the total time vehicles spent
+in it, the total distance they travelled in it and the fuel they burnt in it. A MOTION point i of
+a trajectory stands for the step to the trajectory's next point:
+
+    dt_i = t_{i+1} - t_i,   dx_i = x_{i+1} - x_i,   v_i = dx_i / dt_i,
+    fuel_i = f(v_i, a_i, 0) dt_i            (f: the paper's polynomial energy model, sim.energy)
+
+and a trajectory's last point stands for nothing (dt = dx = 0), so a trajectory's steps add up to
+exactly its duration and its length. The acceleration a_i is the change of speed over about one
+second around the step (`ACCEL_WINDOW_S`): MOTION positions are 25 Hz, and differencing twice at
+0.04 s would turn centimetres of position noise into metres per second squared, which the energy
+model's a_+^2 term would turn into fuel. The road grade is taken as 0 (no elevation profile yet).
+
+All functions take many trajectories at once, concatenated, with `starts` (the index of each
+trajectory's first point), so a batch of thousands of documents is a handful of numpy calls.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sim.energy import RAV4_2019, FuelModel
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+# Acceleration is the speed change over this span around each step (seconds).
+ACCEL_WINDOW_S = 1.0
+
+# The energy model per MOTION coarse vehicle class. The model set (sim.energy) has one fitted
+# vehicle, a midsize SUV (the 2019 RAV4); it is used for every class, which overstates a sedan's
+# fuel a little and understates a semi's by several times (docs/analytics.md): psi is a field of
+# "RAV4-equivalent" fuel, comparable across time and space, not a fuel inventory.
+FUEL_MODEL_BY_CLASS: dict[int, FuelModel] = {
+    0: RAV4_2019,  # sedan
+    1: RAV4_2019,  # midsize (SUV): the fitted vehicle
+    2: RAV4_2019,  # van
+    3: RAV4_2019,  # pickup
+    4: RAV4_2019,  # semi
+    5: RAV4_2019,  # truck
+    6: RAV4_2019,  # motorcycle
+}
+DEFAULT_FUEL_MODEL = RAV4_2019
+
+def fuel_model_name(vehicle_class: int) -> str:
+    """The energy model used for a MOTION coarse vehicle class."""
+    return FUEL_MODEL_BY_CLASS.get(vehicle_class, DEFAULT_FUEL_MODEL).name
+
+
+@dataclass(frozen=True, slots=True)
+class Steps:
+    """Per point: the step it stands for, its speed and acceleration, and the fuel of the step."""
+
+    dt_s: FloatArray
+    dx_m: FloatArray
+    speed_mps: FloatArray
+    accel_mps2: FloatArray
+    fuel_g: FloatArray
+
+
+def trajectory_steps(
+    time_s: FloatArray, x_m: FloatArray, starts: IntArray, vehicle_class: IntArray
+) -> Steps:
+    """Steps of concatenated trajectories (time strictly increasing within each one).
+
+    `vehicle_class` is each point's MOTION coarse class, which picks its energy model.
+    """
+    classes = np.asarray(vehicle_class)
+    points = len(time_s)
+    ends = np.append(starts[1:], points)
+    last = np.zeros(points, dtype=bool)
+    last[ends[ends > starts] - 1] = True
+    dt = np.zeros(points)
+    dx = np.zeros(points)
+    dt[:-1] = np.diff(time_s)
+    dx[:-1] = np.diff(x_m)
+    dt[last] = 0.0
+    dx[last] = 0.0
+    moving = dt > 0
+    speed = np.zeros(points)
+    np.divide(dx, dt, out=speed, where=moving)
+    # A trajectory's last point keeps the speed of its last step (it stands for no time).
+    first = np.zeros(points, dtype=bool)
+    first[starts[ends > starts]] = True
+    closing = np.flatnonzero(last & ~first)
+    speed[closing] = speed[closing - 1]
+    accel = windowed_accel(time_s, dt, speed, starts, ends)
+    fuel = np.zeros(points)
+    for code in np.unique(classes):
+        model = FUEL_MODEL_BY_CLASS.get(int(code), DEFAULT_FUEL_MODEL)
+        at = classes == code
+        fuel[at] = model.fuel_rate_gps(np.maximum(speed[at], 0.0), accel[at]) * dt[at]
+    return Steps(dt_s=dt, dx_m=dx, speed_mps=speed, accel_mps2=accel, fuel_g=fuel)
+
+
+def windowed_accel(
+    time_s: FloatArray, dt_s: FloatArray, speed_mps: FloatArray, starts: IntArray, ends: IntArray
+) -> FloatArray:
+    """Speed change over about ACCEL_WINDOW_S around each step, within its own trajectory.
+
+    a_i = (v_hi - v_lo) / (m_hi - m_lo), m = t + dt / 2 the steps' midpoints, lo and hi the steps
+    half a window before and after i, clipped to the trajectory's steps (0 without two steps).
+    """
+    points = len(time_s)
+    if points == 0:
+        return np.zeros(0)
+    positive = dt_s[dt_s > 0]
+    typical_step = float(np.median(positive[:100_000])) if len(positive) else 1.0
+    half = max(1, int(round(0.5 * ACCEL_WINDOW_S / typical_step)))
+    midpoint = time_s + 0.5 * dt_s
+    index = np.arange(points)
+    lo = index - half
+    hi = index + half
+    # Most points sit more than half a window from their trajectory's ends and keep the plain
+    # shifts; those near an end are clipped to their own trajectory's steps.
+    last_step = ends - 2  # a trajectory's last step is its last-but-one point
+    offsets = np.arange(half + 1)
+    near = np.concatenate(
+        [starts[:, None] + offsets[None, :], ends[:, None] - 1 - offsets[None, :]], axis=1
+    ).ravel()
+    owner = np.repeat(np.arange(len(starts)), 2 * (half + 1))
+    valid = (near >= starts[owner]) & (near < ends[owner])
+    near, owner = near[valid], owner[valid]
+    lo[near] = np.maximum(near - half, starts[owner])
+    hi[near] = np.minimum(near + half, last_step[owner])
+    np.clip(lo, 0, points - 1, out=lo)
+    np.clip(hi, 0, points - 1, out=hi)
+    span = midpoint[hi] - midpoint[lo]
+    accel = np.zeros(points)
+    np.divide(speed_mps[hi] - speed_mps[lo], span, out=accel, where=(hi > lo) & (span > 0))
+    return accel

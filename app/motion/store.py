@@ -1,0 +1,159 @@
+"""The MOTION store: Parquet files beside the warehouse, read with DuckDB.
+
+Why not the warehouse: a MOTION day is hundreds of millions of 25 Hz points that are written once
+and then only aggregated (Edie boxes over hours and kilometres). Measured by
+`bench/motion_import.py --warehouse` (docs/performance.md), PostgreSQL's COPY loads them an order of
+magnitude slower than Parquet is written, and an Edie hour is seconds of a full scan there against
+a fraction of a second in DuckDB's columnar scan; the fleet's own pings (1 Hz, 100 cars) stay in
+the warehouse, and the figure joins the two.
+
+Layout under `SMOOTHFLEET_DATA_DIR/motion` (or `--store`), partitioned by UTC day like the pings:
+
+    points/day=YYYY-MM-DD/<import>.parquet         one row per trajectory point
+    trajectories/day=YYYY-MM-DD/<import>.parquet   one row per MOTION document (vehicle fragment)
+    imports/<sha256 of the file>.json              what each imported file added (written last)
+    staging/<import>/...                           an import in progress (invisible to readers)
+
+A trajectory's points live in the day of its first timestamp. `<import>` is the first 16 hex
+digits of the file's SHA-256.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import duckdb
+import pyarrow as pa
+
+POINTS = "points"
+TRAJECTORIES = "trajectories"
+IMPORTS = "imports"
+STAGING = "staging"
+
+# One row per trajectory point: the step it stands for (app.motion.kinematics).
+POINT_SCHEMA = pa.schema(
+    [
+        pa.field("trajectory_id", pa.int64()),
+        pa.field("t_s", pa.float64()),  # unix seconds
+        pa.field("x_m", pa.float32()),  # corridor position
+        pa.field("lane", pa.int16()),
+        pa.field("speed_mps", pa.float32()),
+        pa.field("accel_mps2", pa.float32()),
+        pa.field("dt_s", pa.float32()),
+        pa.field("dx_m", pa.float32()),
+        pa.field("fuel_g", pa.float32()),
+    ]
+)
+# One row per MOTION document.
+TRAJECTORY_SCHEMA = pa.schema(
+    [
+        pa.field("trajectory_id", pa.int64()),
+        pa.field("document_id", pa.string()),
+        pa.field("source_sha256", pa.string()),
+        pa.field("first_t_s", pa.float64()),
+        pa.field("last_t_s", pa.float64()),
+        pa.field("first_x_m", pa.float64()),
+        pa.field("last_x_m", pa.float64()),
+        pa.field("points", pa.int32()),
+        pa.field("lane", pa.int16()),
+        pa.field("vehicle_class", pa.int16()),
+        pa.field("fuel_model", pa.string()),
+        pa.field("length_m", pa.float32()),
+        pa.field("width_m", pa.float32()),
+        pa.field("height_m", pa.float32()),
+        pa.field("direction", pa.int8()),
+        pa.field("x_score", pa.float32()),
+        pa.field("y_score", pa.float32()),
+        pa.field("is_fleet", pa.bool_()),
+        pa.field("distance_m", pa.float64()),
+        pa.field("fuel_g", pa.float64()),
+    ]
+)
+
+
+class MotionStoreEmpty(LookupError):
+    """Nothing has been imported into this store yet."""
+
+
+def files(store: Path, table: str) -> list[Path]:
+    """The committed Parquet files of one table."""
+    return sorted((store / table).glob("day=*/*.parquet"))
+
+
+def _relation(store: Path, table: str, schema: pa.Schema) -> str:
+    paths = files(store, table)
+    if not paths:
+        columns = ", ".join(
+            f"CAST(NULL AS {_duck_type(field.type)}) AS {field.name}" for field in schema
+        )
+        return f"SELECT {columns}, CAST(NULL AS DATE) AS day WHERE false"
+    pattern = str(store / table / "day=*" / "*.parquet").replace("'", "''")
+    return f"SELECT * FROM read_parquet('{pattern}', hive_partitioning = true)"
+
+
+def _duck_type(arrow_type: pa.DataType) -> str:
+    names = {
+        pa.int8(): "TINYINT",
+        pa.int16(): "SMALLINT",
+        pa.int32(): "INTEGER",
+        pa.int64(): "BIGINT",
+        pa.float32(): "REAL",
+        pa.float64(): "DOUBLE",
+        pa.bool_(): "BOOLEAN",
+        pa.string(): "VARCHAR",
+    }
+    return names[arrow_type]
+
+
+def view_sql(store: Path) -> str:
+    """The DuckDB views and macros over a store (also written to `<store>/views.sql`)."""
+    return "\n".join(
+        [
+            f"CREATE OR REPLACE VIEW motion_points AS {_relation(store, POINTS, POINT_SCHEMA)};",
+            "CREATE OR REPLACE VIEW motion_trajectories AS "
+            f"{_relation(store, TRAJECTORIES, TRAJECTORY_SCHEMA)};",
+            EDIE_MACRO,
+        ]
+    )
+
+
+# Edie's generalised definitions (paper, "Results") on boxes of h_t x h_x, aligned to multiples
+# of h_t since the epoch and of h_x from the corridor's start, so boxes agree between queries.
+EDIE_MACRO = """
+CREATE OR REPLACE MACRO motion_edie(
+    since_s, until_s, x_from_m, x_to_m, h_t_s := 10.0, h_x_m := 200.0, lane_no := NULL
+) AS TABLE
+SELECT
+    floor(t_s / h_t_s) * h_t_s AS t_start_s,
+    floor(x_m / h_x_m) * h_x_m AS x_start_m,
+    sum(dt_s) AS time_s,
+    sum(dx_m) AS distance_m,
+    sum(fuel_g) AS fuel_g,
+    count(DISTINCT trajectory_id) AS vehicles,
+    count(*) AS points,
+    sum(dt_s) / (h_t_s * h_x_m) AS density_veh_per_m,
+    sum(dx_m) / (h_t_s * h_x_m) AS flow_veh_per_s,
+    sum(fuel_g) / (h_t_s * h_x_m) AS fuel_rate_density_g_per_s_m,
+    sum(dx_m) / nullif(sum(dt_s), 0) AS speed_mps,
+    sum(fuel_g) / nullif(sum(dt_s), 0) AS fuel_rate_per_vehicle_g_per_s,
+    sum(fuel_g) / nullif(sum(dx_m), 0) AS fuel_per_distance_g_per_m
+FROM motion_points
+WHERE t_s >= since_s AND t_s < until_s
+  AND x_m >= x_from_m AND x_m < x_to_m
+  AND (lane_no IS NULL OR lane = lane_no)
+GROUP BY ALL;
+"""
+
+
+def connect(store: Path) -> duckdb.DuckDBPyConnection:
+    """An in-memory DuckDB connection with the store's views and the `motion_edie` macro."""
+    connection = duckdb.connect(":memory:")
+    connection.execute(view_sql(store))
+    return connection
+
+
+def write_views_file(store: Path) -> Path:
+    """`<store>/views.sql`: analysts open the store with `duckdb -init <store>/views.sql`."""
+    path = store / "views.sql"
+    path.write_text(view_sql(store) + "\n")
+    return path
