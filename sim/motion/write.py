@@ -24,7 +24,9 @@ POSITION_DECIMALS = 2
 TIME_DECIMALS = 4
 
 
-def motion_document(trajectory: SimulatedTrajectory, frame: MotionFrame, run_id: int) -> dict[str, Any]:
+def motion_document(
+    trajectory: SimulatedTrajectory, frame: MotionFrame, run_id: int
+) -> dict[str, Any]:
     """One MOTION trajectory document for a simulated vehicle."""
     x_ft = np.round(frame.x_ft(trajectory.x_m), POSITION_DECIMALS)
     y_ft = np.full(len(x_ft), round(float(frame.y_ft(trajectory.lane)), POSITION_DECIMALS))

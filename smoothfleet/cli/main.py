@@ -49,6 +49,7 @@ from app.vehicles.schemas import RosterRow
 from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
 from smoothfleet.cli.common import CliError, console, database, settings
 from smoothfleet.cli.inrix import inrix
+from smoothfleet.cli.motion import motion
 from smoothfleet.cli.planner import planner
 from smoothfleet.cli.sim import fleet_options, sim
 
@@ -511,6 +512,7 @@ def _with_overrides(**overrides: object) -> Settings:
 cli.add_command(inrix)
 cli.add_command(sim)
 cli.add_command(planner)
+cli.add_command(motion)
 
 
 # --- entry point ---------------------------------------------------------------------------
