@@ -184,12 +184,14 @@ def split_documents(
             raise MotionFileError(
                 scanner.start, f"a document larger than {MAX_DOCUMENT_BYTES // 2**20} MB"
             )
-    if scanner.start is not None or scanner.in_string:
-        where = scanner.start if scanner.start is not None else read_so_far
-        raise MotionFileError(where, "the file ends inside a document")
+    if pending.strip(b"[]" + _BLANK) and scanner.start is None and not scanner.in_string:
+        batch.bad.append(BadDocument(index, pending_at, "not a JSON object"))
     batch.bytes_read = read_so_far
     if batch.texts or batch.bad:
         yield batch
+    if scanner.start is not None or scanner.in_string:
+        where = scanner.start if scanner.start is not None else read_so_far
+        raise MotionFileError(where, "the file ends inside a document")
 
 
 def parse_batch(batch: DocumentBatch, scratch: Path) -> tuple[pa.Table, list[int]]:
