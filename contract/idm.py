@@ -81,3 +81,25 @@ def equilibrium_gap_m(params: IdmParams, speed_mps: ArrayLike) -> FloatArray:
         1.0 - ratio**params.delta
     )
     return result
+
+
+# l: the length added to the gap to get a vehicle's share of the lane (energy-model.md).
+VEHICLE_LENGTH_M = 4.0
+
+
+def equilibrium_density_per_m(
+    params: IdmParams, speed_mps: ArrayLike, vehicle_length_m: float = VEHICLE_LENGTH_M
+) -> FloatArray:
+    """Vehicles per metre of lane in equilibrium, k(v) = 1 / (s(v) + l); 0 at and above v0.
+
+    At and above the desired speed no gap holds a driver back (the equilibrium gap is unbounded),
+    so the lane holds no queue there. The Speed Planner sizes its buffers with it (paper,
+    "Buffer design").
+    """
+    v = np.asarray(speed_mps, dtype=np.float64)
+    if np.any(v < 0):
+        raise ValueError("equilibrium density: speeds must not be negative")
+    below = v < params.desired_speed_mps
+    gap = equilibrium_gap_m(params, np.where(below, v, 0.0))
+    density: FloatArray = np.where(below, 1.0 / (gap + vehicle_length_m), 0.0)
+    return density

@@ -3,9 +3,13 @@ km/h, the warehouse and every model speak SI."""
 
 from __future__ import annotations
 
-# Exact by definition (1 mile = 1609.344 m).
+# Exact by definition: 1 mile = 1609.344 m, so 1 mph = 0.44704 m/s and 1.609344 km/h.
+METRES_PER_MILE = 1609.344
 MPS_PER_MPH = 0.44704
+MPH_PER_MPS = 1.0 / MPS_PER_MPH
+KPH_PER_MPH = 1.609344
 MPS_PER_KPH = 1.0 / 3.6
+KPH_PER_MPS = 3.6
 
 
 def mph_to_mps(speed_mph: float) -> float:

@@ -16,9 +16,6 @@ from app.analytics import view_query
 from app.core.metrics import server_registry
 from app.models import Corridor, PlanRun
 
-METRES_PER_MILE = 1609.344
-MPH_PER_MPS = 3600.0 / METRES_PER_MILE
-
 
 async def _rows(session: AsyncSession, sql: str, **params: Any) -> Sequence[RowMapping]:
     return (await session.execute(text(sql), params)).mappings().all()

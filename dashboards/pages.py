@@ -42,6 +42,7 @@ from app.fleet.service import (
 from app.models import PlanRun
 from app.users.service import log_in
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+from contract.units import METRES_PER_MILE, MPH_PER_MPS
 from dashboards import data
 from dashboards.auth import (
     LoginRequired,
@@ -66,7 +67,6 @@ from dashboards.charts import (
     heatmap,
     line_chart,
 )
-from dashboards.data import MPH_PER_MPS
 
 HERE = Path(__file__).parent
 templates = Jinja2Templates(directory=HERE / "templates")
@@ -849,7 +849,7 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
                 fuel[row, column] = box["fuel_per_distance_g_per_m"] * 1000.0
     postmiles = (
         corridor.postmile_at_start,
-        corridor.postmile_at_start + rows * h_x / data.METRES_PER_MILE,
+        corridor.postmile_at_start + rows * h_x / METRES_PER_MILE,
     )
     x_range = (t0, t0 + columns * h_t)
     context["edie_window"] = (since, until, corridor.corridor_id)

@@ -14,13 +14,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from contract.units import MPS_PER_MPH
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-MPH = 0.44704  # m/s per mph
 # INRIX readings outside 0-100 mph are not speeds of traffic (the sanity range).
-MAX_INRIX_SPEED_MPS = 100 * MPH
+MAX_INRIX_SPEED_MPS = 100 * MPS_PER_MPH
 
 
 def _floats(values: ArrayLike) -> FloatArray:

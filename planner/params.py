@@ -11,7 +11,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from planner.inputs import MPH
+from contract.units import MPS_PER_MPH
 
 
 class InvalidParams(ValueError):
@@ -53,8 +53,10 @@ class PlannerParams(BaseModel):
 
     # Step 4 - bottleneck identification.
     bottleneck_finder: str = "speed_rise"
-    slow_speed_mps: float = Field(60 * MPH, gt=0, description="at or below: a slow region")
-    min_rise_mps: float = Field(4 * MPH, gt=0, description="rise downstream that marks a head")
+    slow_speed_mps: float = Field(60 * MPS_PER_MPH, gt=0, description="at or below: a slow region")
+    min_rise_mps: float = Field(
+        4 * MPS_PER_MPH, gt=0, description="rise downstream that marks a head"
+    )
     rise_distance_m: float = Field(500.0, gt=0, description="downstream distance of that rise")
     standing_cycles: int = Field(5, ge=1, le=60, description="recent cycles looked at")
     standing_required: int = Field(4, ge=1, le=60, description="cycles a standing one is seen in")
@@ -71,7 +73,10 @@ class PlannerParams(BaseModel):
     # the posted limit; the paper's fleet allowed "modest speeds in excess of the posted speed
     # limit of 70 mph", up to 73 mph (its ACC clip, eq. v_final): 3 mph = 1.34112 m/s.
     speed_limit_allowance_mps: float = Field(
-        0.0, ge=0, le=5 * MPH, description="targets may exceed the posted limit by this much"
+        0.0,
+        ge=0,
+        le=5 * MPS_PER_MPH,
+        description="targets may exceed the posted limit by this much",
     )
 
     @model_validator(mode="after")

@@ -23,14 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
+from contract.units import METRES_PER_MILE, MPS_PER_MPH
+
 HERE = Path(__file__).parent
 CORRIDOR_FILE = HERE / "i24_wb_corridor.json"
 ROSTER_FILE = HERE / "roster.csv"
 
 CORRIDOR_ID = "I-24-WB"
 LANES = 4
-METRES_PER_MILE = 1609.344
-MPH = 0.44704  # m/s per mph
 # The corridor runs over the INRIX columns 2..19 of the recorded feed: 14.6 km, the length of
 # the paper's I-24 test section; columns 0, 1 and 20 lie outside it (the feed still reports
 # them, and ingest counts them as unknown codes).
@@ -157,8 +157,8 @@ def build_corridor(shared: Path) -> dict[str, object]:
             "direction": "westbound",
             "lanes": LANES,
             "length_m": round(float(end - origin), 2),
-            "speed_limit_mps": round(70 * MPH, 4),
-            "min_target_speed_mps": round(20 * MPH, 4),
+            "speed_limit_mps": round(70 * MPS_PER_MPH, 4),
+            "min_target_speed_mps": round(20 * MPS_PER_MPH, 4),
             "postmile_at_start": 0.0,
             "reference_line_origin_m": round(float(origin), 4),
         },

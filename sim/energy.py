@@ -21,7 +21,6 @@ FloatArray = NDArray[np.float64]
 
 # 1 g/s of gasoline is 1.268 gal/h (energy-model.md), so one gram is 1.268 / 3600 gallons.
 GALLONS_PER_GRAM_GASOLINE = 1.268 / 3600.0
-METRES_PER_MILE = 1609.344
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,7 +22,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sim.energy import METRES_PER_MILE, RAV4_2019, FuelModel
+from contract.units import METRES_PER_MILE
+from sim.energy import RAV4_2019, FuelModel
 from sim.platoon import PlatoonRun
 
 FloatArray = NDArray[np.float64]

@@ -15,7 +15,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-MPS_PER_MPH = 0.44704  # exact: 1 mph = 1609.344 m / 3600 s
+from contract.units import MPS_PER_MPH
+
 S_PER_MINUTE = 60.0
 
 

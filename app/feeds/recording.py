@@ -22,8 +22,9 @@ from typing import Any
 
 import orjson
 
-from app.feeds.inrix import MPS_PER_MPH, S_PER_MINUTE
+from app.feeds.inrix import S_PER_MINUTE
 from contract.recorded import RecordingError, read_inrix_minutes, read_trajectory
+from contract.units import MPS_PER_MPH
 
 
 @dataclass(frozen=True)

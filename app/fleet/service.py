@@ -27,10 +27,10 @@ from app.fleet.readiness import (
 )
 from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+from contract.units import METRES_PER_MILE
 
 log = logging.getLogger(__name__)
 
-METRES_PER_MILE = 1609.344
 # The newest ping is looked for in this window first, so the query touches only the last days'
 # ping partitions; vehicles silent for longer are looked up again without the bound.
 RECENT_PING_WINDOW = timedelta(days=2)

@@ -3,7 +3,7 @@
 For a standing bottleneck the queue is the run of slow cells (fused TSE at most
 `slow_speed_mps`) holding its head, or the first one within the smoothing window downstream of
 it. The queue holds N = sum k(v_i) L_i vehicles per lane (IDM equilibrium density k, see
-planner.idm). The buffer drives at v_b = the queue's slowest speed + `buffer_speed_margin_mps`;
+contract.idm). The buffer drives at v_b = the queue's slowest speed + `buffer_speed_margin_mps`;
 to hold the same N vehicles at that speed it needs L_b = N / k(v_b) metres, which end where the
 queue starts. Upstream of it the ceiling ramps down at `ramp_decel_mps2`:
 v(x) = sqrt(v_b^2 + 2 a (x_b - x)), so the fleet arrives at v_b without braking hard, and the
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from contract.idm import I24_IDM, equilibrium_density_per_m
 from planner.buffers.base import Buffer, BufferDesign
-from planner.idm import equilibrium_density_per_m
 from planner.inputs import BoolArray, CorridorGrid, FloatArray
 from planner.params import PlannerParams
 
@@ -62,10 +62,12 @@ def design_queue_storage(
         first, last = queue
         queue_speeds = speeds[first : last + 1]
         vehicles = float(
-            np.sum(equilibrium_density_per_m(queue_speeds) * grid.length_m[first : last + 1])
+            np.sum(
+                equilibrium_density_per_m(I24_IDM, queue_speeds) * grid.length_m[first : last + 1]
+            )
         )
         buffer_speed = float(queue_speeds.min()) + params.buffer_speed_margin_mps
-        buffer_length = vehicles / float(equilibrium_density_per_m(buffer_speed))
+        buffer_length = vehicles / float(equilibrium_density_per_m(I24_IDM, buffer_speed))
         queue_start = float(grid.start_x_m[first])
         plateau_start = queue_start - buffer_length
         upstream = centers < queue_start

@@ -9,12 +9,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from contract.units import KPH_PER_MPH, KPH_PER_MPS, MPH_PER_MPS
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.cars.toyota import NO_LEAD_DISTANCE_M
-
-KPH_PER_MPS = 3.6
-MPH_PER_MPS = 1 / 0.44704
-KPH_PER_MPH = 1.609344
 
 
 @dataclass(frozen=True)

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from contract.units import MPS_PER_MPH
 from sim.drives import Drive, drive_from_speeds
 from sim.traffic import INRIX_LATENCY_S, INRIX_PERIOD_S, SAMPLE_SPACING_M, WaveField
 
 FloatArray = NDArray[np.float64]
 
-MPS_PER_MPH = 0.44704
 # The field is looped this long before it wraps around (a long demo sees one jump per period).
 LOOP_HOURS = 6.0
 # Samples per minute when averaging a segment's speed (every 5 s).

@@ -37,8 +37,9 @@ from app.core.config import Settings
 from app.core.db import make_sync_engine, session_scope
 from app.core.security import issue_token
 from app.models.dimensions import InrixSegment, Vehicle
+from contract.units import METRES_PER_MILE
 from sim.drives import Drive, load_drive
-from sim.energy import GALLONS_PER_GRAM_GASOLINE, METRES_PER_MILE
+from sim.energy import GALLONS_PER_GRAM_GASOLINE
 from sim.fleet.traffic import CorridorTraffic, Segment, synthetic_waves
 from sim.fleet.worker import VehicleSpec, WorkerSpec
 

@@ -17,7 +17,7 @@ from sqlalchemy import Engine, text
 from app.core.config import load_settings
 from app.core.db import make_sync_engine
 from app.plans.jobs import run_planner
-from planner.inputs import MPH
+from contract.units import MPS_PER_MPH
 from tests.planner.facts import INRIX_CODES, inrix_snapshot, standing_slowdown
 from tests.support.databases import database_from_template
 from tests.support.fleet import drive, post_pings
@@ -25,8 +25,8 @@ from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 
 LATEST = "/api/v1/plans/latest"
-SPEED_LIMIT = 70 * MPH
-MIN_TARGET = 20 * MPH
+SPEED_LIMIT = 70 * MPS_PER_MPH
+MIN_TARGET = 20 * MPS_PER_MPH
 
 
 @dataclass

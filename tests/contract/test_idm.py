@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from contract.idm import I24_IDM, IdmParams, equilibrium_gap_m, idm_accel
+from contract.idm import (
+    I24_IDM,
+    IdmParams,
+    equilibrium_density_per_m,
+    equilibrium_gap_m,
+    idm_accel,
+)
 
 
 def test_closing_in_on_a_slower_leader() -> None:
@@ -51,3 +57,13 @@ def test_bad_parameters_are_refused() -> None:
         IdmParams(max_accel_mps2=0.0)
     with pytest.raises(ValueError, match="must not be negative"):
         IdmParams(time_gap_s=-1.0)
+
+
+def test_equilibrium_density_worked_by_hand() -> None:
+    # v = 20 m/s: s = (2 + 1.24 x 20) / sqrt(1 - (20/35)^4) = 26.8 / 0.94519 = 28.354 m,
+    # k = 1 / (28.354 + 4) = 0.030908 vehicles per metre
+    assert float(equilibrium_density_per_m(I24_IDM, 20.0)) == pytest.approx(0.030908, rel=1e-4)
+    # at and above v0 the gap is unbounded: no queue
+    assert equilibrium_density_per_m(I24_IDM, [35.0, 40.0]).tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match="must not be negative"):
+        equilibrium_density_per_m(I24_IDM, -1.0)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from planner.inputs import MPH, CorridorGrid
+from contract.units import MPS_PER_MPH
+from planner.inputs import CorridorGrid
 
 
 def uniform_grid(cells: int, cell_m: float = 100.0, lanes: int = 1) -> CorridorGrid:
@@ -16,6 +17,6 @@ def uniform_grid(cells: int, cell_m: float = 100.0, lanes: int = 1) -> CorridorG
         start_x_m=starts,
         end_x_m=starts + cell_m,
         segment_ids=np.arange(1, cells + 1),
-        speed_limit_mps=70 * MPH,
-        min_target_speed_mps=20 * MPH,
+        speed_limit_mps=70 * MPS_PER_MPH,
+        min_target_speed_mps=20 * MPS_PER_MPH,
     )

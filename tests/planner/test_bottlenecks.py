@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from contract.units import MPS_PER_MPH
 from planner.bottlenecks import FINDERS, standing_bottlenecks
-from planner.inputs import MPH
 from planner.params import PlannerParams
 from tests.planner.grids import uniform_grid
 
@@ -20,8 +20,10 @@ def test_the_head_is_the_last_slow_cell_before_the_rise() -> None:
 
 
 def test_a_rise_of_less_than_four_mph_is_no_head() -> None:
-    slow = 50 * MPH
-    smoothed = np.array([[slow, slow, slow + 3.9 * MPH, slow + 3.9 * MPH, 30, 30, 30]] * 2)
+    slow = 50 * MPS_PER_MPH
+    smoothed = np.array(
+        [[slow, slow, slow + 3.9 * MPS_PER_MPH, slow + 3.9 * MPS_PER_MPH, 30, 30, 30]] * 2
+    )
     heads = FINDERS.get("speed_rise")(smoothed, GRID, PARAMS)
     # 50 -> 53.9 mph is not a rise > 4 mph; 53.9 mph -> 30 m/s (67 mph) is.
     assert np.argwhere(heads[0]).ravel().tolist() == [3]

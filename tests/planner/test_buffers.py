@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from contract.idm import I24_IDM, equilibrium_density_per_m, equilibrium_gap_m
 from planner.buffers import DESIGNERS, BufferDesign, apply_buffers
-from planner.idm import equilibrium_density_per_m, equilibrium_gap_m
 from planner.params import PlannerParams
 from tests.planner.grids import uniform_grid
 
@@ -27,9 +27,9 @@ def design(tse: np.ndarray = TSE, standing: np.ndarray = HEAD) -> BufferDesign:
 
 def test_idm_equilibrium_density_worked_by_hand() -> None:
     # s(8) = (2 + 1.24 x 8) / sqrt(1 - (8/35)^4) = 11.92 / 0.998634 = 11.9363 m
-    assert equilibrium_gap_m(8.0) == pytest.approx(11.9363, abs=1e-4)
-    assert equilibrium_density_per_m(8.0) == pytest.approx(1 / 15.9363, rel=1e-5)
-    assert equilibrium_density_per_m(35.0) == 0.0  # at v0 the gap is unbounded
+    assert equilibrium_gap_m(I24_IDM, 8.0) == pytest.approx(11.9363, abs=1e-4)
+    assert equilibrium_density_per_m(I24_IDM, 8.0) == pytest.approx(1 / 15.9363, rel=1e-5)
+    assert equilibrium_density_per_m(I24_IDM, 35.0) == 0.0  # at v0 the gap is unbounded
 
 
 def test_buffer_length_and_speed_worked_by_hand() -> None:
@@ -39,8 +39,8 @@ def test_buffer_length_and_speed_worked_by_hand() -> None:
     # = 1157.6 m, ending where the queue starts (9000 m).
     assert buffer.queue_vehicles == pytest.approx(62.750, abs=1e-3)
     assert buffer.target_speed_mps == 10.0
-    vehicles = 1000 * float(equilibrium_density_per_m(8.0))
-    plateau_start = 9000 - vehicles / float(equilibrium_density_per_m(10.0))
+    vehicles = 1000 * float(equilibrium_density_per_m(I24_IDM, 8.0))
+    plateau_start = 9000 - vehicles / float(equilibrium_density_per_m(I24_IDM, 10.0))
     assert plateau_start == pytest.approx(9000 - 1157.6, abs=0.1)
     ceiling = design().ceiling_mps[0]
     assert ceiling[78:90].tolist() == [10.0] * 12  # centres 7850 ... 8950

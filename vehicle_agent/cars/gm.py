@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import ClassVar
 
-from contract.units import MPS_PER_MPH
+from contract.units import KPH_PER_MPH, MPS_PER_MPH
 from vehicle_agent.cars.base import (
     CarInterface,
     CarReading,
@@ -23,7 +23,6 @@ from vehicle_agent.cars.base import (
 from vehicle_agent.codec import Checksum, GmSteeringButtonChecksum
 from vehicle_agent.controllers import Actuation
 
-KPH_PER_MPH = 1.609344
 # Accelerator pedal counts above which the driver is pressing the gas.
 GAS_PRESSED_COUNTS = 3
 
