@@ -19,8 +19,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from contract.controllers import MAX_GAP_SETTING, MIN_GAP_SETTING
 from vehicle_agent.cars import CruiseButton
-from vehicle_agent.controllers.base import MAX_GAP_SETTING, MIN_GAP_SETTING
 
 # One press of the gap button moves to the next shorter gap, from the shortest back to the
 # longest (3 -> 2 -> 1 -> 3), as the cars' steering-wheel button cycles its bars.

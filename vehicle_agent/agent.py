@@ -26,6 +26,7 @@ from typing import Any
 
 import can
 
+from contract.controllers import ControllerConfigError
 from contract.corridor import CorridorGeometry, trusted_heading
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
@@ -37,7 +38,6 @@ from vehicle_agent.controllers import (
     AccSetPoint,
     Action,
     Controller,
-    ControllerConfigError,
     Observation,
     build_controller,
 )

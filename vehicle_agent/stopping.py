@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import math
 
+from contract.controllers import Actuation
 from vehicle_agent.actuators import AccelLimits
 from vehicle_agent.cars import CarReading
-from vehicle_agent.controllers import Actuation
 
 # What the stock ACC brakes on its own (m/s^2): ISO 15622 limits an ACC's automatic
 # deceleration to 3.5 m/s^2 (averaged over 2 s) at highway speed; harder stops are the

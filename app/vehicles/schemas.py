@@ -13,7 +13,7 @@ from pydantic import (
     model_validator,
 )
 
-from vehicle_agent.controllers import controller_actuations
+from contract.controllers import controller_actuations
 
 # Which controllers can drive which actuation, from the vehicle agent's controller registry (the
 # single source of truth: a controller added there is accepted here).

@@ -107,7 +107,7 @@ def test_acc_controllers_need_a_stock_acc_model() -> None:
 
 def test_every_registered_controller_can_be_built_for_the_simulator() -> None:
     for name, spec in CONTROLLERS.items():
-        if "accel" in spec.actuations:
+        if "accel" in spec.schema.actuations:
             assert isinstance(agent_policy(name, "accel", FixedPlan()), AgentPolicy)
 
 

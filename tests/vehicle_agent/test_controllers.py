@@ -10,18 +10,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+from contract.controllers import CONTROLLER_SCHEMAS, ControllerConfigError, controller_actuations
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
     AccSetPoint,
-    ControllerConfigError,
     Observation,
     TargetProfile,
     build_controller,
     clip_speed_setting,
-    controller_actuations,
 )
 from vehicle_agent.controllers.microaccel_acc import ahead_accel
+from vehicle_agent.controllers.registry import BUILDERS
 
 
 def test_clip_uses_the_mean_of_the_last_second_without_zero_and_missing_speeds() -> None:
@@ -50,6 +50,8 @@ def test_registry_is_what_the_server_validates_against() -> None:
         "microaccel_acc": frozenset({"acc"}),
     }
     assert CONTROLLER_ACTUATIONS == controller_actuations()
+    # every controller of the contract has an implementation, and only those
+    assert set(BUILDERS) == set(CONTROLLER_SCHEMAS)
 
 
 def test_bad_configuration_is_named() -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
+from contract.controllers import LaneChangeParams
 from vehicle_agent.controllers import AccelCommand, Observation, build_controller
 from vehicle_agent.controllers.lane_change import (
-    LaneChangeParams,
     LaneChangeRecovery,
     headway_factor,
     relative_speed_factor,

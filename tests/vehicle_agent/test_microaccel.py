@@ -10,9 +10,9 @@ import math
 
 import pytest
 
+from contract.controllers import MicroAccelParams
 from vehicle_agent.controllers import AccelCommand, Observation, build_controller
 from vehicle_agent.controllers.microaccel import (
-    MicroAccelParams,
     anticipation_accel,
     base_accel,
     min_brake_accel,

@@ -14,8 +14,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import ClassVar
 
+from contract.controllers import Actuation
 from vehicle_agent.codec import Checksum
-from vehicle_agent.controllers import Actuation
 
 Signals = Mapping[str, float]
 

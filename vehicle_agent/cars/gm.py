@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import ClassVar
 
+from contract.controllers import Actuation
 from contract.units import KPH_PER_MPH, MPS_PER_MPH
 from vehicle_agent.cars.base import (
     CarInterface,
@@ -21,7 +22,6 @@ from vehicle_agent.cars.base import (
     Signals,
 )
 from vehicle_agent.codec import Checksum, GmSteeringButtonChecksum
-from vehicle_agent.controllers import Actuation
 
 # Accelerator pedal counts above which the driver is pressing the gas.
 GAS_PRESSED_COUNTS = 3

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import ClassVar
 
+from contract.controllers import Actuation
 from contract.units import kph_to_mps
 from vehicle_agent.cars.base import (
     CarInterface,
@@ -20,7 +21,6 @@ from vehicle_agent.cars.base import (
     MessageRule,
     Signals,
 )
-from vehicle_agent.controllers import Actuation
 
 # Accelerator position above which the driver is pressing the gas (raw 0..1023 counts).
 GAS_PRESSED_COUNTS = 3

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import ClassVar
 
+from contract.controllers import Actuation
 from contract.units import kph_to_mps
 from vehicle_agent.cars.base import (
     CarInterface,
@@ -22,7 +23,6 @@ from vehicle_agent.cars.base import (
     Signals,
 )
 from vehicle_agent.codec import Checksum, ToyotaChecksum
-from vehicle_agent.controllers import Actuation
 
 NO_LEAD_DISTANCE_M = 252.0
 

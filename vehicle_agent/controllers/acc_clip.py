@@ -14,12 +14,7 @@ from collections import deque
 from collections.abc import Iterable
 
 from contract.units import mps_to_mph
-from vehicle_agent.controllers.base import (
-    AccSetPoint,
-    Action,
-    Controller,
-    Observation,
-)
+from vehicle_agent.controllers.base import AccSetPoint, Action, Controller, Observation
 
 CLIP_WINDOW_STEPS = 10  # the last 1 s at the 10 Hz control rate
 BELOW_MEAN_MPH = 15.0

@@ -10,17 +10,12 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
 
-Actuation = Literal["acc", "accel"]
-ACTUATIONS: tuple[Actuation, ...] = ("acc", "accel")
-
-# ACC gap settings: 1..3 bars (paper: roughly 1.2, 1.5 and 2.0 s time gaps).
-MIN_GAP_SETTING = 1
-MAX_GAP_SETTING = 3
+from contract.controllers import Actuation
 
 
 @dataclass(frozen=True, slots=True)

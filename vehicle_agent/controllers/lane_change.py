@@ -28,32 +28,8 @@ from __future__ import annotations
 
 import math
 
-from pydantic import BaseModel, ConfigDict, Field
-
+from contract.controllers import LaneChangeParams
 from vehicle_agent.controllers.base import Observation
-
-
-class LaneChangeParams(BaseModel):
-    """Lane-change recovery parameters (paper values where the paper gives them)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    enabled: bool = True
-    # h_safe: acceptable time gap (s); C_safe: acceptable time to collision (s).
-    safe_time_gap_s: float = Field(2.0, gt=0)
-    safe_ttc_s: float = Field(4.5, gt=0)
-    # t*: f1's slope; dv*: f2's offset (paper: "Delta v*"); c: weight of f1 in alpha.
-    t_star: float = Field(1.32, gt=0)
-    dv_star: float = Field(10.3, gt=0)
-    c: float = Field(0.75, ge=0, le=1)
-    # epsilon (m/s^2): the smoothing stops once |a_k - u_k| is this small.
-    epsilon_mps2: float = Field(0.05, gt=0)
-    # A gap change this much beyond what the relative speed explains is a lane change (m); radar
-    # noise is well under a metre, a cut-in changes the gap by tens of metres.
-    gap_jump_m: float = Field(4.0, gt=0)
-    # A step asking more jerk than this is significant (m/s^3): 0.5 m/s^2 in one 0.1 s period.
-    jerk_threshold_mps3: float = Field(5.0, gt=0)
-    max_smoothing: float = Field(0.95, ge=0, lt=1)
 
 
 def headway_factor(gap_m: float, speed_mps: float, t_star: float) -> float:

@@ -15,37 +15,13 @@ from __future__ import annotations
 
 import math
 
-from pydantic import BaseModel, ConfigDict, Field
-
-from vehicle_agent.controllers.base import AccelCommand, Actuation, Controller, Observation
-from vehicle_agent.controllers.lane_change import LaneChangeParams, LaneChangeRecovery
+from contract.controllers import Actuation, MicroAccelParams
+from vehicle_agent.controllers.base import AccelCommand, Controller, Observation
+from vehicle_agent.controllers.lane_change import LaneChangeRecovery
 
 # Smallest gap margin h - s0 (m) and lead speed (m/s) used in divisions (see module docstring).
 MIN_GAP_MARGIN_M = 0.1
 MIN_LEAD_SPEED_MPS = 0.1
-
-
-class MicroAccelParams(BaseModel):
-    """MicroAccel gains and limits (paper eq. a_safe, a_target, a_MPC)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    # k: gain of the safety and target terms (1/s).
-    k: float = Field(0.5, gt=0, le=5)
-    # s0: standstill safety distance (m).
-    standstill_gap_m: float = Field(5.0, ge=0, le=50)
-    # a_min: the ego's hardest planned braking (m/s^2, negative), also the command floor.
-    min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
-    # a_l,min: the leader's hardest possible braking (m/s^2, negative); harder than ours keeps
-    # the equilibrium gap near 1.9 s at 25 m/s with the defaults.
-    lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
-    # a_max: the ego's largest acceleration (m/s^2), also the command ceiling.
-    max_accel_mps2: float = Field(1.5, gt=0, le=4)
-    # k2: gain of the anticipation term when the leader accelerates (1/(m/s)).
-    k2: float = Field(0.2, ge=0, le=5)
-    # Time constant (s) of the low-pass on the leader's finite-difference acceleration.
-    lead_accel_filter_s: float = Field(0.5, ge=0, le=10)
-    lane_change: LaneChangeParams = LaneChangeParams()
 
 
 def safe_speed(

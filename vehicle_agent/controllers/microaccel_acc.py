@@ -19,38 +19,13 @@ instead of braking with the wave; `free_gap_setting` otherwise. A gap change wai
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
-
-from contract.units import mps_to_mph
-from vehicle_agent.controllers.base import (
-    MAX_GAP_SETTING,
-    MIN_GAP_SETTING,
-    AccSetPoint,
+from contract.controllers import (
     Actuation,
-    Controller,
-    Observation,
+    MicroAccelAccParams,
 )
-from vehicle_agent.controllers.microaccel import LeadAccelEstimator, MicroAccelParams, base_accel
-
-
-class MicroAccelAccParams(BaseModel):
-    """MicroAccel-to-set-points parameters."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    base: MicroAccelParams = MicroAccelParams()
-    # How far ahead the plan is read (s at the current speed), and at least this far (m).
-    lookahead_s: float = Field(20.0, gt=0, le=120)
-    min_lookahead_m: float = Field(200.0, gt=0, le=5000)
-    # tau: how fast the stock ACC follows a speed setting (s).
-    acc_response_s: float = Field(2.0, gt=0, le=20)
-    # A target this much below the current speed ahead is a slowdown (m/s), or a needed
-    # deceleration this strong (m/s^2).
-    slowdown_mps: float = Field(2.0, gt=0)
-    slowdown_accel_mps2: float = Field(-0.3, lt=0)
-    congested_gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
-    free_gap_setting: int = Field(2, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
-    gap_dwell_s: float = Field(10.0, ge=0)
+from contract.units import mps_to_mph
+from vehicle_agent.controllers.base import AccSetPoint, Controller, Observation
+from vehicle_agent.controllers.microaccel import LeadAccelEstimator, base_accel
 
 
 def ahead_accel(speed_mps: float, ahead_speed_mps: float, distance_m: float) -> float:

@@ -8,16 +8,12 @@ MicroAccel's safety term whenever the make measures the leader: min(a_target, a_
 
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
-
+from contract.controllers import Actuation, SimpleParams
 from contract.units import mps_to_mph
 from vehicle_agent.controllers.base import (
-    MAX_GAP_SETTING,
-    MIN_GAP_SETTING,
     AccelCommand,
     AccSetPoint,
     Action,
-    Actuation,
     Controller,
     Observation,
 )
@@ -28,24 +24,6 @@ from vehicle_agent.controllers.microaccel import (
     safety_accel,
     target_accel,
 )
-
-
-class SimpleParams(BaseModel):
-    """Simple controller parameters."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
-    k: float = Field(0.5, gt=0, le=5)
-    max_accel_mps2: float = Field(1.0, gt=0, le=1.5)
-    min_accel_mps2: float = Field(-2.0, lt=0, ge=-3)
-    # Safety term parameters (see MicroAccelParams).
-    standstill_gap_m: float = Field(5.0, ge=0, le=50)
-    lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
-    safety_min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
-    # Added to the target on acc cars (mph), e.g. to offset a speedometer bias.
-    speed_offset_mph: float = Field(0.0, ge=-10, le=10)
-    gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
 
 
 class SimpleController(Controller):

@@ -1,0 +1,175 @@
+"""The controllers a vehicle config may name, and the schema of each one's parameters.
+
+The server checks an assignment against these before it saves it, and the agent builds its
+controller from the same models, so a car never receives a config it cannot run. The agent's
+registry (`vehicle_agent.controllers.registry`) pairs each name with its implementation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+Actuation = Literal["acc", "accel"]
+ACTUATIONS: tuple[Actuation, ...] = ("acc", "accel")
+
+# ACC gap settings: 1..3 bars (paper: roughly 1.2, 1.5 and 2.0 s time gaps).
+MIN_GAP_SETTING = 1
+MAX_GAP_SETTING = 3
+
+
+class LaneChangeParams(BaseModel):
+    """Lane-change recovery parameters (paper values where the paper gives them)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    enabled: bool = True
+    # h_safe: acceptable time gap (s); C_safe: acceptable time to collision (s).
+    safe_time_gap_s: float = Field(2.0, gt=0)
+    safe_ttc_s: float = Field(4.5, gt=0)
+    # t*: f1's slope; dv*: f2's offset (paper: "Delta v*"); c: weight of f1 in alpha.
+    t_star: float = Field(1.32, gt=0)
+    dv_star: float = Field(10.3, gt=0)
+    c: float = Field(0.75, ge=0, le=1)
+    # epsilon (m/s^2): the smoothing stops once |a_k - u_k| is this small.
+    epsilon_mps2: float = Field(0.05, gt=0)
+    # A gap change this much beyond what the relative speed explains is a lane change (m); radar
+    # noise is well under a metre, a cut-in changes the gap by tens of metres.
+    gap_jump_m: float = Field(4.0, gt=0)
+    # A step asking more jerk than this is significant (m/s^3): 0.5 m/s^2 in one 0.1 s period.
+    jerk_threshold_mps3: float = Field(5.0, gt=0)
+    max_smoothing: float = Field(0.95, ge=0, lt=1)
+
+
+class MicroAccelParams(BaseModel):
+    """MicroAccel gains and limits (paper eq. a_safe, a_target, a_MPC)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    # k: gain of the safety and target terms (1/s).
+    k: float = Field(0.5, gt=0, le=5)
+    # s0: standstill safety distance (m).
+    standstill_gap_m: float = Field(5.0, ge=0, le=50)
+    # a_min: the ego's hardest planned braking (m/s^2, negative), also the command floor.
+    min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
+    # a_l,min: the leader's hardest possible braking (m/s^2, negative); harder than ours keeps
+    # the equilibrium gap near 1.9 s at 25 m/s with the defaults.
+    lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
+    # a_max: the ego's largest acceleration (m/s^2), also the command ceiling.
+    max_accel_mps2: float = Field(1.5, gt=0, le=4)
+    # k2: gain of the anticipation term when the leader accelerates (1/(m/s)).
+    k2: float = Field(0.2, ge=0, le=5)
+    # Time constant (s) of the low-pass on the leader's finite-difference acceleration.
+    lead_accel_filter_s: float = Field(0.5, ge=0, le=10)
+    lane_change: LaneChangeParams = LaneChangeParams()
+
+
+class SimpleParams(BaseModel):
+    """Simple controller parameters."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
+    k: float = Field(0.5, gt=0, le=5)
+    max_accel_mps2: float = Field(1.0, gt=0, le=1.5)
+    min_accel_mps2: float = Field(-2.0, lt=0, ge=-3)
+    # Safety term parameters (see MicroAccelParams).
+    standstill_gap_m: float = Field(5.0, ge=0, le=50)
+    lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
+    safety_min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
+    # Added to the target on acc cars (mph), e.g. to offset a speedometer bias.
+    speed_offset_mph: float = Field(0.0, ge=-10, le=10)
+    gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+
+
+class MicroAccelAccParams(BaseModel):
+    """MicroAccel-to-set-points parameters."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    base: MicroAccelParams = MicroAccelParams()
+    # How far ahead the plan is read (s at the current speed), and at least this far (m).
+    lookahead_s: float = Field(20.0, gt=0, le=120)
+    min_lookahead_m: float = Field(200.0, gt=0, le=5000)
+    # tau: how fast the stock ACC follows a speed setting (s).
+    acc_response_s: float = Field(2.0, gt=0, le=20)
+    # A target this much below the current speed ahead is a slowdown (m/s), or a needed
+    # deceleration this strong (m/s^2).
+    slowdown_mps: float = Field(2.0, gt=0)
+    slowdown_accel_mps2: float = Field(-0.3, lt=0)
+    congested_gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+    free_gap_setting: int = Field(2, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+    gap_dwell_s: float = Field(10.0, ge=0)
+
+
+class ControllerConfigError(ValueError):
+    """A controller a car cannot run: `field` names what is wrong (`controller.name`,
+    `controller.params.<path>`), `reason` says why, and the message says both."""
+
+    def __init__(self, field: str, reason: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+        self.reason = reason
+
+
+@dataclass(frozen=True)
+class ControllerSchema:
+    """One controller a config may name: the actuations it drives and its parameters' model."""
+
+    actuations: frozenset[Actuation]
+    params_model: type[BaseModel]
+    summary: str
+
+
+CONTROLLER_SCHEMAS: dict[str, ControllerSchema] = {
+    "simple": ControllerSchema(
+        frozenset({"acc", "accel"}),
+        SimpleParams,
+        "follows the plan's target speed at the vehicle's position, bounded",
+    ),
+    "microaccel": ControllerSchema(
+        frozenset({"accel"}),
+        MicroAccelParams,
+        "min(a_safe, a_target, a_MPC) with lane-change recovery (acceleration requests)",
+    ),
+    "microaccel_acc": ControllerSchema(
+        frozenset({"acc"}),
+        MicroAccelAccParams,
+        "MicroAccel anticipation as ACC speed setting and gap bars",
+    ),
+}
+
+
+def controller_actuations() -> dict[str, frozenset[str]]:
+    """Controller name -> the actuations it can drive."""
+    return {name: frozenset(schema.actuations) for name, schema in CONTROLLER_SCHEMAS.items()}
+
+
+def validate_controller(
+    name: str, actuation: str | None, params: Mapping[str, Any] | None
+) -> BaseModel:
+    """The controller's params model, or ControllerConfigError naming the field at fault.
+
+    `actuation` None checks the name and the parameters only.
+    """
+    schema = CONTROLLER_SCHEMAS.get(name)
+    if schema is None:
+        known = ", ".join(sorted(CONTROLLER_SCHEMAS))
+        reason = f"{name!r} is not one of {known}"
+        raise ControllerConfigError("controller.name", reason, f"controller {reason}")
+    if actuation is not None and actuation not in schema.actuations:
+        reason = f"{name!r} cannot drive actuation {actuation!r}"
+        raise ControllerConfigError("controller.name", reason, f"controller {reason}")
+    try:
+        return schema.params_model.model_validate(dict(params or {}))
+    except ValidationError as error:
+        detail = error.errors()[0]
+        where = ".".join(str(part) for part in detail.get("loc", ()))
+        field = f"params.{where}" if where else "params"
+        reason = str(detail.get("msg", "invalid"))
+        raise ControllerConfigError(
+            f"controller.{field}", reason, f"controller {name}: {field}: {reason}"
+        ) from None
