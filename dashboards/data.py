@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -15,6 +15,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from app.analytics import view_query
 from app.core.metrics import server_registry
 from app.models import Corridor, PlanRun
+from dashboards.corridor_map import MapSegment
 
 
 async def _rows(session: AsyncSession, sql: str, **params: Any) -> Sequence[RowMapping]:
@@ -110,6 +111,42 @@ async def latest_plan(session: AsyncSession, corridor_id: str) -> PlanRun | None
         .limit(1)
     )
     return found
+
+
+async def map_segments(
+    session: AsyncSession, corridor_id: str, plan: PlanRun | None
+) -> list[MapSegment]:
+    """The corridor's sub-segments with their coordinates and, per lane, the plan's target."""
+    rows = await _rows(
+        session,
+        "SELECT s.i24_segment_id, s.start_x_m, s.end_x_m, s.start_lat, s.start_lon, s.end_lat, "
+        "s.end_lon, sp.lane, sp.target_speed_mps, sp.is_buffer FROM dim_i24_segment s "
+        "LEFT JOIN fact_speed_planner sp ON sp.i24_segment_id = s.i24_segment_id "
+        "AND sp.corridor_id = s.corridor_id AND sp.plan_id = :plan "
+        "WHERE s.corridor_id = :corridor ORDER BY s.seq, sp.lane",
+        corridor=corridor_id,
+        plan=-1 if plan is None else plan.plan_id,
+    )
+    segments: dict[int, MapSegment] = {}
+    for row in rows:
+        segment = segments.get(row["i24_segment_id"])
+        if segment is None:
+            segment = MapSegment(
+                float(row["start_x_m"]),
+                float(row["end_x_m"]),
+                float(row["start_lat"]),
+                float(row["start_lon"]),
+                float(row["end_lat"]),
+                float(row["end_lon"]),
+                {},
+                False,
+            )
+            segments[row["i24_segment_id"]] = segment
+        if row["lane"] is not None:
+            segment.target_mps[int(row["lane"])] = float(row["target_speed_mps"])
+            if row["is_buffer"]:
+                segments[row["i24_segment_id"]] = replace(segment, is_buffer=True)
+    return list(segments.values())
 
 
 async def plan_by_id(session: AsyncSession, plan_id: int) -> PlanRun | None:

@@ -67,6 +67,7 @@ from dashboards.charts import (
     heatmap,
     line_chart,
 )
+from dashboards.corridor_map import CAR_COLOURS, CarState, MapCar, corridor_map
 
 HERE = Path(__file__).parent
 templates = Jinja2Templates(directory=HERE / "templates")
@@ -321,6 +322,89 @@ async def fleet_live(
     """The fleet page's counts and table, for its periodic refresh."""
     context = await _fleet_context(request, session, route, make, problem)
     return _render(request, "_fleet_live.html", user, **context)
+
+
+# --- map --------------------------------------------------------------------------------------
+
+
+def map_cars(entries: list[FleetEntry], corridor_id: str) -> list[MapCar]:
+    """The cars on this corridor with a located last ping, in the map's three states."""
+    cars = []
+    for entry in entries:
+        ping = entry.last_ping
+        if entry.vehicle.corridor_id != corridor_id or ping is None or ping.x_m is None:
+            continue
+        state: CarState
+        if entry.readiness.level_of("ping") == "red":
+            state = "not reporting"
+        elif ping.is_controller_engaged:
+            state = "engaged"
+        else:
+            state = "not engaged"
+        cars.append(
+            MapCar(
+                entry.vehicle.vehicle_id,
+                ping.x_m,
+                ping.lane or entry.vehicle.assigned_lane,
+                state,
+                ping.speed_mps,
+            )
+        )
+    return cars
+
+
+async def _map_context(
+    request: Request, session: AsyncSession, corridor_id: str | None
+) -> dict[str, Any]:
+    now = datetime.now(UTC)
+    corridors = await data.corridors(session)
+    corridor = next((c for c in corridors if c.corridor_id == corridor_id), None)
+    if corridor is None and corridor_id is not None:
+        raise PageError(404, "Unknown corridor", f"There is no corridor {corridor_id}.")
+    corridor = corridor or (corridors[0] if corridors else None)
+    context: dict[str, Any] = {
+        "page": "map",
+        "corridors": corridors,
+        "corridor": corridor,
+        "generated_at": now,
+        "refresh_s": _settings(request).dashboard_refresh_s,
+        "map": None,
+        "plan": None,
+        "plan_age_s": None,
+        "states": {},
+    }
+    if corridor is None:
+        return context
+    plan = await data.latest_plan(session, corridor.corridor_id)
+    entries = await fleet(session, now, Thresholds.from_settings(_settings(request)))
+    cars = map_cars(entries, corridor.corridor_id)
+    segments = await data.map_segments(session, corridor.corridor_id, plan)
+    if segments:
+        upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
+        context["map"] = corridor_map("corridor-map", segments, corridor.lanes, cars, upper)
+    context["plan"] = plan
+    if plan is not None and plan.published_at is not None:
+        context["plan_age_s"] = (now - plan.published_at).total_seconds()
+    context["states"] = {state: sum(car.state == state for car in cars) for state in CAR_COLOURS}
+    return context
+
+
+@router.get("/map")
+async def map_page(
+    request: Request, user: UserDep, session: SessionDep, corridor: str | None = None
+) -> HTMLResponse:
+    """The corridor with every car, the plan's targets per lane and the buffers."""
+    context = await _map_context(request, session, corridor)
+    return _render(request, "map.html", user, **context)
+
+
+@router.get("/map/live")
+async def map_live(
+    request: Request, user: UserDep, session: SessionDep, corridor: str | None = None
+) -> HTMLResponse:
+    """The map and its counts, for the page's periodic refresh."""
+    context = await _map_context(request, session, corridor)
+    return _render(request, "_map_live.html", user, **context)
 
 
 # --- vehicle ------------------------------------------------------------------------------------

@@ -167,9 +167,10 @@ def test_an_operators_morning(
         expect(row.locator('[data-field="reasons"]')).to_have_text("ACC not available")
         for width in (1400, 1024):
             page.set_viewport_size({"width": width, "height": 900})
-            reasons = row.locator('[data-field="reasons"]').bounding_box()
-            assert reasons is not None
-            assert reasons["x"] + reasons["width"] <= width, f"reasons cut off at {width} px"
+            right = row.locator('[data-field="reasons"]').evaluate(
+                "cell => cell.getBoundingClientRect().right"
+            )
+            assert right <= width, f"reasons cut off at {width} px"
             screenshot(page, f"morning-not-cleared-{width}.png")
 
         fleet_tab = browser.new_page()
@@ -178,6 +179,13 @@ def test_an_operators_morning(
         watched = fleet_tab.locator('tr[data-vehicle="SF-003"]')
         expect(watched).to_have_attribute("data-verdict", "not cleared")
         fleet_tab.evaluate("window.notReloaded = true")
+        map_tab = browser.new_page()
+        map_tab.set_viewport_size({"width": 1400, "height": 900})
+        map_tab.goto(f"{base}/map")
+        marker = map_tab.locator('svg[data-chart="corridor-map"] a[data-vehicle="SF-003"]')
+        expect(marker).to_have_attribute("data-state", "not engaged")
+        expect(map_tab.locator('[data-state-count="engaged"]')).to_have_text("2")
+        map_tab.evaluate("window.notReloaded = true")
 
         row.get_by_role("link", name="SF-003").click()
         expect(page).to_have_url(f"{base}/vehicles/SF-003")
@@ -200,6 +208,23 @@ def test_an_operators_morning(
         fleet_tab.set_viewport_size({"width": 1400, "height": 900})
         screenshot(fleet_tab, "morning-fleet-after-1400.png")
         fleet_tab.close()
+
+        # The mechanics fixed it on the spot: SF-003 drives with its controller engaged.
+        later = datetime.now(UTC).replace(microsecond=0)
+        post_pings(
+            client,
+            token,
+            drive("SF-003", later - timedelta(seconds=3), 6000.0, 24.0, 3, controller_engaged=True),
+        )
+        expect(marker).to_have_attribute("data-state", "engaged", timeout=10_000)
+        expect(map_tab.locator('[data-state-count="engaged"]')).to_have_text("3")
+        assert map_tab.evaluate("window.notReloaded") is True
+        screenshot(map_tab, "morning-map-1400.png")
+        map_tab.set_viewport_size({"width": 1024, "height": 900})
+        screenshot(map_tab, "morning-map-1024.png")
+        marker.click()
+        expect(map_tab).to_have_url(f"{base}/vehicles/SF-003")
+        map_tab.close()
 
 
 def test_an_operator_changes_an_assignment(
