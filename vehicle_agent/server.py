@@ -1,4 +1,4 @@
-"""The agent's side of the server contract (../shared/interfaces.md): config, corridor, plan,
+"""The agent's side of the server contract (docs/interfaces.md): config, corridor, plan,
 pings and status, over an injected httpx client (a real one in the car, the demo's in-process
 transport or a test server elsewhere). Every call has a short timeout and raises `ServerError`
 (with the status code when there was one) instead of letting transport errors escape.

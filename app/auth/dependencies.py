@@ -1,6 +1,6 @@
 """FastAPI dependencies: 401 without a valid bearer token, 403 for a role that may not act.
 
-Roles (../shared/interfaces.md): `vehicle` (bound to one vehicle_id), `feed` (third-party data),
+Roles (docs/interfaces.md): `vehicle` (bound to one vehicle_id), `feed` (third-party data),
 ops `viewer` < `operator` < `admin`. What each endpoint allows is stated where it is declared.
 """
 

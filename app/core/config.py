@@ -1,6 +1,6 @@
 """Server settings: one pydantic-settings class read from the environment (prefix SMOOTHFLEET_).
 
-The names in `../shared/interfaces.md` (DATABASE_URL, DATA_DIR, HOST, PORT, PLANNER_PERIOD_S,
+The names in `docs/interfaces.md` (DATABASE_URL, DATA_DIR, HOST, PORT, PLANNER_PERIOD_S,
 INRIX_URL, INRIX_KEY) are a contract with operators; everything else here is ours to extend.
 """
 

@@ -13,33 +13,17 @@ from typing import Any
 from fastapi import FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.responses import JSONResponse
-from pydantic import BaseModel, ConfigDict
 from sqlalchemy.exc import DataError, DBAPIError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.logs import RepeatedMessages
+from contract.errors import ErrorResponse
 
 log = logging.getLogger(__name__)
 log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a request
 
 RETRY_AFTER_S = 5
-
-
-class FieldError(BaseModel):
-    """One rejected field of a request (FastAPI's validation error item)."""
-
-    model_config = ConfigDict(extra="allow")
-
-    loc: list[str | int]
-    msg: str
-    type: str
-
-
-class ErrorResponse(BaseModel):
-    """The body of every error: a sentence, or for a malformed request the list of its fields."""
-
-    detail: str | list[FieldError]
 
 
 def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:

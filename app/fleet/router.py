@@ -1,5 +1,5 @@
 """Operations API: `GET /api/v1/fleet` and `PUT /api/v1/vehicles/{vehicle_id}/assignment`
-(../shared/interfaces.md), plus `PUT .../maintenance` to take a car out of service.
+(docs/interfaces.md), plus `PUT .../maintenance` to take a car out of service.
 """
 
 from __future__ import annotations

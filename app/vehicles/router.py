@@ -1,4 +1,4 @@
-"""Vehicle-facing API: pings, piStatus reports, the vehicle's config (../shared/interfaces.md)."""
+"""Vehicle-facing API: pings, piStatus reports, the vehicle's config (docs/interfaces.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`smoothfleet`: the server-side command line (see ../shared/interfaces.md, "Command line").
+"""`smoothfleet`: the server-side command line (see docs/interfaces.md, "Command line").
 
 Every command that needs the database gets it from `database()`: the server named by
 SMOOTHFLEET_DATABASE_URL, or else the embedded PostgreSQL under SMOOTHFLEET_DATA_DIR, started
