@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
@@ -90,6 +90,7 @@ class InrixWindow:
 
     history: InrixHistory
     ignored: dict[str, int]
+    measured_at: list[datetime] = field(default_factory=list)  # the snapshots read, in order
 
 
 @dataclass(frozen=True)
@@ -152,8 +153,10 @@ def load_inrix(
     now: datetime,
     params: PlannerParams,
     received_by: datetime,
+    measured_at: Collection[datetime] | None = None,
 ) -> InrixWindow:
-    """INRIX speeds measured in the history window before `now`, received by `received_by`."""
+    """INRIX speeds measured in the history window before `now`, received by `received_by`
+    (and, for a replay, only of the snapshots `measured_at` the cycle read)."""
     segments = session.execute(
         text(
             "SELECT xd_code, (start_x_m + end_x_m) / 2 AS center_x_m FROM dim_inrix_segment "
@@ -177,6 +180,8 @@ def load_inrix(
             "received_by": received_by,
         },
     ).all()
+    if measured_at is not None:
+        rows = [row for row in rows if row.measured_at in measured_at]
     times = sorted({row.measured_at for row in rows})
     snapshot = {moment: index for index, moment in enumerate(times)}
     speeds = np.full((len(times), len(segments)), np.nan)
@@ -203,7 +208,7 @@ def load_inrix(
         "not_a_number": not_a_number,
         "out_of_range": cleaning.out_of_range,
     }
-    return InrixWindow(history, ignored)
+    return InrixWindow(history, ignored, times)
 
 
 # Per vehicle, lane and sub-segment of the window (cell = -1: off the corridor, x_m NULL or
@@ -445,19 +450,51 @@ INSERT_PLAN_ROWS = text(
     """
     INSERT INTO fact_speed_planner
         (corridor_id, plan_id, lane, i24_segment_id, target_speed_mps, is_buffer,
-         tse_speed_mps, smoothed_speed_mps)
-    SELECT :corridor, :plan_id, lane, segment, target, buffer, tse, smoothed
+         tse_speed_mps, smoothed_speed_mps, fleet_speed_mps, fleet_ping_count)
+    SELECT :corridor, :plan_id, lane, segment, target, buffer, tse, smoothed, fleet, fleet_pings
     FROM unnest(CAST(:lanes AS smallint[]), CAST(:segments AS integer[]),
                 CAST(:targets AS real[]), CAST(:buffers AS boolean[]),
-                CAST(:tses AS real[]), CAST(:smootheds AS real[]))
-         AS rows (lane, segment, target, buffer, tse, smoothed)
+                CAST(:tses AS real[]), CAST(:smootheds AS real[]),
+                CAST(:fleet AS float8[]), CAST(:fleet_pings AS integer[]))
+         AS rows (lane, segment, target, buffer, tse, smoothed, fleet, fleet_pings)
     """
 )
 
+# inputs["fleet_observations"] of a plan whose rows hold the fleet observation it read.
+FLEET_IN_PLAN_ROWS = "plan_rows"
 
-def _publish_rows(session: Session, grid: CorridorGrid, plan_id: int, plan: Plan) -> None:
+
+def _fleet_cells(
+    grid: CorridorGrid, observations: LaneObservations
+) -> tuple[list[float | None], list[int | None]]:
+    """The observation of each plan cell (lane-major, as the plan rows), None where none.
+
+    The warehouse pools the window per lane and sub-segment, so each cell has one row at most;
+    its mean is stored as read, so a replay hands the planner the very same numbers.
+    """
+    speeds: list[float | None] = [None] * (grid.lanes * grid.cells)
+    counts: list[int | None] = [None] * (grid.lanes * grid.cells)
+    for lane, cell, speed, count in zip(
+        observations.lane.tolist(),
+        observations.cell.tolist(),
+        observations.mean_speed_mps.tolist(),
+        observations.ping_count.tolist(),
+        strict=True,
+    ):
+        position = (lane - 1) * grid.cells + cell
+        if counts[position] is not None:
+            raise ValueError(f"observations: lane {lane}, cell {cell} appears twice")
+        speeds[position] = speed
+        counts[position] = count
+    return speeds, counts
+
+
+def _publish_rows(
+    session: Session, grid: CorridorGrid, plan_id: int, plan: Plan, fleet: LaneObservations
+) -> None:
     lanes = np.repeat(np.arange(1, grid.lanes + 1), grid.cells)
     segments = np.tile(grid.segment_ids, grid.lanes)
+    fleet_speeds, fleet_pings = _fleet_cells(grid, fleet)
     session.execute(
         INSERT_PLAN_ROWS,
         {
@@ -469,7 +506,28 @@ def _publish_rows(session: Session, grid: CorridorGrid, plan_id: int, plan: Plan
             "buffers": plan.is_buffer.ravel().tolist(),
             "tses": plan.tse_mps.ravel().tolist(),
             "smootheds": plan.smoothed_mps.ravel().tolist(),
+            "fleet": fleet_speeds,
+            "fleet_pings": fleet_pings,
         },
+    )
+
+
+def _stored_fleet(session: Session, grid: CorridorGrid, plan_id: int) -> LaneObservations:
+    """The fleet observation a plan read, from its own rows (FLEET_IN_PLAN_ROWS)."""
+    rows = session.execute(
+        text(
+            "SELECT lane, i24_segment_id, fleet_speed_mps, fleet_ping_count "
+            "FROM fact_speed_planner WHERE corridor_id = :corridor AND plan_id = :plan_id "
+            "AND fleet_ping_count IS NOT NULL"
+        ),
+        {"corridor": grid.corridor_id, "plan_id": plan_id},
+    ).all()
+    cell_of_segment = {int(segment): cell for cell, segment in enumerate(grid.segment_ids)}
+    return LaneObservations(
+        lane=np.array([row.lane for row in rows], dtype=np.int64),
+        cell=np.array([cell_of_segment[row.i24_segment_id] for row in rows], dtype=np.int64),
+        mean_speed_mps=np.array([row.fleet_speed_mps for row in rows], dtype=np.float64),
+        ping_count=np.array([row.fleet_ping_count for row in rows], dtype=np.int64),
     )
 
 
@@ -531,6 +589,10 @@ def run_cycle(
         "pings": pings.pings,
         "pings_off_corridor": pings.pings_off_corridor,
         "previous_plans": previous,
+        # Exactly which INRIX snapshots the cycle read: one committing just after the read,
+        # with received_at before it, must not enter a replay.
+        "inrix_measured_at": [_iso(moment) for moment in inrix.measured_at],
+        "fleet_observations": FLEET_IN_PLAN_ROWS,
     }
     planner_inputs = PlannerInputs(
         grid,
@@ -576,7 +638,7 @@ def run_cycle(
         valid_until=published_at + timedelta(seconds=valid_for_s),
         duration_ms=duration_ms,
     )
-    _publish_rows(session, grid, plan_id, plan)
+    _publish_rows(session, grid, plan_id, plan, pings.observations)
     return CycleOutcome(corridor_id, "published", plan_id, None, duration_ms, inputs)
 
 
@@ -633,20 +695,29 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
         now,
         params,
         received_by=datetime.fromisoformat(inputs["inrix_received_by"]),
+        measured_at=(
+            None
+            if "inrix_measured_at" not in inputs
+            else {datetime.fromisoformat(moment) for moment in inputs["inrix_measured_at"]}
+        ),
     )
     window_start = datetime.fromisoformat(inputs["ping_window_start"])
     window_end = datetime.fromisoformat(inputs["ping_window_end"])
-    pings = stored_observations(session, grid, window_end)
-    if pings.pings != inputs["pings"]:
-        # The observations are written just after publication; if that failed, the pings
-        # themselves (still within retention) are the record.
-        pings = pool_pings(session, grid, window_start, window_end)
+    if inputs.get("fleet_observations") == FLEET_IN_PLAN_ROWS:
+        fleet = _stored_fleet(session, grid, plan_id)
+    else:  # a plan stored before its rows kept the observation: the best record left
+        pings = stored_observations(session, grid, window_end)
+        if pings.pings != inputs["pings"]:
+            # The observations are written just after publication; if that failed, the pings
+            # themselves (still within retention) are the record.
+            pings = pool_pings(session, grid, window_start, window_end)
+        fleet = pings.observations
     previous = [int(plan) for plan in inputs.get("previous_plans", [])]
     plan = plan_speeds(
         PlannerInputs(
             grid,
             inrix.history,
-            pings.observations,
+            fleet,
             _epoch_s(now),
             tuple(load_smoothed(session, grid, previous)),
         ),
@@ -665,8 +736,11 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
     buffers_differing = 0
     for row in stored:
         cell = cell_of_segment[row.i24_segment_id]
-        recomputed = float(np.float32(plan.target_mps[row.lane - 1, cell]))
-        difference = max(difference, abs(recomputed - float(row.target_speed_mps)))
+        # Both as the REAL column holds them: the driver hands a REAL back as its shortest
+        # decimal (28.999998), which is the float32 28.999998092651367 only once re-rounded.
+        recomputed = np.float32(plan.target_mps[row.lane - 1, cell])
+        stored_target = np.float32(row.target_speed_mps)
+        difference = max(difference, abs(float(recomputed) - float(stored_target)))
         buffers_differing += int(bool(plan.is_buffer[row.lane - 1, cell]) != row.is_buffer)
     missing = grid.lanes * grid.cells - len(stored)
     return ReplayReport(

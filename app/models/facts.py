@@ -210,3 +210,7 @@ class SpeedPlan(Base):
     # The fused lane-level TSE and its forward-kernel smoothing behind the target (provenance).
     tse_speed_mps: Mapped[float | None] = mapped_column(REAL)
     smoothed_speed_mps: Mapped[float | None] = mapped_column(REAL)
+    # The fleet observation the cycle read for this cell (mean of the window's pings, exact, and
+    # their count; NULL where none): a plan replays from these, not from pings arriving later.
+    fleet_speed_mps: Mapped[float | None] = mapped_column(Float)
+    fleet_ping_count: Mapped[int | None] = mapped_column(Integer)

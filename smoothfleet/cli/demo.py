@@ -35,7 +35,7 @@ from sqlalchemy import Engine, select, text
 
 from app.core.config import Settings
 from app.core.db import make_sync_engine, session_scope
-from app.core.security import issue_token
+from app.core.security import issue_token, revoke_tokens
 from app.models.dimensions import InrixSegment, Vehicle
 from contract.units import METRES_PER_MILE
 from sim.drives import Drive, load_drive
@@ -398,7 +398,18 @@ def run_fleet(
             if process.poll() is None:
                 process.kill()
         feed.stop.set()
+        # The run's tokens end with it: a simulated car's token left valid is a live credential
+        # in a spec file on disk.
+        revoke_run_tokens(engine, specs, feed_token)
         engine.dispose()
+
+
+def revoke_run_tokens(engine: Engine, specs: Sequence[WorkerSpec], feed_token: str) -> None:
+    """Revoke every token a fleet run issued (its cars' and its INRIX feed's)."""
+    tokens = [vehicle.token for spec in specs for vehicle in spec.vehicles] + [feed_token]
+    with session_scope(engine) as session:
+        for token in tokens:
+            revoke_tokens(session, token=token)
 
 
 def start_worker(run_dir: Path, index: int, spec: WorkerSpec) -> WorkerProcess:

@@ -203,6 +203,38 @@ def test_replay_recomputes_a_plan_from_the_warehouse(seeded_engine: Engine) -> N
     assert tampered.max_difference_mps == pytest.approx(0.5, abs=1e-3)
 
 
+def test_replay_is_exact_although_pings_and_inrix_of_the_window_arrive_after_the_read(
+    seeded_engine: Engine,
+) -> None:
+    minutes_of_slowdown(seeded_engine, NOW + timedelta(minutes=2), 7)
+    for minute in range(3):
+        pings(
+            seeded_engine,
+            "SF-002",
+            NOW + timedelta(minutes=minute),
+            np.linspace(8000, 8400, 60),
+            9.0,
+        )
+        outcome = cycle(seeded_engine, NOW + timedelta(minutes=minute))
+    end = NOW + timedelta(minutes=2)
+    # After the cycle read its window: a car's spool uploaded late, pings of two more cars, and
+    # an INRIX snapshot of the window whose transaction committed after the read although its
+    # received_at (the request's arrival) was before it.
+    pings(seeded_engine, "SF-003", end, np.linspace(8100, 8500, 60), 3.7, lane=2)
+    pings(seeded_engine, "SF-004", end - timedelta(seconds=7), np.linspace(9000, 9200, 40), 21.3)
+    inrix_snapshot(
+        seeded_engine,
+        end - timedelta(seconds=30),
+        [4.0] * 18,
+        received_at=end - timedelta(seconds=1),
+    )
+    with Session(seeded_engine) as session:
+        report = replay_plan(session, outcome.plan_id or 0)
+    assert report.cells == 4 * 158
+    assert report.max_difference_mps == 0.0  # bit for bit, not within a tolerance
+    assert report.buffer_cells_differing == 0
+
+
 def test_replay_without_stored_observations_pools_the_pings(seeded_engine: Engine) -> None:
     minutes_of_slowdown(seeded_engine, NOW, 3)
     pings(seeded_engine, "SF-003", NOW, np.linspace(8000, 8400, 60), 9.0)

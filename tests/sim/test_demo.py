@@ -11,7 +11,9 @@ from pathlib import Path
 
 import pytest
 from sqlalchemy import Engine, text
+from sqlalchemy.orm import Session
 
+from planner.warehouse import replay_plan
 from tests.support.servers import cli_env, free_port, run_cli
 
 VEHICLES = 6
@@ -58,3 +60,19 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
     # every agent handed its car back and uploaded its spool before the demo ended
     for spool in tmp_path.glob("demo/*/spools/*.sqlite"):
         assert spool.stat().st_size > 0
+    with engine.connect() as connection:
+        live_tokens = connection.execute(
+            text("SELECT count(*) FROM api_token WHERE revoked_at IS NULL")
+        ).scalar_one()
+        plan_ids = connection.execute(
+            text("SELECT plan_id FROM plan_run WHERE status = 'published' ORDER BY plan_id")
+        ).scalars()
+    assert live_tokens == 0, "the run's cars' and feed's tokens must end with it"
+    # Spools uploaded at the end carry pings of the plans' windows that arrived after the plans
+    # read them: every plan still replays to its stored targets bit for bit.
+    with Session(engine) as session:
+        reports = [replay_plan(session, plan_id) for plan_id in plan_ids]
+    assert reports
+    assert [(r.max_difference_mps, r.buffer_cells_differing) for r in reports] == [(0.0, 0)] * len(
+        reports
+    )
