@@ -43,7 +43,7 @@ from app.models import PlanRun
 from app.users.service import log_in
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
-from dashboards import data
+from dashboards import data, motion
 from dashboards.auth import (
     LoginRequired,
     PageError,
@@ -127,6 +127,7 @@ def _render(
 def install(app: FastAPI) -> None:
     """Mount the pages, their static files and their error pages on the app."""
     app.include_router(router)
+    app.include_router(motion.router)
     app.mount("/static", StaticFiles(directory=HERE / "static"), name="static")
 
     async def on_login_required(request: Request, error: Exception) -> Response:

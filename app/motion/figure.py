@@ -23,7 +23,7 @@ import pandas as pd  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from sqlalchemy import Connection  # noqa: E402
 
-from app.motion.edie import EdieGrid, day_window, edie_field, to_grid  # noqa: E402
+from app.motion.edie import EdieGrid, EdieWindow, day_window, edie_field, to_grid  # noqa: E402
 from app.motion.fleet import TRACE_GAP_S, FleetDay, fleet_pings  # noqa: E402
 
 ENGAGED_COLOUR = "red"
@@ -40,9 +40,16 @@ def day_figure(store: Path, connection: Connection, day: date, corridor_id: str)
     window = day_window(store, day)
     field = edie_field(store, window)
     fleet = fleet_pings(connection, corridor_id, window.since, window.until)
+    return window_figure(window, field, fleet, corridor_id)
+
+
+def window_figure(
+    window: EdieWindow, field: pd.DataFrame, fleet: FleetDay, corridor_id: str
+) -> bytes:
+    """The figure of a window's Edie field (from `edie_field`) and the fleet's pings in it."""
     title = (
-        f"{corridor_id}, {day.isoformat()}: Edie fields of every vehicle I-24 MOTION tracked "
-        f"({window.h_t_s:g} s x {window.h_x_m:g} m boxes, all lanes)"
+        f"{corridor_id}, {window.since:%Y-%m-%d}: Edie fields of every vehicle I-24 MOTION "
+        f"tracked ({window.h_t_s:g} s x {window.h_x_m:g} m boxes, all lanes)"
     )
     return bulk_fuel_figure(
         to_grid(field, window, "fuel_per_distance_g_per_m"),
@@ -71,9 +78,10 @@ def bulk_fuel_figure(
         axis.set_facecolor("0.85")
         axis.set_ylabel("corridor position x [km]")
         axis.set_ylim(grid.x_edges_m[0] / 1000.0, grid.x_edges_m[-1] / 1000.0)
-        axis.add_collection(_trajectories(fleet.pings))
+        axis.add_collection(_trajectories(fleet.pings), autolim=False)
     ticks = _clock_ticks(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]))
-    axes[1].set_xticks(ticks, [datetime.fromtimestamp(t, UTC).strftime("%H:%M") for t in ticks])
+    clock = "%H:%M" if len(ticks) < 2 or ticks[1] - ticks[0] >= 60 else "%H:%M:%S"
+    axes[1].set_xticks(ticks, [datetime.fromtimestamp(t, UTC).strftime(clock) for t in ticks])
     axes[1].set_xlim(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]))
     axes[1].set_xlabel("time [UTC]")
     share = (
@@ -89,8 +97,8 @@ def bulk_fuel_figure(
 
 
 def _clock_ticks(first_s: float, last_s: float) -> list[float]:
-    """Round clock times (every 5, 10, 15, 30 or 60 min) for about six ticks."""
-    for step in (300.0, 600.0, 900.0, 1800.0, 3600.0):
+    """Round clock times (every 10 s to 1 h) for at most eight ticks."""
+    for step in (10.0, 30.0, 60.0, 120.0, 300.0, 600.0, 900.0, 1800.0, 3600.0):
         if (last_s - first_s) / step <= 8:
             break
     first_tick = -(-first_s // step) * step
@@ -104,9 +112,9 @@ def _trajectories(pings: pd.DataFrame) -> LineCollection:
     x_km = pings["x_m"].to_numpy(dtype=np.float64) / 1000.0
     vehicle = pings["vehicle_id"].to_numpy()
     engaged = pings["is_controller_engaged"].to_numpy(dtype=bool)
-    seconds = pd.to_datetime(pings["ts"], utc=True).astype("int64").to_numpy() / 1e9
-    times = seconds
-    joined = (vehicle[1:] == vehicle[:-1]) & (np.diff(seconds) <= TRACE_GAP_S)
+    since_epoch = pd.to_datetime(pings["ts"], utc=True) - pd.Timestamp(0, tz="UTC")
+    times = since_epoch.dt.total_seconds().to_numpy(dtype=np.float64)
+    joined = (vehicle[1:] == vehicle[:-1]) & (np.diff(times) <= TRACE_GAP_S)
     starts = np.flatnonzero(joined)
     segments = np.stack(
         [

@@ -8,7 +8,7 @@ same rows and definition as the analytics page, so the share printed on the figu
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime, timedelta
+from datetime import UTC, date, datetime, timedelta
 
 import pandas as pd
 from sqlalchemy import Connection, text
@@ -42,12 +42,17 @@ def fleet_pings(
     pings = pd.DataFrame(
         result.fetchall(), columns=["vehicle_id", "ts", "x_m", "is_controller_engaged"]
     )
-    day = since.replace(hour=0, minute=0, second=0, microsecond=0)
+    return FleetDay(pings=pings, engagement_share=engagement_share(connection, since.date()))
+
+
+def engagement_share(connection: Connection, day: date) -> float | None:
+    """The fleet's pooled engagement share of a UTC day (None without pings on the corridor)."""
+    since = datetime(day.year, day.month, day.day, tzinfo=UTC)
     share = connection.execute(
         text(
-            "SELECT engagement_share FROM analytics.engagement_fleet_daily_between(:day, :next)"
-            " WHERE day = CAST(:day AS date)"
+            "SELECT engagement_share FROM analytics.engagement_fleet_daily_between(:since, :until)"
+            " WHERE day = :day"
         ),
-        {"day": day, "next": day + timedelta(days=1)},
+        {"since": since, "until": since + timedelta(days=1), "day": day},
     ).scalar_one_or_none()
-    return FleetDay(pings=pings, engagement_share=None if share is None else float(share))
+    return None if share is None else float(share)

@@ -25,6 +25,8 @@ from pathlib import Path
 import duckdb
 import pyarrow as pa
 
+from app.core.config import Settings
+
 POINTS = "points"
 TRAJECTORIES = "trajectories"
 IMPORTS = "imports"
@@ -69,6 +71,17 @@ TRAJECTORY_SCHEMA = pa.schema(
         pa.field("fuel_g", pa.float64()),
     ]
 )
+
+
+def motion_store(settings: Settings) -> Path:
+    """Where the MOTION store lives: SMOOTHFLEET_MOTION_DIR, else DATA_DIR/motion."""
+    return settings.motion_dir or settings.data_dir / "motion"
+
+
+def imported_days(store: Path) -> list[str]:
+    """The UTC days (YYYY-MM-DD) holding imported trajectories, latest first."""
+    days = {path.parent.name.removeprefix("day=") for path in files(store, TRAJECTORIES)}
+    return sorted(days, reverse=True)
 
 
 class MotionStoreEmpty(LookupError):

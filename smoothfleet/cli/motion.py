@@ -20,13 +20,12 @@ from rich.progress import (
     TransferSpeedColumn,
 )
 
-from app.core.config import Settings
 from app.core.db import make_sync_engine
 from app.motion.documents import MotionFileError
 from app.motion.edie import H_T_S, H_X_M, EdieWindow, EdieWindowError, edie_field
 from app.motion.figure import day_figure
 from app.motion.importer import ImportReport, import_motion_file
-from app.motion.store import MotionStoreEmpty
+from app.motion.store import MotionStoreEmpty, motion_store
 from sim.drives import DriveError, load_drive
 from sim.motion.frame import DEFAULT_ANCHOR_X_FT, DEFAULT_ANCHOR_X_M, MotionFrame
 from sim.motion.traffic import MotionRunConfig, boundary_speeds, simulate_motion_run
@@ -42,11 +41,6 @@ DEFAULT_BOUNDARY_DRIVES = (
 # The testbed's section on the seed corridor under the default frame: mileposts 62.7 to 58.7.
 TESTBED_START_X_M = float(MotionFrame().x_m(62.7 * 5280.0))
 REASONS_SHOWN = 20
-
-
-def motion_store(current: Settings) -> Path:
-    """Where the MOTION store lives."""
-    return current.motion_dir or current.data_dir / "motion"
 
 
 @click.group("motion")
