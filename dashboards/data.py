@@ -15,7 +15,9 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from app.analytics import view_query
 from app.core.metrics import server_registry
 from app.models import Corridor, PlanRun
+from contract.units import METRES_PER_MILE
 from dashboards.corridor_map import MapSegment
+from dashboards.figures import Trajectory
 
 
 async def _rows(session: AsyncSession, sql: str, **params: Any) -> Sequence[RowMapping]:
@@ -147,6 +149,59 @@ async def map_segments(
             if row["is_buffer"]:
                 segments[row["i24_segment_id"]] = replace(segment, is_buffer=True)
     return list(segments.values())
+
+
+async def fleet_trajectories(
+    session: AsyncSession, corridor: Corridor, since: datetime, until: datetime, bucket_s: float
+) -> list[Trajectory]:
+    """Every car's path along the corridor between since and until: its last position in each
+    `bucket_s` window (a car re-entering at the start is not averaged across the corridor), and
+    whether its controller was engaged then."""
+    rows = await _rows(
+        session,
+        "SELECT p.vehicle_id, floor(extract(epoch FROM p.ts) / :bucket) * :bucket AS t, "
+        "(array_agg(p.x_m ORDER BY p.ts DESC))[1] AS x_m, "
+        "(array_agg(coalesce(p.is_controller_engaged, false) ORDER BY p.ts DESC))[1] AS engaged "
+        "FROM fact_vehicle_ping p JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
+        "WHERE v.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
+        "AND p.x_m IS NOT NULL GROUP BY p.vehicle_id, t ORDER BY p.vehicle_id, t",
+        corridor=corridor.corridor_id,
+        since=since,
+        until=until,
+        bucket=bucket_s,
+    )
+    paths: dict[str, list[RowMapping]] = {}
+    for row in rows:
+        paths.setdefault(row["vehicle_id"], []).append(row)
+    return [
+        Trajectory(
+            vehicle_id,
+            np.array([float(r["t"]) for r in path]),
+            corridor.postmile_at_start
+            + np.array([float(r["x_m"]) for r in path]) / METRES_PER_MILE,
+            np.array([bool(r["engaged"]) for r in path]),
+        )
+        for vehicle_id, path in paths.items()
+    ]
+
+
+async def engagement_share(
+    session: AsyncSession, corridor_id: str, since: datetime, until: datetime
+) -> tuple[int, float | None]:
+    """(pings on the corridor, share of them with the controller engaged) between the times."""
+    row = (
+        await _rows(
+            session,
+            "SELECT count(*) AS pings, avg(coalesce(p.is_controller_engaged, false)::int) "
+            "AS share FROM fact_vehicle_ping p JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
+            "WHERE v.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
+            "AND p.x_m IS NOT NULL",
+            corridor=corridor_id,
+            since=since,
+            until=until,
+        )
+    )[0]
+    return int(row["pings"]), None if row["share"] is None else float(row["share"])
 
 
 async def plan_by_id(session: AsyncSession, plan_id: int) -> PlanRun | None:

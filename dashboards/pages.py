@@ -22,6 +22,7 @@ from fastapi.templating import Jinja2Templates
 from jinja2 import pass_context
 from jinja2.runtime import Context
 from sqlalchemy.ext.asyncio import AsyncSession
+from starlette.concurrency import run_in_threadpool
 
 from app.core.config import Settings
 from app.core.db import SessionDep
@@ -68,6 +69,7 @@ from dashboards.charts import (
     line_chart,
 )
 from dashboards.corridor_map import CAR_COLOURS, CarState, MapCar, corridor_map
+from dashboards.figures import time_space
 
 HERE = Path(__file__).parent
 templates = Jinja2Templates(directory=HERE / "templates")
@@ -406,6 +408,135 @@ async def map_live(
     """The map and its counts, for the page's periodic refresh."""
     context = await _map_context(request, session, corridor)
     return _render(request, "_map_live.html", user, **context)
+
+
+# --- time-space -------------------------------------------------------------------------------
+
+TIME_SPACE_COLUMNS = 360
+TIME_SPACE_ROWS = 200
+TIME_SPACE_MIN_REFRESH_S = 15.0  # a matplotlib figure per refresh: the plans change every 60 s
+TIME_SPACE_FIELDS = {"tse": "fused TSE speed", "target": "plan target speed"}
+
+
+async def _time_space_context(
+    request: Request,
+    session: AsyncSession,
+    corridor_id: str | None,
+    lane: int,
+    hours: float,
+    field_name: str,
+) -> dict[str, Any]:
+    if field_name not in TIME_SPACE_FIELDS:
+        raise PageError(400, "Unknown field", f"Show 'tse' or 'target', not {field_name!r}.")
+    settings = _settings(request)
+    now = datetime.now(UTC)
+    corridors = await data.corridors(session)
+    corridor = next((c for c in corridors if c.corridor_id == corridor_id), None)
+    if corridor is None and corridor_id is not None:
+        raise PageError(404, "Unknown corridor", f"There is no corridor {corridor_id}.")
+    corridor = corridor or (corridors[0] if corridors else None)
+    context: dict[str, Any] = {
+        "page": "timespace",
+        "corridors": corridors,
+        "corridor": corridor,
+        "lane": lane,
+        "hours": hours,
+        "field": field_name,
+        "fields": TIME_SPACE_FIELDS,
+        "generated_at": now,
+        "refresh_s": max(settings.dashboard_refresh_s, TIME_SPACE_MIN_REFRESH_S),
+        "figure": None,
+        "cars": 0,
+        "window_share": None,
+        "day_share": None,
+        "day_start": None,
+    }
+    if corridor is None:
+        return context
+    context["lanes"] = list(range(1, corridor.lanes + 1))
+    since = now - timedelta(hours=hours)
+    bucket_s = max(1.0, hours * 3600.0 / 720.0)
+    trajectories = await data.fleet_trajectories(session, corridor, since, now, bucket_s)
+    # The plan in force at `since` was published up to a planner period (and its lag) earlier.
+    plans = await data.recent_plans(
+        session, corridor.corridor_id, lane, since - timedelta(minutes=15), now
+    )
+    first = [t.times_s[0] for t in trajectories if len(t.times_s)]
+    if plans is not None:
+        first.append(float(plans.published_at[0]))
+    if not first:
+        return context
+    start = max(since.timestamp(), min(first))  # the axis begins where the data does
+    end = now.timestamp()
+    low = corridor.postmile_at_start
+    high = low + corridor.length_m / METRES_PER_MILE
+    grid = None
+    if plans is not None:
+        values = plans.tse_mps if field_name == "tse" else plans.target_mps
+        times = np.linspace(start, end, TIME_SPACE_COLUMNS, endpoint=False)
+        times += (times[1] - times[0]) / 2
+        postmiles = np.linspace(low, high, TIME_SPACE_ROWS, endpoint=False)
+        postmiles += (postmiles[1] - postmiles[0]) / 2
+        grid = data.sample_plans(plans, values, times, postmiles)
+        if np.all(np.isnan(grid)):
+            grid = None
+    upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
+    zone = display_zone(settings)
+    title = f"{corridor.corridor_id} lane {lane}: {TIME_SPACE_FIELDS[field_name]}, fleet on top"
+    context["figure"] = await run_in_threadpool(
+        time_space,
+        "time-space",
+        title,
+        grid,
+        (datetime.fromtimestamp(start, UTC), now),
+        (low, high),
+        trajectories,
+        zone,
+        upper,
+        TIME_SPACE_FIELDS[field_name],
+        3 * bucket_s,
+    )
+    context["has_field"] = grid is not None
+    context["cars"] = len(trajectories)
+    _, context["window_share"] = await data.engagement_share(
+        session, corridor.corridor_id, since, now
+    )
+    day_start = datetime.combine(now.astimezone(zone).date(), datetime.min.time(), zone)
+    context["day_start"] = day_start
+    _, context["day_share"] = await data.engagement_share(
+        session, corridor.corridor_id, day_start, now
+    )
+    return context
+
+
+@router.get("/timespace")
+async def time_space_page(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    corridor: str | None = None,
+    lane: Annotated[int, Query(ge=1, le=12)] = 1,
+    hours: Annotated[float, Query(gt=0, le=24)] = 2.0,
+    field: str = "tse",
+) -> HTMLResponse:
+    """The paper's time-space view: the speed field with every fleet car's trajectory on top."""
+    context = await _time_space_context(request, session, corridor, lane, hours, field)
+    return _render(request, "timespace.html", user, **context)
+
+
+@router.get("/timespace/live")
+async def time_space_live(
+    request: Request,
+    user: UserDep,
+    session: SessionDep,
+    corridor: str | None = None,
+    lane: Annotated[int, Query(ge=1, le=12)] = 1,
+    hours: Annotated[float, Query(gt=0, le=24)] = 2.0,
+    field: str = "tse",
+) -> HTMLResponse:
+    """The figure and shares, for the page's periodic refresh."""
+    context = await _time_space_context(request, session, corridor, lane, hours, field)
+    return _render(request, "_timespace_live.html", user, **context)
 
 
 # --- vehicle ------------------------------------------------------------------------------------

@@ -1,13 +1,16 @@
-"""The corridor map's geometry and markup (pure: no server)."""
+"""The corridor map's and the time-space figure's geometry (pure: no server)."""
 
 from __future__ import annotations
 
 import re
+from datetime import UTC, datetime
+from zoneinfo import ZoneInfo
 
 import numpy as np
 import pytest
 
 from dashboards.corridor_map import MapCar, MapSegment, corridor_map, plane_m
+from dashboards.figures import Trajectory, local_time_ticks, trajectory_pieces
 
 
 def test_the_plane_is_metres_east_and_north() -> None:
@@ -60,3 +63,22 @@ def test_cars_link_to_their_pages_in_their_state_at_their_place() -> None:
     # Lane 1 is left of travel: on a northbound road, further west (smaller x).
     assert float(found[0][2]) < float(found[1][2])
     assert "SF-001: engaged, lane 1, 56 mph" in svg
+
+
+def test_trajectories_break_at_gaps_and_at_a_re_entry() -> None:
+    path = Trajectory(
+        "SF-001",
+        np.array([0.0, 10.0, 20.0, 60.0, 70.0, 80.0]),
+        np.array([1.0, 1.1, 1.2, 1.5, 0.1, 0.2]),  # a 40 s gap, then back to the start
+        np.array([True, True, False, False, False, True]),
+    )
+    pieces, engaged = trajectory_pieces(path, max_gap_s=30.0)
+    assert pieces[:, 0, 0].tolist() == [0.0, 10.0, 70.0]
+    assert engaged.tolist() == [True, True, False]
+
+
+def test_time_ticks_fall_on_whole_local_minutes() -> None:
+    zone = ZoneInfo("America/Chicago")
+    start = datetime(2022, 11, 16, 12, 7, 30, tzinfo=UTC).timestamp()  # 06:07:30 CST
+    ticks = local_time_ticks(start, start + 3600.0, zone)
+    assert list(ticks.values()) == ["06:10", "06:20", "06:30", "06:40", "06:50", "07:00"]

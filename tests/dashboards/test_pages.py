@@ -281,6 +281,8 @@ def test_an_unknown_filter_is_explained(site: str) -> None:
         ("/plans", "No corridor yet"),
         ("/feeds", "No INRIX data yet"),
         ("/analytics", "No pings on the corridor in the last 30 days"),
+        ("/map", "No corridor yet"),
+        ("/timespace", "No corridor yet"),
     ],
 )
 def test_every_page_works_on_an_empty_database(empty_site: str, path: str, says: str) -> None:
@@ -297,6 +299,7 @@ def test_every_page_works_on_an_empty_database(empty_site: str, path: str, says:
         ("/vehicles/SF-010", "No pings from this vehicle yet"),
         ("/feeds", "No pings in the last hour"),
         ("/analytics", "No ping has followed a plan in the last 7 days"),
+        ("/timespace", "No pings and no plans on I-24-WB in the last 2.0 h"),
     ],
 )
 def test_pages_of_a_fleet_without_data_say_what_to_do(site: str, path: str, says: str) -> None:
@@ -346,6 +349,18 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         analytics = client.get("/analytics").text
         for chart in ("engagement-share", "pings-hourly", "vehicles-hourly", "edie-speed"):
             assert f'data-chart="{chart}"' in analytics
+
+        corridor_map = client.get("/map").text
+        assert 'data-vehicle="SF-001" data-state="engaged"' in corridor_map
+        assert "lane 1: " in corridor_map
+        assert "no plan" not in corridor_map
+
+        time_space = client.get("/timespace", params={"field": "tse"}).text
+        assert 'data-chart="time-space"' in time_space
+        assert '<span class="number" data-field="cars">1</span>' in time_space
+        assert '<span class="number" data-field="window-share">100 %</span>' in time_space
+        assert "No plan of lane 1" not in time_space
+        assert client.get("/timespace", params={"field": "fuel"}).status_code == 400
 
 
 def test_the_csrf_token_belongs_to_the_session(site: str) -> None:
