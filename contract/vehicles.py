@@ -95,14 +95,19 @@ class StatusAnswer(BaseModel):
 
 
 class ControllerConfig(BaseModel):
-    """Which controller the agent runs, and its parameters."""
+    """Which controller the agent runs, and its parameters (schemas: `contract.controllers`)."""
 
     name: str
-    params: dict[str, Any]
+    params: dict[str, Any] = Field(default_factory=dict)
 
 
 class VehicleConfig(BaseModel):
-    """What a vehicle should run: its identity, assignment, controller and agent periods."""
+    """What a vehicle should run: its identity, assignment, controller and agent periods.
+
+    Unknown fields are ignored, so a car keeps reading the configs of a newer server.
+    """
+
+    model_config = ConfigDict(extra="ignore")
 
     vehicle_id: str
     make: str
@@ -111,11 +116,11 @@ class VehicleConfig(BaseModel):
     actuation: Literal["acc", "accel"]
     corridor_id: str
     route: str
-    assigned_lane: int
+    assigned_lane: int = Field(ge=1)
     controller: ControllerConfig
-    active: bool = Field(description="false: the agent leaves the car to its stock ACC")
-    in_maintenance: bool
-    ping_period_s: float
-    status_period_s: float
-    plan_poll_s: float
-    stale_plan_after_s: float
+    active: bool = Field(True, description="false: the agent leaves the car to its stock ACC")
+    in_maintenance: bool = False
+    ping_period_s: float = Field(1.0, gt=0)
+    status_period_s: float = Field(10.0, gt=0)
+    plan_poll_s: float = Field(5.0, gt=0)
+    stale_plan_after_s: float = Field(180.0, gt=0)

@@ -25,9 +25,11 @@ from pathlib import Path
 from typing import Any
 
 import can
+from pydantic import BaseModel, ValidationError
 
 from contract.controllers import ControllerConfigError
 from contract.corridor import CorridorGeometry, trusted_heading
+from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
@@ -46,7 +48,7 @@ from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
-from vehicle_agent.server import ServerClient, ServerError, VehicleConfig
+from vehicle_agent.server import ServerClient, ServerError
 from vehicle_agent.spool import PingSpool
 from vehicle_agent.state import CarStateReader
 from vehicle_agent.stopping import reading_needs_hand_back
@@ -132,6 +134,8 @@ class AgentStats:
     pings_spooled: int = 0
     pings_uploaded: int = 0
     pings_without_fix: int = 0
+    # Fields left out of a ping or status report because they broke the contract, per message.
+    fields_dropped: Counter[str] = field(default_factory=Counter)
     handbacks: Counter[str] = field(default_factory=Counter)
     server_errors: Counter[str] = field(default_factory=Counter)
     plans_refused: int = 0
@@ -444,7 +448,8 @@ class Agent:
         return True
 
     def ping(self) -> dict[str, Any] | None:
-        """The ping for the latest snapshot (None without a GPS fix: lat/lon are required)."""
+        """The ping for the latest snapshot as `contract.vehicles.Ping` JSON (None without a GPS
+        fix: lat/lon are required)."""
         snapshot = self.snapshot
         if snapshot is None or snapshot.fix is None or not snapshot.fix.has_fix:
             return None
@@ -483,10 +488,10 @@ class Agent:
             ping[key] = round(value, 3) if isinstance(value, float) else value
         if "heading_deg" in ping:
             ping["heading_deg"] = ping["heading_deg"] % 360.0
-        return ping
+        return self._message(Ping, ping, "ping")
 
     def status_report(self) -> dict[str, Any]:
-        """The piStatus report for now."""
+        """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON."""
         now = self.clock.monotonic()
         snapshot = self.snapshot
         since, frames_then = self._frames_at_status
@@ -517,7 +522,35 @@ class Agent:
             if self.server and self.server.last_rtt_ms is not None
             else None,
         }
-        return {key: value for key, value in report.items() if value is not None}
+        status = self._message(
+            VehicleStatusReport,
+            {key: value for key, value in report.items() if value is not None},
+            "status",
+        )
+        assert status is not None, "a status report needs only its ts, which is always valid"
+        return status
+
+    def _message(
+        self, model: type[BaseModel], fields: dict[str, Any], what: str
+    ) -> dict[str, Any] | None:
+        """`fields` checked against the contract model, as the JSON the server will accept.
+
+        An optional field outside the contract (a glitching sensor: a lead 1.5 km away) is left
+        out and counted rather than costing the whole message; None when a required one is bad.
+        """
+        for _ in range(len(fields) + 1):
+            try:
+                return model.model_validate(fields).model_dump(mode="json", exclude_none=True)
+            except ValidationError as error:
+                bad = {str(detail["loc"][0]) for detail in error.errors() if detail["loc"]}
+                required = {name for name, info in model.model_fields.items() if info.is_required()}
+                self.stats.fields_dropped[what] += len(bad)
+                if bad & required or not bad & set(fields):
+                    log.warning("%s not sent: %s", what, error.errors()[0]["msg"])
+                    return None
+                log.warning("%s: left out %s (outside the contract)", what, ", ".join(sorted(bad)))
+                fields = {key: value for key, value in fields.items() if key not in bad}
+        return None
 
     # Network ----------------------------------------------------------------------------------
 
@@ -643,8 +676,9 @@ class Agent:
                 self._server_failed("pings", error)
                 self._upload_schedule.failed(now, 1.0)
                 return uploaded
-            for index, reason in answer.rejected:
-                log.warning("server rejected ping %s: %s", rows[index][1].get("ts"), reason)
+            for rejection in answer.rejected:
+                ts = rows[rejection.index][1].get("ts")
+                log.warning("server rejected ping %s: %s", ts, rejection.error)
             self.spool.remove([row_id for row_id, _ in rows], rejected=len(answer.rejected))
             uploaded += len(rows)
             self.stats.pings_uploaded += len(rows)

@@ -12,9 +12,10 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 import httpx
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ValidationError
 
 from contract.corridor import CorridorGeometry
+from contract.vehicles import PingAnswer, VehicleConfig
 from vehicle_agent.plan import Plan, PlanError, parse_plan
 
 
@@ -26,34 +27,6 @@ class ServerError(Exception):
         self.status = status
 
 
-class ControllerConfig(BaseModel):
-    """The controller the server assigns."""
-
-    name: str
-    params: dict[str, Any] = Field(default_factory=dict)
-
-
-class VehicleConfig(BaseModel):
-    """GET /api/v1/vehicles/{id}/config (fields the agent uses)."""
-
-    model_config = ConfigDict(extra="ignore")
-
-    vehicle_id: str
-    make: str
-    model: str
-    year: int
-    actuation: Literal["acc", "accel"]
-    corridor_id: str
-    assigned_lane: int = Field(ge=1)
-    controller: ControllerConfig
-    active: bool = True
-    in_maintenance: bool = False
-    ping_period_s: float = Field(1.0, gt=0)
-    status_period_s: float = Field(10.0, gt=0)
-    plan_poll_s: float = Field(5.0, gt=0)
-    stale_plan_after_s: float = Field(180.0, gt=0)
-
-
 @dataclass(frozen=True)
 class PlanFetch:
     """The outcome of one plan poll."""
@@ -62,15 +35,6 @@ class PlanFetch:
     plan: Plan | None = None
     etag: str | None = None
     retry_after_s: float | None = None
-
-
-@dataclass(frozen=True)
-class PingAnswer:
-    """The server's answer to a ping batch."""
-
-    accepted: int
-    duplicates: int
-    rejected: list[tuple[int, str]]
 
 
 class ServerClient:
@@ -165,14 +129,9 @@ class ServerClient:
         if response.status_code != 200:
             raise self._fail(response, "pings")
         try:
-            body = response.json()
-            return PingAnswer(
-                int(body["accepted"]),
-                int(body["duplicates"]),
-                [(int(r["index"]), str(r["error"])) for r in body.get("rejected", [])],
-            )
-        except (ValueError, KeyError, TypeError) as error:
-            raise ServerError(f"pings: unexpected answer ({error})") from None
+            return PingAnswer.model_validate_json(response.content)
+        except ValidationError as error:
+            raise ServerError(f"pings: unexpected answer ({error.errors()[0]['msg']})") from None
 
     def post_status(self, report: Mapping[str, Any]) -> None:
         """Post a piStatus report."""

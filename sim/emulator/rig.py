@@ -17,6 +17,7 @@ from typing import Any
 import can
 
 from contract.corridor import CorridorGeometry
+from contract.vehicles import ControllerConfig, VehicleConfig
 from sim.emulator.car import CarEmulator
 from sim.emulator.leaders import Leader
 from vehicle_agent.agent import Agent
@@ -24,7 +25,7 @@ from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.plan import Plan
-from vehicle_agent.server import ControllerConfig, ServerClient, VehicleConfig
+from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 
 CORRIDOR = "I-24-WB"
@@ -135,6 +136,7 @@ def vehicle_config(
         year=car.years[0],
         actuation=car.actuation,
         corridor_id=CORRIDOR,
+        route="I-24-WB mainline",
         assigned_lane=2,
         controller=ControllerConfig(name=controller, params=params or {}),
         **fields,

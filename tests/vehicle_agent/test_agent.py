@@ -3,6 +3,7 @@ taking over, reaching set points, handing back within one control period, bad in
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -240,3 +241,31 @@ def test_pings_are_spooled_once_a_second(tmp_path: Path, dbc_cache: Path) -> Non
         assert 0 < ping["lead_distance_m"] < 100
         timestamps = [row[1]["ts"] for row in rows]
         assert timestamps == sorted(set(timestamps))
+
+
+def test_a_reading_outside_the_contract_costs_only_its_field(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    with rig(
+        "toyota_rav4",
+        tmp_path,
+        dbc_cache,
+        controller="microaccel",
+        leader=ConstantSpeedLeader(1050.0, 22.0, 100.0),
+    ) as r:
+        engage_and_settle(r)
+        snapshot = r.agent.snapshot
+        assert snapshot is not None
+        assert snapshot.reading is not None
+        # a radar glitch: a lead 1.5 km away (the contract allows up to 1000 m)
+        glitch = replace(snapshot.reading, lead_distance_m=1500.0)
+        r.agent.snapshot = replace(snapshot, reading=glitch)
+        r.clock.advance(1.0)
+        ping = r.agent.ping()
+        assert ping is not None
+        assert "lead_distance_m" not in ping
+        assert ping["lead_present"] is True
+        assert ping["speed_mps"] > 0
+        assert r.agent.stats.fields_dropped["ping"] == 1
+        # a status report is always sent (only its ts is required)
+        assert "ts" in r.agent.status_report()
