@@ -2,8 +2,9 @@
 
 Every `period_s` (60 s) of simulated time the real planner (`planner.plan_speeds`, the same
 registered algorithm and parameters as the server's) is fed what the server would have: the
-INRIX minutes it has received by then (simulated by `sim.traffic`, ~3 minutes late) and the
-fleet's pings of the last ping window (the simulated AVs post one per second, like the agent).
+INRIX minutes it has received by then (simulated by `sim.inrix` with the real feed's errors and
+lag, or the drive's real minutes) and the fleet's pings of the last ping window (the simulated
+AVs post one per second, like the agent).
 Each plan is handed to the AVs as the agent receives it (a `vehicle_agent.plan.Plan`, sub-segment
 steps with their ends) and read with the agent's own `LanePlan.profile`: the lookup shifted by
 the agent's wave speed times the plan's age.
@@ -30,7 +31,8 @@ from planner import (
     plan_speeds,
 )
 from sim.drives import Drive
-from sim.traffic import INRIX_LATENCY_S, InrixFeed, inrix_snapshots, segment_bounds
+from sim.inrix import CALIBRATED, simulated_feed
+from sim.traffic import INRIX_PERIOD_S, InrixFeed, segment_bounds
 from vehicle_agent.controllers import TargetProfile
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanLane
 
@@ -66,11 +68,13 @@ def simulated_grid(drive: Drive) -> CorridorGrid:
 
 
 def simulated_inrix(drive: Drive, params: PlannerParams) -> InrixFeed:
-    """The drive's simulated INRIX: from before the planner's history window to the drive's end."""
+    """The drive's simulated INRIX (`sim.inrix`, calibrated on the real feed; seeded by the
+    drive's name): a reading a minute per 0.5 mile segment, from a history window before the
+    drive to its end."""
     bounds = segment_bounds(-ROAD_BEFORE_M, float(drive.position_m[-1]) + ROAD_AFTER_M)
-    lead_in = params.inrix_history_s + INRIX_LATENCY_S
-    first = -math.ceil(lead_in / 60.0) * 60.0
-    return inrix_snapshots(drive, bounds, first, drive.duration_s)
+    first = -math.ceil((params.inrix_history_s + INRIX_PERIOD_S) / INRIX_PERIOD_S) * INRIX_PERIOD_S
+    stamps = np.arange(first, drive.duration_s + 1e-9, INRIX_PERIOD_S)
+    return simulated_feed(drive, bounds, stamps, CALIBRATED)
 
 
 @dataclass

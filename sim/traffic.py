@@ -1,17 +1,17 @@
-"""Simulated INRIX: the traffic state along the road, aggregated and delayed like the real feed.
+"""Traffic along the road behind a real drive, and the INRIX feed's shape (segments, minutes).
 
 A platoon simulation has one real vehicle ahead, the replayed leader; the road ahead of it is
 known only through what the leader met. In congested traffic, speed changes travel upstream at a
-nearly constant wave speed (about 15 km/h on I-24; paper section "TSE Enhancement" and the
-planner's prediction), so the state at (t, x) is the one the leader met at the time tau when the
-wave through (t, x) reached it:
+nearly constant wave speed c, so the state at (t, x) is the one the leader met at the time tau
+when the wave through (t, x) reached it:
 
     x_L(tau) = x - c (tau - t)    <=>    x_L(tau) + c tau = x + c t,
 
-which has exactly one solution because x_L + c tau increases strictly. `wave_field_speed` gives
-v(t, x) = v_L(tau) (held at the drive's first or last speed outside it). `inrix_snapshots`
-averages that field like INRIX does: per segment (about 0.5 mi) and per minute, and each minute
-becomes visible `latency_s` (paper Table 1: ~180 s) after it ends.
+which has exactly one solution because x_L + c tau increases strictly. `WaveField` gives
+v(t, x) = v_L(tau) (held at the drive's first or last speed outside it). The demo's traffic uses
+it at I-24's 15 km/h (paper section "TSE Enhancement"); the simulated INRIX (`sim.inrix`) uses it
+at a wave speed calibrated on the real feed, not the planner's, under a measurement model of the
+real feed's errors. `InrixFeed` holds readings per minute and per segment (about 0.5 mi).
 """
 
 from __future__ import annotations
@@ -31,8 +31,7 @@ WAVE_SPEED_MPS = 15.0 / 3.6
 INRIX_PERIOD_S = 60.0
 INRIX_LATENCY_S = 180.0
 INRIX_SEGMENT_M = 804.672
-# Samples per minute and per segment when averaging the field (every 5 s, every 50 m).
-SAMPLE_PERIOD_S = 5.0
+# Samples per segment when averaging the field (every 50 m).
 SAMPLE_SPACING_M = 50.0
 
 
@@ -62,10 +61,11 @@ def wave_field_speed(
 
 @dataclass(frozen=True)
 class InrixFeed:
-    """Per-minute segment means of a traffic field: `speed_mps[minute, segment]`.
+    """INRIX readings per minute and per segment: `speed_mps[minute, segment]`.
 
-    `measured_at_s[m]` is the end of minute m (the time the reading describes, as the planner
-    reads INRIX's timestamp); it becomes visible at `measured_at_s[m] + latency_s`.
+    Row m is stamped `measured_at_s[m]` and becomes visible at `measured_at_s[m] + latency_s`
+    (0 for the recorded and the simulated feeds: their stamp is when the reading arrives, and
+    the feed's lag is inside the readings).
     """
 
     segment_start_m: FloatArray
@@ -92,35 +92,3 @@ def segment_bounds(start_m: float, end_m: float, length_m: float = INRIX_SEGMENT
     bounds: FloatArray = start_m + length_m * np.arange(count + 1, dtype=np.float64)
     bounds[-1] = max(bounds[-1], end_m)
     return bounds
-
-
-def inrix_snapshots(
-    drive: Drive,
-    bounds_m: FloatArray,
-    first_minute_s: float,
-    last_minute_s: float,
-    *,
-    latency_s: float = INRIX_LATENCY_S,
-    wave_speed_mps: float = WAVE_SPEED_MPS,
-) -> InrixFeed:
-    """Minute-by-segment means of the drive's wave field for minutes starting in the range."""
-    starts = np.arange(first_minute_s, last_minute_s + 1e-9, INRIX_PERIOD_S)
-    sample_t = np.arange(0.0, INRIX_PERIOD_S, SAMPLE_PERIOD_S) + 0.5 * SAMPLE_PERIOD_S
-    speeds = np.empty((len(starts), len(bounds_m) - 1))
-    wave_field = WaveField(drive, wave_speed_mps)
-    for segment in range(len(bounds_m) - 1):
-        low, high = float(bounds_m[segment]), float(bounds_m[segment + 1])
-        count = max(1, int(round((high - low) / SAMPLE_SPACING_M)))
-        sample_x = low + (np.arange(count) + 0.5) * (high - low) / count
-        times = starts[:, None, None] + sample_t[None, :, None]
-        field = wave_field.speed_mps(
-            np.broadcast_to(times, (len(starts), len(sample_t), count)), sample_x
-        )
-        speeds[:, segment] = field.mean(axis=(1, 2))
-    return InrixFeed(
-        segment_start_m=bounds_m[:-1].copy(),
-        segment_end_m=bounds_m[1:].copy(),
-        measured_at_s=starts + INRIX_PERIOD_S,
-        speed_mps=speeds,
-        latency_s=latency_s,
-    )

@@ -11,8 +11,9 @@ from sim.av import RADAR_RANGE_M, AgentPolicy, agent_policy
 from sim.drives import drive_from_speeds, load_drive
 from sim.emulator.acc import SimulatedAccCar
 from sim.kpi import platoon_kpis
-from sim.plans import SimulatedPlanner
+from sim.plans import ROAD_AFTER_M, ROAD_BEFORE_M, SimulatedPlanner
 from sim.platoon import AvObservation, platoon_roles, simulate_platoon
+from sim.traffic import InrixFeed, segment_bounds
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
@@ -113,7 +114,12 @@ def test_every_registered_controller_can_be_built_for_the_simulator() -> None:
 
 def test_planner_runs_every_minute_and_the_plan_ages() -> None:
     steady = drive_from_speeds("steady", np.full(3001, 25.0))
-    planner = SimulatedPlanner.for_drive(steady, "kernel_smooth")
+    # an exact feed of the steady traffic (the simulated one has the real feed's errors)
+    bounds = segment_bounds(-ROAD_BEFORE_M, float(steady.position_m[-1]) + ROAD_AFTER_M)
+    stamps = np.arange(-900.0, 301.0, 60.0)
+    speeds = np.full((len(stamps), len(bounds) - 1), 25.0)
+    exact = InrixFeed(bounds[:-1], bounds[1:], stamps, speeds, 0.0)
+    planner = SimulatedPlanner.for_drive(steady, "kernel_smooth", feed=exact)
     first = planner.profile(0.0)
     assert planner.plans_run == 1
     # steady 25 m/s traffic: the plan says 25 m/s everywhere

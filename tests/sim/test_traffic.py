@@ -1,12 +1,11 @@
-"""Simulated INRIX: the wave field behind a real leader, per-minute segment means, the delay."""
+"""The wave field behind a real leader; the INRIX feed's segments and delay."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from sim.drives import drive_from_speeds
-from sim.traffic import WAVE_SPEED_MPS, inrix_snapshots, segment_bounds, wave_field_speed
+from sim.traffic import WAVE_SPEED_MPS, InrixFeed, segment_bounds, wave_field_speed
 
 C = WAVE_SPEED_MPS  # 4.1667 m/s upstream
 
@@ -29,26 +28,19 @@ def test_the_slow_state_moves_upstream_behind_the_leader() -> None:
     np.testing.assert_allclose(speeds, [30.0, 10.0])
 
 
-def test_inrix_minutes_are_segment_means_seen_three_minutes_late() -> None:
-    steady = drive_from_speeds("steady", np.full(6001, 20.0))
+def test_inrix_segments_are_half_a_mile_and_rows_visible_after_their_latency() -> None:
     bounds = segment_bounds(0.0, 4000.0)
     # 0.5 mile segments: 0, 804.7, ..., the last one stretched to 4000 m
     np.testing.assert_allclose(bounds[:2], [0.0, 804.672])
     assert bounds[-1] == 4000.0
-    feed = inrix_snapshots(steady, bounds, -300.0, 540.0)
-    assert feed.speed_mps.shape == (15, len(bounds) - 1)
-    np.testing.assert_allclose(feed.speed_mps, 20.0)
-    # the minute 0-60 s is stamped 60 s and arrives at 240 s
-    assert feed.measured_at_s[5] == 60.0
-    visible = feed.visible_rows(240.0)
-    assert feed.measured_at_s[visible].max() == pytest.approx(60.0)
-    assert feed.measured_at_s[feed.visible_rows(239.9)].max() == pytest.approx(0.0)
-
-
-def test_a_minute_mean_averages_the_wave_passing_through_the_segment() -> None:
-    bounds = np.array([2000.0, 3000.0])
-    feed = inrix_snapshots(STEP_DOWN, bounds, 0.0, 120.0)
-    # minute 0-60 s: the whole segment is upstream of the slow front (3417 -> 3167 m): fast
-    assert feed.speed_mps[0, 0] == pytest.approx(30.0)
-    # minute 120-180 s: the front crosses 3000 -> 2750 m, so part of the segment is slow
-    assert 10.0 < feed.speed_mps[2, 0] < 30.0
+    assert len(bounds) == 5
+    feed = InrixFeed(
+        segment_start_m=bounds[:-1],
+        segment_end_m=bounds[1:],
+        measured_at_s=np.array([0.0, 60.0, 120.0]),
+        speed_mps=np.full((3, 4), 20.0),
+        latency_s=180.0,
+    )
+    # the reading stamped 60 s arrives at 240 s
+    assert feed.measured_at_s[feed.visible_rows(240.0)].max() == 60.0
+    assert feed.measured_at_s[feed.visible_rows(239.9)].max() == 0.0
