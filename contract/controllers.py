@@ -105,6 +105,15 @@ class MicroAccelAccParams(BaseModel):
     gap_dwell_s: float = Field(10.0, ge=0)
 
 
+class RlParams(BaseModel):
+    """An RL controller's policy: a `.npz` file on the car, or None for the one the agent ships
+    (`vehicle_agent/controllers/policies/rl_<actuation>.npz`, manifest beside it)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    policy: str | None = Field(None, min_length=1)
+
+
 class ControllerConfigError(ValueError):
     """A controller a car cannot run: `field` names what is wrong (`controller.name`,
     `controller.params.<path>`), `reason` says why, and the message says both."""

@@ -1,0 +1,148 @@
+"""The car's RL runtime: features, action decoding, the numpy network and the policy file checks."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from contract.controllers import RlParams
+from vehicle_agent.controllers import AccelCommand, AccSetPoint, Observation, TargetProfile
+from vehicle_agent.controllers.policy import (
+    PolicyFileError,
+    acc_features,
+    accel_features,
+    load_policy,
+    requested_accel_mps2,
+    requested_gap_setting,
+    requested_speed_mph,
+    save_policy,
+)
+from vehicle_agent.controllers.rl_acc import RlAccController
+from vehicle_agent.controllers.rl_accel import RlAccelController, bounded_request
+
+
+def test_acc_features_are_the_papers_list_scaled() -> None:
+    # v = 15 m/s, v_s = 24 m/s, 500 m ahead 12 m/s, minicar on, s = 50 mph (22.352 m/s), g = 3.
+    features = acc_features(15.0, 24.0, 12.0, True, 50.0, 3)
+    np.testing.assert_allclose(features, [0.5, 0.8, 0.4, 1.0, 22.352 / 30.0, 1.0])
+
+
+def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed() -> None:
+    seen = accel_features(30.0, 30.0, 30.0, True, 40.0, -5.0)
+    np.testing.assert_allclose(seen, [1.0, 1.0, 1.0, 1.0, 0.4, -0.5])
+    unseen = accel_features(30.0, 30.0, 30.0, False, math.inf, 7.0)
+    np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
+
+
+def test_acc_action_spans_the_papers_clip_window_around_the_mean_speed() -> None:
+    # mean 60 mph: -1 -> 45 mph (mean - 15), 0 -> 60, +1 -> 65 (mean + 5), beyond is clipped
+    np.testing.assert_allclose(
+        requested_speed_mph(np.array([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 3.0]), 60.0),
+        [45.0, 45.0, 52.5, 60.0, 62.5, 65.0, 65.0],
+    )
+    np.testing.assert_array_equal(
+        requested_gap_setting(np.array([-1.0, -0.34, -0.33, 0.33, 0.34, 1.0])), [1, 1, 2, 2, 3, 3]
+    )
+
+
+def test_accel_action_maps_to_the_limiter_range_with_zero_at_zero() -> None:
+    np.testing.assert_allclose(
+        requested_accel_mps2(np.array([-5.0, -1.0, -0.5, 0.0, 0.5, 1.0])),
+        [-3.0, -3.0, -1.5, 0.0, 0.75, 1.5],
+    )
+
+
+def two_layer_policy(tmp_path: Path, actuation: str, outputs: int) -> Path:
+    """Hidden layer: 1 unit reading v only (weight 2); head: `outputs` copies of it."""
+    hidden_weight = np.zeros((6, 1))
+    hidden_weight[0, 0] = 2.0
+    path = tmp_path / f"{actuation}.npz"
+    save_policy(
+        path,
+        "acc" if actuation == "acc" else "accel",
+        [hidden_weight, np.ones((1, outputs))],
+        [np.array([-1.0]), np.zeros(outputs)],
+    )
+    return path
+
+
+def test_network_is_a_tanh_mlp_with_a_linear_clipped_head(tmp_path: Path) -> None:
+    network = load_policy(two_layer_policy(tmp_path, "accel", 1), "accel")
+    # v feature 0.5 -> tanh(2 * 0.5 - 1) = 0; 0.8 -> tanh(0.6) = 0.537; 5 -> tanh(9) ~ 1 -> 1
+    batch = np.zeros((3, 6))
+    batch[:, 0] = [0.5, 0.8, 5.0]
+    np.testing.assert_allclose(network.action(batch)[:, 0], [0.0, math.tanh(0.6), math.tanh(9)])
+    assert len(network.sha256) == 64
+
+
+def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
+    acc = two_layer_policy(tmp_path, "acc", 2)
+    with pytest.raises(PolicyFileError, match="a policy for actuation acc, not accel"):
+        load_policy(acc, "accel")
+    wrong_outputs = two_layer_policy(tmp_path, "accel", 2)
+    with pytest.raises(PolicyFileError, match="2 outputs, an accel policy has 1"):
+        load_policy(wrong_outputs, "accel")
+    with pytest.raises(PolicyFileError, match="No such file"):
+        load_policy(tmp_path / "missing.npz", "acc")
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"not a zip")
+    with pytest.raises(PolicyFileError, match="not a policy file"):
+        load_policy(garbage, "acc")
+    bad = tmp_path / "nan.npz"
+    save_policy(bad, "accel", [np.full((6, 1), np.nan)], [np.zeros(1)])
+    with pytest.raises(PolicyFileError, match="non-finite weights"):
+        load_policy(bad, "accel")
+    narrow = tmp_path / "narrow.npz"
+    save_policy(narrow, "accel", [np.zeros((5, 1))], [np.zeros(1)])
+    with pytest.raises(PolicyFileError, match=r"layer 0 has shape \(5, 1\)"):
+        load_policy(narrow, "accel")
+
+
+def test_rl_acc_requests_the_networks_setting_around_the_last_second(tmp_path: Path) -> None:
+    controller = RlAccController("acc", RlParams(policy=str(two_layer_policy(tmp_path, "acc", 2))))
+    # v = 15 m/s -> feature 0.5 -> action (0, 0): the mean speed and the middle gap
+    action = controller.step(Observation(time_s=0.0, speed_mps=15.0, target_speed_mps=20.0))
+    assert isinstance(action, AccSetPoint)
+    assert action.requested_speed_mph == pytest.approx(15.0 / 0.44704)
+    assert (action.speed_setting_mph, action.gap_setting) == (34, 2)
+
+
+def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:
+    path = two_layer_policy(tmp_path, "accel", 1)
+    controller = RlAccelController("accel", RlParams(policy=str(path)))
+    free = controller.step(Observation(time_s=0.0, speed_mps=30.0, target_speed_mps=30.0))
+    # v feature 1 -> tanh(1) = 0.76 -> 1.14 m/s^2 with no leader measured
+    assert free == AccelCommand(pytest.approx(1.5 * math.tanh(1.0)))
+    close = controller.step(
+        Observation(
+            time_s=0.1,
+            speed_mps=30.0,
+            target_speed_mps=30.0,
+            position_m=0.0,
+            target=TargetProfile(np.array([0.0, 1000.0]), np.array([30.0, 30.0])),
+            lead_present=True,
+            lead_distance_m=10.0,
+            lead_rel_speed_mps=-5.0,
+        )
+    )
+    assert isinstance(close, AccelCommand)
+    assert close.accel_mps2 == -3.0  # a_safe far below: the limiter's floor
+
+
+@given(
+    request=st.floats(-10, 10),
+    speed=st.floats(0, 40),
+    gap=st.floats(0, 200),
+    rel=st.floats(-20, 20),
+)
+def test_bounded_request_stays_within_the_limiter_range(
+    request: float, speed: float, gap: float, rel: float
+) -> None:
+    command = bounded_request(request, speed, gap, rel, 0.0)
+    assert -3.0 <= command <= 1.5
+    assert command <= max(request, -3.0)

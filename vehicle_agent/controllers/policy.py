@@ -1,0 +1,223 @@
+"""A trained RL policy on the car: its observation, its action, and its network evaluated in numpy.
+
+Paper section "ACC-Based Controller": the deployed controller is a PPO-trained policy. Training
+happens in the simulator (`sim/rl`, which the car never installs); the car only evaluates the
+network's mean action, a small multilayer perceptron, exported as a `.npz` of its weights. The
+features and the decoding of the action are defined here, once, and the training environment
+calls the same functions, so the car feeds the network exactly what it was trained on.
+
+Observation (all makes, the paper's list): ego speed v, the planner's target v_s at the car's
+position, the "minicar" flag l, and on `acc` cars the ACC speed setting s and gap setting g.
+Added, because the car really holds it: the plan's target `PLAN_LOOKAHEAD_M` ahead (the agent has
+the whole lane plan; the anticipation it allows is what smooths a wave before the car meets it).
+Added on `accel` cars only (the RAV4 measures them, paper Table 2): the space gap and the leader's
+relative speed.
+
+Action, in [-1, 1] per component (PPO's Gaussian, clipped):
+- `acc`: component 0 is the requested speed setting, spread over the paper's clip window around
+  the last second's mean speed, [mean - 15 mph, mean + 5 mph] (0: the mean), so every value the
+  network can output survives the clip; component 1 picks the gap bars (thirds of [-1, 1] ->
+  1, 2, 3).
+- `accel`: an acceleration request, 3 m/s^2 of braking at -1 and 1.5 m/s^2 at +1 (the agent's
+  AccelLimiter bounds), 0 at 0.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from contract.units import MPS_PER_MPH
+from vehicle_agent.controllers.acc_clip import ABOVE_MEAN_MPH, BELOW_MEAN_MPH
+
+FloatArray = NDArray[np.float64]
+PolicyActuation = Literal["acc", "accel"]
+
+# Speeds enter the network divided by this (m/s; the 73 mph ceiling is 32.6 m/s).
+SPEED_SCALE_MPS = 30.0
+# The plan is also read this far ahead of the car (m).
+PLAN_LOOKAHEAD_M = 500.0
+# The cars' radar sees a leader within about 80-100 m (paper Table 2, "minicar"); a gap is
+# divided by this, and reads as 1 without a leader.
+GAP_SCALE_M = 100.0
+# Relative speeds enter divided by this (m/s).
+REL_SPEED_SCALE_MPS = 10.0
+# `accel` action bounds (m/s^2): the agent's AccelLimiter range.
+ACCEL_ACTION_MIN_MPS2 = -3.0
+ACCEL_ACTION_MAX_MPS2 = 1.5
+
+ACC_FEATURES = 6
+ACCEL_FEATURES = 6
+ACTION_SIZES: dict[PolicyActuation, int] = {"acc": 2, "accel": 1}
+FEATURE_SIZES: dict[PolicyActuation, int] = {"acc": ACC_FEATURES, "accel": ACCEL_FEATURES}
+
+
+class PolicyFileError(ValueError):
+    """A policy file that cannot be used; the message names the file and what is wrong."""
+
+
+def acc_features(
+    speed_mps: ArrayLike,
+    target_mps: ArrayLike,
+    target_ahead_mps: ArrayLike,
+    lead_present: ArrayLike,
+    speed_setting_mph: ArrayLike,
+    gap_setting: ArrayLike,
+) -> FloatArray:
+    """The `acc` observation (last axis: v, v_s, v_s ahead, l, s, g), scaled for the network."""
+    setting = np.asarray(speed_setting_mph, dtype=np.float64) * MPS_PER_MPH
+    features: FloatArray = np.stack(
+        np.broadcast_arrays(
+            np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            np.asarray(lead_present, dtype=np.float64),
+            setting / SPEED_SCALE_MPS,
+            np.asarray(gap_setting, dtype=np.float64) - 2.0,
+        ),
+        axis=-1,
+    )
+    return features
+
+
+def accel_features(
+    speed_mps: ArrayLike,
+    target_mps: ArrayLike,
+    target_ahead_mps: ArrayLike,
+    lead_present: ArrayLike,
+    gap_m: ArrayLike,
+    rel_speed_mps: ArrayLike,
+) -> FloatArray:
+    """The `accel` observation (v, v_s, v_s ahead, l, gap, lead - ego speed), scaled.
+
+    Without a leader in radar range the gap reads as the range and the relative speed as 0.
+    """
+    present = np.asarray(lead_present, dtype=bool)
+    measured = np.minimum(np.asarray(gap_m, dtype=np.float64), GAP_SCALE_M)
+    gap = np.where(present, measured, GAP_SCALE_M)
+    rel = np.where(present, np.asarray(rel_speed_mps, dtype=np.float64), 0.0)
+    features: FloatArray = np.stack(
+        np.broadcast_arrays(
+            np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+            present.astype(np.float64),
+            gap / GAP_SCALE_M,
+            rel / REL_SPEED_SCALE_MPS,
+        ),
+        axis=-1,
+    )
+    return features
+
+
+def requested_speed_mph(action: ArrayLike, mean_speed_mph: ArrayLike) -> FloatArray:
+    """v_action from action component 0: -1 -> mean - 15 mph, 0 -> mean, +1 -> mean + 5 mph.
+
+    Piecewise linear over the paper's clip window, so 0 holds the speed of the last second.
+    """
+    value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    offset = np.where(value < 0.0, BELOW_MEAN_MPH * value, ABOVE_MEAN_MPH * value)
+    requested: FloatArray = np.asarray(mean_speed_mph, dtype=np.float64) + offset
+    return requested
+
+
+def requested_gap_setting(action: ArrayLike) -> NDArray[np.int64]:
+    """Gap bars from action component 1: [-1, -1/3) -> 1, [-1/3, 1/3) -> 2, [1/3, 1] -> 3."""
+    value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    bars: NDArray[np.int64] = np.where(value < -1.0 / 3.0, 1, np.where(value < 1.0 / 3.0, 2, 3))
+    return bars
+
+
+def requested_accel_mps2(action: ArrayLike) -> FloatArray:
+    """The acceleration request: -1 -> -3 m/s^2, 0 -> 0, +1 -> +1.5 m/s^2."""
+    value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    accel: FloatArray = np.where(
+        value < 0.0, -ACCEL_ACTION_MIN_MPS2 * value, ACCEL_ACTION_MAX_MPS2 * value
+    )
+    return accel
+
+
+@dataclass(frozen=True)
+class PolicyNetwork:
+    """A tanh MLP's deterministic action: mean = W_k(... tanh(W_1 x + b_1) ...) + b_k, clipped.
+
+    `weights[i]` has shape (inputs, outputs), so a batch of observations (rows) multiplies on
+    the left. `sha256` is the file's digest: what the car reports it runs.
+    """
+
+    actuation: PolicyActuation
+    weights: tuple[FloatArray, ...]
+    biases: tuple[FloatArray, ...]
+    sha256: str
+
+    def action(self, features: FloatArray) -> FloatArray:
+        """The mean action for one observation (1-D) or a batch (rows), clipped to [-1, 1]."""
+        hidden = features
+        last = len(self.weights) - 1
+        for index, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
+            hidden = hidden @ weight + bias
+            if index < last:
+                hidden = np.tanh(hidden)
+        clipped: FloatArray = np.clip(hidden, -1.0, 1.0)
+        return clipped
+
+
+def save_policy(
+    path: Path,
+    actuation: PolicyActuation,
+    weights: list[FloatArray],
+    biases: list[FloatArray],
+) -> str:
+    """Write a policy `.npz` (layer_i_weight / layer_i_bias and the actuation); its sha256."""
+    arrays: dict[str, FloatArray | NDArray[np.str_]] = {"actuation": np.array(actuation)}
+    for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
+        arrays[f"layer_{index}_weight"] = np.asarray(weight, dtype=np.float64)
+        arrays[f"layer_{index}_bias"] = np.asarray(bias, dtype=np.float64)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        np.savez(handle, **arrays)  # type: ignore[arg-type]
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def load_policy(path: Path, actuation: PolicyActuation) -> PolicyNetwork:
+    """Read a policy `.npz` and check it drives `actuation` with the right shapes."""
+    try:
+        content = path.read_bytes()
+    except OSError as error:
+        raise PolicyFileError(f"{path}: {error.strerror or error}") from None
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            stored = str(archive["actuation"])
+            layers = sum(1 for name in archive.files if name.endswith("_weight"))
+            weights = tuple(
+                np.asarray(archive[f"layer_{i}_weight"], dtype=np.float64) for i in range(layers)
+            )
+            biases = tuple(
+                np.asarray(archive[f"layer_{i}_bias"], dtype=np.float64) for i in range(layers)
+            )
+    except (OSError, ValueError, KeyError) as error:
+        raise PolicyFileError(f"{path}: not a policy file ({error})") from None
+    if stored != actuation:
+        raise PolicyFileError(f"{path}: a policy for actuation {stored}, not {actuation}")
+    if not weights:
+        raise PolicyFileError(f"{path}: no layers")
+    inputs = FEATURE_SIZES[actuation]
+    for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
+        if weight.ndim != 2 or weight.shape[0] != inputs or bias.shape != (weight.shape[1],):
+            raise PolicyFileError(
+                f"{path}: layer {index} has shape {weight.shape} and bias {bias.shape}, "
+                f"expected ({inputs}, n) and (n,)"
+            )
+        if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
+            raise PolicyFileError(f"{path}: layer {index} holds non-finite weights")
+        inputs = weight.shape[1]
+    if inputs != ACTION_SIZES[actuation]:
+        raise PolicyFileError(
+            f"{path}: {inputs} outputs, an {actuation} policy has {ACTION_SIZES[actuation]}"
+        )
+    return PolicyNetwork(actuation, weights, biases, hashlib.sha256(content).hexdigest())

@@ -1,0 +1,77 @@
+"""RL-ACC: the PPO-trained policy that sets the stock ACC (paper section "ACC-Based Controller").
+
+Each control period the policy reads v, v_s (and the plan ahead), the minicar flag l and the ACC's
+speed and gap settings s and g (`policy.acc_features`) and outputs a requested speed setting and
+gap bars (`policy.requested_speed_mph`, `policy.requested_gap_setting`). The registry wraps it in
+the paper's clip (`AccClip`) like every `acc` controller; the agent's button sequencer realises the
+set point (gap first), behind the safety layer: the output is only a request.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from contract.controllers import Actuation, RlParams
+from contract.units import mps_to_mph
+from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
+from vehicle_agent.controllers.base import AccSetPoint, Controller, Observation
+from vehicle_agent.controllers.policy import (
+    PLAN_LOOKAHEAD_M,
+    acc_features,
+    load_policy,
+    requested_gap_setting,
+    requested_speed_mph,
+)
+
+# The policy the package ships (trained by `smoothfleet sim train`, manifest beside it).
+BUNDLED_POLICIES = Path(__file__).resolve().parent / "policies"
+
+
+def policy_path(params: RlParams, actuation: Actuation) -> Path:
+    """The policy file the params name, or the bundled `rl_<actuation>.npz`."""
+    if params.policy is not None:
+        return Path(params.policy)
+    return BUNDLED_POLICIES / f"rl_{actuation}.npz"
+
+
+def plan_ahead_mps(observation: Observation) -> float:
+    """The plan's target PLAN_LOOKAHEAD_M ahead (the target here when the plan is not held)."""
+    if observation.target is None or observation.position_m is None:
+        return observation.target_speed_mps
+    return observation.target.at(observation.position_m + PLAN_LOOKAHEAD_M)
+
+
+class RlAccController(Controller):
+    """The trained policy's speed setting and gap bars (actuation `acc`)."""
+
+    name = "rl_acc"
+
+    def __init__(self, actuation: Actuation, params: RlParams) -> None:
+        super().__init__(actuation)
+        self.network = load_policy(policy_path(params, actuation), "acc")
+        self.speeds_mph: deque[float] = deque(maxlen=CLIP_WINDOW_STEPS)
+
+    def step(self, observation: Observation) -> AccSetPoint:
+        """Features -> network -> set point (before the registry's clip)."""
+        speed_mph = mps_to_mph(observation.speed_mps)
+        self.speeds_mph.append(speed_mph)
+        setting = observation.acc_speed_setting_mph
+        gap = observation.acc_gap_setting
+        features = acc_features(
+            observation.speed_mps,
+            observation.target_speed_mps,
+            plan_ahead_mps(observation),
+            observation.lead_present,
+            speed_mph if setting is None else setting,
+            3 if gap is None else gap,
+        )
+        action = self.network.action(features)
+        mean_mph = sum(self.speeds_mph) / len(self.speeds_mph)
+        requested = float(requested_speed_mph(action[0], mean_mph))
+        bars = int(requested_gap_setting(action[1]))
+        if not np.isfinite(requested):
+            raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite speed")
+        return AccSetPoint(round(requested), bars, requested_speed_mph=requested)

@@ -1,0 +1,102 @@
+"""RL-Accel: the PPO-trained policy's acceleration request, for cars that take one (RAV4).
+
+The policy reads v, v_s (and the plan ahead), the minicar flag and, as the RAV4 measures them
+(paper Table 2), the space gap and the leader's relative speed (`policy.accel_features`). Its
+request is bounded by MicroAccel's safety term a_safe (paper eq. a_safe: never faster than the
+speed from which braking at a_min stops behind a leader braking at a_l,min), the same bound the
+training environment applies, then by the agent's limiter and safety layer like every request.
+"""
+
+from __future__ import annotations
+
+import math
+
+from contract.controllers import Actuation, MicroAccelParams, RlParams
+from vehicle_agent.controllers.base import AccelCommand, Controller, Observation
+from vehicle_agent.controllers.microaccel import (
+    LeadAccelEstimator,
+    safe_speed,
+    safe_speed_rate,
+    safety_accel,
+)
+from vehicle_agent.controllers.policy import (
+    ACCEL_ACTION_MAX_MPS2,
+    ACCEL_ACTION_MIN_MPS2,
+    accel_features,
+    load_policy,
+    requested_accel_mps2,
+)
+from vehicle_agent.controllers.rl_acc import plan_ahead_mps, policy_path
+
+# The safety term's gains and limits: MicroAccel's defaults.
+SAFETY = MicroAccelParams()
+
+
+def bounded_request(
+    request_mps2: float,
+    speed_mps: float,
+    gap_m: float | None,
+    rel_speed_mps: float | None,
+    lead_accel_mps2: float,
+) -> float:
+    """min(request, a_safe) within the action bounds; without a measured leader, the request."""
+    command = request_mps2
+    if gap_m is not None and rel_speed_mps is not None:
+        lead_speed = max(speed_mps + rel_speed_mps, 0.0)
+        v_safe = safe_speed(
+            gap_m,
+            lead_speed,
+            standstill_gap_m=SAFETY.standstill_gap_m,
+            min_accel_mps2=SAFETY.min_accel_mps2,
+            lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
+        )
+        rate = safe_speed_rate(
+            v_safe,
+            rel_speed_mps,
+            lead_speed,
+            lead_accel_mps2,
+            min_accel_mps2=SAFETY.min_accel_mps2,
+            lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
+        )
+        command = min(command, safety_accel(speed_mps, v_safe, rate, SAFETY.k))
+    return min(max(command, ACCEL_ACTION_MIN_MPS2), ACCEL_ACTION_MAX_MPS2)
+
+
+class RlAccelController(Controller):
+    """The trained policy's acceleration, bounded by a_safe (actuation `accel`)."""
+
+    name = "rl_accel"
+
+    def __init__(self, actuation: Actuation, params: RlParams) -> None:
+        super().__init__(actuation)
+        self.network = load_policy(policy_path(params, actuation), "accel")
+        self.lead_accel = LeadAccelEstimator(SAFETY.lead_accel_filter_s)
+
+    def reset(self) -> None:
+        """Forget the leader's speed history."""
+        self.lead_accel.reset()
+
+    def step(self, observation: Observation) -> AccelCommand:
+        """Features -> network -> request -> min with a_safe."""
+        gap: float | None = None
+        rel: float | None = None
+        lead_accel = 0.0
+        if observation.has_lead_state:
+            gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
+            rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
+            lead_accel = self.lead_accel.update(observation.time_s, observation.speed_mps + rel)
+        else:
+            self.lead_accel.reset()
+        features = accel_features(
+            observation.speed_mps,
+            observation.target_speed_mps,
+            plan_ahead_mps(observation),
+            gap is not None,
+            math.inf if gap is None else gap,
+            0.0 if rel is None else rel,
+        )
+        request = float(requested_accel_mps2(self.network.action(features)[0]))
+        command = bounded_request(request, observation.speed_mps, gap, rel, lead_accel)
+        if not math.isfinite(command):
+            raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite request")
+        return AccelCommand(command)
