@@ -1,0 +1,40 @@
+"""Cross-validation folds keep whole dates apart."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.drives import drive_from_speeds
+from sim.folds import date_folds, drive_date
+
+
+def test_every_date_is_held_out_exactly_once_and_never_trained_on() -> None:
+    names = [
+        "2021-03-08-22-35-14_masterArray_0_5373",
+        "2021-03-08-22-35-14_masterArray_1_4961",
+        "2021-03-09-13-35-04_masterArray_0_4633",
+        "2021-03-12-22-20-57_masterArray_0_7509",
+        "2021-04-07-12-33-03_masterArray_0_4031",
+        "2021-04-07-21-22-07_masterArray_0_4882",
+    ]
+    drives = [drive_from_speeds(name, np.full(10, 20.0)) for name in names]
+    folds = date_folds(drives, 2)
+    # dates sorted: 03-08, 03-09, 03-12, 04-07 -> fold 0 holds out 03-08 and 03-12
+    assert folds[0].held_out_dates == ["2021-03-08", "2021-03-12"]
+    assert folds[1].held_out_dates == ["2021-03-09", "2021-04-07"]
+    for fold in folds:
+        assert not set(fold.train_dates) & set(fold.held_out_dates)
+        assert len(fold.train) + len(fold.held_out) == len(drives)
+    held = [drive.name for fold in folds for drive in fold.held_out]
+    assert sorted(held) == sorted(names)
+    # both drives of one date stay together (two recordings of 2021-03-08)
+    assert {drive_date(drive) for drive in folds[1].train} == {"2021-03-08", "2021-03-12"}
+
+
+def test_impossible_folds_are_refused() -> None:
+    drives = [drive_from_speeds("2021-03-08-x", np.full(10, 20.0))]
+    with pytest.raises(ValueError, match="at least 2 folds"):
+        date_folds(drives, 1)
+    with pytest.raises(ValueError, match="1 dates cannot fill 2 folds"):
+        date_folds(drives, 2)
