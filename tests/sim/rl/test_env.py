@@ -1,0 +1,152 @@
+"""The RL training environment: the paper's MDP over many platoons at once."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.drives import Drive, drive_from_speeds
+from sim.energy import RAV4_2019
+from sim.platoon import VEHICLE_LENGTH_M
+from sim.rl.env import EnvConfig, PlatoonVecEnv, RewardWeights
+
+STEADY = drive_from_speeds("2021-01-01-steady", np.full(6001, 20.0))
+ONLY_GAP = RewardWeights(accel=0.0, speed=0.0, fuel=0.0, gap=1.0, collision=1.0)
+
+
+def steady_env(
+    actuation: str, reward: RewardWeights, envs: int = 2, episode_s: float = 60.0
+) -> PlatoonVecEnv:
+    config = EnvConfig(
+        "acc" if actuation == "acc" else "accel", humans=3, episode_s=episode_s, reward=reward
+    )
+    env = PlatoonVecEnv([STEADY], envs, config)
+    env.reset(seed=1)
+    return env
+
+
+def place_av(env: PlatoonVecEnv, gap_m: float) -> None:
+    env.position[:, 1] = env.position[:, 0] - VEHICLE_LENGTH_M - gap_m
+
+
+def test_observations_and_actions_are_batched_rows() -> None:
+    env = PlatoonVecEnv([STEADY], 4, EnvConfig("acc", humans=3, episode_s=60.0))
+    observation, _ = env.reset(seed=3)
+    assert observation.shape == (4, 6)
+    assert env.action_space.shape == (4, 2)
+    # steady 20 m/s: v = v_s = 20 m/s everywhere (features / 30), leader within radar range
+    np.testing.assert_allclose(observation[:, :3], 20.0 / 30.0, atol=1e-6)
+    np.testing.assert_array_equal(observation[:, 3], 1.0)
+    observation, reward, terminated, truncated, _ = env.step(np.zeros((4, 2)))
+    assert observation.shape == (4, 6)
+    assert reward.shape == (4,)
+    assert not terminated.any()
+    assert not truncated.any()
+
+
+def test_reward_without_penalties_is_one() -> None:
+    env = steady_env("accel", RewardWeights(0.0, 0.0, 0.0, 0.0, 0.0))
+    _, reward, *_ = env.step(np.zeros((2, 1)))
+    np.testing.assert_array_equal(reward, 1.0)
+
+
+def test_fuel_term_is_the_mean_fuel_rate_of_the_av_and_the_humans_behind() -> None:
+    env = steady_env("accel", RewardWeights(0.0, 0.0, 1.0, 0.0, 0.0))
+    # the AV 60 m behind the leader (free to hold its speed), the humans at their spacing
+    env.position[:, 1:] -= (
+        60.0 - (env.position[:, 0] - env.position[:, 1] - VEHICLE_LENGTH_M)[:, None]
+    )
+    before = env.speed[:, 1:].copy()
+    _, reward, *_ = env.step(np.zeros((2, 1)))
+    accel = (env.speed[:, 1:] - before) / 0.1
+    expected = 1.0 - RAV4_2019.fuel_rate_gps(before, accel).mean(axis=1)
+    np.testing.assert_allclose(reward, expected)
+    # everyone steady at 20 m/s: f = c0 + c1 v + c3 v^3 = 0.1463 + 0.2436 + 0.2195 = 0.609 g/s
+    assert reward[0] == pytest.approx(1.0 - 0.609, abs=0.001)
+
+
+@pytest.mark.parametrize(
+    ("gap_m", "reward"),
+    [
+        (50.0, 1.0),  # 2.5 s at 20 m/s: inside
+        (130.0, 0.0),  # beyond h_max = 120 m
+        (15.0, 0.0),  # 0.75 s: under the 1 s minimum time gap
+    ],
+)
+def test_gap_term_is_the_papers_intervention_penalty(gap_m: float, reward: float) -> None:
+    env = steady_env("accel", ONLY_GAP)
+    place_av(env, gap_m)
+    _, rewards, *_ = env.step(np.zeros((2, 1)))
+    np.testing.assert_allclose(rewards, reward)
+
+
+def test_speed_term_is_the_square_of_the_distance_to_the_plan() -> None:
+    env = steady_env("accel", RewardWeights(0.0, 0.01, 0.0, 0.0, 0.0))
+    env.speed[:, 1] = 25.0
+    # the plan says 20 m/s; 5 m/s faster costs 0.01 x 25
+    _, reward, *_ = env.step(np.zeros((2, 1)))
+    np.testing.assert_allclose(reward, 1.0 - 0.25, atol=1e-6)
+
+
+def test_a_collision_ends_the_episode_with_the_steps_left_as_penalty() -> None:
+    env = steady_env("accel", ONLY_GAP)
+    place_av(env, 50.0)
+    env.position[0, 1] = env.position[0, 0] - VEHICLE_LENGTH_M - 0.5
+    env.speed[0, 1] = 30.0  # closing at 10 m/s: touches within the step
+    _, reward, terminated, truncated, infos = env.step(np.zeros((2, 1)))
+    assert terminated.tolist() == [True, False]
+    assert not truncated.any()
+    # outside the bounds (0) and 599 steps left of 600
+    assert reward[0] == pytest.approx(0.0 - 599.0)
+    assert infos["_final_obs"].tolist() == [True, False]
+    assert env.elapsed[0] == 0  # restarted within the same step
+
+
+def test_episodes_are_truncated_at_their_length() -> None:
+    env = steady_env("accel", ONLY_GAP, episode_s=1.0)
+    for _ in range(9):
+        _, _, terminated, truncated, _ = env.step(np.zeros((2, 1)))
+        assert not truncated.any()
+    _, _, terminated, truncated, infos = env.step(np.zeros((2, 1)))
+    assert truncated.all()
+    assert not terminated.any()
+    assert infos["final_obs"].shape == (2, 6)
+
+
+def test_acc_actions_go_through_the_clip_and_the_button_sequencer_gap_first() -> None:
+    env = steady_env("acc", ONLY_GAP, envs=1)
+    car = env.cars[0]
+    assert (car.acc.set_speed_mph, car.acc.gap_setting) == (45, 3)  # 20 m/s = 44.7 mph
+    # ask for 1 bar and +5 mph (the clip's ceiling over the last second's mean)
+    settings = []
+    for _ in range(60):
+        env.step(np.array([[1.0, -1.0]]))
+        settings.append((car.acc.set_speed_mph, car.acc.gap_setting))
+    # one press per 0.5 s: the gap moves 3 -> 2 -> 1 before the speed setting moves at all
+    first_speed_change = next(i for i, (speed, _) in enumerate(settings) if speed != 45)
+    first_gap_one = next(i for i, (_, gap) in enumerate(settings) if gap == 1)
+    assert first_gap_one < first_speed_change
+    assert settings[0] == (45, 3)
+    # never above the clip's ceiling: the last second's mean speed + 5 mph
+    for step, (speed, _) in enumerate(settings):
+        assert speed <= 45 + 5 * (1 + step // 10)
+
+
+def test_the_same_seed_starts_the_same_windows() -> None:
+    other = drive_from_speeds("2021-01-02-other", np.linspace(10.0, 30.0, 9001))
+    drives: list[Drive] = [STEADY, other]
+    first = PlatoonVecEnv(drives, 8, EnvConfig("accel", humans=2, episode_s=60.0))
+    second = PlatoonVecEnv(drives, 8, EnvConfig("accel", humans=2, episode_s=60.0))
+    first.reset(seed=5)
+    second.reset(seed=5)
+    np.testing.assert_array_equal(first.start_step, second.start_step)
+    np.testing.assert_array_equal(first.road_index, second.road_index)
+
+
+def test_configuration_errors_say_what_is_wrong() -> None:
+    with pytest.raises(ValueError, match="at least one human"):
+        EnvConfig("acc", humans=0)
+    with pytest.raises(ValueError, match="no drive is longer than an episode"):
+        PlatoonVecEnv([STEADY], 2, EnvConfig("acc", episode_s=1000.0))
+    with pytest.raises(ValueError, match="non-finite action"):
+        steady_env("accel", ONLY_GAP).step(np.full((2, 1), np.nan))
