@@ -164,7 +164,7 @@ class SimulatedPlanner:
                 )
             ],
         )
-        self._lane_plan = LanePlan(agent_plan, SIM_LANE, None, now_s)
+        self._lane_plan = LanePlan(agent_plan, SIM_LANE, None)
         self._published_at_s = now_s
         self.plans_run += 1
         self.plans_buffered += int(bool(plan.is_buffer.any()))

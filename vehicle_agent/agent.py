@@ -48,7 +48,15 @@ from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
-from vehicle_agent.server import ServerClient, ServerError
+from vehicle_agent.server import (
+    NewPlan,
+    NotAuthorized,
+    NoValidPlan,
+    ServerClient,
+    ServerError,
+    ServerUnavailable,
+    UnexpectedAnswer,
+)
 from vehicle_agent.spool import PingSpool
 from vehicle_agent.state import CarStateReader
 from vehicle_agent.stopping import reading_needs_hand_back
@@ -240,7 +248,7 @@ class Agent:
         plan_fresh = (
             assignment is not None
             and lane_plan is not None
-            and lane_plan.is_fresh(now, wall, assignment.config.stale_plan_after_s)
+            and lane_plan.is_fresh(wall, assignment.config.stale_plan_after_s)
         )
         previous = self.state
         self.state = engage.step(
@@ -577,7 +585,8 @@ class Agent:
 
     def _server_failed(self, what: str, error: ServerError) -> None:
         self.stats.server_errors[what] += 1
-        log.warning("%s", error)
+        # A token the server refuses needs a person; the other failures pass by themselves.
+        log.log(logging.ERROR if isinstance(error, NotAuthorized) else logging.WARNING, "%s", error)
 
     def _refresh_config(self, now: float) -> None:
         assert self.server is not None
@@ -630,7 +639,7 @@ class Agent:
         if config is None:
             return False
         try:
-            self.lane_plan = LanePlan(plan, config.assigned_lane, etag, self.clock.monotonic())
+            self.lane_plan = LanePlan(plan, config.assigned_lane, etag)
         except PlanError as error:
             self.stats.plans_refused += 1
             log.warning("%s", error)
@@ -639,26 +648,34 @@ class Agent:
         return True
 
     def _poll_plan(self, now: float, config: VehicleConfig) -> None:
+        """Poll the plan. Whatever the network does, the held plan is kept and followed until
+        its own valid_until (or stale_plan_after_s of age); only the server's explicit "no valid
+        plan" ends it sooner (vehicle_agent/server.py lists every outcome)."""
         assert self.server is not None
         held = self.lane_plan
         try:
             fetched = self.server.plan(held.etag if held else None)
         except ServerError as error:
             self._server_failed("plan", error)
-            if "refused" in str(error):
-                self.stats.plans_refused += 1
-                self.lane_plan = None
+            if isinstance(error, UnexpectedAnswer) and error.status == 200:
+                self.stats.plans_refused += 1  # a plan the agent will not follow
             self._plan_schedule.failed(now, config.plan_poll_s)
+            if isinstance(error, ServerUnavailable) and error.retry_after_s:
+                self._retry_after(now, error.retry_after_s)
             return
         self._plan_schedule.done(now, config.plan_poll_s)
-        if fetched.status == "unavailable":
+        if isinstance(fetched, NoValidPlan):
             self.lane_plan = None
             if fetched.retry_after_s:
-                self._plan_schedule.next_s = now + min(fetched.retry_after_s, MAX_RETRY_AFTER_S)
-        elif fetched.status == "unchanged" and held is not None:
-            held.confirmed_s = now
-        elif fetched.plan is not None:
+                self._retry_after(now, fetched.retry_after_s)
+        elif isinstance(fetched, NewPlan):
             self.accept_plan(fetched.plan, fetched.etag)
+
+    def _retry_after(self, now: float, retry_after_s: float) -> None:
+        """The next plan poll no sooner than the server asked (bounded by MAX_RETRY_AFTER_S)."""
+        self._plan_schedule.next_s = max(
+            self._plan_schedule.next_s, now + min(retry_after_s, MAX_RETRY_AFTER_S)
+        )
 
     def upload(self, now: float | None = None) -> int:
         """Send spooled pings, oldest first, in batches; returns how many left the spool."""

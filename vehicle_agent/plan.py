@@ -121,14 +121,13 @@ def parse_plan(body: bytes | str) -> Plan:
 class LanePlan:
     """One lane of a plan, ready for lookups, and what the agent knows about its freshness."""
 
-    def __init__(self, plan: Plan, lane: int, etag: str | None, confirmed_s: float) -> None:
+    def __init__(self, plan: Plan, lane: int, etag: str | None) -> None:
         lane_plan = plan.lane(lane)
         if lane_plan is None:
             raise PlanError(f"plan {plan.plan_id} has no lane {lane}")
         self.plan = plan
         self.lane = lane
         self.etag = etag
-        self.confirmed_s = confirmed_s
         self.x_m, self.speeds = lane_plan.profile_points()
 
     @property
@@ -140,11 +139,15 @@ class LanePlan:
         """Seconds since the plan was published."""
         return (wall - self.plan.published_at).total_seconds()
 
-    def is_fresh(self, now_s: float, wall: datetime, stale_after_s: float) -> bool:
-        """Published and confirmed by the server within `stale_after_s`, and still valid."""
+    def is_fresh(self, wall: datetime, stale_after_s: float) -> bool:
+        """Before its own valid_until and published within `stale_after_s`.
+
+        Whether the server could be reached since does not matter: a plan stays right for as
+        long as its publisher said, so a server restart or a network gap does not end it.
+        """
         if self.plan.valid_until is not None and wall > self.plan.valid_until:
             return False
-        return self.age_s(wall) <= stale_after_s and now_s - self.confirmed_s <= stale_after_s
+        return self.age_s(wall) <= stale_after_s
 
     def profile(self, wall: datetime, wave_speed_mps: float) -> TargetProfile:
         """Targets as seen now: the lookup moves downstream by -wave speed x plan age."""

@@ -1,7 +1,21 @@
 """The agent's side of the server contract (docs/interfaces.md): config, corridor, plan,
 pings and status, over an injected httpx client (a real one in the car, the demo's in-process
-transport or a test server elsewhere). Every call has a short timeout and raises `ServerError`
-(with the status code when there was one) instead of letting transport errors escape.
+transport or a test server elsewhere). Every call has a short timeout.
+
+A failed call raises one `ServerError` subclass per cause, each with one effect on the agent
+(docs/agent.md, "When the server is away"):
+
+| error | cause | effect |
+|---|---|---|
+| `ServerUnreachable` | no connection (refused, DNS, reset) | keep the plan, retry with backoff |
+| `ServerTimeout` | no answer within the timeout | keep the plan, retry with backoff |
+| `ServerUnavailable` | 5xx, 503 `database_unavailable` | keep the plan, retry after Retry-After |
+| `NotAuthorized` | 401 / 403 | keep the plan, log an error, retry (a token to fix) |
+| `UnexpectedAnswer` | another status, or a body not in the contract | keep the plan, retry |
+
+A plan poll answers one of three outcomes instead: `NewPlan` (200), `PlanUnchanged` (304) and
+`NoValidPlan` (503 with code `no_valid_plan`), the only answer that ends the plan the car follows
+before its own `valid_until`.
 """
 
 from __future__ import annotations
@@ -9,32 +23,85 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import httpx
 from pydantic import ValidationError
 
 from contract.corridor import CorridorGeometry
+from contract.errors import NO_VALID_PLAN, ErrorResponse
 from contract.vehicles import PingAnswer, VehicleConfig
 from vehicle_agent.plan import Plan, PlanError, parse_plan
 
 
 class ServerError(Exception):
-    """A call failed: no answer, an error status, or an answer that is not what was agreed."""
+    """A call failed; the subclass says how, `status` is the HTTP status when there was one."""
 
     def __init__(self, message: str, status: int | None = None) -> None:
         super().__init__(message)
         self.status = status
 
 
-@dataclass(frozen=True)
-class PlanFetch:
-    """The outcome of one plan poll."""
+class ServerUnreachable(ServerError):
+    """No connection to the server (refused, unresolvable, reset before an answer)."""
 
-    status: Literal["new", "unchanged", "unavailable"]
-    plan: Plan | None = None
-    etag: str | None = None
-    retry_after_s: float | None = None
+
+class ServerTimeout(ServerError):
+    """The server did not answer within the call's timeout."""
+
+
+class ServerUnavailable(ServerError):
+    """A 5xx: the server is up but cannot serve now (e.g. its database is away)."""
+
+    def __init__(self, message: str, status: int, retry_after_s: float | None) -> None:
+        super().__init__(message, status)
+        self.retry_after_s = retry_after_s
+
+
+class NotAuthorized(ServerError):
+    """401 or 403: the token is missing, revoked, or may not do this."""
+
+
+class UnexpectedAnswer(ServerError):
+    """Any other status, or a body that is not what the contract says."""
+
+
+@dataclass(frozen=True)
+class NewPlan:
+    """200: a plan (new, or changed since the ETag the car sent)."""
+
+    plan: Plan
+    etag: str | None
+
+
+@dataclass(frozen=True)
+class PlanUnchanged:
+    """304: the plan held (by its ETag) is still the latest."""
+
+
+@dataclass(frozen=True)
+class NoValidPlan:
+    """503 `no_valid_plan`: the server holds no valid plan; the car hands back."""
+
+    retry_after_s: float | None
+
+
+PlanFetch = NewPlan | PlanUnchanged | NoValidPlan
+
+
+def _retry_after(response: httpx.Response) -> float | None:
+    value = response.headers.get("Retry-After")
+    try:
+        return float(value) if value is not None else None
+    except ValueError:
+        return None
+
+
+def _error_body(response: httpx.Response) -> ErrorResponse | None:
+    try:
+        return ErrorResponse.model_validate_json(response.content)
+    except ValidationError:
+        return None
 
 
 class ServerClient:
@@ -66,18 +133,25 @@ class ServerClient:
                 headers={**self.headers, **(headers or {})},
                 timeout=self.timeout,
             )
-        except httpx.HTTPError as error:
-            raise ServerError(f"{method} {path}: {type(error).__name__}: {error}") from None
+        except httpx.TimeoutException as error:
+            raise ServerTimeout(f"{method} {path}: no answer ({type(error).__name__})") from None
+        except httpx.TransportError as error:
+            raise ServerUnreachable(f"{method} {path}: {type(error).__name__}: {error}") from None
         self.last_rtt_ms = (time.perf_counter() - started) * 1000.0
         return response
 
     @staticmethod
     def _fail(response: httpx.Response, what: str) -> ServerError:
-        try:
-            detail = response.json().get("detail")
-        except ValueError:
-            detail = response.text[:200]
-        return ServerError(f"{what}: HTTP {response.status_code} {detail}", response.status_code)
+        """The typed error for an answer that is not the call's success."""
+        body = _error_body(response)
+        detail = body.detail if body is not None else response.text[:200]
+        status = response.status_code
+        message = f"{what}: HTTP {status} {detail}"
+        if status in (401, 403):
+            return NotAuthorized(message, status)
+        if status >= 500:
+            return ServerUnavailable(message, status, _retry_after(response))
+        return UnexpectedAnswer(message, status)
 
     def config(self) -> VehicleConfig:
         """What this vehicle should run."""
@@ -87,7 +161,7 @@ class ServerClient:
         try:
             return VehicleConfig.model_validate_json(response.content)
         except ValidationError as error:
-            raise ServerError(
+            raise UnexpectedAnswer(
                 f"config: not a vehicle config ({error.errors()[0]['msg']})"
             ) from None
 
@@ -100,28 +174,25 @@ class ServerClient:
             body = response.json()
             return CorridorGeometry.from_segments(corridor_id, int(body["lanes"]), body["segments"])
         except (ValueError, KeyError, TypeError) as error:
-            raise ServerError(f"corridor: unusable geometry ({error})") from None
+            raise UnexpectedAnswer(f"corridor: unusable geometry ({error})") from None
 
     def plan(self, etag: str | None) -> PlanFetch:
-        """Poll the vehicle's plan with If-None-Match; 503 means no valid plan exists."""
+        """Poll the vehicle's plan with If-None-Match (see the module's table of outcomes)."""
         headers = {"If-None-Match": etag} if etag else None
         response = self._request("GET", f"/api/v1/vehicles/{self.vehicle_id}/plan", headers=headers)
         if response.status_code == 304:
-            return PlanFetch("unchanged", etag=etag)
+            return PlanUnchanged()
         if response.status_code == 503:
-            retry = response.headers.get("Retry-After")
-            try:
-                retry_after = float(retry) if retry is not None else None
-            except ValueError:
-                retry_after = None
-            return PlanFetch("unavailable", retry_after_s=retry_after)
+            body = _error_body(response)
+            if body is not None and body.code == NO_VALID_PLAN:
+                return NoValidPlan(_retry_after(response))
         if response.status_code != 200:
             raise self._fail(response, "plan")
         try:
             plan = parse_plan(response.content)
         except PlanError as error:
-            raise ServerError(str(error)) from None
-        return PlanFetch("new", plan=plan, etag=response.headers.get("ETag"))
+            raise UnexpectedAnswer(str(error), response.status_code) from None
+        return NewPlan(plan, response.headers.get("ETag"))
 
     def post_pings(self, pings: Sequence[Mapping[str, Any]]) -> PingAnswer:
         """Upload a batch; the answer comes only after the server committed the accepted rows."""
@@ -131,7 +202,9 @@ class ServerClient:
         try:
             return PingAnswer.model_validate_json(response.content)
         except ValidationError as error:
-            raise ServerError(f"pings: unexpected answer ({error.errors()[0]['msg']})") from None
+            raise UnexpectedAnswer(
+                f"pings: unexpected answer ({error.errors()[0]['msg']})"
+            ) from None
 
     def post_status(self, report: Mapping[str, Any]) -> None:
         """Post a piStatus report."""

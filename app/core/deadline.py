@@ -23,6 +23,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.core.errors import RETRY_AFTER_S
 from app.core.logs import RepeatedMessages
+from contract.errors import DATABASE_UNAVAILABLE
 
 log = logging.getLogger(__name__)
 log.addFilter(RepeatedMessages())
@@ -90,7 +91,9 @@ class RequestDeadline:
             _route_of(scope),
             self.deadline_s,
         )
-        body = orjson.dumps({"detail": "database not answering in time, retry later"})
+        body = orjson.dumps(
+            {"detail": "database not answering in time, retry later", "code": DATABASE_UNAVAILABLE}
+        )
         await send(
             {
                 "type": "http.response.start",

@@ -18,7 +18,7 @@ from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.logs import RepeatedMessages
-from contract.errors import ErrorResponse
+from contract.errors import DATABASE_UNAVAILABLE, ErrorCode, ErrorResponse
 
 log = logging.getLogger(__name__)
 log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a request
@@ -49,10 +49,14 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
     }
 
 
-def service_unavailable(detail: str, retry_after_s: int = RETRY_AFTER_S) -> JSONResponse:
-    """A 503 in the API's error shape."""
+def service_unavailable(
+    detail: str, retry_after_s: int = RETRY_AFTER_S, code: ErrorCode = DATABASE_UNAVAILABLE
+) -> JSONResponse:
+    """A 503 in the API's error shape, with the code that tells a car what it means."""
     return JSONResponse(
-        {"detail": detail}, status_code=503, headers={"Retry-After": str(retry_after_s)}
+        {"detail": detail, "code": code},
+        status_code=503,
+        headers={"Retry-After": str(retry_after_s)},
     )
 
 

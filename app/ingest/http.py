@@ -26,6 +26,7 @@ from app.core.ratelimit import retry_after_header
 from app.ingest.pings import BodyError, ForeignVehicle
 from app.ingest.service import Ingest, RowsRefused
 from app.ingest.writer import WriterStopped
+from contract.errors import DATABASE_UNAVAILABLE
 
 log = logging.getLogger(__name__)
 log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a request
@@ -48,7 +49,8 @@ def _error(status: int, detail: str, headers: dict[str, str] | None = None) -> R
 
 
 def _unavailable(detail: str) -> Reply:
-    return _error(503, detail, {"Retry-After": str(RETRY_AFTER_S)})
+    body = orjson.dumps({"detail": detail, "code": DATABASE_UNAVAILABLE})
+    return Reply(503, body, {"Retry-After": str(RETRY_AFTER_S)})
 
 
 def _is_outage(error: Exception) -> bool:

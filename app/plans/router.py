@@ -25,6 +25,7 @@ from app.plans.service import (
     plan_history,
     vehicle_assignment,
 )
+from contract.errors import NO_VALID_PLAN
 from contract.plans import PlanOut
 from contract.vehicles import VEHICLE_ID_PATTERN
 
@@ -81,6 +82,7 @@ async def _serve_latest(
         return service_unavailable(
             f"no valid plan for {corridor_id}: leave the car to its stock ACC",
             retry_after_s=max(1, round(settings.planner_period_s)),
+            code=NO_VALID_PLAN,
         )
     etag = f'"plan-{plan_id}-lane-{lane if lane is not None else "all"}"'
     headers = {"ETag": etag, "Cache-Control": "no-cache"}

@@ -198,6 +198,8 @@ def test_without_a_valid_plan_vehicles_are_told_to_retry(
         assert response.status_code == 503
         assert response.headers["Retry-After"] == "60"
         assert "no valid plan for I-24-WB" in response.json()["detail"]
+        # the code a car reads to hand back (a database outage has another one)
+        assert response.json()["code"] == "no_valid_plan"
         # An expired plan is no plan either.
         with seeded_engine.begin() as connection:
             connection.execute(

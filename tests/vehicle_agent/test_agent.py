@@ -89,7 +89,9 @@ def test_stale_plan_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path
         engage_and_settle(r)
         plan = r.agent.lane_plan
         assert plan is not None
-        stale_at = plan.confirmed_s + 5.0
+        # stale 5 s after it was published, whenever it was last confirmed
+        age_s = (r.clock.now() - plan.plan.published_at).total_seconds()
+        stale_at = r.clock.monotonic() - age_s + 5.0
         r.run(stale_at - r.clock.monotonic() - 0.01)
         assert engaged(r)
         assert hand_back_time(r, stale_at) <= CONTROL_PERIOD_S

@@ -63,11 +63,11 @@ def test_non_finite_speeds_and_missing_lanes_are_refused() -> None:
     with pytest.raises(PlanError):
         parse_plan(body().replace("10.0]", "NaN]"))
     with pytest.raises(PlanError, match="has no lane 3"):
-        LanePlan(parse_plan(body()), 3, None, 0.0)
+        LanePlan(parse_plan(body()), 3, None)
 
 
 def test_targets_hold_over_each_sub_segment_and_move_downstream_with_age() -> None:
-    lane = LanePlan(parse_plan(body()), 2, '"abc"', confirmed_s=50.0)
+    lane = LanePlan(parse_plan(body()), 2, '"abc"')
     fresh = lane.profile(PUBLISHED, wave_speed_mps=-5.0)
     assert fresh.at(50.0) == 30.0
     assert fresh.at(150.0) == 20.0
@@ -77,9 +77,10 @@ def test_targets_hold_over_each_sub_segment_and_move_downstream_with_age() -> No
     assert lane.profile(PUBLISHED + timedelta(seconds=20), -5.0).at(50.0) == 20.0
 
 
-def test_freshness_needs_a_recent_plan_a_recent_confirmation_and_validity() -> None:
-    lane = LanePlan(parse_plan(body()), 2, None, confirmed_s=50.0)
-    assert lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=60), stale_after_s=120.0)
-    assert not lane.is_fresh(200.0, PUBLISHED + timedelta(seconds=60), stale_after_s=120.0)
-    assert not lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=121), stale_after_s=120.0)
-    assert not lane.is_fresh(60.0, PUBLISHED + timedelta(seconds=181), stale_after_s=600.0)
+def test_freshness_is_the_plans_own_age_and_validity() -> None:
+    lane = LanePlan(parse_plan(body()), 2, None)
+    assert lane.is_fresh(PUBLISHED + timedelta(seconds=60), stale_after_s=120.0)
+    assert not lane.is_fresh(PUBLISHED + timedelta(seconds=121), stale_after_s=120.0)
+    # valid_until (published + 180 s) ends it even when stale_plan_after_s would not
+    assert lane.is_fresh(PUBLISHED + timedelta(seconds=180), stale_after_s=600.0)
+    assert not lane.is_fresh(PUBLISHED + timedelta(seconds=181), stale_after_s=600.0)
