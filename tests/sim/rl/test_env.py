@@ -34,8 +34,14 @@ def test_observations_and_actions_are_batched_rows() -> None:
     observation, _ = env.reset(seed=3)
     assert observation.shape == (4, 6)
     assert env.action_space.shape == (4, 2)
-    # steady 20 m/s: v = v_s = 20 m/s everywhere (features / 30), leader within radar range
-    np.testing.assert_allclose(observation[:, :3], 20.0 / 30.0, atol=1e-6)
+    # v = 20 m/s (features / 30); v_s here and 500 m ahead as the planner's plan says
+    np.testing.assert_allclose(observation[:, 0], 20.0 / 30.0)
+    for env_index, planner in enumerate(env.planners):
+        time_s = float(env.start_step[env_index]) * 0.1
+        profile = planner.profile(time_s)
+        x = float(env.position[env_index, 1])
+        assert observation[env_index, 1] == pytest.approx(profile.at(x) / 30.0)
+        assert observation[env_index, 2] == pytest.approx(profile.at(x + 500.0) / 30.0)
     np.testing.assert_array_equal(observation[:, 3], 1.0)
     observation, reward, terminated, truncated, _ = env.step(np.zeros((4, 2)))
     assert observation.shape == (4, 6)
@@ -83,9 +89,10 @@ def test_gap_term_is_the_papers_intervention_penalty(gap_m: float, reward: float
 def test_speed_term_is_the_square_of_the_distance_to_the_plan() -> None:
     env = steady_env("accel", RewardWeights(0.0, 0.01, 0.0, 0.0, 0.0))
     env.speed[:, 1] = 25.0
-    # the plan says 20 m/s; 5 m/s faster costs 0.01 x 25
+    plan = env.target_here.copy()
+    # 0.01 per (m/s)^2 off the plan's target at the AV (e.g. 5 m/s off costs 0.25)
     _, reward, *_ = env.step(np.zeros((2, 1)))
-    np.testing.assert_allclose(reward, 1.0 - 0.25, atol=1e-6)
+    np.testing.assert_allclose(reward, 1.0 - 0.01 * (25.0 - plan) ** 2)
 
 
 def test_a_collision_ends_the_episode_with_the_steps_left_as_penalty() -> None:
