@@ -57,6 +57,10 @@ TOLERANCE = 0.2
 # The block bootstrap of the real statistics' standard errors.
 BOOTSTRAP_BLOCK_S = 120.0
 BOOTSTRAP_RESAMPLES = 200
+LEGEND = (
+    "real/simulated; unmarked: within +/-20 % of the real value; *: outside +/-20 % but within "
+    "the real value's standard error; !: outside both"
+)
 # The shifts of the feed (s) whose pooled MAE the fit matches besides the statistics.
 CURVE_SHIFTS_S = (-300.0, -150.0, 150.0, 300.0, 600.0)
 # The grid each parameter is searched on.
@@ -291,6 +295,7 @@ def compare(
     for drive, path in zip(drives, simulated, strict=True):
         say(side_by_side(drive_label(drive.recorded.drive), [path], [drive.real]))
     say(side_by_side("all drives", simulated, [drive.real for drive in drives]))
+    say(LEGEND)
 
 
 def cross_validate(drives: Sequence[CalibrationDrive], say: Callable[[str], None]) -> None:
@@ -307,6 +312,7 @@ def cross_validate(drives: Sequence[CalibrationDrive], say: Callable[[str], None
         say(side_by_side(f"{date} held out", paths, [drive.real for drive in held_out]))
         say(f"    fitted on the other dates: {parameters(model)}")
     say(side_by_side("every date held out", held_out_paths, [drive.real for drive in drives]))
+    say(LEGEND)
 
 
 def parameters(model: FeedModel) -> str:

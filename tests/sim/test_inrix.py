@@ -221,6 +221,7 @@ def calibration_drives() -> list[CalibrationDrive]:
     return [CalibrationDrive.of(recorded) for recorded in load_recorded_drives(INRIX_DRIVES)]
 
 
+@pytest.mark.slow
 def test_the_calibrated_feed_has_the_real_feeds_error_statistics_within_20_percent(
     calibration_drives: list[CalibrationDrive],
 ) -> None:
