@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.evaluation import ProbeDrive
 from sim.drives import Drive
 from sim.traffic import SAMPLE_SPACING_M, InrixFeed, WaveField
 
@@ -187,6 +188,13 @@ def simulated_feed(
     )
 
 
+def probe_samples(drive: Drive) -> ProbeDrive:
+    """The car once a second (PROBE_STEP_S): time, distance along the drive, speed."""
+    every = int(round(PROBE_STEP_S / drive.dt_s))
+    time_s = np.arange(0, drive.steps + 1, every, dtype=np.float64) * drive.dt_s
+    return ProbeDrive(time_s, drive.position_m[::every], drive.speed_mps[::every])
+
+
 @dataclass(frozen=True)
 class ProbePairing:
     """Which reading the car is compared with every second, for every shift of the feed.
@@ -208,17 +216,15 @@ class ProbePairing:
         cls, drive: Drive, feed: InrixFeed, shifts_s: FloatArray = LAG_SEARCH_S
     ) -> ProbePairing:
         """The car of `drive` against readings stamped and placed like `feed`'s."""
-        every = int(round(PROBE_STEP_S / drive.dt_s))
-        time_s = np.arange(0, drive.steps + 1, every, dtype=np.float64) * drive.dt_s
-        x_m = drive.position_m[::every]
+        probe = probe_samples(drive)
+        time_s, x_m = probe.time_s, probe.x_m
         segment = np.searchsorted(feed.segment_start_m, x_m, side="right") - 1
         on_road = (segment >= 0) & (x_m < feed.segment_end_m[-1])
         row = np.searchsorted(feed.measured_at_s, time_s[None, :] + shifts_s[:, None], "right") - 1
         valid = on_road[None, :] & (row >= 0)
         segments = feed.speed_mps.shape[1]
         flat = row.clip(0) * segments + segment.clip(0)[None, :]
-        speed = drive.speed_mps[::every]
-        return cls(shifts_s, time_s, speed, flat.astype(np.int64), valid, drive.name)
+        return cls(shifts_s, time_s, probe.speed_mps, flat.astype(np.int64), valid, drive.name)
 
     def errors(self, speed_mps: FloatArray) -> PathErrors:
         """Reading minus the car's speed, `[shift, second]`, NaN where there is no reading."""

@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from planner import InrixHistory, PlannerParams
+from planner.evaluation import DriveErrors, evaluate_drive
 from sim.drives import Drive
 from sim.inrix import (
     CALIBRATED,
@@ -43,9 +45,12 @@ from sim.inrix import (
     field_grid,
     mae_curve,
     measured,
+    probe_samples,
     segment_series,
+    simulated_feed,
     window_means,
 )
+from sim.plans import simulated_grid
 from sim.recorded import RecordedDrive, load_recorded_drives
 from sim.traffic import WaveField
 
@@ -61,6 +66,8 @@ LEGEND = (
     "real/simulated; unmarked: within +/-20 % of the real value; *: outside +/-20 % but within "
     "the real value's standard error; !: outside both"
 )
+# The planner's TSE variants compared on both feeds (planner/evaluation.py).
+TSE_VARIANTS = ("inrix", "predicted", "fused")
 # The shifts of the feed (s) whose pooled MAE the fit matches besides the statistics.
 CURVE_SHIFTS_S = (-300.0, -150.0, 150.0, 300.0, 600.0)
 # The grid each parameter is searched on.
@@ -298,6 +305,81 @@ def compare(
     say(LEGEND)
 
 
+def compare_planner(
+    drives: Sequence[CalibrationDrive], model: FeedModel, say: Callable[[str], None]
+) -> None:
+    """Per drive and pooled, the planner's TSE error on the real and on the simulated feed."""
+    say("The planner's TSE against the car on each feed (planner/evaluation.py: every 10 s, the")
+    say("estimate along the next minute's path vs the car's mean speed), MAE m/s, real/simulated:")
+    say(f"{'':22s} {'decisions':>9s} " + " ".join(f"{variant:>13s}" for variant in TSE_VARIANTS))
+    found = [planner_errors(drive, model) for drive in drives]
+    for drive, errors in zip(drives, found, strict=True):
+        cells = [
+            tse_cell(
+                errors["real"].mean_absolute_error(variant),
+                errors["simulated"].mean_absolute_error(variant),
+            )
+            for variant in TSE_VARIANTS
+        ]
+        decisions = len(errors["real"].truth_mps)
+        say(f"{drive_label(drive.recorded.drive):22s} {decisions:9d} " + " ".join(cells))
+    pooled = pooled_planner_mae(found)
+    cells = [
+        tse_cell(pooled["real"][variant], pooled["simulated"][variant]) for variant in TSE_VARIANTS
+    ]
+    say(f"{'all drives':22s} {'':9s} " + " ".join(cells))
+
+
+def pooled_planner_mae(found: Sequence[dict[str, DriveErrors]]) -> dict[str, dict[str, float]]:
+    """MAE over every decision of every drive, per feed and TSE variant."""
+    return {
+        feed: {
+            variant: float(
+                np.mean(
+                    np.concatenate(
+                        [
+                            np.abs(errors[feed].estimates_mps[variant] - errors[feed].truth_mps)
+                            for errors in found
+                        ]
+                    )
+                )
+            )
+            for variant in TSE_VARIANTS
+        }
+        for feed in ("real", "simulated")
+    }
+
+
+def tse_cell(real: float, simulated: float) -> str:
+    """`real/simulated`, `!` when the simulated is outside +/-20 % of the real."""
+    mark = "!" if abs(simulated - real) > TOLERANCE * abs(real) else " "
+    return f"{f'{real:.2f}/{simulated:.2f}{mark}':>13s}"
+
+
+def planner_errors(drive: CalibrationDrive, model: FeedModel) -> dict[str, DriveErrors]:
+    """The planner's TSE errors along the car on the real feed and on the simulated one (made at
+    the real one's stamps and segments); both stamped on arrival, so no latency is added."""
+    recorded = drive.recorded
+    real = recorded.feed
+    bounds = np.append(real.segment_start_m, real.segment_end_m[-1])
+    feeds = {
+        "real": real,
+        "simulated": simulated_feed(recorded.drive, bounds, real.measured_at_s, model),
+    }
+    probe = probe_samples(recorded.drive)
+    grid = simulated_grid(recorded.drive)
+    return {
+        name: evaluate_drive(
+            probe,
+            InrixHistory(feed.measured_at_s, feed.speed_mps, feed.segment_center_x_m),
+            grid,
+            PlannerParams(),
+            latency_s=0.0,
+        )
+        for name, feed in feeds.items()
+    }
+
+
 def cross_validate(drives: Sequence[CalibrationDrive], say: Callable[[str], None]) -> None:
     """Leave one date out: fit on the others, report the held-out date's statistics."""
     dates = sorted({date_of(drive.recorded.drive) for drive in drives})
@@ -336,6 +418,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         model = CALIBRATED
     say(f"Simulated with {parameters(model)}:")
     compare(drives, model, say)
+    say("")
+    compare_planner(drives, model, say)
 
 
 if __name__ == "__main__":

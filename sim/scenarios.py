@@ -100,7 +100,7 @@ class Case:
     scenario: str
     drive: Drive
     bottleneck: Bottleneck | None = None
-    # The real INRIX minutes of the drive; None: INRIX simulated from the drive (sim.traffic).
+    # The real INRIX minutes of the drive; None: INRIX simulated from the drive (sim.inrix).
     inrix: InrixFeed | None = None
 
     @property
