@@ -1,0 +1,432 @@
+"""The fuel-optimal AV trajectory with full knowledge of the leader: the bound every controller's
+saving is a share of (paper sidebar "Optimized Vehicle Trajectory", problem (S4) with its
+envelope (S5)).
+
+The platoon is the evaluation's: the replayed leader, one AV right behind it, then the I-24 IDM
+humans, starting at the IDM equilibrium spacing, stepped exactly as `sim.platoon` steps it
+(dt of the drive, ballistic update, no reversing, the AV's request capped by the RAV4's feasible
+acceleration). The objective is the platoon's total fuel from the RAV4 model (the paper's
+sidebar used the L2 norm of the accelerations as a proxy; we minimise the fuel itself, which is
+what the evaluation reports). The AV's acceleration is piecewise constant over
+`control_interval_s` and bounded by the accel controllers' limits (MicroAccel: -3 to 1.5 m/s^2);
+the gap envelope of `sim.gaps.GapBounds` (space gap within [h_min, h_max], time gap at least
+1 s) is a quadratic penalty of growing weight, optimised against bounds tightened by a margin
+so that what is left of the penalty stays inside the real bounds.
+
+As the sidebar does, the gradient comes from the adjoint of the discrete dynamics, derived by
+hand below and compiled with numba (one forward and one backward sweep over the drive, about
+the cost of two simulations), and L-BFGS-B (scipy) does the descent under the box bounds.
+The returned trajectory is then replayed in the real simulator (`simulate_platoon` with
+`ReplayPolicy`), and every figure reported comes from that replay.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, cast
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize
+
+from sim.drives import Drive
+from sim.energy import RAV4_2019, FuelModel
+from sim.gaps import GapBounds, gap_kpis
+from sim.idm import I24_IDM, IdmParams
+from sim.platoon import (
+    MAX_BRAKING_MPS2,
+    MIN_MODEL_GAP_M,
+    VEHICLE_LENGTH_M,
+    AvObservation,
+    PlatoonRun,
+    platoon_roles,
+    simulate_platoon,
+)
+from vehicle_agent.controllers.microaccel import MicroAccelParams
+
+FloatArray = NDArray[np.float64]
+
+# The humans behind the AV in the evaluation's platoon.
+HUMANS = 24
+_MICROACCEL = MicroAccelParams()
+
+
+@dataclass(frozen=True, slots=True)
+class OptimumSettings:
+    """How the optimal control problem is discretised and solved."""
+
+    # Length of each piece of the piecewise-constant control (the paper's parameterisation).
+    control_interval_s: float = 1.0
+    # The accel controllers' command range (MicroAccel defaults).
+    min_accel_mps2: float = _MICROACCEL.min_accel_mps2
+    max_accel_mps2: float = _MICROACCEL.max_accel_mps2
+    # Penalty weights (g per m^2 s of violation), raised in turn; each stage warm-starts the next.
+    penalty_weights: tuple[float, ...] = (1.0, 10.0, 100.0, 1000.0)
+    # The envelope is tightened by this much inside the optimiser (m, and s of time gap).
+    margin_m: float = 0.5
+    margin_s: float = 0.05
+    # L-BFGS-B iterations per penalty stage.
+    max_iterations: int = 400
+
+    def __post_init__(self) -> None:
+        if self.control_interval_s <= 0:
+            raise ValueError(f"control_interval_s must be positive, got {self.control_interval_s}")
+        if not self.min_accel_mps2 < 0.0 < self.max_accel_mps2:
+            raise ValueError(
+                f"the accel range must contain 0, got [{self.min_accel_mps2}, "
+                f"{self.max_accel_mps2}] m/s^2"
+            )
+        if not self.penalty_weights or min(self.penalty_weights) <= 0:
+            raise ValueError("penalty_weights must be positive and not empty")
+        if self.margin_m < 0 or self.margin_s < 0 or self.max_iterations < 1:
+            raise ValueError("margins must not be negative and max_iterations at least 1")
+
+
+@dataclass(frozen=True)
+class OptimumResult:
+    """The optimal AV accelerations of one drive and what their replay in the simulator did."""
+
+    drive_name: str
+    # The AV's acceleration request over each simulator step (length = drive.steps).
+    accel_mps2: FloatArray
+    # Platoon fuel (every vehicle, the leader included) of the replay and of the all-human run.
+    fuel_g: float
+    baseline_fuel_g: float
+    # 1 - fuel / baseline fuel, in %; the same per distance driven (the evaluation's definition).
+    fuel_saving_pct: float
+    fuel_per_distance_saving_pct: float
+    max_gap_m: float
+    min_gap_m: float
+    gap_out_of_bounds_s: float
+    time_gap_violation_s: float
+    collisions: int
+    iterations: int
+    seconds: float
+    run: PlatoonRun
+
+
+class ReplayPolicy:
+    """An AV policy that plays back a fixed acceleration per simulator step."""
+
+    def __init__(self, accel_mps2: FloatArray, dt_s: float) -> None:
+        self._accel = np.asarray(accel_mps2, dtype=np.float64)
+        self._dt_s = dt_s
+
+    def accel_mps2(self, observation: AvObservation) -> float:
+        """The recorded acceleration of this step."""
+        return float(self._accel[int(round(observation.time_s / self._dt_s))])
+
+
+def platoon_fuel_g(run: PlatoonRun, model: FuelModel = RAV4_2019) -> float:
+    """Total fuel of every vehicle of a run (leader included), f(v_k, a_k) dt summed (paper eq.)."""
+    accel = np.diff(run.speed_mps, axis=0) / run.dt_s
+    return float(model.fuel_rate_gps(run.speed_mps[:-1], accel).sum() * run.dt_s)
+
+
+def _fuel_coefficients(model: FuelModel) -> FloatArray:
+    return np.array(
+        [
+            model.c0,
+            model.c1,
+            model.c2,
+            model.c3,
+            model.p0,
+            model.p1,
+            model.p2,
+            model.q0,
+            model.q1,
+            model.beta,
+            model.fuel_cut_speed_mps,
+            model.b1,
+            model.b2,
+            model.b3,
+        ]
+    )
+
+
+def _idm_coefficients(idm: IdmParams) -> FloatArray:
+    return np.array(
+        [
+            idm.max_accel_mps2,
+            idm.comfortable_decel_mps2,
+            idm.delta,
+            idm.min_gap_m,
+            idm.desired_speed_mps,
+            idm.time_gap_s,
+        ]
+    )
+
+
+def _envelope(bounds: GapBounds, settings: OptimumSettings) -> FloatArray:
+    return np.array(
+        [
+            bounds.min_gap_m + settings.margin_m,
+            bounds.max_gap_m - settings.margin_m,
+            bounds.min_time_gap_s + settings.margin_s,
+        ]
+    )
+
+
+def _platoon_cost_gradient_py(
+    request: FloatArray,
+    lead_x: FloatArray,
+    lead_v: FloatArray,
+    start_x: FloatArray,
+    start_v: FloatArray,
+    idm: FloatArray,
+    fuel: FloatArray,
+    envelope: FloatArray,
+    dt: float,
+    length: float,
+    weight: float,
+    gradient: FloatArray,
+) -> tuple[float, float]:
+    """Followers' fuel (g) and envelope penalty of the AV's requests; their gradient in place.
+
+    Follower 0 is the AV, 1.. the IDM humans. The forward sweep is `simulate_platoon`'s step;
+    the backward sweep is its adjoint (reverse-mode derivative of every operation, the clips
+    included: a clipped quantity passes no gradient through the clipped argument).
+    """
+    steps = request.shape[0]
+    n = start_x.shape[0]
+    amax, bcomf, delta, s0, v0, tgap = idm[0], idm[1], idm[2], idm[3], idm[4], idm[5]
+    c0, c1, c2, c3 = fuel[0], fuel[1], fuel[2], fuel[3]
+    p0, p1, p2, q0, q1 = fuel[4], fuel[5], fuel[6], fuel[7], fuel[8]
+    beta, cut_speed, b1, b2, b3 = fuel[9], fuel[10], fuel[11], fuel[12], fuel[13]
+    low, high, min_time_gap = envelope[0], envelope[1], envelope[2]
+    braking = 1.0 / (2.0 * math.sqrt(amax * bcomf))
+    half_dt2 = 0.5 * dt * dt
+    x = np.empty((steps + 1, n))
+    v = np.empty((steps + 1, n))
+    a = np.empty((steps, n))
+    x[0] = start_x
+    v[0] = start_v
+    fuel_g = 0.0
+    penalty = 0.0
+    # forward: simulate_platoon's step
+    for k in range(steps):
+        for i in range(n):
+            own_v = v[k, i]
+            if i == 0:
+                cap = b1 * math.exp(-b2 * own_v) + b3
+                acc = min(request[k], cap)
+                acc = max(acc, -MAX_BRAKING_MPS2)
+            else:
+                gap = x[k, i - 1] - x[k, i] - length
+                desired = s0 + own_v * tgap + max(0.0, own_v * (own_v - v[k, i - 1])) * braking
+                ratio = desired / max(gap, MIN_MODEL_GAP_M)
+                acc = amax * (1.0 - (own_v / v0) ** delta - ratio * ratio)
+            acc = max(acc, -own_v / dt)
+            a[k, i] = acc
+            x[k + 1, i] = x[k, i] + own_v * dt + acc * half_dt2
+            v[k + 1, i] = max(own_v + acc * dt, 0.0)
+            a_plus = max(acc, 0.0)
+            rate = (
+                c0
+                + own_v * (c1 + own_v * (c2 + own_v * c3))
+                + (p0 + own_v * (p1 + own_v * p2)) * acc
+                + (q0 + q1 * own_v) * a_plus * a_plus
+            )
+            floor = beta if own_v <= cut_speed else 0.0
+            fuel_g += max(rate, floor) * dt
+    # envelope penalty on the AV's gap at every state after the first
+    for k in range(1, steps + 1):
+        gap = lead_x[k] - x[k, 0] - length
+        penalty += (
+            max(low - gap, 0.0) ** 2
+            + max(gap - high, 0.0) ** 2
+            + max(min_time_gap * v[k, 0] - gap, 0.0) ** 2
+        ) * dt
+    # backward: adj_x, adj_v hold the adjoint of state k; the penalty of state k joins it
+    # first, then it is carried back through step k - 1
+    adj_x = np.zeros(n)
+    adj_v = np.zeros(n)
+    new_x = np.zeros(n)
+    new_v = np.zeros(n)
+    for k in range(steps, 0, -1):
+        gap = lead_x[k] - x[k, 0] - length
+        excess = max(min_time_gap * v[k, 0] - gap, 0.0)
+        d_gap = 2.0 * (max(gap - high, 0.0) - max(low - gap, 0.0) - excess)
+        adj_x[0] -= weight * dt * d_gap
+        adj_v[0] += weight * dt * 2.0 * excess * min_time_gap
+        step = k - 1
+        # front to back: vehicle i initialises its own adjoint, then adds to vehicle i - 1's
+        for i in range(n):
+            own_v = v[step, i]
+            acc = a[step, i]
+            adj_next_v = adj_v[i] if own_v + acc * dt > 0.0 else 0.0
+            new_x[i] = adj_x[i]
+            new_v[i] = adj_x[i] * dt + adj_next_v
+            adj_acc = adj_x[i] * half_dt2 + adj_next_v * dt
+            # fuel rate f(v, a) = max(rate, floor): the floor passes no gradient
+            a_plus = max(acc, 0.0)
+            demand = p0 + own_v * (p1 + own_v * p2)
+            rate = (
+                c0
+                + own_v * (c1 + own_v * (c2 + own_v * c3))
+                + demand * acc
+                + (q0 + q1 * own_v) * a_plus * a_plus
+            )
+            if rate > (beta if own_v <= cut_speed else 0.0):
+                adj_acc += (demand + 2.0 * (q0 + q1 * own_v) * a_plus) * dt
+                new_v[i] += (
+                    c1
+                    + own_v * (2.0 * c2 + 3.0 * c3 * own_v)
+                    + (p1 + 2.0 * p2 * own_v) * acc
+                    + q1 * a_plus * a_plus
+                ) * dt
+            stop = -own_v / dt
+            if i == 0:
+                raw = request[step]
+                cap = b1 * math.exp(-b2 * own_v) + b3
+                gradient[step] = 0.0
+                if max(min(raw, cap), -MAX_BRAKING_MPS2) < stop:
+                    new_v[i] -= adj_acc / dt
+                elif raw > cap:
+                    new_v[i] -= adj_acc * b2 * b1 * math.exp(-b2 * own_v)
+                elif raw >= -MAX_BRAKING_MPS2:
+                    gradient[step] = adj_acc
+                continue
+            lead_speed = v[step, i - 1]
+            gap = x[step, i - 1] - x[step, i] - length
+            approach = own_v * (own_v - lead_speed)
+            desired = s0 + own_v * tgap + max(0.0, approach) * braking
+            model_gap = max(gap, MIN_MODEL_GAP_M)
+            ratio = desired / model_gap
+            if amax * (1.0 - (own_v / v0) ** delta - ratio * ratio) < stop:
+                new_v[i] -= adj_acc / dt
+                continue
+            d_ratio = -2.0 * amax * ratio * adj_acc
+            d_desired = d_ratio / model_gap
+            if gap > MIN_MODEL_GAP_M:
+                d_gap = -d_ratio * desired / (model_gap * model_gap)
+                new_x[i - 1] += d_gap
+                new_x[i] -= d_gap
+            new_v[i] -= adj_acc * amax * delta * (own_v / v0) ** (delta - 1.0) / v0
+            new_v[i] += d_desired * tgap
+            if approach > 0.0:
+                new_v[i] += d_desired * braking * (2.0 * own_v - lead_speed)
+                new_v[i - 1] -= d_desired * braking * own_v
+        for i in range(n):
+            adj_x[i] = new_x[i]
+            adj_v[i] = new_v[i]
+    return fuel_g, penalty
+
+
+_platoon_cost_gradient = cast(
+    Callable[..., tuple[float, float]],
+    numba.njit(cache=True, fastmath=False)(_platoon_cost_gradient_py),
+)
+
+
+def optimal_trajectory(
+    drive: Drive,
+    *,
+    humans: int = HUMANS,
+    bounds: GapBounds | None = None,
+    settings: OptimumSettings | None = None,
+    idm: IdmParams = I24_IDM,
+    model: FuelModel = RAV4_2019,
+) -> OptimumResult:
+    """The fuel-optimal AV trajectory behind this drive's leader, verified in the simulator.
+
+    Starts from the AV driving as the humans do (the all-human run's accelerations, within the
+    command range) and raises the envelope penalty stage by stage (paper sidebar (S4)-(S5)).
+    """
+    bounds = bounds or GapBounds()
+    settings = settings or OptimumSettings()
+    if humans < 0:
+        raise ValueError(f"humans must not be negative, got {humans}")
+    started = time.perf_counter()
+    dt = drive.dt_s
+    steps = drive.steps
+    baseline = simulate_platoon(drive, platoon_roles(humans + 1, 0), idm=idm)
+    per_piece = max(1, round(settings.control_interval_s / dt))
+    piece_starts = np.arange(0, steps, per_piece)
+    # Unknowns: the AV's speed at the end of each piece (its start speed is given). The
+    # accelerations are their differences, so a change moves the trajectory locally instead of
+    # shifting every later position (acceleration unknowns make the problem ill-conditioned by
+    # the square of the drive's length). Differences outside the command range are clipped in
+    # the dynamics, as the car would, and penalised so that the optimum does not lean on it.
+    piece_s = np.diff(np.append(piece_starts, steps)) * dt
+    start_speed = float(baseline.speed_mps[0, 1])
+    ends = np.append(piece_starts[1:], steps)
+    guess = np.asarray(baseline.speed_mps[ends, 1], dtype=np.float64)
+    fixed: tuple[Any, ...] = (
+        drive.position_m,
+        drive.speed_mps,
+        baseline.position_m[0, 1:].copy(),
+        baseline.speed_mps[0, 1:].copy(),
+        _idm_coefficients(idm),
+        _fuel_coefficients(model),
+        _envelope(bounds, settings),
+        dt,
+        baseline.vehicle_length_m,
+    )
+    gradient = np.zeros(steps)
+
+    def accelerations(speeds: FloatArray) -> tuple[FloatArray, FloatArray]:
+        wanted = np.diff(speeds, prepend=start_speed) / piece_s
+        return wanted, np.clip(wanted, settings.min_accel_mps2, settings.max_accel_mps2)
+
+    def cost(speeds: FloatArray, weight: float) -> tuple[float, FloatArray]:
+        wanted, pieces = accelerations(speeds)
+        fuel_g, penalty = _platoon_cost_gradient(
+            np.repeat(pieces, per_piece)[:steps], *fixed, weight, gradient
+        )
+        excess = wanted - pieces
+        by_piece = np.add.reduceat(gradient, piece_starts) * (wanted == pieces)
+        by_piece += 2.0 * weight * excess * piece_s
+        # d accel_j / d speed_j = 1 / tau_j and d accel_{j+1} / d speed_j = -1 / tau_{j+1}
+        by_speed = by_piece / piece_s
+        by_speed[:-1] -= by_piece[1:] / piece_s[1:]
+        return fuel_g + weight * (penalty + float(np.sum(excess * excess * piece_s))), by_speed
+
+    speeds = guess
+    iterations = 0
+    for weight in settings.penalty_weights:
+        solution = minimize(
+            cost,
+            speeds,
+            args=(weight,),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(0.0, None)] * len(speeds),
+            options={"maxiter": settings.max_iterations},
+        )
+        speeds = np.asarray(solution.x, dtype=np.float64)
+        iterations += int(solution.nit)
+    accel = np.repeat(accelerations(speeds)[1], per_piece)[:steps]
+    run = simulate_platoon(
+        drive,
+        platoon_roles(humans, 1),
+        [ReplayPolicy(accel, dt)],
+        idm=idm,
+        av_max_accel=lambda speed: float(model.max_accel_mps2(speed)),
+    )
+    fuel_g = platoon_fuel_g(run, model)
+    baseline_fuel_g = platoon_fuel_g(baseline, model)
+    distance = float((run.position_m[-1] - run.position_m[0]).sum())
+    baseline_distance = float((baseline.position_m[-1] - baseline.position_m[0]).sum())
+    envelope = gap_kpis(run.gap_m[:, 0], run.speed_mps[:, 1], dt, bounds)
+    return OptimumResult(
+        drive_name=drive.name,
+        accel_mps2=accel,
+        fuel_g=fuel_g,
+        baseline_fuel_g=baseline_fuel_g,
+        fuel_saving_pct=100.0 * (1.0 - fuel_g / baseline_fuel_g),
+        fuel_per_distance_saving_pct=100.0
+        * (1.0 - (fuel_g / distance) / (baseline_fuel_g / baseline_distance)),
+        max_gap_m=envelope.max_av_gap_m,
+        min_gap_m=float(run.gap_m[:, 0].min()),
+        gap_out_of_bounds_s=envelope.gap_out_of_bounds_s,
+        time_gap_violation_s=envelope.time_gap_violation_s,
+        collisions=run.collisions,
+        iterations=iterations,
+        seconds=time.perf_counter() - started,
+        run=run,
+    )
