@@ -1,0 +1,147 @@
+"""The fuel-optimal bound: its adjoint gradient, hand-worked leaders, and a slice of a real drive,
+every result verified by replaying the trajectory in the real simulator."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from contract.idm import I24_IDM
+from sim.drives import Drive, drive_from_speeds, load_drive
+from sim.energy import RAV4_2019
+from sim.gaps import GapBounds
+from sim.optimum import (
+    OptimumSettings,
+    ReplayPolicy,
+    _envelope,
+    _fuel_coefficients,
+    _idm_coefficients,
+    _platoon_cost_gradient,
+    optimal_trajectory,
+    platoon_fuel_g,
+)
+from sim.platoon import platoon_roles, simulate_platoon
+
+SHARED_DRIVES = Path(__file__).resolve().parents[3] / "shared" / "data" / "trajectories"
+WAVE_DRIVE = SHARED_DRIVES / "2021-03-08-22-35-14_masterArray_0_5373.csv"
+BOUNDS = GapBounds()
+
+
+def _times(duration_s: float) -> np.ndarray:
+    return np.arange(0.0, duration_s + 0.05, 0.1)
+
+
+def test_adjoint_gradient_matches_finite_differences() -> None:
+    """The hand-derived adjoint is the forward sweep's derivative, clips and penalties included."""
+    t = _times(40.0)
+    drive = drive_from_speeds("dip", 20.0 - 6.0 * np.exp(-(((t - 15.0) / 4.0) ** 2)))
+    baseline = simulate_platoon(drive, platoon_roles(6, 0))
+    steps = drive.steps
+    # a tight envelope and a sum-of-positions target so every penalty term is active
+    fixed = (
+        drive.position_m,
+        drive.speed_mps,
+        baseline.position_m[0, 1:].copy(),
+        baseline.speed_mps[0, 1:].copy(),
+        _idm_coefficients(I24_IDM),
+        _fuel_coefficients(RAV4_2019),
+        _envelope(GapBounds(min_gap_m=25.0, max_gap_m=35.0), OptimumSettings()),
+        drive.dt_s,
+        baseline.vehicle_length_m,
+        np.concatenate(
+            [[100.0, 800.0, 5000.0, baseline.position_m[-1, 1:].sum() + 50.0], [21.0] * 6]
+        ),
+    )
+    rng = np.random.default_rng(7)
+    human = np.diff(baseline.speed_mps[:, 1]) / drive.dt_s
+    request = np.clip(human + rng.normal(0.0, 0.3, steps), -2.9, 1.4)
+    gradient = np.zeros(steps)
+    _platoon_cost_gradient(request, *fixed, 10.0, gradient)
+
+    def objective(values: np.ndarray) -> float:
+        fuel, penalty = _platoon_cost_gradient(values, *fixed, 10.0, np.zeros(steps))
+        return float(fuel + 10.0 * penalty)
+
+    for step in (0, 50, 150, 300, steps - 1):
+        bump = np.zeros(steps)
+        bump[step] = 1e-6
+        numeric = (objective(request + bump) - objective(request - bump)) / 2e-6
+        assert gradient[step] == pytest.approx(numeric, rel=1e-4, abs=1e-4)
+
+
+def _assert_verified(result_drive: Drive, settings: OptimumSettings | None = None) -> None:
+    result = optimal_trajectory(result_drive, humans=8, settings=settings)
+    assert result.collisions == 0
+    assert result.gap_out_of_bounds_s == 0.0
+    assert result.time_gap_violation_s == 0.0
+    assert BOUNDS.min_gap_m <= result.min_gap_m <= result.max_gap_m <= BOUNDS.max_gap_m
+
+
+def test_constant_speed_leader_optimum_is_to_cruise() -> None:
+    """Behind a steady leader, with no distance lost, the convex fuel curve makes cruising best."""
+    drive = drive_from_speeds("steady", np.full(len(_times(120.0)), 25.0))
+    result = optimal_trajectory(drive, humans=8)
+    assert abs(result.fuel_saving_pct) < 0.05
+    assert abs(result.total_fuel_saving_pct) < 0.05
+    # the optimiser stops on a flat valley, not exactly at the cruise: the speed stays near 25
+    assert np.abs(result.run.speed_mps[:, 1] - 25.0).max() < 1.0
+    assert result.collisions == 0
+    assert result.gap_out_of_bounds_s == 0.0
+
+
+def test_one_slowdown_is_smoothed_within_the_envelope() -> None:
+    """A 25 -> 10 -> 25 m/s dip: the AV opens its gap instead of braking, and saves fuel."""
+    t = _times(120.0)
+    drive = drive_from_speeds("dip", 25.0 - 15.0 * np.exp(-(((t - 40.0) / 8.0) ** 2)))
+    result = optimal_trajectory(drive, humans=8)
+    baseline = simulate_platoon(drive, platoon_roles(9, 0))
+    av_speed = result.run.speed_mps[:, 1]
+    assert av_speed.min() > baseline.speed_mps[:, 1].min() + 1.0
+    assert result.fuel_saving_pct > 3.0
+    assert result.total_fuel_saving_pct > 3.0
+    assert result.collisions == 0
+    assert result.gap_out_of_bounds_s == 0.0
+    assert result.time_gap_violation_s == 0.0
+    assert result.max_gap_m <= BOUNDS.max_gap_m
+    assert result.min_gap_m >= BOUNDS.min_gap_m
+    settings = OptimumSettings()
+    assert result.accel_mps2.min() >= settings.min_accel_mps2
+    assert result.accel_mps2.max() <= settings.max_accel_mps2
+    # the figures are the replay's: recomputing them from its trajectories gives the same
+    assert result.fuel_g == pytest.approx(platoon_fuel_g(result.run))
+    assert result.baseline_fuel_g == pytest.approx(platoon_fuel_g(baseline))
+
+
+def test_replay_policy_plays_the_accelerations_back() -> None:
+    drive = drive_from_speeds("steady", np.full(101, 20.0))
+    accel = np.where(np.arange(100) < 50, -0.5, 0.5)
+    run = simulate_platoon(drive, platoon_roles(2, 1), [ReplayPolicy(accel, drive.dt_s)])
+    np.testing.assert_allclose(np.diff(run.speed_mps[:, 1]) / drive.dt_s, accel, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_real_drive_slice_saves_fuel_within_the_envelope() -> None:
+    drive = load_drive(WAVE_DRIVE).slice(100.0, 180.0)
+    result = optimal_trajectory(drive)
+    assert result.fuel_saving_pct > 0.0
+    assert result.collisions == 0
+    assert result.gap_out_of_bounds_s == 0.0
+    assert result.time_gap_violation_s == 0.0
+    assert result.iterations > 0
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("control_interval_s", 0.0),
+        ("min_accel_mps2", 0.5),
+        ("penalty_weights", ()),
+        ("margin_m", -1.0),
+        ("max_iterations", 0),
+    ],
+)
+def test_settings_refuse_what_cannot_be_solved(field: str, value: object) -> None:
+    with pytest.raises(ValueError, match=field):
+        OptimumSettings(**{field: value})  # type: ignore[arg-type]
