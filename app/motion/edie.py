@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from app.motion.store import MotionStoreEmpty, connect
+from app.motion.store import CELL_T_S, CELL_X_M, MotionStoreEmpty, connect
 
 # The paper's box ("Results": h_t = 10 s, h_x = 200 m).
 H_T_S = 10.0
@@ -65,6 +65,11 @@ class EdieWindow:
             raise EdieWindowError(f"lanes are numbered from 1, got {self.lane}")
 
     @property
+    def whole_cells(self) -> bool:
+        """Whether a box is a whole number of the store's base cells (CELL_T_S x CELL_X_M)."""
+        return _multiple(self.h_t_s, CELL_T_S) and _multiple(self.h_x_m, CELL_X_M)
+
+    @property
     def bounds(self) -> tuple[float, float, float, float]:
         """(t0, t1, x0, x1): the window widened to whole boxes (unix s, corridor m)."""
         t0 = math.floor(self.since.timestamp() / self.h_t_s) * self.h_t_s
@@ -75,16 +80,26 @@ class EdieWindow:
 
 
 def edie_field(store: Path, window: EdieWindow) -> pd.DataFrame:
-    """One row per box holding MOTION points: totals, rho, q, f, u, phi, psi and counts."""
+    """One row per box holding MOTION points: totals, rho, q, f, u, phi, psi and counts.
+
+    Boxes of whole cells of the store's base grid are summed from `motion_cells`; others from
+    every point (the same sums, a hundred times more rows to read).
+    """
     t0, t1, x0, x1 = window.bounds
+    macro = "motion_edie_cells" if window.whole_cells else "motion_edie"
     with connect(store) as connection:
         frame = connection.execute(
-            "SELECT * FROM motion_edie(?, ?, ?, ?, h_t_s := ?, h_x_m := ?, lane_no := ?) "
+            f"SELECT * FROM {macro}(?, ?, ?, ?, h_t_s := ?, h_x_m := ?, lane_no := ?) "
             "ORDER BY t_start_s, x_start_m",
             [t0, t1, x0, x1, window.h_t_s, window.h_x_m, window.lane],
         ).df()
     frame.insert(0, "t_start", pd.to_datetime(frame["t_start_s"], unit="s", utc=True))
     return frame
+
+
+def _multiple(size: float, base: float) -> bool:
+    ratio = size / base
+    return ratio >= 1 and abs(ratio - round(ratio)) < 1e-9
 
 
 @dataclass(frozen=True, slots=True)

@@ -39,8 +39,12 @@ from app.motion.documents import (
     parse_batch,
     split_documents,
 )
-from app.motion.kinematics import fuel_model_name, trajectory_steps
+from app.motion.kinematics import cell_runs, fuel_model_name, trajectory_steps
 from app.motion.store import (
+    CELL_SCHEMA,
+    CELL_T_S,
+    CELL_X_M,
+    CELLS,
     IMPORTS,
     POINT_SCHEMA,
     POINTS,
@@ -57,6 +61,7 @@ SECONDS_PER_DAY = 86_400
 # The manifest keeps this many bad documents' reasons (the counts are always complete).
 REASONS_KEPT = 1000
 HASH_CHUNK_BYTES = 8 * 1024 * 1024
+DICTIONARY_COLUMNS = ["trajectory_id", "lane", "document_id", "source_sha256", "fuel_model"]
 
 
 @dataclass
@@ -262,14 +267,35 @@ def _import_batch(
         },
         schema=TRAJECTORY_SCHEMA,
     )
+    runs = cell_runs(time_s, x_m, lane, trajectory_of_point, steps, CELL_T_S, CELL_X_M)
+    cells = pa.table(
+        {
+            "trajectory_id": trajectory_of_point[runs.first_point],
+            "t_cell_s": runs.t_cell_s,
+            "x_cell_m": runs.x_cell_m,
+            "lane": lane[runs.first_point],
+            "time_s": runs.time_s,
+            "distance_m": runs.distance_m,
+            "fuel_g": runs.fuel_g,
+            "points": runs.points.astype(np.int32),
+        },
+        schema=CELL_SCHEMA,
+    )
     days = (time_s[starts] // SECONDS_PER_DAY).astype(np.int64)
     for day in np.unique(days):
         in_day = days == day
         if in_day.all():
-            writer.write(int(day), points, trajectories)
-        else:
-            in_day_points = pa.array(np.repeat(in_day, lengths))
-            writer.write(int(day), points.filter(in_day_points), trajectories.filter(in_day))
+            writer.write(int(day), {POINTS: points, CELLS: cells, TRAJECTORIES: trajectories})
+            continue
+        point_in_day = np.repeat(in_day, lengths)
+        writer.write(
+            int(day),
+            {
+                POINTS: points.filter(pa.array(point_in_day)),
+                CELLS: cells.filter(pa.array(point_in_day[runs.first_point])),
+                TRAJECTORIES: trajectories.filter(pa.array(in_day)),
+            },
+        )
     report.documents += len(keys)
     report.points += len(time_s)
 
@@ -312,30 +338,34 @@ def _column(table: pa.Table, column: str) -> NDArray[np.float32]:
 
 
 class _DayWriters:
-    """One points and one trajectories Parquet file per UTC day, in the staging folder."""
+    """One Parquet file per table and UTC day, in the staging folder."""
+
+    SCHEMAS = {POINTS: POINT_SCHEMA, CELLS: CELL_SCHEMA, TRAJECTORIES: TRAJECTORY_SCHEMA}
 
     def __init__(self, staging: Path, name: str) -> None:
         self.staging = staging
         self.name = name
-        self.writers: dict[int, tuple[pq.ParquetWriter, pq.ParquetWriter]] = {}
+        self.writers: dict[tuple[int, str], pq.ParquetWriter] = {}
 
-    def write(self, day: int, points: pa.Table, trajectories: pa.Table) -> None:
-        if day not in self.writers:
-            label = datetime.fromtimestamp(day * SECONDS_PER_DAY, UTC).date().isoformat()
-            pair = []
-            for table, schema in ((POINTS, POINT_SCHEMA), (TRAJECTORIES, TRAJECTORY_SCHEMA)):
-                folder = self.staging / table / f"day={label}"
+    def write(self, day: int, tables: dict[str, pa.Table]) -> None:
+        label = datetime.fromtimestamp(day * SECONDS_PER_DAY, UTC).date().isoformat()
+        for table_name, table in tables.items():
+            writer = self.writers.get((day, table_name))
+            if writer is None:
+                folder = self.staging / table_name / f"day={label}"
                 folder.mkdir(parents=True)
-                pair.append(pq.ParquetWriter(folder / f"{self.name}.parquet", schema))
-            self.writers[day] = (pair[0], pair[1])
-        points_writer, trajectories_writer = self.writers[day]
-        points_writer.write_table(points)
-        trajectories_writer.write_table(trajectories)
+                writer = self.writers[(day, table_name)] = pq.ParquetWriter(
+                    folder / f"{self.name}.parquet",
+                    self.SCHEMAS[table_name],
+                    # Positions and times hardly repeat: dictionary encoding them is wasted
+                    # work; the keys, lanes and names do.
+                    use_dictionary=DICTIONARY_COLUMNS,
+                )
+            writer.write_table(table)
 
     def close(self) -> None:
-        for points_writer, trajectories_writer in self.writers.values():
-            points_writer.close()
-            trajectories_writer.close()
+        for writer in self.writers.values():
+            writer.close()
 
 
 def _known_trajectories(store: Path) -> set[int]:
@@ -349,7 +379,7 @@ def _known_trajectories(store: Path) -> set[int]:
 
 def _remove_unfinished(store: Path, name: str) -> None:
     """Files of an earlier import of the same file that stopped before its manifest."""
-    for table in (POINTS, TRAJECTORIES):
+    for table in (POINTS, CELLS, TRAJECTORIES):
         for path in (store / table).glob(f"day=*/{name}.parquet"):
             path.unlink()
     shutil.rmtree(store / STAGING / name, ignore_errors=True)
@@ -357,7 +387,7 @@ def _remove_unfinished(store: Path, name: str) -> None:
 
 def _commit(store: Path, staging: Path) -> None:
     """Move the staged files into place: trajectories last, as dedup reads them."""
-    for table in (POINTS, TRAJECTORIES):
+    for table in (POINTS, CELLS, TRAJECTORIES):
         for path in sorted((staging / table).glob("day=*/*.parquet")):
             target = store / table / path.parent.name / path.name
             target.parent.mkdir(parents=True, exist_ok=True)

@@ -113,11 +113,14 @@ def windowed_accel(
     typical_step = float(np.median(positive[:100_000])) if len(positive) else 1.0
     half = max(1, int(round(0.5 * ACCEL_WINDOW_S / typical_step)))
     midpoint = time_s + 0.5 * dt_s
-    index = np.arange(points)
-    lo = index - half
-    hi = index + half
-    # Most points sit more than half a window from their trajectory's ends and keep the plain
-    # shifts; those near an end are clipped to their own trajectory's steps.
+    accel = np.zeros(points)
+    if points > 2 * half:
+        # Away from a trajectory's ends: lo = i - half and hi = i + half, plain shifts.
+        inner = slice(half, points - half)
+        span = midpoint[2 * half :] - midpoint[: points - 2 * half]
+        change = speed_mps[2 * half :] - speed_mps[: points - 2 * half]
+        np.divide(change, span, out=accel[inner], where=span > 0)
+    # Near an end (and at the array's ends): lo and hi clipped to the trajectory's own steps.
     last_step = ends - 2  # a trajectory's last step is its last-but-one point
     offsets = np.arange(half + 1)
     near = np.concatenate(
@@ -126,11 +129,66 @@ def windowed_accel(
     owner = np.repeat(np.arange(len(starts)), 2 * (half + 1))
     valid = (near >= starts[owner]) & (near < ends[owner])
     near, owner = near[valid], owner[valid]
-    lo[near] = np.maximum(near - half, starts[owner])
-    hi[near] = np.minimum(near + half, last_step[owner])
-    np.clip(lo, 0, points - 1, out=lo)
-    np.clip(hi, 0, points - 1, out=hi)
-    span = midpoint[hi] - midpoint[lo]
-    accel = np.zeros(points)
-    np.divide(speed_mps[hi] - speed_mps[lo], span, out=accel, where=(hi > lo) & (span > 0))
+    lo = np.maximum(near - half, starts[owner])
+    hi = np.minimum(near + half, last_step[owner])
+    usable = hi > lo
+    edge = np.zeros(len(near))
+    span_near = midpoint[np.where(usable, hi, lo)] - midpoint[lo]
+    np.divide(
+        speed_mps[np.where(usable, hi, lo)] - speed_mps[lo],
+        span_near,
+        out=edge,
+        where=usable & (span_near > 0),
+    )
+    accel[near] = edge
     return accel
+
+
+@dataclass(frozen=True, slots=True)
+class CellRuns:
+    """Steps summed per trajectory, lane and cell of the base grid (one row per run of points)."""
+
+    first_point: IntArray
+    t_cell_s: FloatArray
+    x_cell_m: FloatArray
+    time_s: FloatArray
+    distance_m: FloatArray
+    fuel_g: FloatArray
+    points: IntArray
+
+
+def cell_runs(
+    time_s: FloatArray,
+    x_m: FloatArray,
+    lane: NDArray[np.int16],
+    trajectory: IntArray,
+    steps: Steps,
+    cell_t_s: float,
+    cell_x_m: float,
+) -> CellRuns:
+    """Edie's totals of each run of consecutive points in one trajectory, lane and cell.
+
+    Points of a trajectory are in time order, so a cell is entered and left a few times at
+    most: summing runs (np.add.reduceat) needs no sort. A box made of whole cells sums its
+    cells' rows exactly as it would sum its points (app.motion.edie).
+    """
+    t_cell = np.floor(time_s / cell_t_s) * cell_t_s
+    x_cell = np.floor(x_m / cell_x_m) * cell_x_m
+    change = np.ones(len(time_s), dtype=bool)
+    change[1:] = (
+        (t_cell[1:] != t_cell[:-1])
+        | (x_cell[1:] != x_cell[:-1])
+        | (lane[1:] != lane[:-1])
+        | (trajectory[1:] != trajectory[:-1])
+    )
+    first = np.flatnonzero(change)
+    counts = np.diff(np.append(first, len(time_s)))
+    return CellRuns(
+        first_point=first,
+        t_cell_s=t_cell[first],
+        x_cell_m=x_cell[first],
+        time_s=np.add.reduceat(steps.dt_s, first) if len(first) else np.zeros(0),
+        distance_m=np.add.reduceat(steps.dx_m, first) if len(first) else np.zeros(0),
+        fuel_g=np.add.reduceat(steps.fuel_g, first) if len(first) else np.zeros(0),
+        points=counts.astype(np.int64),
+    )

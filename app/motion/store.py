@@ -28,7 +28,12 @@ import pyarrow as pa
 from app.core.config import Settings
 
 POINTS = "points"
+CELLS = "cells"
 TRAJECTORIES = "trajectories"
+# The base grid of `cells`: the paper's box. A box whose size is a whole number of cells is
+# summed from `cells` (about 100 times fewer rows than points); any other box from `points`.
+CELL_T_S = 10.0
+CELL_X_M = 200.0
 IMPORTS = "imports"
 STAGING = "staging"
 
@@ -44,6 +49,19 @@ POINT_SCHEMA = pa.schema(
         pa.field("dt_s", pa.float32()),
         pa.field("dx_m", pa.float32()),
         pa.field("fuel_g", pa.float32()),
+    ]
+)
+# One row per run of a trajectory's points in one lane and one cell of the base grid.
+CELL_SCHEMA = pa.schema(
+    [
+        pa.field("trajectory_id", pa.int64()),
+        pa.field("t_cell_s", pa.float64()),  # unix seconds, a multiple of CELL_T_S
+        pa.field("x_cell_m", pa.float64()),  # a multiple of CELL_X_M
+        pa.field("lane", pa.int16()),
+        pa.field("time_s", pa.float64()),
+        pa.field("distance_m", pa.float64()),
+        pa.field("fuel_g", pa.float64()),
+        pa.field("points", pa.int32()),
     ]
 )
 # One row per MOTION document.
@@ -123,9 +141,11 @@ def view_sql(store: Path) -> str:
     return "\n".join(
         [
             f"CREATE OR REPLACE VIEW motion_points AS {_relation(store, POINTS, POINT_SCHEMA)};",
+            f"CREATE OR REPLACE VIEW motion_cells AS {_relation(store, CELLS, CELL_SCHEMA)};",
             "CREATE OR REPLACE VIEW motion_trajectories AS "
             f"{_relation(store, TRAJECTORIES, TRAJECTORY_SCHEMA)};",
             EDIE_MACRO,
+            EDIE_CELLS_MACRO,
         ]
     )
 
@@ -153,6 +173,34 @@ SELECT
 FROM motion_points
 WHERE t_s >= since_s AND t_s < until_s
   AND x_m >= x_from_m AND x_m < x_to_m
+  AND (lane_no IS NULL OR lane = lane_no)
+GROUP BY ALL;
+"""
+
+
+# The same fields summed from `cells`, for boxes of whole cells (h_t a multiple of 10 s, h_x of
+# 200 m): the totals are the same sums regrouped, and `vehicles` counts distinct trajectories.
+EDIE_CELLS_MACRO = """
+CREATE OR REPLACE MACRO motion_edie_cells(
+    since_s, until_s, x_from_m, x_to_m, h_t_s := 10.0, h_x_m := 200.0, lane_no := NULL
+) AS TABLE
+SELECT
+    floor(t_cell_s / h_t_s) * h_t_s AS t_start_s,
+    floor(x_cell_m / h_x_m) * h_x_m AS x_start_m,
+    sum(time_s) AS time_s,
+    sum(distance_m) AS distance_m,
+    sum(fuel_g) AS fuel_g,
+    count(DISTINCT trajectory_id) AS vehicles,
+    sum(points) AS points,
+    sum(time_s) / (h_t_s * h_x_m) AS density_veh_per_m,
+    sum(distance_m) / (h_t_s * h_x_m) AS flow_veh_per_s,
+    sum(fuel_g) / (h_t_s * h_x_m) AS fuel_rate_density_g_per_s_m,
+    sum(distance_m) / nullif(sum(time_s), 0) AS speed_mps,
+    sum(fuel_g) / nullif(sum(time_s), 0) AS fuel_rate_per_vehicle_g_per_s,
+    sum(fuel_g) / nullif(sum(distance_m), 0) AS fuel_per_distance_g_per_m
+FROM motion_cells
+WHERE t_cell_s >= since_s AND t_cell_s < until_s
+  AND x_cell_m >= x_from_m AND x_cell_m < x_to_m
   AND (lane_no IS NULL OR lane = lane_no)
 GROUP BY ALL;
 """

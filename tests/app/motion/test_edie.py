@@ -9,6 +9,7 @@ import pytest
 
 from app.motion.edie import EdieWindow, EdieWindowError, edie_field
 from app.motion.importer import import_motion_file
+from app.motion.store import connect
 from tests.app.motion.conftest import METRIC_FRAME, document, write
 
 T0 = 1_668_600_000.0  # 2022-11-16 12:00:00 UTC, a multiple of 10 s
@@ -94,3 +95,31 @@ def test_windows_that_cannot_make_a_field_say_why(changes: dict[str, object], me
     }
     with pytest.raises(EdieWindowError, match=message):
         EdieWindow(**arguments)  # type: ignore[arg-type]
+
+
+def test_boxes_that_are_not_whole_cells_are_summed_from_the_points(store: Path) -> None:
+    # 5 s x 100 m at [T0, T0 + 5) x [0, 100): A's points 0-4 (5 s, 100 m) and B's points 0-4
+    # (50-90 m: 5 s, 50 m).
+    window = EdieWindow(SINCE, SINCE.replace(second=5), 0.0, 100.0, h_t_s=5.0, h_x_m=100.0)
+    assert not window.whole_cells
+    box = edie_field(store, window).iloc[0]
+    assert (box["time_s"], box["distance_m"]) == (pytest.approx(10.0), pytest.approx(150.0))
+    assert box["density_veh_per_m"] == pytest.approx(10.0 / 500.0)
+    assert box["speed_mps"] == pytest.approx(15.0)
+    assert box["fuel_g"] == pytest.approx(5 * F20 + 5 * F10, rel=1e-6)
+
+
+def test_cells_and_points_give_the_same_field(store: Path) -> None:
+    window = EdieWindow(SINCE, UNTIL, 0.0, 400.0, h_t_s=20.0, h_x_m=400.0)
+    assert window.whole_cells
+    with connect(store) as connection:
+        by_points, by_cells = (
+            connection.execute(
+                f"SELECT * FROM {macro}(?, ?, 0, 400, h_t_s := 20, h_x_m := 400)",
+                [T0, T0 + 20],
+            ).fetchall()
+            for macro in ("motion_edie", "motion_edie_cells")
+        )
+    assert len(by_points) == len(by_cells) == 1
+    # float32 point columns against float64 cell sums: equal to single precision.
+    assert list(by_points[0]) == pytest.approx(list(by_cells[0]), rel=1e-6)
