@@ -3,13 +3,22 @@
 from __future__ import annotations
 
 import json
+import shlex
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+)
 
 from sim.drives import DriveError, load_drives
 from sim.evaluate import ControllerVariant, evaluate
@@ -231,3 +240,125 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
             raise CliError(f"sim fleet: {error}") from None
     for line in summary.lines():
         console.print(line)
+
+
+@sim.command("train")
+@click.option(
+    "--actuation",
+    type=click.Choice(["acc", "accel"]),
+    required=True,
+    help="acc: ACC speed setting and gap bars (Rogue, XT5); accel: acceleration (RAV4).",
+)
+@click.option(
+    "--drives",
+    "drives_dir",
+    type=click.Path(path_type=Path),
+    default=SHARED_DRIVES,
+    show_default=True,
+    help="Folder of real drive CSVs (10 Hz) to train and cross-validate on.",
+)
+@click.option("--timesteps", type=click.IntRange(min=1), default=300_000, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--folds",
+    type=click.IntRange(min=2),
+    default=2,
+    show_default=True,
+    help="Cross-validation folds; each holds out whole dates.",
+)
+@click.option(
+    "--final/--no-final",
+    default=True,
+    show_default=True,
+    help="Ship a policy trained on every date (else fold 0's policy).",
+)
+@click.option("--num-envs", type=click.IntRange(1, 256), default=16, show_default=True)
+@click.option(
+    "--humans",
+    type=click.IntRange(1, 200),
+    default=24,
+    show_default=True,
+    help="IDM drivers behind the AV in training.",
+)
+@click.option("--episode-s", type=click.FloatRange(min=1.0), default=300.0, show_default=True)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(path_type=Path),
+    default=Path("policies"),
+    show_default=True,
+    help="Where rl_<actuation>.npz, its manifest .json and the fold policies go.",
+)
+def train_command(
+    actuation: str,
+    drives_dir: Path,
+    timesteps: int,
+    seed: int,
+    folds: int,
+    final: bool,
+    num_envs: int,
+    humans: int,
+    episode_s: float,
+    out_dir: Path,
+) -> None:
+    """Train the RL controller with PPO (paper, ACC-Based Controller), cross-validated by date.
+
+    Needs the `train` extra (torch, stable-baselines3, gymnasium).
+    """
+    try:
+        from sim.rl.env import EnvConfig
+        from sim.rl.pipeline import run_training
+        from sim.rl.train import PpoSettings
+    except ImportError as error:
+        raise click.ClickException(
+            f"sim train needs the train extra (pip install -e '.[train]'): {error}"
+        ) from None
+    try:
+        drives = load_drives(drives_dir)
+        config = EnvConfig(
+            "acc" if actuation == "acc" else "accel", humans=humans, episode_s=episode_s
+        )
+    except (DriveError, ValueError) as error:
+        raise click.ClickException(str(error)) from None
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
+        tasks: dict[str, TaskID] = {}
+
+        def advance(stage: str, done: int, total: int) -> None:
+            if stage not in tasks:
+                tasks[stage] = progress.add_task(stage, total=total)
+            progress.update(tasks[stage], completed=done)
+
+        try:
+            result = run_training(
+                drives,
+                config,
+                PpoSettings(num_envs=num_envs),
+                timesteps=timesteps,
+                seed=seed,
+                folds=folds,
+                out_dir=out_dir,
+                final=final,
+                command=shlex.join(["smoothfleet", *sys.argv[1:]]),
+                progress=advance,
+            )
+        except ValueError as error:
+            raise click.ClickException(str(error)) from None
+    for row in result.summary:
+        console.print(
+            f"{row['controller']:>15} {row['group']:>12} ({row['drives']} drives): fuel saving "
+            f"{row['fuel_saving_pct']:+.1f} %, throughput {row['throughput_change_pct']:+.1f} % "
+            f"(worst {row['worst_throughput_change_pct']:+.1f} %), network speed "
+            f"{row['network_speed_change_pct']:+.1f} % (worst "
+            f"{row['worst_network_speed_change_pct']:+.1f} %), collisions {row['collisions']}, "
+            f"gap within bounds >= {100 * row['min_gap_within_share']:.1f} %"
+        )
+    console.print(
+        f"wrote {result.policy_path} (sha256 {result.sha256[:12]}) and {result.manifest_path}"
+    )

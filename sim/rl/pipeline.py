@@ -1,0 +1,221 @@
+"""`smoothfleet sim train` end to end: folds by date, PPO per fold, held-out scores, the shipped
+policy and its manifest.
+
+Cross-validation keeps whole dates apart (`sim.folds`): fold k's policy trains on the other
+folds' dates and is scored only on its own held-out dates, beside the reference controller of
+the same actuation on the same drives, so every figure in the manifest is held out. The shipped
+policy is then trained the same way on every date (or, with `final=False`, fold 0's policy is
+shipped and its manifest says so). Nothing is tuned on the held-out drives: the hyperparameters
+(`PpoSettings`) and the reward (`RewardWeights`) are fixed before any run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import platform
+import shutil
+import subprocess
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import stable_baselines3
+import torch
+
+from sim.drives import Drive
+from sim.folds import Fold, date_folds, drive_date
+from sim.rl.env import EnvConfig
+from sim.rl.scores import ControllerUnderTest, DriveScore, score_drives, summarise
+from sim.rl.train import PpoSettings, export_policy, train_policy
+
+# What each RL controller is scored beside: the hand-designed controller of the same actuation
+# with the gain docs/simulation.md's evaluation found best.
+REFERENCES: dict[str, ControllerUnderTest] = {
+    "acc": ControllerUnderTest.registered("microaccel_acc", "acc", {"base": {"k": 0.05}}),
+    "accel": ControllerUnderTest.registered("microaccel", "accel", {"k": 0.05}),
+}
+REPOSITORY = Path(__file__).resolve().parents[2]
+
+
+@dataclass(frozen=True)
+class TrainingRun:
+    """What `run_training` wrote."""
+
+    policy_path: Path
+    manifest_path: Path
+    sha256: str
+    summary: list[dict[str, Any]]
+
+
+def source_commit() -> str:
+    """The repository's commit, `+dirty` when the work tree differs from it."""
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=REPOSITORY, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=REPOSITORY,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return commit + ("+dirty" if dirty else "")
+
+
+def run_training(
+    drives: Sequence[Drive],
+    config: EnvConfig,
+    settings: PpoSettings,
+    *,
+    timesteps: int,
+    seed: int,
+    folds: int,
+    out_dir: Path,
+    final: bool = True,
+    command: str = "",
+    progress: Callable[[str, int, int], None] | None = None,
+) -> TrainingRun:
+    """Cross-validate, train the shipped policy, write `rl_<actuation>.npz` and `.json`.
+
+    `command` is recorded in the manifest (how to reproduce it); `progress(stage, done, total)`
+    hears the timesteps of each training and each scored drive.
+    """
+    commit = source_commit()  # now: the code that trains, whatever changes meanwhile
+    actuation = config.actuation
+    name = f"rl_{actuation}"
+    splits = date_folds(drives, folds)
+    scores: list[DriveScore] = []
+    fold_records = []
+    for fold in splits:
+        fold_scores, record = _cross_validate(
+            fold, config, settings, timesteps, seed, out_dir, progress
+        )
+        scores.extend(fold_scores)
+        fold_records.append(record)
+    policy_path = out_dir / f"{name}.npz"
+    if final:
+        model = train_policy(
+            drives, config, settings, timesteps, seed, _steps(progress, "final", timesteps)
+        )
+        digest = export_policy(model, policy_path, config)
+        shipped_dates = sorted({drive_date(drive) for drive in drives})
+        shipped = "trained on every date"
+    else:
+        shutil.copyfile(_fold_path(out_dir, name, 0), policy_path)
+        digest = hashlib.sha256(policy_path.read_bytes()).hexdigest()
+        shipped_dates = splits[0].train_dates
+        shipped = "fold 0's policy"
+    summary = summarise(scores)
+    manifest = {
+        "policy": policy_path.name,
+        "sha256": digest,
+        "actuation": actuation,
+        "shipped": shipped,
+        "training_dates": shipped_dates,
+        "seed": seed,
+        "timesteps": timesteps,
+        "folds": folds,
+        "ppo": settings.as_dict(),
+        "environment": _config_record(config),
+        "source_commit": commit,
+        "command": command,
+        "trained_at": datetime.now(UTC).isoformat(timespec="seconds"),
+        "versions": {
+            "python": platform.python_version(),
+            "torch": torch.__version__,
+            "stable_baselines3": stable_baselines3.__version__,
+        },
+        "cross_validation": {
+            "note": "every figure is on dates held out of the policy that produced it",
+            "summary": summary,
+            "folds": fold_records,
+            "drives": [score.as_dict() for score in scores],
+        },
+    }
+    manifest_path = out_dir / f"{name}.json"
+    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    return TrainingRun(policy_path, manifest_path, digest, summary)
+
+
+def _fold_path(out_dir: Path, name: str, index: int) -> Path:
+    return out_dir / "folds" / f"{name}_fold{index}.npz"
+
+
+def _cross_validate(
+    fold: Fold,
+    config: EnvConfig,
+    settings: PpoSettings,
+    timesteps: int,
+    seed: int,
+    out_dir: Path,
+    progress: Callable[[str, int, int], None] | None,
+) -> tuple[list[DriveScore], dict[str, Any]]:
+    """Train on the fold's dates, score on its held-out dates beside the reference."""
+    actuation = config.actuation
+    name = f"rl_{actuation}"
+    stage = f"fold {fold.index}"
+    path = _fold_path(out_dir, name, fold.index)
+    model = train_policy(
+        fold.train, config, settings, timesteps, seed, _steps(progress, stage, timesteps)
+    )
+    digest = export_policy(model, path, config)
+    tested = [
+        ControllerUnderTest.policy_file(name, actuation, path),
+        REFERENCES[actuation],
+    ]
+    total = len(fold.held_out) * len(tested)
+    counter = itertools.count(1)
+
+    def scored(label: str) -> None:
+        if progress is not None:
+            progress(f"{stage} held-out", next(counter), total)
+
+    scores = score_drives(
+        fold.held_out,
+        tested,
+        planner=config.planner,
+        planner_params=config.planner_params,
+        progress=scored,
+    )
+    record = {
+        "fold": fold.index,
+        "train_dates": fold.train_dates,
+        "held_out_dates": fold.held_out_dates,
+        "policy_sha256": digest,
+        "held_out": summarise(scores),
+    }
+    return scores, record
+
+
+def _steps(
+    progress: Callable[[str, int, int], None] | None, stage: str, total: int
+) -> Callable[[int], None] | None:
+    if progress is None:
+        return None
+
+    def report(done: int) -> None:
+        progress(stage, min(done, total), total)
+
+    return report
+
+
+def _config_record(config: EnvConfig) -> Mapping[str, Any]:
+    return {
+        "humans": config.humans,
+        "episode_s": config.episode_s,
+        "planner": config.planner,
+        "planner_params": dict(config.planner_params),
+        "reward": asdict(config.reward),
+        "gap_bounds": {
+            "min_gap_m": config.gap_bounds.min_gap_m,
+            "max_gap_m": config.gap_bounds.max_gap_m,
+            "min_time_gap_s": config.gap_bounds.min_time_gap_s,
+        },
+    }

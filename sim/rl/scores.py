@@ -1,0 +1,186 @@
+"""Held-out scores of a controller: the issue's targets, per drive and per group of drives.
+
+Each drive is run twice, as in `sim.evaluate`: all humans (the baseline), then one AV right behind
+the leader (4 % penetration with 24 humans, the paper's 1 in 25) run by the agent's controller with
+the real planner in the loop. Per drive: the fuel saving of the simulated vehicles, throughput over
+every vehicle and network speed against the baseline, collisions, and the share of time the AV
+keeps the gap envelope (`sim.gaps`). Groups: the stop-and-go drives (2nd speed percentile below
+10 m/s), every shockwave drive, the freeflow drives.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from contract.controllers import RlParams
+from sim.av import AgentPolicy
+from sim.drives import Drive
+from sim.emulator.acc import SimulatedAccCar
+from sim.energy import RAV4_2019
+from sim.folds import drive_date
+from sim.gaps import GapBounds, gap_kpis
+from sim.kpi import Kpis, platoon_kpis
+from sim.plans import SimulatedPlanner
+from sim.platoon import platoon_roles, simulate_platoon
+from vehicle_agent.controllers import AccClip, Controller, build_controller
+from vehicle_agent.controllers.rl_acc import RlAccController
+from vehicle_agent.controllers.rl_accel import RlAccelController
+
+# A stop-and-go drive: its 2nd speed percentile is below this (m/s; the issue's definition).
+STOP_AND_GO_P2_MPS = 10.0
+
+
+@dataclass(frozen=True)
+class ControllerUnderTest:
+    """A controller to score: a label for the tables, its actuation, and how to build one."""
+
+    label: str
+    actuation: str
+    build: Callable[[], Controller]
+
+    @classmethod
+    def registered(
+        cls, name: str, actuation: str, params: Mapping[str, Any]
+    ) -> ControllerUnderTest:
+        """A controller of the agent's registry, built as the agent builds it."""
+        return cls(name, actuation, lambda: build_controller(name, actuation, params))
+
+    @classmethod
+    def policy_file(cls, label: str, actuation: str, path: Path) -> ControllerUnderTest:
+        """An RL controller running the policy in `path` (behind the ACC clip on `acc` cars)."""
+        params = RlParams(policy=str(path))
+
+        def build() -> Controller:
+            if actuation == "acc":
+                return AccClip(RlAccController("acc", params))
+            return RlAccelController("accel", params)
+
+        return cls(label, actuation, build)
+
+
+@dataclass(frozen=True)
+class DriveScore:
+    """One controller on one drive, against the all-human platoon of the same drive."""
+
+    drive: str
+    date: str
+    kind: str
+    stop_and_go: bool
+    controller: str
+    fuel_saving_pct: float
+    throughput_change_pct: float
+    network_speed_change_pct: float
+    accel_rms_change_pct: float
+    collisions: int
+    gap_within_share: float
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain values (manifest, CSV)."""
+        return asdict(self)
+
+
+def is_stop_and_go(drive: Drive) -> bool:
+    """A drive whose 2nd speed percentile is below 10 m/s."""
+    return float(np.percentile(drive.speed_mps, 2.0)) < STOP_AND_GO_P2_MPS
+
+
+def _change_pct(value: float, base: float) -> float:
+    return float(100.0 * (value / base - 1.0))
+
+
+def score_drives(
+    drives: Sequence[Drive],
+    controllers: Sequence[ControllerUnderTest],
+    *,
+    planner: str,
+    planner_params: Mapping[str, Any],
+    humans: int = 24,
+    bounds: GapBounds | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> list[DriveScore]:
+    """Every controller on every drive (one AV behind the leader, `humans` behind it)."""
+    envelope = bounds or GapBounds()
+    scores = []
+    for drive in drives:
+        base = platoon_kpis(simulate_platoon(drive, platoon_roles(humans + 1, 0)))
+        for entry in controllers:
+            schedule = SimulatedPlanner.for_drive(drive, planner, planner_params)
+            policy = AgentPolicy(
+                entry.build(),
+                schedule,
+                senses_lead_state=entry.actuation == "accel",
+                stock_acc=SimulatedAccCar() if entry.actuation == "acc" else None,
+            )
+            run = simulate_platoon(
+                drive,
+                platoon_roles(humans, 1),
+                [policy],
+                av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+            )
+            kpis = platoon_kpis(run)
+            av = np.flatnonzero(run.is_av[1:])
+            envelope_kpis = gap_kpis(run.gap_m[:, av], run.speed_mps[:, av + 1], run.dt_s, envelope)
+            scores.append(_score(drive, entry.label, base, kpis, envelope_kpis.within_bounds_share))
+            if progress is not None:
+                progress(f"{drive.name} {entry.label}")
+    return scores
+
+
+def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> DriveScore:
+    return DriveScore(
+        drive=drive.name,
+        date=drive_date(drive),
+        kind=drive.kind,
+        stop_and_go=is_stop_and_go(drive),
+        controller=label,
+        fuel_saving_pct=float(100.0 * (1.0 - base.fuel_economy_mpg / kpis.fuel_economy_mpg)),
+        throughput_change_pct=_change_pct(kpis.throughput_vph, base.throughput_vph),
+        network_speed_change_pct=_change_pct(kpis.network_speed_mps, base.network_speed_mps),
+        accel_rms_change_pct=_change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
+        collisions=kpis.collisions,
+        gap_within_share=within,
+    )
+
+
+GROUPS: dict[str, Callable[[DriveScore], bool]] = {
+    "stop_and_go": lambda score: score.stop_and_go,
+    "shockwave": lambda score: score.kind == "shockwave",
+    "freeflow": lambda score: score.kind == "freeflow",
+}
+
+
+def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
+    """Per controller and group: mean fuel saving, mean and worst throughput and network speed
+    changes, collisions, the smallest share of time within the gap envelope."""
+    rows = []
+    for label in dict.fromkeys(score.controller for score in scores):
+        for group, member in GROUPS.items():
+            chosen = [s for s in scores if s.controller == label and member(s)]
+            if not chosen:
+                continue
+            rows.append(
+                {
+                    "controller": label,
+                    "group": group,
+                    "drives": len(chosen),
+                    "fuel_saving_pct": float(np.mean([s.fuel_saving_pct for s in chosen])),
+                    "throughput_change_pct": float(
+                        np.mean([s.throughput_change_pct for s in chosen])
+                    ),
+                    "worst_throughput_change_pct": min(s.throughput_change_pct for s in chosen),
+                    "network_speed_change_pct": float(
+                        np.mean([s.network_speed_change_pct for s in chosen])
+                    ),
+                    "worst_network_speed_change_pct": min(
+                        s.network_speed_change_pct for s in chosen
+                    ),
+                    "collisions": sum(s.collisions for s in chosen),
+                    "min_gap_within_share": min(s.gap_within_share for s in chosen),
+                }
+            )
+    return rows

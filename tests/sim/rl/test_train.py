@@ -1,0 +1,123 @@
+"""PPO end to end: a tiny policy trains, exports to the car's format and is scored held out."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.drives import Drive, load_drive
+from sim.rl.env import EnvConfig
+from sim.rl.scores import ControllerUnderTest
+from sim.rl.train import PpoSettings, export_policy, train_policy
+from tests.sim.test_evaluate import write_drive
+from tests.support.servers import cli_env, run_cli
+from vehicle_agent.controllers import Observation
+from vehicle_agent.controllers.policy import load_policy
+
+STOP_AND_GO = "data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+FREEFLOW = "data/trajectories/2021-03-09-13-35-04_masterArray_0_4633.csv"
+TINY = PpoSettings(num_envs=4, n_steps=128, batch_size=256, n_epochs=2)
+
+
+def stop_and_go(shared_dir: Path) -> Drive:
+    return load_drive(shared_dir / STOP_AND_GO).slice(300.0, 200.0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("actuation", ["acc", "accel"])
+def test_a_tiny_policy_trains_and_the_car_runs_exactly_its_actions(
+    shared_dir: Path, tmp_path: Path, actuation: str
+) -> None:
+    config = EnvConfig("acc" if actuation == "acc" else "accel", humans=4, episode_s=60.0)
+    seen: list[int] = []
+    model = train_policy([stop_and_go(shared_dir)], config, TINY, 2048, 7, seen.append)
+    assert seen[-1] >= 2048
+    path = tmp_path / f"rl_{actuation}.npz"
+    digest = export_policy(model, path, config)
+    assert digest == hashlib.sha256(path.read_bytes()).hexdigest()
+    network = load_policy(path, config.actuation)
+    features = np.random.default_rng(0).uniform(-1.0, 1.5, size=(64, 6))
+    expected, _ = model.predict(features, deterministic=True)
+    np.testing.assert_allclose(network.action(features), expected, atol=1e-5)
+    # the controller the scores run reads the same file
+    controller = ControllerUnderTest.policy_file("rl", actuation, path).build()
+    controller.step(Observation(time_s=0.0, speed_mps=20.0, target_speed_mps=22.0))
+
+
+@pytest.mark.slow
+def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    fast = load_drive(shared_dir / FREEFLOW)
+    # three dates, one of them recorded twice (parts of one fast drive: 25 cars pass 3.6 km)
+    for name, drive in (
+        ("2021-04-05-a", fast.slice(0.0, 120.0)),
+        ("2021-04-05-b", fast.slice(110.0, 120.0)),
+        ("2021-03-09-a", fast.slice(220.0, 120.0)),
+        ("2021-04-19-a", fast.slice(330.0, 120.0)),
+    ):
+        write_drive(drive, drives / f"{name}.csv")
+    out = tmp_path / "out"
+    result = run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "accel",
+        "--drives",
+        str(drives),
+        "--timesteps",
+        "1024",
+        "--seed",
+        "5",
+        "--num-envs",
+        "4",
+        "--humans",
+        "4",
+        "--episode-s",
+        "60",
+        "--no-final",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=280,
+    )
+    assert result.returncode == 0, result.stderr
+    manifest = json.loads((out / "rl_accel.json").read_text())
+    assert manifest["sha256"] == hashlib.sha256((out / "rl_accel.npz").read_bytes()).hexdigest()
+    assert manifest["seed"] == 5
+    assert manifest["ppo"]["num_envs"] == 4
+    assert manifest["command"].startswith("smoothfleet sim train --actuation accel")
+    assert manifest["environment"]["gap_bounds"] == {
+        "min_gap_m": 7.0,
+        "max_gap_m": 120.0,
+        "min_time_gap_s": 1.0,
+    }
+    folds = manifest["cross_validation"]["folds"]
+    assert [fold["held_out_dates"] for fold in folds] == [
+        ["2021-03-09", "2021-04-19"],
+        ["2021-04-05"],
+    ]
+    for fold in folds:
+        assert not set(fold["train_dates"]) & set(fold["held_out_dates"])
+    # fold 0's policy is shipped: trained on fold 0's dates only
+    assert manifest["shipped"] == "fold 0's policy"
+    assert manifest["training_dates"] == ["2021-04-05"]
+    scored = {(row["drive"], row["controller"]) for row in manifest["cross_validation"]["drives"]}
+    assert len(scored) == 8  # 4 drives x (rl_accel, microaccel), each on its held-out fold
+    assert "rl_accel" in result.stdout
+    assert "sha256" in result.stdout
+
+
+def test_cli_train_names_a_missing_folder(tmp_path: Path) -> None:
+    missing = run_cli(
+        "sim", "train", "--actuation", "acc", "--drives", str(tmp_path / "x"), env=cli_env()
+    )
+    assert missing.returncode != 0
+    assert "no drive CSV files" in missing.stderr
+    assert "Traceback" not in missing.stderr
