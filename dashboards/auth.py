@@ -208,6 +208,17 @@ async def current_user(request: Request, session: SessionDep) -> PageUser:
 UserDep = Annotated[PageUser, Depends(current_user)]
 
 
+def navigating_user(request: Request) -> PageUser | None:
+    """Who the session cookie names, for the navigation of an error page only (no database:
+    the page may be an error of the database itself); never for deciding what may be done."""
+    value = request.cookies.get(SESSION_COOKIE)
+    settings = _settings(request)
+    claims = read_session_cookie(settings, value, time.time()) if value else None
+    if claims is None:
+        return None
+    return PageUser(claims.username, "", csrf_token(settings, claims.nonce))
+
+
 def check_form(user: PageUser, submitted_token: str, *, needs_operator: bool) -> None:
     """Refuse a form without this session's CSRF token, or an action beyond the user's role."""
     if not hmac.compare_digest(user.csrf_token.encode(), submitted_token.encode()):

@@ -7,7 +7,9 @@ postmiles (people's units on US roads); times in UTC.
 
 from __future__ import annotations
 
+import inspect
 import json
+import logging
 import math
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -16,13 +18,20 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 from fastapi import APIRouter, FastAPI, Form, Query, Request
-from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
+from fastapi.responses import (
+    HTMLResponse,
+    JSONResponse,
+    PlainTextResponse,
+    RedirectResponse,
+    Response,
+)
 from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 from jinja2 import pass_context
 from jinja2.runtime import Context
 from sqlalchemy.ext.asyncio import AsyncSession
 from starlette.concurrency import run_in_threadpool
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.config import Settings
 from app.core.db import SessionDep
@@ -54,6 +63,7 @@ from dashboards.auth import (
     check_login_csrf,
     clear_session,
     login_csrf_token,
+    navigating_user,
     remember_login_csrf,
     safe_next,
     set_session,
@@ -72,6 +82,7 @@ from dashboards.corridor_map import CAR_COLOURS, CarState, MapCar, corridor_map
 from dashboards.figures import time_space
 
 HERE = Path(__file__).parent
+log = logging.getLogger(__name__)
 templates = Jinja2Templates(directory=HERE / "templates")
 router = APIRouter(include_in_schema=False)
 
@@ -143,14 +154,66 @@ def install(app: FastAPI) -> None:
         return _render(
             request,
             "error.html",
-            None,
+            navigating_user(request),
             status_code=error.status_code,
             title=error.title,
             message=error.message,
+            path=request.url.path,
+        )
+
+    api_http_error = app.exception_handlers[StarletteHTTPException]
+
+    async def on_http_error(request: Request, error: Exception) -> Response:
+        assert isinstance(error, StarletteHTTPException)
+        if not wants_page(request):
+            answer = api_http_error(request, error)
+            return await answer if inspect.isawaitable(answer) else answer
+        title, message = ERROR_PAGES.get(error.status_code, ("Error", str(error.detail)))
+        return _render(
+            request,
+            "error.html",
+            navigating_user(request),
+            status_code=error.status_code,
+            title=title,
+            message=message,
+            path=request.url.path,
+        )
+
+    async def on_server_error(request: Request, error: Exception) -> Response:
+        log.error("page %s failed", request.url.path, exc_info=error)
+        if not wants_page(request):
+            return PlainTextResponse("Internal Server Error", status_code=500)
+        return _render(
+            request,
+            "error.html",
+            navigating_user(request),
+            status_code=500,
+            title="Something went wrong",
+            message="The server failed to show this page; the failure is in its log. Try again "
+            "in a moment, or go back to the fleet.",
+            path=request.url.path,
         )
 
     app.add_exception_handler(LoginRequired, on_login_required)
     app.add_exception_handler(PageError, on_page_error)
+    app.add_exception_handler(StarletteHTTPException, on_http_error)
+    app.add_exception_handler(Exception, on_server_error)
+
+
+# Paths of the API and its machinery: their errors stay JSON ({"detail": ...}).
+NOT_PAGES = ("/api/", "/docs", "/redoc", "/openapi", "/metrics", "/healthz", "/readyz", "/static/")
+ERROR_PAGES = {
+    404: ("Page not found", "There is no page here. The menu above leads to every page."),
+    403: ("Not allowed", "Your role does not allow this page."),
+    405: ("Not allowed", "This page cannot be used that way."),
+}
+
+
+def wants_page(request: Request) -> bool:
+    """A browser asking for a dashboard page (HTML), not a client of the API."""
+    path = request.url.path
+    accepts_html = "text/html" in request.headers.get("accept", "")
+    return accepts_html and not path.startswith(NOT_PAGES)
 
 
 def _quote(path: str) -> str:

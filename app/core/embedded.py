@@ -43,6 +43,14 @@ def ensure_database(server_url: str, name: str) -> None:
             conn.execute(sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
 
 
+def drop_database(server_url: str, name: str) -> None:
+    """Drop database `name` if it exists, ending its sessions (the demo's fresh start)."""
+    with psycopg.connect(libpq_url(server_url), autocommit=True) as conn:
+        conn.execute(
+            sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name))
+        )
+
+
 def database_url(server_url: str, name: str) -> str:
     """The URL of database `name` on the server behind `server_url` (socket URLs keep ?host=)."""
     head, _, query = server_url.partition("?")

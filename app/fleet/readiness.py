@@ -338,23 +338,31 @@ def check_acc(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
 
 
 def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
-    """The assigned controller runs."""
+    """The car runs the assigned controller.
+
+    The agent reports its controller as running only while it drives the car (engaged:
+    vehicle_agent/agent.py `controller_running`), so "not running" is every parked car at
+    6 a.m. and every car its driver has not engaged yet: a warning, never a reason to withhold
+    clearance."""
     status = facts.last_status
     if status is None or status.is_controller_running is None:
         return _unknown("controller", "its controller")
-    name = status.controller or "?"
-    if not status.is_controller_running:
-        return Grade(
-            "red", f"{name} stopped", "the controller is not running", f"controller {name} stopped"
-        )
+    name = status.controller or facts.assigned_controller
     if status.controller is not None and status.controller != facts.assigned_controller:
         return Grade(
             "amber",
-            f"{name} runs",
+            f"{name} {'runs' if status.is_controller_running else 'idle'}",
             f"runs {name}, assigned {facts.assigned_controller} (config not picked up yet?)",
             f"runs {name}, assigned {facts.assigned_controller}",
         )
-    return Grade("green", f"{name} runs", "the assigned controller runs")
+    if not status.is_controller_running:
+        return Grade(
+            "amber",
+            f"{name} idle",
+            "the controller is not driving the car (not engaged)",
+            f"controller {name} not engaged",
+        )
+    return Grade("green", f"{name} runs", "the assigned controller drives the car")
 
 
 def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:

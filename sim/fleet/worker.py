@@ -58,6 +58,7 @@ WRAP_MARGIN_M = 60.0
 START_TIME_GAP_S = 2.0
 # At most this many ticks of a car per control step: a late step must not grow the next one.
 MAX_SUB_TICKS = 4
+PROGRESS_STEPS = 20  # about every 2 s
 
 
 class VehicleSpec(BaseModel):
@@ -83,6 +84,9 @@ class WorkerSpec(BaseModel):
     spool_dir: str
     dbc_cache: str
     vehicles: list[VehicleSpec]
+    # Where the worker rewrites its recent control-step timing every PROGRESS_STEPS steps (the
+    # demo's status line reads it); None: nowhere.
+    progress_path: str | None = None
 
 
 class EmulatorGps:
@@ -229,6 +233,7 @@ class Worker:
             car.emulator.step(start)
         self.last_step_s = start
         next_step = time.monotonic()
+        window = (self.steps, self.late_steps, start)
         while not self.stop.is_set():
             cpu_before = time.thread_time()
             self.control_step()
@@ -240,6 +245,23 @@ class Worker:
             else:
                 self.late_steps += 1
                 next_step = time.monotonic()
+            if self.steps - window[0] >= PROGRESS_STEPS:
+                window = self._write_progress(window)
+
+    def _write_progress(self, window: tuple[int, int, float]) -> tuple[int, int, float]:
+        """Rewrite the progress file with the steps since `window`; the next window's start."""
+        now = time.monotonic()
+        if self.spec.progress_path is not None:
+            path = Path(self.spec.progress_path)
+            progress = {
+                "window_steps": self.steps - window[0],
+                "window_late_steps": self.late_steps - window[1],
+                "window_wall_s": now - window[2],
+            }
+            partial = path.with_suffix(".partial")
+            partial.write_text(json.dumps(progress))
+            partial.replace(path)  # readers never see half a file
+        return self.steps, self.late_steps, now
 
     def network_loop(self, cars: list[FleetCar]) -> None:
         """The agents' blocking HTTP calls, each when due."""

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
+from zoneinfo import ZoneInfo
 
 import httpx
 from sqlalchemy import Engine, select, text
@@ -37,11 +38,12 @@ from app.core.config import Settings
 from app.core.db import make_sync_engine, session_scope
 from app.core.security import issue_token, revoke_tokens
 from app.models.dimensions import InrixSegment, Vehicle
-from contract.units import METRES_PER_MILE
+from contract.units import METRES_PER_MILE, MPH_PER_MPS
 from sim.drives import Drive, load_drive
 from sim.energy import GALLONS_PER_GRAM_GASOLINE
 from sim.fleet.traffic import CorridorTraffic, Segment, synthetic_waves
 from sim.fleet.worker import VehicleSpec, WorkerSpec
+from smoothfleet.cli.demo_status import StatusMonitor
 
 CORRIDOR = "I-24-WB"
 # The strongest stop-and-go drive of the shared data, 300 s in: waves from the first minute.
@@ -57,6 +59,10 @@ FLEET_WORKERS = 2
 START_MARGIN_M = 300.0
 READY_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 90.0
+# The emulated cars send each watched message at most once per 0.1 s control step (sim.emulator:
+# 50 frames/s for a Rogue, whose schedule is 150/s), so the demo's server expects CAN traffic at
+# half of that (amber below 1/6 of the schedule) and keeps red where the agent's inputs go stale.
+DEMO_SERVER_SETTINGS = {"SMOOTHFLEET_READINESS_CAN_SHARE": "[0.167, 0.1]"}
 
 # A fleet worker process and the file its summary goes to.
 WorkerProcess = tuple[subprocess.Popen[bytes], Path]
@@ -82,6 +88,8 @@ class DemoSummary:
     # Seconds between a car's control steps, and the CPU one step of the whole worker takes.
     mean_step_interval_s: float
     step_cpu_s: float
+    # Cars whose clearance verdict changed between two status lines.
+    verdict_changes: int = 0
 
     def lines(self) -> list[str]:
         """The closing summary, one fact per line."""
@@ -97,7 +105,8 @@ class DemoSummary:
             f"engaged on the plan: {100 * self.engaged_share:.0f} % of vehicle-time "
             f"({100 * self.pings_engaged_share:.0f} % of stored pings)",
             f"fleet so far: {self.fuel_economy_mpg:.1f} mpg (RAV4 fuel model), mean speed "
-            f"{self.mean_speed_mps:.1f} m/s",
+            f"{self.mean_speed_mps * MPH_PER_MPS:.1f} mph",
+            f"clearance: {self.verdict_changes} verdict changes seen by the status line",
             cpu,
             f"control steps: every {self.mean_step_interval_s:.2f} s on average (goal 0.10 s, "
             f"{100 * self.late_control_steps:.0f} % late); one step of a worker's cars takes "
@@ -128,8 +137,9 @@ def fleet_specs(
     drive_path: Path | None,
     vehicles: int,
     workers: int,
-) -> tuple[list[WorkerSpec], str, list[Segment]]:
-    """Tokens for the fleet and the feed, and the workers' specs (cars spread per lane)."""
+) -> tuple[list[WorkerSpec], list[str], list[Segment]]:
+    """Tokens for the fleet, the feed and the status line (in that order after the fleet's),
+    and the workers' specs (cars spread per lane)."""
     with session_scope(engine) as session:
         roster = [
             vehicle
@@ -166,6 +176,7 @@ def fleet_specs(
                     )
                 )
         feed_token = issue_token(session, "feed", name="demo INRIX feed")
+        viewer_token = issue_token(session, "viewer", name="demo status line")
     worker_specs = [
         WorkerSpec(
             server_url=base_url,
@@ -176,11 +187,12 @@ def fleet_specs(
             spool_dir=str(run_dir / "spools"),
             dbc_cache=str(settings.data_dir / "dbc"),
             vehicles=specs[part::workers],
+            progress_path=str(run_dir / f"worker-{part}.progress.json"),
         )
         for part in range(workers)
         if specs[part::workers]
     ]
-    return worker_specs, feed_token, segments
+    return worker_specs, [feed_token, viewer_token], segments
 
 
 class InrixFeed:
@@ -263,7 +275,7 @@ def run_demo(
     """Server, feed and fleet until Ctrl-C or `duration_s`; returns the summary."""
     run_dir = new_run_dir(settings)
     base = f"http://{settings.host}:{settings.port}"
-    env = {**os.environ, "SMOOTHFLEET_DATABASE_URL": url}
+    env = {**os.environ, **DEMO_SERVER_SETTINGS, "SMOOTHFLEET_DATABASE_URL": url}
     with (run_dir / "server.log").open("wb") as server_log:
         server = subprocess.Popen(
             [
@@ -345,9 +357,18 @@ def run_fleet(
     engine = make_sync_engine(url)
     epoch = time.time()
     started = datetime.fromtimestamp(epoch, UTC)
-    specs, feed_token, segments = fleet_specs(
+    specs, (feed_token, viewer_token), segments = fleet_specs(
         engine, settings, base_url, run_dir, epoch, drive_path, vehicles, FLEET_WORKERS
     )
+    monitor = StatusMonitor(
+        base_url,
+        viewer_token,
+        engine,
+        [Path(spec.progress_path) for spec in specs if spec.progress_path is not None],
+        say,
+        ZoneInfo(settings.dashboard_timezone),
+    )
+    monitor_thread = threading.Thread(target=monitor.run, name="status-line", daemon=True)
     workers: list[WorkerProcess] = []
     traffic = CorridorTraffic(traffic_drive(drive_path), start_offset_s=TRAFFIC_OFFSET_S)
     feed = InrixFeed(base_url, feed_token, traffic, segments, epoch)
@@ -362,6 +383,7 @@ def run_fleet(
             f"fleet: {sum(len(spec.vehicles) for spec in specs)} vehicles in {len(workers)} "
             f"processes; logs in {run_dir}"
         )
+        monitor_thread.start()
         measured_from = time.monotonic()
         server_pids = [] if server_pid is None else [server_pid]
         pids = server_pids + [process.pid for process, _ in workers]
@@ -379,6 +401,8 @@ def run_fleet(
             say("interrupted")
         elapsed = time.monotonic() - measured_from
         cpu_end = {pid: process_cpu_s(pid) for pid in pids}
+        monitor.stop.set()
+        monitor_thread.join(timeout=15)
         say("stopping: the agents hand their cars back and upload their spools ...")
         summaries = stop_workers(workers)
         feed.stop.set()
@@ -392,21 +416,23 @@ def run_fleet(
             summaries,
             cpu_share(server_pids, cpu_start, cpu_end, elapsed) if server_pids else None,
             cpu_share([p.pid for p, _ in workers], cpu_start, cpu_end, elapsed),
+            len(monitor.tracker.changes),
         )
     finally:
         for process, _ in workers:
             if process.poll() is None:
                 process.kill()
         feed.stop.set()
+        monitor.stop.set()
         # The run's tokens end with it: a simulated car's token left valid is a live credential
         # in a spec file on disk.
-        revoke_run_tokens(engine, specs, feed_token)
+        revoke_run_tokens(engine, specs, [feed_token, viewer_token])
         engine.dispose()
 
 
-def revoke_run_tokens(engine: Engine, specs: Sequence[WorkerSpec], feed_token: str) -> None:
-    """Revoke every token a fleet run issued (its cars' and its INRIX feed's)."""
-    tokens = [vehicle.token for spec in specs for vehicle in spec.vehicles] + [feed_token]
+def revoke_run_tokens(engine: Engine, specs: Sequence[WorkerSpec], others: Sequence[str]) -> None:
+    """Revoke every token a fleet run issued (its cars', its INRIX feed's, its status line's)."""
+    tokens = [vehicle.token for spec in specs for vehicle in spec.vehicles] + list(others)
     with session_scope(engine) as session:
         for token in tokens:
             revoke_tokens(session, token=token)
@@ -473,6 +499,7 @@ def summarise(
     workers: list[dict[str, Any]],
     server_cpu: float | None,
     fleet_cpu: float | None,
+    verdict_changes: int = 0,
 ) -> DemoSummary:
     """The closing summary from the database and the workers' own counts."""
     with engine.connect() as connection:
@@ -522,6 +549,7 @@ def summarise(
         late_control_steps=sum(w["late_steps"] for w in workers) / max(1, worker_steps),
         mean_step_interval_s=sum(w["control_wall_s"] for w in workers) / max(1, worker_steps),
         step_cpu_s=sum(w["control_cpu_s"] for w in workers) / max(1, worker_steps),
+        verdict_changes=verdict_changes,
     )
 
 

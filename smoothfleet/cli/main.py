@@ -462,42 +462,77 @@ def serve(
 DEMO_ADMIN = "admin"
 
 
+DEMO_DATABASE = "smoothfleet_demo"
+
+
 @cli.command("demo")
 @click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
 @click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
+@click.option(
+    "--keep",
+    is_flag=True,
+    help="Keep the previous run's demo database (maintenance flags, users, plans, pings).",
+)
 @fleet_options
-def demo(host: str | None, port: int | None, duration: float | None, vehicles: int) -> None:
+def demo(
+    host: str | None, port: int | None, keep: bool, duration: float | None, vehicles: int
+) -> None:
     """Everything on one machine: embedded database, migrations, seed, API, dashboard, planner,
-    a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent."""
+    a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent.
+
+    The embedded server gets a database of the demo's own, made afresh each run unless --keep;
+    with SMOOTHFLEET_DATABASE_URL set, the demo uses that database as it is."""
+    current = _with_overrides(host=host, port=port)
+    ensure_port_free(current.host, current.port)
+    if current.database_url is not None:
+        console.print("SMOOTHFLEET_DATABASE_URL is set: the demo uses that database as it is")
+        with database(current) as url:
+            _demo_on(url, current, duration, vehicles)
+        return
+    from app.core.embedded import (
+        database_url,
+        drop_database,
+        embedded_server,
+        ensure_database,
+        pgdata_dir,
+    )
+
+    with embedded_server(pgdata_dir(current.data_dir)) as server_url:
+        if not keep:
+            drop_database(server_url, DEMO_DATABASE)
+        ensure_database(server_url, DEMO_DATABASE)
+        _demo_on(database_url(server_url, DEMO_DATABASE), current, duration, vehicles)
+
+
+def _say_whole(line: str) -> None:
+    """One line of the demo's output, never wrapped at the terminal's width (a status line is
+    read, and grepped from a log, as one line)."""
+    console.print(line, soft_wrap=True)
+
+
+def _demo_on(url: str, current: Settings, duration: float | None, vehicles: int) -> None:
     from app.migrate import upgrade
     from app.seed import seed
     from smoothfleet.cli.demo import DemoError, run_demo
 
-    current = _with_overrides(host=host, port=port)
-    ensure_port_free(current.host, current.port)
-    with database(current) as url:
-        engine = make_sync_engine(url)
-        upgrade(engine)
-        admin_password = new_password()
-        with session_scope(engine) as session:
-            counts = seed(session)
-            save_user(session, DEMO_ADMIN, "admin", admin_password)
-        engine.dispose()
-        public = current.public_url or f"http://{current.host}:{current.port}"
-        console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
-        console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
-        console.print(
-            f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)"
-        )
-        console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
-        try:
-            summary = run_demo(
-                url, current, duration_s=duration, vehicles=vehicles, say=console.print
-            )
-        except DemoError as error:
-            raise CliError(f"demo: {error}") from None
-        for line in summary.lines():
-            console.print(line)
+    engine = make_sync_engine(url)
+    upgrade(engine)
+    admin_password = new_password()
+    with session_scope(engine) as session:
+        counts = seed(session)
+        save_user(session, DEMO_ADMIN, "admin", admin_password)
+    engine.dispose()
+    public = current.public_url or f"http://{current.host}:{current.port}"
+    console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
+    console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+    console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
+    console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
+    try:
+        summary = run_demo(url, current, duration_s=duration, vehicles=vehicles, say=_say_whole)
+    except DemoError as error:
+        raise CliError(f"demo: {error}") from None
+    for line in summary.lines():
+        console.print(line)
 
 
 def _with_overrides(**overrides: object) -> Settings:

@@ -120,7 +120,7 @@ def test_a_stale_status_turns_amber_then_red_and_blocks_clearance(age_s: int, le
         ({"can_msgs_per_s": 75.0}, "can", "amber"),
         ({"can_msgs_per_s": 15.0}, "can", "red"),
         ({"is_acc_available": False}, "acc", "red"),
-        ({"is_controller_running": False}, "controller", "red"),
+        ({"is_controller_running": False}, "controller", "amber"),
         ({"controller": "simple"}, "controller", "amber"),
         ({"plan_age_s": None}, "plan", "amber"),
         ({"plan_age_s": 95.0}, "plan", "amber"),

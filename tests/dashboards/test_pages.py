@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import html
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
@@ -258,6 +259,53 @@ def test_an_unknown_vehicle_is_a_404_page(site: str) -> None:
         assert response.status_code == 404
         assert "There is no vehicle SF-999 in the roster" in response.text
         assert "Traceback" not in response.text
+
+
+def test_an_unknown_page_is_an_html_page_with_the_menu(site: str) -> None:
+    page = {"Accept": "text/html"}
+    with logged_in(site, "viewer") as client:
+        response = client.get("/no-such-page", headers=page)
+        assert response.status_code == 404
+        assert response.headers["content-type"].startswith("text/html")
+        assert "<h1>Page not found</h1>" in response.text
+        assert '<a href="/fleet"' in response.text
+        assert "viewer" in response.text  # the logged-in menu, with the logout button
+        vehicle = client.get("/vehicles/SF-999", headers=page)
+        assert '<a href="/map"' in vehicle.text
+    with httpx.Client(base_url=site) as visitor:
+        anonymous = visitor.get("/no-such-page", headers=page)
+        assert anonymous.status_code == 404
+        assert '<a href="/login">Log in</a>' in anonymous.text
+        api = visitor.get("/api/v1/no-such-thing", headers=page)
+        assert api.status_code == 404
+        assert api.json() == {"detail": "Not Found"}
+        assert visitor.get("/no-such-page").json() == {"detail": "Not Found"}  # not a browser
+
+
+def test_a_failing_page_is_a_500_page_and_the_api_keeps_its_answer(database_url: str) -> None:
+    from smoothfleet.server import create_app
+
+    app = create_app(load_settings(database_url=database_url))
+
+    @app.get("/broken-page")
+    async def broken_page() -> None:
+        raise RuntimeError("a bug in a page")
+
+    @app.get("/api/v1/broken")
+    async def broken_api() -> None:
+        raise RuntimeError("a bug in the API")
+
+    async def ask(path: str) -> httpx.Response:
+        transport = httpx.ASGITransport(app, raise_app_exceptions=False)
+        async with httpx.AsyncClient(transport=transport, base_url="http://test") as client:
+            return await client.get(path, headers={"Accept": "text/html"})
+
+    page = asyncio.run(ask("/broken-page"))
+    assert page.status_code == 500
+    assert "<h1>Something went wrong</h1>" in page.text
+    assert "a bug in a page" not in page.text
+    api = asyncio.run(ask("/api/v1/broken"))
+    assert (api.status_code, api.text) == (500, "Internal Server Error")
 
 
 def test_an_unknown_plan_is_a_404_page(site: str) -> None:
