@@ -88,8 +88,9 @@ class DemoSummary:
     # Seconds between a car's control steps, and the CPU one step of the whole worker takes.
     mean_step_interval_s: float
     step_cpu_s: float
-    # Cars whose clearance verdict changed between two status lines.
-    verdict_changes: int = 0
+    # Cars the status line saw cleared, and verdict changes after a car's first clearance.
+    cars_cleared: int = 0
+    verdict_flips: int = 0
 
     def lines(self) -> list[str]:
         """The closing summary, one fact per line."""
@@ -106,7 +107,8 @@ class DemoSummary:
             f"({100 * self.pings_engaged_share:.0f} % of stored pings)",
             f"fleet so far: {self.fuel_economy_mpg:.1f} mpg (RAV4 fuel model), mean speed "
             f"{self.mean_speed_mps * MPH_PER_MPS:.1f} mph",
-            f"clearance: {self.verdict_changes} verdict changes seen by the status line",
+            f"clearance: {self.cars_cleared} cars cleared, {self.verdict_flips} verdict changes "
+            "after a car's first clearance (status line every 5 s)",
             cpu,
             f"control steps: every {self.mean_step_interval_s:.2f} s on average (goal 0.10 s, "
             f"{100 * self.late_control_steps:.0f} % late); one step of a worker's cars takes "
@@ -416,7 +418,8 @@ def run_fleet(
             summaries,
             cpu_share(server_pids, cpu_start, cpu_end, elapsed) if server_pids else None,
             cpu_share([p.pid for p, _ in workers], cpu_start, cpu_end, elapsed),
-            len(monitor.tracker.changes),
+            len(monitor.tracker.cleared_once),
+            monitor.tracker.flips,
         )
     finally:
         for process, _ in workers:
@@ -499,7 +502,8 @@ def summarise(
     workers: list[dict[str, Any]],
     server_cpu: float | None,
     fleet_cpu: float | None,
-    verdict_changes: int = 0,
+    cars_cleared: int = 0,
+    verdict_flips: int = 0,
 ) -> DemoSummary:
     """The closing summary from the database and the workers' own counts."""
     with engine.connect() as connection:
@@ -549,7 +553,8 @@ def summarise(
         late_control_steps=sum(w["late_steps"] for w in workers) / max(1, worker_steps),
         mean_step_interval_s=sum(w["control_wall_s"] for w in workers) / max(1, worker_steps),
         step_cpu_s=sum(w["control_cpu_s"] for w in workers) / max(1, worker_steps),
-        verdict_changes=verdict_changes,
+        cars_cleared=cars_cleared,
+        verdict_flips=verdict_flips,
     )
 
 

@@ -1,7 +1,8 @@
 """The demo's status line: what an operator would check, every few seconds, in the pages' units.
 
     13:02:05  pings 99.8/s · reporting 100/100 · cleared 98 · engaged 71 · plan 42 s old ·
-              INRIX 3 min old · fleet step 0.10 s (2 % late) · verdict changes 0
+              INRIX 212 s old · fleet step 0.10 s (2 % late) · verdict changes 98 (0 after
+              clearance)
 
 The counts come from GET /api/v1/fleet (the numbers the fleet page shows, with the same
 readiness), the ping rate from the server's own /metrics counter, the ages from the warehouse,
@@ -45,6 +46,7 @@ class FleetStatus:
     step_interval_s: float | None
     late_share: float | None
     verdict_changes: int
+    verdict_flips: int = 0
 
 
 def status_line(status: FleetStatus, zone: Any = None) -> str:
@@ -63,16 +65,20 @@ def status_line(status: FleetStatus, zone: Any = None) -> str:
         f"{status.at.astimezone(zone).strftime('%H:%M:%S')}  pings {pings} · reporting "
         f"{status.reporting}/{status.vehicles} · cleared {status.cleared} · engaged "
         f"{status.engaged} · plan {age(status.plan_age_s)} · INRIX {age(status.inrix_age_s)} · "
-        f"fleet step {step} · verdict changes {status.verdict_changes}"
+        f"fleet step {step} · verdict changes {status.verdict_changes} "
+        f"({status.verdict_flips} after clearance)"
     )
 
 
 @dataclass
 class VerdictTracker:
-    """Counts the changes of each car's verdict between polls."""
+    """Counts the changes of each car's verdict between polls; a car's first clearance (the
+    fleet starting up) is not a flip, every change after it is."""
 
     verdicts: dict[str, str] = field(default_factory=dict)
     changes: list[tuple[datetime, str, str, str]] = field(default_factory=list)
+    cleared_once: set[str] = field(default_factory=set)
+    flips: int = 0
 
     def update(
         self, at: datetime, verdicts: Mapping[str, str]
@@ -83,6 +89,9 @@ class VerdictTracker:
             before = self.verdicts.get(vehicle_id)
             if before is not None and before != verdict:
                 changed.append((at, vehicle_id, before, verdict))
+                self.flips += vehicle_id in self.cleared_once
+            if verdict == "cleared":
+                self.cleared_once.add(vehicle_id)
             self.verdicts[vehicle_id] = verdict
         self.changes.extend(changed)
         return changed
@@ -179,6 +188,7 @@ class StatusMonitor:
             step_interval_s=step,
             late_share=late,
             verdict_changes=len(self.tracker.changes),
+            verdict_flips=self.tracker.flips,
         )
 
     def run(self) -> None:

@@ -51,14 +51,30 @@ def motion() -> None:
 @motion.command("import")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--store", type=click.Path(path_type=Path), help="Default: DATA_DIR/motion.")
-@click.option("--anchor-x-ft", default=DEFAULT_ANCHOR_X_FT, show_default=True,
-              help="MOTION x (ft) of the tie point.")
-@click.option("--anchor-x-m", default=DEFAULT_ANCHOR_X_M, show_default=True,
-              help="Corridor x_m of the tie point.")
-@click.option("--direction", type=click.Choice(["-1", "1"]), default="-1", show_default=True,
-              help="The corridor's MOTION direction (-1 westbound).")
+@click.option(
+    "--anchor-x-ft",
+    default=DEFAULT_ANCHOR_X_FT,
+    show_default=True,
+    help="MOTION x (ft) of the tie point.",
+)
+@click.option(
+    "--anchor-x-m",
+    default=DEFAULT_ANCHOR_X_M,
+    show_default=True,
+    help="Corridor x_m of the tie point.",
+)
+@click.option(
+    "--direction",
+    type=click.Choice(["-1", "1"]),
+    default="-1",
+    show_default=True,
+    help="The corridor's MOTION direction (-1 westbound).",
+)
 def motion_import(
-    files: tuple[Path, ...], store: Path | None, anchor_x_ft: float, anchor_x_m: float,
+    files: tuple[Path, ...],
+    store: Path | None,
+    anchor_x_ft: float,
+    anchor_x_m: float,
     direction: str,
 ) -> None:
     """Import MOTION JSON FILES (any size, streamed); re-importing a file adds nothing."""
@@ -69,8 +85,13 @@ def motion_import(
         if not path.is_file():
             raise CliError(f"{path}: no such file")
         with Progress(
-            TextColumn(path.name), BarColumn(), DownloadColumn(), TransferSpeedColumn(),
-            TimeRemainingColumn(), console=console, transient=True,
+            TextColumn(path.name),
+            BarColumn(),
+            DownloadColumn(),
+            TransferSpeedColumn(),
+            TimeRemainingColumn(),
+            console=console,
+            transient=True,
         ) as progress:
             task = progress.add_task("import", total=path.stat().st_size)
 
@@ -112,28 +133,50 @@ def _print_report(report: ImportReport) -> None:
 @click.option("--start", "start_text", help="UTC start, ISO 8601 (default: this hour).")
 @click.option("--duration", "duration_s", default=3600.0, show_default=True, help="Seconds.")
 @click.option("--lanes", default=4, show_default=True)
-@click.option("--demand", "demand_vph", default=1500.0, show_default=True,
-              help="Vehicles per hour and lane entering upstream.")
+@click.option(
+    "--demand",
+    "demand_vph",
+    default=1500.0,
+    show_default=True,
+    help="Vehicles per hour and lane entering upstream.",
+)
 @click.option("--fleet-share", default=0.02, show_default=True)
 @click.option("--seed", default=0, show_default=True)
-@click.option("--drive", "drives", multiple=True, type=click.Path(path_type=Path),
-              help="Real drive CSV(s) setting the downstream speed (default: two stop-and-go "
-              "drives of ../shared/data/trajectories).")
+@click.option(
+    "--drive",
+    "drives",
+    multiple=True,
+    type=click.Path(path_type=Path),
+    help="Real drive CSV(s) setting the downstream speed (default: two stop-and-go "
+    "drives of ../shared/data/trajectories).",
+)
 def motion_generate(
-    output: Path, start_text: str | None, duration_s: float, lanes: int, demand_vph: float,
-    fleet_share: float, seed: int, drives: tuple[Path, ...],
+    output: Path,
+    start_text: str | None,
+    duration_s: float,
+    lanes: int,
+    demand_vph: float,
+    fleet_share: float,
+    seed: int,
+    drives: tuple[Path, ...],
 ) -> None:
     """Simulate every vehicle of the testbed's section and write it as MOTION JSON."""
-    start = _moment(start_text) if start_text else datetime.now(UTC).replace(
-        minute=0, second=0, microsecond=0
+    start = (
+        _moment(start_text)
+        if start_text
+        else datetime.now(UTC).replace(minute=0, second=0, microsecond=0)
     )
     paths = drives or tuple(SHARED_DRIVES / name for name in DEFAULT_BOUNDARY_DRIVES)
     try:
         boundary = boundary_speeds([load_drive(path) for path in paths], duration_s)
         config = MotionRunConfig(
-            start_unix_s=start.timestamp(), duration_s=duration_s,
-            section_start_m=TESTBED_START_X_M, lanes=lanes,
-            demand_veh_per_h_per_lane=demand_vph, fleet_share=fleet_share, seed=seed,
+            start_unix_s=start.timestamp(),
+            duration_s=duration_s,
+            section_start_m=TESTBED_START_X_M,
+            lanes=lanes,
+            demand_veh_per_h_per_lane=demand_vph,
+            fleet_share=fleet_share,
+            seed=seed,
         )
     except (DriveError, ValueError) as error:
         raise CliError(str(error)) from None
@@ -155,8 +198,15 @@ def motion_generate(
 @click.option("-o", "--output", type=click.Path(path_type=Path), help="CSV (default: stdout).")
 @click.option("--store", type=click.Path(path_type=Path))
 def motion_edie(
-    since: str, until: str, x_from_m: float, x_to_m: float, h_t_s: float, h_x_m: float,
-    lane: int | None, output: Path | None, store: Path | None,
+    since: str,
+    until: str,
+    x_from_m: float,
+    x_to_m: float,
+    h_t_s: float,
+    h_x_m: float,
+    lane: int | None,
+    output: Path | None,
+    store: Path | None,
 ) -> None:
     """Edie's fields (rho, q, f, u, phi, psi, counts) per box, as CSV."""
     try:

@@ -7,6 +7,7 @@ the plan, and the feed's snapshots are in the warehouse.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -35,6 +36,11 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
     assert result.returncode == 0, result.stdout + result.stderr
     assert f"with {VEHICLES} vehicles" in result.stdout
     assert f"from {VEHICLES} vehicles" in result.stdout
+    # the status line, every 5 s, in the pages' words
+    reporting = re.findall(r"pings .* · reporting (\d+)/100 · cleared \d+ · ", result.stdout)
+    assert reporting, result.stdout
+    assert int(reporting[-1]) == VEHICLES  # of the 100 in the roster
+    assert re.search(r"clearance: \d+ cars cleared, \d+ verdict changes after", result.stdout)
     with engine.connect() as connection:
         pinging = connection.execute(
             text("SELECT vehicle_id, count(*) FROM fact_vehicle_ping GROUP BY vehicle_id")

@@ -24,11 +24,12 @@ def test_the_status_line_reads_in_the_pages_units() -> None:
         inrix_age_s=212.0,
         step_interval_s=0.1049,
         late_share=0.021,
-        verdict_changes=0,
+        verdict_changes=98,
+        verdict_flips=0,
     )
     assert status_line(status, ZoneInfo("America/Chicago")) == (
         "06:02:05  pings 99.8/s · reporting 100/100 · cleared 98 · engaged 71 · plan 42 s old · "
-        "INRIX 212 s old · fleet step 0.10 s (2 % late) · verdict changes 0"
+        "INRIX 212 s old · fleet step 0.10 s (2 % late) · verdict changes 98 (0 after clearance)"
     )
 
 
@@ -39,7 +40,7 @@ def test_missing_sources_read_as_dashes_and_none() -> None:
     assert "plan none · INRIX none · fleet step —" in line
 
 
-def test_verdict_changes_are_counted_between_polls_only() -> None:
+def test_verdict_changes_are_counted_and_flips_after_a_first_clearance() -> None:
     tracker = VerdictTracker()
     assert tracker.update(AT, {"SF-001": "not cleared", "SF-002": "cleared"}) == []
     assert tracker.update(AT, {"SF-001": "cleared", "SF-002": "cleared"}) == [
@@ -47,6 +48,9 @@ def test_verdict_changes_are_counted_between_polls_only() -> None:
     ]
     tracker.update(AT, {"SF-001": "cleared", "SF-003": "cleared"})  # a new car is no change
     assert len(tracker.changes) == 1
+    assert tracker.flips == 0  # SF-001 was cleared for the first time: the fleet starting
+    tracker.update(AT, {"SF-001": "not cleared", "SF-002": "cleared", "SF-003": "cleared"})
+    assert (len(tracker.changes), tracker.flips) == (2, 1)
 
 
 def test_progress_of_all_workers_is_pooled(tmp_path: Path) -> None:

@@ -19,8 +19,17 @@ def test_generate_import_twice_fields_and_plot(
     )
     generated = tmp_path / "hour.json"
     made = run_cli(
-        "motion", "generate", "-o", str(generated), "--start", "2022-11-16T12:00:00Z",
-        "--duration", "60", "--lanes", "2", env=env,
+        "motion",
+        "generate",
+        "-o",
+        str(generated),
+        "--start",
+        "2022-11-16T12:00:00Z",
+        "--duration",
+        "60",
+        "--lanes",
+        "2",
+        env=env,
     )
     assert made.returncode == 0, made.stderr
     assert "trajectories" in " ".join(made.stdout.split())
@@ -34,8 +43,17 @@ def test_generate_import_twice_fields_and_plot(
     assert "already imported" in " ".join(again.stdout.split())
 
     fields = run_cli(
-        "motion", "edie", "--since", "2022-11-16T12:00", "--until", "2022-11-16T12:01",
-        "--from-m", "6000", "--to-m", "13000", env=env,
+        "motion",
+        "edie",
+        "--since",
+        "2022-11-16T12:00",
+        "--until",
+        "2022-11-16T12:01",
+        "--from-m",
+        "6000",
+        "--to-m",
+        "13000",
+        env=env,
     )
     assert fields.returncode == 0, fields.stderr
     rows = list(csv.DictReader(io.StringIO(fields.stdout)))
