@@ -150,60 +150,50 @@ def view_sql(store: Path) -> str:
     )
 
 
-# Edie's generalised definitions (paper, "Results") on boxes of h_t x h_x, aligned to multiples
-# of h_t since the epoch and of h_x from the corridor's start, so boxes agree between queries.
-EDIE_MACRO = """
-CREATE OR REPLACE MACRO motion_edie(
+def _edie_macro(
+    name: str, table: str, t: str, x: str, time: str, distance: str, fuel: str, points: str
+) -> str:
+    """Edie's generalised definitions (paper, "Results") on boxes of h_t x h_x over `table`.
+
+    Boxes are aligned to multiples of h_t since the epoch and of h_x from the corridor's start,
+    so they agree between queries; `vehicles` counts distinct trajectories.
+    """
+    return f"""
+CREATE OR REPLACE MACRO {name}(
     since_s, until_s, x_from_m, x_to_m, h_t_s := 10.0, h_x_m := 200.0, lane_no := NULL
 ) AS TABLE
 SELECT
-    floor(t_s / h_t_s) * h_t_s AS t_start_s,
-    floor(x_m / h_x_m) * h_x_m AS x_start_m,
-    sum(dt_s) AS time_s,
-    sum(dx_m) AS distance_m,
-    sum(fuel_g) AS fuel_g,
+    floor({t} / h_t_s) * h_t_s AS t_start_s,
+    floor({x} / h_x_m) * h_x_m AS x_start_m,
+    sum({time}) AS time_s,
+    sum({distance}) AS distance_m,
+    sum({fuel}) AS fuel_g,
     count(DISTINCT trajectory_id) AS vehicles,
-    count(*) AS points,
-    sum(dt_s) / (h_t_s * h_x_m) AS density_veh_per_m,
-    sum(dx_m) / (h_t_s * h_x_m) AS flow_veh_per_s,
-    sum(fuel_g) / (h_t_s * h_x_m) AS fuel_rate_density_g_per_s_m,
-    sum(dx_m) / nullif(sum(dt_s), 0) AS speed_mps,
-    sum(fuel_g) / nullif(sum(dt_s), 0) AS fuel_rate_per_vehicle_g_per_s,
-    sum(fuel_g) / nullif(sum(dx_m), 0) AS fuel_per_distance_g_per_m
-FROM motion_points
-WHERE t_s >= since_s AND t_s < until_s
-  AND x_m >= x_from_m AND x_m < x_to_m
+    {points} AS points,
+    sum({time}) / (h_t_s * h_x_m) AS density_veh_per_m,
+    sum({distance}) / (h_t_s * h_x_m) AS flow_veh_per_s,
+    sum({fuel}) / (h_t_s * h_x_m) AS fuel_rate_density_g_per_s_m,
+    sum({distance}) / nullif(sum({time}), 0) AS speed_mps,
+    sum({fuel}) / nullif(sum({time}), 0) AS fuel_rate_per_vehicle_g_per_s,
+    sum({fuel}) / nullif(sum({distance}), 0) AS fuel_per_distance_g_per_m
+FROM {table}
+WHERE {t} >= since_s AND {t} < until_s
+  AND {x} >= x_from_m AND {x} < x_to_m
   AND (lane_no IS NULL OR lane = lane_no)
 GROUP BY ALL;
 """
 
 
-# The same fields summed from `cells`, for boxes of whole cells (h_t a multiple of 10 s, h_x of
-# 200 m): the totals are the same sums regrouped, and `vehicles` counts distinct trajectories.
-EDIE_CELLS_MACRO = """
-CREATE OR REPLACE MACRO motion_edie_cells(
-    since_s, until_s, x_from_m, x_to_m, h_t_s := 10.0, h_x_m := 200.0, lane_no := NULL
-) AS TABLE
-SELECT
-    floor(t_cell_s / h_t_s) * h_t_s AS t_start_s,
-    floor(x_cell_m / h_x_m) * h_x_m AS x_start_m,
-    sum(time_s) AS time_s,
-    sum(distance_m) AS distance_m,
-    sum(fuel_g) AS fuel_g,
-    count(DISTINCT trajectory_id) AS vehicles,
-    sum(points) AS points,
-    sum(time_s) / (h_t_s * h_x_m) AS density_veh_per_m,
-    sum(distance_m) / (h_t_s * h_x_m) AS flow_veh_per_s,
-    sum(fuel_g) / (h_t_s * h_x_m) AS fuel_rate_density_g_per_s_m,
-    sum(distance_m) / nullif(sum(time_s), 0) AS speed_mps,
-    sum(fuel_g) / nullif(sum(time_s), 0) AS fuel_rate_per_vehicle_g_per_s,
-    sum(fuel_g) / nullif(sum(distance_m), 0) AS fuel_per_distance_g_per_m
-FROM motion_cells
-WHERE t_cell_s >= since_s AND t_cell_s < until_s
-  AND x_cell_m >= x_from_m AND x_cell_m < x_to_m
-  AND (lane_no IS NULL OR lane = lane_no)
-GROUP BY ALL;
-"""
+# Every point: any box size.
+EDIE_MACRO = _edie_macro(
+    "motion_edie", "motion_points", "t_s", "x_m", "dt_s", "dx_m", "fuel_g", "count(*)"
+)
+# The same sums regrouped from `cells`, for boxes of whole cells (h_t a multiple of 10 s, h_x of
+# 200 m).
+EDIE_CELLS_MACRO = _edie_macro(
+    "motion_edie_cells", "motion_cells", "t_cell_s", "x_cell_m", "time_s", "distance_m",
+    "fuel_g", "sum(points)",
+)
 
 
 def connect(store: Path) -> duckdb.DuckDBPyConnection:

@@ -6,11 +6,14 @@ import csv
 import io
 from pathlib import Path
 
+import pytest
+
 from tests.support.servers import cli_env, run_cli
 
 REAL_RECORD = "i24motion/INCEPTION.22-11-22.single_record_from_tutorial_notebook.json"
 
 
+@pytest.mark.slow  # five CLI processes, one of them simulating a minute of traffic
 def test_generate_import_twice_fields_and_plot(
     shared_dir: Path, seeded_database_url: str, tmp_path: Path
 ) -> None:
