@@ -32,6 +32,8 @@ G_PER_KM_PER_G_PER_M = 1000.0
 # Colour ranges: psi of a car at steady highway speed is ~60-80 g/km, in waves two or three
 # times that; u from standstill to 35 m/s (78 mph).
 PSI_RANGE_G_PER_KM = (0.0, 200.0)
+# No car on the corridor covers ground faster than this (134 mph).
+MAX_TRACE_SPEED_MPS = 60.0
 SPEED_RANGE_MPS = (0.0, 35.0)
 
 
@@ -78,7 +80,7 @@ def bulk_fuel_figure(
         axis.set_facecolor("0.85")
         axis.set_ylabel("corridor position x [km]")
         axis.set_ylim(grid.x_edges_m[0] / 1000.0, grid.x_edges_m[-1] / 1000.0)
-        axis.add_collection(_trajectories(fleet.pings), autolim=False)
+        axis.add_collection(fleet_lines(fleet.pings), autolim=False)
     ticks = _clock_ticks(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]))
     clock = "%H:%M" if len(ticks) < 2 or ticks[1] - ticks[0] >= 60 else "%H:%M:%S"
     axes[1].set_xticks(ticks, [datetime.fromtimestamp(t, UTC).strftime(clock) for t in ticks])
@@ -105,7 +107,7 @@ def _clock_ticks(first_s: float, last_s: float) -> list[float]:
     return [float(t) for t in np.arange(first_tick, last_s + 1e-9, step)]
 
 
-def _trajectories(pings: pd.DataFrame) -> LineCollection:
+def fleet_lines(pings: pd.DataFrame) -> LineCollection:
     """Each car's consecutive pings joined, coloured by the engagement at the segment's start."""
     if pings.empty:
         return LineCollection([])
@@ -114,7 +116,14 @@ def _trajectories(pings: pd.DataFrame) -> LineCollection:
     engaged = pings["is_controller_engaged"].to_numpy(dtype=bool)
     since_epoch = pd.to_datetime(pings["ts"], utc=True) - pd.Timestamp(0, tz="UTC")
     times = since_epoch.dt.total_seconds().to_numpy(dtype=np.float64)
-    joined = (vehicle[1:] == vehicle[:-1]) & (np.diff(times) <= TRACE_GAP_S)
+    gap_s, advance_m = np.diff(times), np.diff(x_km) * 1000.0
+    # A car is joined to its next ping unless it was silent too long or "moved" faster than a
+    # car can (a loop back to the corridor's start, a fix on another road).
+    joined = (
+        (vehicle[1:] == vehicle[:-1])
+        & (gap_s <= TRACE_GAP_S)
+        & (np.abs(advance_m) <= MAX_TRACE_SPEED_MPS * gap_s)
+    )
     starts = np.flatnonzero(joined)
     segments = np.stack(
         [
