@@ -61,6 +61,7 @@ class PlannerParams(BaseModel):
     standing_cycles: int = Field(5, ge=1, le=60, description="recent cycles looked at")
     standing_required: int = Field(4, ge=1, le=60, description="cycles a standing one is seen in")
     match_distance_m: float = Field(300.0, ge=0, description="same bottleneck if this close")
+    # Set from SMOOTHFLEET_PLANNER_PERIOD_S by the job that schedules the planner.
     cycle_period_s: float = Field(60.0, gt=0, description="the schedule's period")
 
     # Step 5 - buffer design.

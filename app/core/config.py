@@ -164,7 +164,20 @@ class Settings(BaseSettings):
     def _planner_params_are_valid(cls, value: dict[str, Any]) -> dict[str, Any]:
         from planner import PlannerParams
 
-        return PlannerParams.parse(value).stored()
+        PlannerParams.parse(value)
+        return value
+
+    @model_validator(mode="after")
+    def _one_planner_period(self) -> Settings:
+        # The planner's memory of past plans spans its cycles: its period is the schedule's.
+        given = self.planner_params.get("cycle_period_s")
+        if given is not None and float(given) != self.planner_period_s:
+            raise ValueError(
+                f"SMOOTHFLEET_PLANNER_PARAMS: cycle_period_s {given} differs from "
+                f"SMOOTHFLEET_PLANNER_PERIOD_S {self.planner_period_s:g}; leave it out, the "
+                "planner takes its schedule's period"
+            )
+        return self
 
     @model_validator(mode="after")
     def _no_placeholder_secrets_in_production(self) -> Settings:

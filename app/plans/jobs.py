@@ -34,6 +34,14 @@ log = logging.getLogger(__name__)
 PLANNER_JOB_ID = "planner"
 
 
+def planner_params(settings: Settings) -> PlannerParams:
+    """The configured planner parameters, its cycle period being the schedule's period (the
+    look-back of standing bottlenecks spans `standing_cycles` of the cycles actually run)."""
+    return PlannerParams.parse(
+        {**settings.planner_params, "cycle_period_s": settings.planner_period_s}
+    )
+
+
 def run_planner(
     engine: Engine,
     settings: Settings,
@@ -44,7 +52,7 @@ def run_planner(
 ) -> list[CycleOutcome]:
     """One cycle for each corridor (all of them unless named), each in its own transaction."""
     algorithm = settings.planner_algorithm
-    params = PlannerParams.parse(settings.planner_params)
+    params = planner_params(settings)
     if corridors is None:
         with session_scope(engine) as session:
             corridors = corridor_ids(session)
