@@ -85,6 +85,9 @@ class VehicleStatusReport(BaseModel):
     cpu_temp_c: float | None = Field(None, ge=-60, le=150)
     ups_on_battery: bool | None = None
     server_rtt_ms: float | None = Field(None, ge=0)
+    config_version: int | None = Field(
+        None, ge=1, le=2**31 - 1, description="the vehicle config version the agent runs"
+    )
 
 
 class StatusAnswer(BaseModel):
@@ -124,3 +127,6 @@ class VehicleConfig(BaseModel):
     status_period_s: float = Field(10.0, gt=0)
     plan_poll_s: float = Field(5.0, gt=0)
     stale_plan_after_s: float = Field(180.0, gt=0)
+    config_version: int | None = Field(
+        None, ge=1, description="bumped by every change; echoed in the car's status reports"
+    )

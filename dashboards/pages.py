@@ -735,13 +735,13 @@ async def vehicle_assignment(
         try:
             lane_number = int(lane)
         except ValueError:
-            raise AssignmentError(f"lane: {lane!r} is not a lane number") from None
+            raise AssignmentError("lane", f"{lane!r} is not a lane number") from None
         try:
             controller_params = json.loads(params or "{}")
         except json.JSONDecodeError as error:
-            raise AssignmentError(f"controller parameters: not valid JSON ({error.msg})") from None
+            raise AssignmentError("controller.params", f"not valid JSON ({error.msg})") from None
         if not isinstance(controller_params, dict):
-            raise AssignmentError("controller parameters: must be a JSON object")
+            raise AssignmentError("controller.params", "must be a JSON object")
         await change_assignment(
             session,
             vehicle_id,
@@ -761,7 +761,8 @@ async def vehicle_assignment(
             page="fleet",
             saved=None,
             error=f"Not saved: {error}",
-            **context,
+            field_error=error,
+            **{**context, "params_json": params},
         )
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=assignment", status_code=303)
 

@@ -529,6 +529,7 @@ class Agent:
             "server_rtt_ms": round(self.server.last_rtt_ms, 1)
             if self.server and self.server.last_rtt_ms is not None
             else None,
+            "config_version": self.config.config_version if self.config else None,
         }
         status = self._message(
             VehicleStatusReport,
@@ -654,7 +655,7 @@ class Agent:
         assert self.server is not None
         held = self.lane_plan
         try:
-            fetched = self.server.plan(held.etag if held else None)
+            fetched = self.server.plan(config.assigned_lane, held.etag if held else None)
         except ServerError as error:
             self._server_failed("plan", error)
             if isinstance(error, UnexpectedAnswer) and error.status == 200:

@@ -176,10 +176,13 @@ class ServerClient:
         except (ValueError, KeyError, TypeError) as error:
             raise UnexpectedAnswer(f"corridor: unusable geometry ({error})") from None
 
-    def plan(self, etag: str | None) -> PlanFetch:
-        """Poll the vehicle's plan with If-None-Match (see the module's table of outcomes)."""
+    def plan(self, lane: int, etag: str | None) -> PlanFetch:
+        """Poll the plan of the lane this car's config assigns, with If-None-Match (see the
+        module's table of outcomes). Asking for the lane explicitly means the plan always matches
+        the config the car runs, even while a new assignment is on its way to the car."""
         headers = {"If-None-Match": etag} if etag else None
-        response = self._request("GET", f"/api/v1/vehicles/{self.vehicle_id}/plan", headers=headers)
+        path = f"/api/v1/vehicles/{self.vehicle_id}/plan?lane={lane}"
+        response = self._request("GET", path, headers=headers)
         if response.status_code == 304:
             return PlanUnchanged()
         if response.status_code == 503:

@@ -82,8 +82,9 @@ async def put_assignment(
 ) -> AssignmentOut:
     """Change the lane, route and controller a vehicle drives (operator or admin).
 
-    The car picks the change up the next time it fetches its config. 422 names the field when
-    the lane is not on the vehicle's corridor or the controller cannot drive its actuation.
+    The car picks the change up the next time it fetches its config. 422 names the field and the
+    reason when the lane is not on the vehicle's corridor, or the controller or its parameters
+    are not what the car can run (the same schema the agent builds from: contract.controllers).
     """
     try:
         vehicle = await change_assignment(
@@ -98,7 +99,11 @@ async def put_assignment(
     except VehicleNotFound:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}") from None
     except AssignmentError as error:
-        raise HTTPException(422, str(error)) from None
+        # FastAPI's own shape for a rejected field (docs/interfaces.md, "Errors")
+        where = ["body", *error.field.split(".")]
+        raise HTTPException(
+            422, [{"loc": where, "msg": error.reason, "type": "value_error"}]
+        ) from None
     await session.refresh(vehicle, ["updated_at"])
     return AssignmentOut(
         vehicle_id=vehicle.vehicle_id,

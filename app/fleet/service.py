@@ -26,7 +26,7 @@ from app.fleet.readiness import (
     assess,
 )
 from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
-from app.vehicles.schemas import CONTROLLER_ACTUATIONS
+from contract.controllers import ControllerConfigError, validate_controller
 from contract.units import METRES_PER_MILE
 
 log = logging.getLogger(__name__)
@@ -47,7 +47,13 @@ class VehicleNotFound(LookupError):
 
 
 class AssignmentError(ValueError):
-    """An assignment the vehicle cannot take; the message says which field and why."""
+    """An assignment the vehicle cannot take: `field` (dotted, e.g. `controller.params.k`) and
+    `reason`; the message says both."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
 
 
 @dataclass(frozen=True)
@@ -308,23 +314,20 @@ async def change_assignment(
         select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
     )
     if lanes is None or not 1 <= lane <= lanes:
-        raise AssignmentError(f"lane: {vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}")
+        raise AssignmentError("lane", f"{vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}")
     route = route.strip()
     if not route:
-        raise AssignmentError("route: must not be empty")
-    actuations = CONTROLLER_ACTUATIONS.get(controller_name)
-    if actuations is None:
-        known = ", ".join(sorted(CONTROLLER_ACTUATIONS))
-        raise AssignmentError(f"controller: {controller_name!r} is not one of {known}")
-    if vehicle.actuation not in actuations:
-        raise AssignmentError(
-            f"controller: {controller_name} cannot drive {vehicle.vehicle_id}, whose actuation is "
-            f"{vehicle.actuation!r}"
-        )
+        raise AssignmentError("route", "must not be empty")
+    try:
+        # the schema the car builds its controller from: a config it cannot run is never saved
+        validate_controller(controller_name, vehicle.actuation, controller_params)
+    except ControllerConfigError as error:
+        raise AssignmentError(error.field, error.reason) from None
     vehicle.assigned_lane = lane
     vehicle.route = route
     vehicle.controller_name = controller_name
     vehicle.controller_params = controller_params
+    vehicle.config_version += 1
     await session.flush()
     log.info(
         "assignment of %s changed by %s: lane %s, route %s, controller %s",
@@ -349,6 +352,7 @@ async def set_maintenance(
     vehicle = await _vehicle_for_update(session, vehicle_id)
     vehicle.is_in_maintenance = in_maintenance
     vehicle.maintenance_note = (note or "").strip() or None
+    vehicle.config_version += 1
     await session.flush()
     log.info("maintenance of %s set to %s by %s", vehicle_id, in_maintenance, changed_by)
     return vehicle

@@ -130,6 +130,8 @@ class Vehicle(Base):
     is_active: Mapped[bool] = mapped_column(server_default=text("true"))
     is_in_maintenance: Mapped[bool] = mapped_column(server_default=text("false"))
     maintenance_note: Mapped[str | None] = mapped_column(Text)
+    # Bumped by every change of what the car should run; the agent echoes the one it applied.
+    config_version: Mapped[int] = mapped_column(Integer, server_default=text("1"))
     created_at: Mapped[datetime] = created_at_column()
     updated_at: Mapped[datetime] = mapped_column(
         DateTime(timezone=True), server_default=func.now(), onupdate=func.now()

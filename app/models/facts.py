@@ -98,6 +98,7 @@ class VehicleStatus(Base):
     cpu_temp_c: Mapped[float | None] = mapped_column(REAL)
     is_ups_on_battery: Mapped[bool | None]
     server_rtt_ms: Mapped[float | None] = mapped_column(REAL)
+    config_version: Mapped[int | None] = mapped_column(Integer)
 
 
 class InrixEstimate(Base):

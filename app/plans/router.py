@@ -111,8 +111,13 @@ async def get_vehicle_plan(
     request: Request,
     principal: AuthDep,
     session: SessionDep,
+    lane: Annotated[
+        int | None,
+        Query(description="the lane of the config the car runs (default: its assigned lane)"),
+    ] = None,
 ) -> Response:
-    """The latest valid plan of the vehicle's corridor, for its assigned lane only."""
+    """The latest valid plan of the vehicle's corridor for one lane: the lane the car asks for
+    (the one of the config it has applied), else its assigned lane."""
     if principal.role == "feed" or (
         principal.role == "vehicle" and principal.vehicle_id != vehicle_id
     ):
@@ -122,8 +127,10 @@ async def get_vehicle_plan(
     assignment = await vehicle_assignment(session, vehicle_id)
     if assignment is None:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}")
-    corridor_id, lane = assignment
-    return await _serve_latest(request, session, corridor_id, lane)
+    corridor_id, assigned_lane = assignment
+    return await _serve_latest(
+        request, session, corridor_id, assigned_lane if lane is None else lane
+    )
 
 
 @router.get("/plans", responses=error_responses(401, 403, 503))

@@ -65,4 +65,5 @@ async def vehicle_config(
         status_period_s=settings.agent_status_period_s,
         plan_poll_s=settings.agent_plan_poll_s,
         stale_plan_after_s=settings.agent_stale_plan_after_s,
+        config_version=vehicle.config_version,
     )

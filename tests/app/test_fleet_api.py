@@ -128,7 +128,7 @@ def test_an_empty_roster_is_an_empty_fleet(database_url: str, engine: Engine) ->
     assert fleet["counts"]["vehicles"] == 0
 
 
-ASSIGNMENT = {"lane": 3, "route": "B", "controller": {"name": "simple", "params": {"gain": 0.5}}}
+ASSIGNMENT = {"lane": 3, "route": "B", "controller": {"name": "simple", "params": {"k": 0.4}}}
 
 
 def test_an_operator_changes_an_assignment_and_the_car_gets_it_in_its_config(api: Api) -> None:
@@ -139,7 +139,7 @@ def test_an_operator_changes_an_assignment_and_the_car_gets_it_in_its_config(api
     assert (answer["lane"], answer["route"], answer["controller"]) == (
         3,
         "B",
-        {"name": "simple", "params": {"gain": 0.5}},
+        {"name": "simple", "params": {"k": 0.4}},
     )
     config = api.client.get(
         "/api/v1/vehicles/SF-001/config", headers=bearer(api.tokens["vehicle"])
@@ -147,6 +147,7 @@ def test_an_operator_changes_an_assignment_and_the_car_gets_it_in_its_config(api
     assert config["assigned_lane"] == 3
     assert config["route"] == "B"
     assert config["controller"]["name"] == "simple"
+    assert config["config_version"] == 2  # one change since the seed
     listed = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
     assert listed["assigned_lane"] == 3
 
@@ -159,22 +160,48 @@ def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
 
 
 @pytest.mark.parametrize(
-    ("body", "message"),
+    ("body", "field", "reason"),
     [
-        ({**ASSIGNMENT, "lane": 5}, "lane: I-24-WB has lanes 1 to 4, not 5"),
+        ({**ASSIGNMENT, "lane": 5}, ["lane"], "I-24-WB has lanes 1 to 4, not 5"),
         (
             {**ASSIGNMENT, "controller": {"name": "microaccel"}},
-            "controller: microaccel cannot drive SF-001, whose actuation is 'acc'",
+            ["controller", "name"],
+            "'microaccel' cannot drive actuation 'acc'",
         ),
-        ({**ASSIGNMENT, "controller": {"name": "pid"}}, "controller: 'pid' is not one of"),
+        ({**ASSIGNMENT, "controller": {"name": "pid"}}, ["controller", "name"], "'pid' is not"),
+        # what the agent's schema refuses is refused before it is saved
+        (
+            {**ASSIGNMENT, "controller": {"name": "simple", "params": {"bogus": 1}}},
+            ["controller", "params", "bogus"],
+            "Extra inputs are not permitted",
+        ),
+        (
+            {**ASSIGNMENT, "controller": {"name": "simple", "params": {"k": -0.5}}},
+            ["controller", "params", "k"],
+            "greater than 0",
+        ),
+        (
+            {**ASSIGNMENT, "controller": {"name": "simple", "params": {"k": "fast"}}},
+            ["controller", "params", "k"],
+            "valid number",
+        ),
     ],
 )
 def test_an_assignment_the_car_cannot_take_is_refused_with_the_field(
-    api: Api, body: dict[str, Any], message: str
+    api: Api, body: dict[str, Any], field: list[str], reason: str
 ) -> None:
+    def config() -> Any:
+        path = "/api/v1/vehicles/SF-001/config"
+        return api.client.get(path, headers=bearer(api.tokens["vehicle"])).json()
+
+    before = config()
     response = api.put("/api/v1/vehicles/SF-001/assignment", body)
     assert response.status_code == 422
-    assert message in response.json()["detail"]
+    (error,) = response.json()["detail"]
+    assert error["loc"] == ["body", *field]
+    assert reason in error["msg"]
+    # nothing was saved: the car's config is what it was
+    assert config() == before
 
 
 def test_assignment_of_an_unknown_vehicle_is_404(api: Api) -> None:

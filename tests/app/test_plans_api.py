@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from sqlalchemy import Engine, text
 
-from app.core.config import load_settings
+from app.core.config import SettingsError, load_settings
 from app.core.db import make_sync_engine
 from app.plans.jobs import run_planner
 from contract.units import MPS_PER_MPH
@@ -241,3 +241,44 @@ def test_two_databases_served_from_one_process_never_mix_their_plans(
     assert free_id == slow_id  # the same id in both databases ...
     assert free_min > 20.0  # ... free flow in the first
     assert slow_min < 15.0  # ... and the slowdown in the second, not the first's document
+
+
+def test_at_a_120_s_schedule_a_standing_slowdown_still_gets_its_buffer(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    # The planner's look-back spans its last cycles: at 120 s between cycles, four cycles of a
+    # standing slowdown reach back 6 minutes (with a fixed 60 s look-back, never "standing").
+    now = datetime.now(UTC).replace(microsecond=0)
+    for minute in range(14, 0, -1):
+        inrix_snapshot(seeded_engine, now - timedelta(minutes=minute), standing_slowdown())
+    settings = load_settings(database_url=seeded_database_url, planner_period_s=120)
+    outcomes = [
+        run_planner(seeded_engine, settings, now=now - timedelta(seconds=120 * cycles_ago))[0]
+        for cycles_ago in (3, 2, 1, 0)
+    ]
+    assert [outcome.status for outcome in outcomes] == ["published"] * 4
+    with seeded_engine.connect() as connection:
+        buffered_lanes = connection.execute(
+            text(
+                "SELECT count(DISTINCT lane) FROM fact_speed_planner "
+                "WHERE plan_id = :plan_id AND is_buffer"
+            ),
+            {"plan_id": outcomes[-1].plan_id},
+        ).scalar_one()
+    assert buffered_lanes == 4
+
+
+def test_a_planner_look_back_other_than_its_schedule_is_refused() -> None:
+    with pytest.raises(SettingsError, match="cycle_period_s 60 differs from"):
+        load_settings(planner_period_s=120, planner_params={"cycle_period_s": 60})
+
+
+def test_a_car_asks_for_the_lane_of_the_config_it_runs(served: Served) -> None:
+    # SF-002 is assigned lane 2; a car still running an older config asks for its own lane
+    path = "/api/v1/vehicles/SF-002/plan"
+    own = served.get(path, role="vehicle")
+    asked = served.get(path, role="vehicle", lane=3)
+    assert [lane["lane"] for lane in own.json()["lanes"]] == [2]
+    assert [lane["lane"] for lane in asked.json()["lanes"]] == [3]
+    assert asked.headers["ETag"] != own.headers["ETag"]
+    assert served.get(path, role="vehicle", lane=9).status_code == 422

@@ -198,7 +198,7 @@ def test_an_operator_changes_an_assignment_from_the_vehicle_page(site: str) -> N
             lane="3",
             route="B",
             controller="simple",
-            params='{"gain": 0.5}',
+            params='{"k": 0.4}',
         )
         assert response.status_code == 303
         page = client.get(response.headers["location"])
@@ -211,8 +211,11 @@ def test_an_operator_changes_an_assignment_from_the_vehicle_page(site: str) -> N
     ("fields", "message"),
     [
         ({"lane": "7"}, "lane: I-24-WB has lanes 1 to 4, not 7"),
-        ({"params": "{gain"}, "controller parameters: not valid JSON"),
-        ({"controller": "microaccel"}, "cannot drive SF-001, whose actuation is"),
+        ({"params": "{gain"}, "controller.params: not valid JSON"),
+        ({"controller": "microaccel"}, "controller.name: 'microaccel' cannot drive actuation"),
+        ({"params": '{"bogus": 1}'}, "controller.params.bogus: Extra inputs are not permitted"),
+        ({"params": '{"k": -0.5}'}, "controller.params.k: Input should be greater than 0"),
+        ({"params": '{"k": "fast"}'}, "controller.params.k: Input should be a valid number"),
     ],
 )
 def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
@@ -223,7 +226,14 @@ def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
         response = post_form(client, "/vehicles/SF-001", "/vehicles/SF-001/assignment", **form)
         assert response.status_code == 422
         assert "Not saved:" in response.text
-        assert message in response.text
+        # beside the field it is about
+        assert f'<span class="field-error" role="alert" data-field="{message.split(":")[0]}">' in (
+            response.text
+        )
+        assert message.replace("'", "&#39;") in response.text
+        # and nothing saved
+        page = client.get("/vehicles/SF-001")
+        assert '<strong data-field="route">A</strong>' in page.text
 
 
 def test_a_form_without_the_session_token_is_refused(site: str) -> None:

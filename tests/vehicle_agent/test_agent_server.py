@@ -73,8 +73,8 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
         ).one()
         statuses = connection.execute(
             text(
-                "SELECT count(*), bool_or(is_controller_running), max(plan_id) "
-                "FROM fact_vehicle_status WHERE vehicle_id = 'SF-098'"
+                "SELECT count(*), bool_or(is_controller_running), max(plan_id), "
+                "min(config_version) FROM fact_vehicle_status WHERE vehicle_id = 'SF-098'"
             )
         ).one()
     assert pings[0] >= 25
@@ -84,6 +84,7 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
     assert statuses[0] >= 2
     assert statuses[1] is True
     assert statuses[2] == plan_id
+    assert statuses[3] == config.config_version == 1  # the version it runs, echoed
 
 
 def ping_keys(engine: Engine) -> list[datetime]:
@@ -194,3 +195,47 @@ def test_without_a_plan_the_car_stays_on_its_acc_until_one_is_published(
             f"published {held.plan.published_at} valid until {held.plan.valid_until}, "
             f"confirmed at {held.confirmed_s}"
         )
+
+
+def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes_plan(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    plan_id = publish_free_flow_plan(seeded_database_url, seeded_engine)
+    token = issue(seeded_engine, "vehicle", "SF-098")  # lane 2
+    operator = issue(seeded_engine, "operator")
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        rig(
+            "toyota_rav4",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-098",
+            server=ServerClient(http, "SF-098", token),
+            speed_mps=24.0,
+        ) as r,
+    ):
+        r.emulator.driver_engage(set_speed_mph=54)
+        r.run(10.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        assert r.agent.state.mode is Mode.ENGAGED
+        changed = http.put(
+            "/api/v1/vehicles/SF-098/assignment",
+            json={"lane": 3, "route": "B", "controller": {"name": "microaccel", "params": {}}},
+            headers={"Authorization": f"Bearer {operator}"},
+        )
+        assert changed.status_code == 200, changed.text
+        # the server now assigns lane 3; the car polls plans with its own lane until its next
+        # config refresh (60 s), then asks for lane 3
+        r.run(70.0, network=True)
+        config = r.agent.config
+        assert config is not None
+        assert (config.assigned_lane, config.config_version) == (3, 2)
+        assert r.agent.lane_plan is not None
+        assert (r.agent.lane_plan.lane, r.agent.lane_plan.plan_id) == (3, plan_id)
+        assert r.agent.stats.plans_refused == 0
+        assert "has no lane" not in caplog.text
