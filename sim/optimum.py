@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import minimize
 
+from contract.controllers import MicroAccelParams
 from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams
 from sim.drives import Drive
 from sim.energy import RAV4_2019, FuelModel
@@ -54,7 +55,6 @@ from sim.platoon import (
     platoon_roles,
     simulate_platoon,
 )
-from vehicle_agent.controllers.microaccel import MicroAccelParams
 
 FloatArray = NDArray[np.float64]
 
