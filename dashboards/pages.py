@@ -223,14 +223,27 @@ def _quote(path: str) -> str:
 
 
 def _readable(value: object) -> str:
-    """A provenance value for people: nested counts as "name n, ...", lists joined."""
+    """A provenance value for people: nested counts as "name n, ...", lists joined, seconds as
+    ages ("inrix age 237 s", not "inrix age s 236.936")."""
     if isinstance(value, dict):
-        return ", ".join(
-            f"{name.replace('_', ' ')} {_readable(item)}" for name, item in value.items()
-        )
+        return ", ".join(_readable_item(name, item) for name, item in value.items())
     if isinstance(value, list):
         return ", ".join(_readable(item) for item in value) or "none"
+    if isinstance(value, float):
+        return f"{value:.1f}"
     return str(value)
+
+
+def _readable_pair(name: str, item: object) -> tuple[str, str]:
+    """(name, value) for people: a name in seconds loses its unit to the value."""
+    if name.endswith("_s") and isinstance(item, int | float) and not isinstance(item, bool):
+        return name[:-2], describe_age(float(item))
+    return name, _readable(item)
+
+
+def _readable_item(name: str, item: object) -> str:
+    shown_name, shown = _readable_pair(name, item)
+    return f"{shown_name.replace('_', ' ')} {shown}"
 
 
 # --- login --------------------------------------------------------------------------------------
@@ -886,7 +899,7 @@ async def _plan_page(
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
         return _render(request, "plans.html", user, **context)
-    context["inputs"] = {name: _readable(value) for name, value in plan.inputs.items()}
+    context["inputs"] = dict(_readable_pair(name, value) for name, value in plan.inputs.items())
     context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
     context["lane_charts"] = _plan_charts(await data.plan_profiles(session, plan))
     # The hour of plans up to this one, drawn until this plan stops being in force (or now).
@@ -898,6 +911,8 @@ async def _plan_page(
     since = published - PLAN_HISTORY
     field = await data.recent_plans(session, corridor.corridor_id, lane, since, published)
     if field is not None:
+        # The time axis begins with the first plan drawn, not an hour before it.
+        since = max(since, datetime.fromtimestamp(float(field.published_at[0]), UTC))
         upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
         context["target_map"] = _time_space_chart(
             "plan-heatmap",
