@@ -73,7 +73,8 @@ def log_in(client: httpx.Client, password: str) -> None:
         "/login",
         data={"username": "admin", "password": password, "csrf_token": token.group(1)},
     )
-    answer.raise_for_status()
+    if answer.status_code != 303:
+        raise SystemExit(f"login failed: HTTP {answer.status_code}")
 
 
 def watch(client: httpx.Client, window: Window, seconds: float) -> None:

@@ -978,7 +978,12 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
     inrix_since = now - timedelta(hours=6)
     ping_since = now - timedelta(hours=1)
     snapshots = await data.inrix_snapshots(session, inrix_since)
-    minutes = await data.pings_per_minute(session, ping_since)
+    # Only whole minutes of GPS time: the minute still running has a fraction of its pings.
+    minutes = [
+        row
+        for row in await data.pings_per_minute(session, ping_since)
+        if row["minute"] + timedelta(minutes=1) <= now
+    ]
     context: dict[str, Any] = {
         "page": "feeds",
         "latest": latest,
@@ -1002,7 +1007,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(snapshots) < 3 else "line",
                 )
             ],
-            Axis("INRIX measurement time (UTC)", "time", inrix_since.timestamp(), now.timestamp()),
+            Axis("INRIX measurement time (UTC)", "time"),
             Axis("latency: received − measured (s)", lower=0.0),
             height=240,
         )
@@ -1019,7 +1024,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(minutes) < 3 else "line",
                 )
             ],
-            Axis("time (UTC)", "time", ping_since.timestamp(), now.timestamp()),
+            Axis("time (UTC)", "time"),
             Axis("pings per second", lower=0.0),
             height=240,
         )
