@@ -9,6 +9,7 @@ acceleration are consistent with each other (GPS distance is noisier than the wh
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -136,3 +137,35 @@ def load_drives(directory: Path) -> list[Drive]:
     if not files:
         raise DriveError(f"{directory}: no drive CSV files")
     return [load_drive(path) for path in files]
+
+
+# Where the shared data may be named explicitly (e.g. an installed copy of smoothfleet).
+SHARED_DATA_ENV = "SMOOTHFLEET_SHARED_DATA"
+
+
+def shared_data_dir(start: Path | None = None) -> Path:
+    """The shared data folder: $SMOOTHFLEET_SHARED_DATA, else the `shared/data` beside the
+    checkout this code (or the working directory) lies in, wherever it was cloned.
+
+    Searched upward from the working directory and from this file: the first ancestor holding
+    `shared/data/trajectories` wins. Raises DriveError naming what was searched.
+    """
+    explicit = os.environ.get(SHARED_DATA_ENV)
+    if explicit:
+        return Path(explicit)
+    origins = [start or Path.cwd(), Path(__file__).resolve()]
+    for origin in origins:
+        for folder in [origin, *origin.parents]:
+            candidate = folder / "shared" / "data"
+            if (candidate / "trajectories").is_dir():
+                return candidate
+    raise DriveError(
+        f"no shared/data/trajectories above {origins[0]} or {origins[1].parent}: "
+        f"set {SHARED_DATA_ENV} or pass the folders explicitly"
+    )
+
+
+def drive_date(name: str) -> str:
+    """The calendar date of a drive (its name starts YYYY-MM-DD): cross-validation keeps each
+    date on one side, since two drives of one date saw the same day's traffic."""
+    return name[:10]

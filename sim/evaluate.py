@@ -2,27 +2,35 @@
 variant x Vehicle Controller variant over the scenarios, against an all-human baseline.
 
 For each case (a scenario on one real drive) the baseline platoon is all IDM humans; each
-variant puts the AV(s) in the platoon, run by the agent's controller with the real planner in
-the loop. A variant's KPI change is relative to the baseline of the same case; a scenario's
-change is the mean over its cases. Fuel saving is the drop in fuel per distance,
-1 - mpg_baseline / mpg_variant.
+variant puts the AV(s) in the platoon, spread through it as the paper's presets do, run by the
+agent's controller with the real planner in the loop, supervised as the agent supervises itself
+(a stop beyond the actuation's braking authority is handed back to the driver: a takeover), with
+drivers from the next lane merging into large gaps (`sim.platoon.CutIns`). A variant's KPI change
+is relative to the baseline of the same case; a scenario's change is the mean over its cases.
+Fuel saving is the drop in fuel per distance, 1 - mpg_baseline / mpg_variant.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sim.av import StockAcc, agent_policy
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
+from sim.gaps import GapBounds, GapKpis, gap_kpis
 from sim.kpi import Kpis, platoon_kpis
 from sim.plans import SimulatedPlanner
-from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
+from sim.platoon import CutIns, HandBack, PlatoonRun, platoon_roles, simulate_platoon
+from sim.runs import run_file_name, write_run, write_runs_index
 from sim.scenarios import Case
 
 BASELINE = "baseline"
@@ -87,6 +95,15 @@ class RunResult:
     kpis: Kpis
     plans_run: int = 0
     plans_buffered: int = 0
+    avs: int = 0
+    # Where every platoon vehicle ended (0 = the leader), and which columns were AVs.
+    final_position_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    av_columns: tuple[int, ...] = ()
+    gaps: GapKpis = GapKpis(0.0, 0.0, 0.0, 1.0)
+    takeovers: int = 0
+    driver_seconds: float = 0.0
+    cut_ins: int = 0
+    recommended: bool = False
 
 
 @dataclass(frozen=True)
@@ -94,6 +111,8 @@ class Evaluation:
     """All runs of an evaluation and their changes against the baselines."""
 
     results: list[RunResult]
+    # Per drive name: the fuel saving of the fuel-optimal AV trajectory (sim.optimum), if known.
+    optimum_fuel_saving_pct: Mapping[str, float] = field(default_factory=dict)
 
     def baseline(self, case_name: str) -> RunResult:
         """The all-human run of a case."""
@@ -114,13 +133,25 @@ class Evaluation:
         base = self.baseline(result.case.name).kpis.fuel_economy_mpg
         return float(100.0 * (1.0 - base / result.kpis.fuel_economy_mpg))
 
-    def variants(self) -> list[tuple[str, str]]:
-        """(planner, controller) pairs evaluated, in run order."""
-        seen: list[tuple[str, str]] = []
+    def distance_lost_m(self, result: RunResult) -> float:
+        """How much further behind the leader the AVs ended than the humans in their places."""
+        if not result.av_columns:
+            return 0.0
+        base = self.baseline(result.case.name).final_position_m
+        columns = list(result.av_columns)
+        return float(np.max(base[columns] - result.final_position_m[columns]))
+
+    def optimum_pct(self, result: RunResult) -> float:
+        """The optimal bound's fuel saving on this run's drive (NaN when not computed)."""
+        return float(self.optimum_fuel_saving_pct.get(result.case.drive.name, float("nan")))
+
+    def variants(self) -> list[tuple[str, str, int]]:
+        """(planner, controller, avs) evaluated, in run order."""
+        seen: list[tuple[str, str, int]] = []
         for r in self.results:
-            pair = (r.planner, r.controller)
-            if r.controller != BASELINE and pair not in seen:
-                seen.append(pair)
+            key = (r.planner, r.controller, r.avs)
+            if r.controller != BASELINE and key not in seen:
+                seen.append(key)
         return seen
 
     def scenarios(self) -> list[str]:
@@ -128,25 +159,29 @@ class Evaluation:
         return list(dict.fromkeys(r.case.scenario for r in self.results))
 
     def summary(self) -> list[dict[str, Any]]:
-        """One row per scenario x planner x controller: mean KPI changes over its cases."""
+        """One row per scenario x planner x controller x AVs: mean changes over its cases."""
         rows = []
         for scenario in self.scenarios():
-            for planner, controller in self.variants():
+            for planner, controller, avs in self.variants():
                 runs = [
                     r
                     for r in self.results
                     if r.case.scenario == scenario
-                    and r.planner == planner
-                    and r.controller == controller
+                    and (r.planner, r.controller, r.avs) == (planner, controller, avs)
                 ]
                 if not runs:
                     continue
+                savings = [self.fuel_saving_pct(r) for r in runs]
+                optimum = [self.optimum_pct(r) for r in runs]
                 row: dict[str, Any] = {
                     "scenario": scenario,
                     "planner": planner,
                     "controller": controller,
+                    "avs": avs,
+                    "recommended": runs[0].recommended,
                     "cases": len(runs),
-                    "fuel_saving_pct": float(np.mean([self.fuel_saving_pct(r) for r in runs])),
+                    "fuel_saving_pct": float(np.mean(savings)),
+                    "optimum_fuel_saving_pct": float(np.mean(optimum)),
                 }
                 for kpi in KPI_DIRECTION:
                     row[f"{kpi}_change_pct"] = float(
@@ -155,11 +190,49 @@ class Evaluation:
                 row["plans_buffered"] = sum(r.plans_buffered for r in runs)
                 row["collisions"] = sum(r.kpis.collisions for r in runs)
                 row["gap_violations"] = sum(r.kpis.gap_violations for r in runs)
+                row["takeovers"] = sum(r.takeovers for r in runs)
+                row["cut_ins"] = sum(r.cut_ins for r in runs)
+                row["max_av_gap_m"] = max(r.gaps.max_av_gap_m for r in runs)
+                row["gap_out_of_bounds_s"] = float(
+                    np.mean([r.gaps.gap_out_of_bounds_s for r in runs])
+                )
+                row["within_bounds_share"] = float(
+                    np.mean([r.gaps.within_bounds_share for r in runs])
+                )
+                row["distance_lost_m"] = float(np.mean([self.distance_lost_m(r) for r in runs]))
                 rows.append(row)
         return rows
 
+    def run_file(self, result: RunResult) -> str:
+        """The Parquet file of the run's trajectories (with --save-runs)."""
+        return run_file_name(
+            result.case.scenario,
+            result.case.drive.name,
+            result.planner,
+            result.controller,
+            result.avs,
+        )
+
+    def write_runs_index(self, directory: Path) -> Path:
+        """`runs.csv` beside the runs' Parquet files."""
+        return write_runs_index(
+            directory,
+            [
+                (
+                    self.run_file(r),
+                    r.case.scenario,
+                    r.case.drive.name,
+                    r.planner,
+                    r.controller,
+                    r.avs,
+                )
+                for r in self.results
+            ],
+        )
+
     def rows(self) -> list[dict[str, Any]]:
-        """One row per run: absolute KPIs and changes against its baseline (the CSV)."""
+        """One row per run (the CSV a reviewer recomputes from): identity, the paper's KPI
+        changes, safety and gap figures, then every absolute KPI and change."""
         out = []
         for r in self.results:
             row: dict[str, Any] = {
@@ -167,11 +240,25 @@ class Evaluation:
                 "drive": r.case.drive.name,
                 "planner": r.planner,
                 "controller": r.controller,
+                "avs": r.avs,
+                "recommended": r.recommended,
+                "fuel_saving_pct": self.fuel_saving_pct(r),
+                "throughput_change_pct": self.change_pct(r, "throughput_vph"),
+                "network_speed_change_pct": self.change_pct(r, "network_speed_mps"),
+                "collisions": r.kpis.collisions,
+                "takeovers": r.takeovers,
+                "driver_seconds": r.driver_seconds,
+                "cut_ins": r.cut_ins,
+                "max_av_gap_m": r.gaps.max_av_gap_m,
+                "gap_out_of_bounds_s": r.gaps.gap_out_of_bounds_s,
+                "time_gap_violation_s": r.gaps.time_gap_violation_s,
+                "within_bounds_share": r.gaps.within_bounds_share,
+                "distance_lost_m": self.distance_lost_m(r),
+                "optimum_fuel_saving_pct": self.optimum_pct(r),
                 "plans_run": r.plans_run,
                 "plans_buffered": r.plans_buffered,
             }
             row.update(r.kpis.as_dict())
-            row["fuel_saving_pct"] = self.fuel_saving_pct(r)
             for kpi in KPI_DIRECTION:
                 row[f"{kpi}_change_pct"] = self.change_pct(r, kpi)
             out.append(row)
@@ -184,6 +271,18 @@ def case_kpis(case: Case, run: PlatoonRun) -> Kpis:
     return platoon_kpis(run, throughput_point_m=point)
 
 
+@dataclass(frozen=True)
+class Realism:
+    """How the AVs are judged and what the road does to them (defaults: the issue's)."""
+
+    bounds: GapBounds = GapBounds()
+    hand_back: HandBack = HandBack()
+    cut_ins: CutIns | None = CutIns()
+
+
+RunSaver = Callable[[RunResult, PlatoonRun], None]
+
+
 def run_case(
     case: Case,
     planner: str | None,
@@ -193,41 +292,119 @@ def run_case(
     avs: int,
     planner_params: Mapping[str, Any] | None = None,
     stock_acc: Callable[[], StockAcc] = SimulatedAccCar,
+    realism: Realism = Realism(),
+    recommended: bool = False,
+    save: RunSaver | None = None,
 ) -> RunResult:
-    """One simulation: the baseline (variant None) or the AVs under planner x controller."""
+    """One simulation: the baseline (variant None, all humans+avs human) or the AVs, spread
+    through the platoon, under planner x controller."""
     if variant is None:
+        roles = platoon_roles(humans + avs, 0)
         run = simulate_platoon(
-            case.drive, platoon_roles(humans + avs, 0), speed_limit=case.bottleneck
+            case.drive, roles, speed_limit=case.bottleneck, cut_ins=realism.cut_ins
         )
-        return RunResult(case, NO_PLANNER, BASELINE, case_kpis(case, run))
-    if planner is None:
-        raise ValueError("an AV variant needs a planner variant")
-    schedule = SimulatedPlanner.for_drive(case.drive, planner, planner_params, case.inrix)
-    policies = [
-        agent_policy(
-            variant.controller,
-            variant.actuation,
-            schedule,
-            variant.params,
-            stock_acc=stock_acc() if variant.actuation == "acc" else None,
+        result = RunResult(
+            case,
+            NO_PLANNER,
+            BASELINE,
+            case_kpis(case, run),
+            final_position_m=run.position_m[-1],
+            cut_ins=run.cut_ins,
         )
-        for _ in range(avs)
-    ]
-    run = simulate_platoon(
-        case.drive,
-        platoon_roles(humans, avs),
-        policies,
-        speed_limit=case.bottleneck,
-        av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
-    )
-    return RunResult(
-        case,
-        planner,
-        variant.name,
-        case_kpis(case, run),
-        schedule.plans_run,
-        schedule.plans_buffered,
-    )
+    else:
+        if planner is None:
+            raise ValueError("an AV variant needs a planner variant")
+        schedule = SimulatedPlanner.for_drive(case.drive, planner, planner_params, case.inrix)
+        policies = [
+            agent_policy(
+                variant.controller,
+                variant.actuation,
+                schedule,
+                variant.params,
+                stock_acc=stock_acc() if variant.actuation == "acc" else None,
+            )
+            for _ in range(avs)
+        ]
+        roles = platoon_roles(humans, avs)
+        run = simulate_platoon(
+            case.drive,
+            roles,
+            policies,
+            speed_limit=case.bottleneck,
+            av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+            hand_back=realism.hand_back,
+            cut_ins=realism.cut_ins,
+        )
+        av_columns = tuple(int(i) + 1 for i in np.flatnonzero(roles))
+        av_index = [column - 1 for column in av_columns]
+        result = RunResult(
+            case,
+            planner,
+            variant.name,
+            case_kpis(case, run),
+            schedule.plans_run,
+            schedule.plans_buffered,
+            avs=avs,
+            final_position_m=run.position_m[-1],
+            av_columns=av_columns,
+            gaps=gap_kpis(
+                run.gap_m[:, av_index], run.speed_mps[:, list(av_columns)], run.dt_s, realism.bounds
+            ),
+            takeovers=run.takeovers,
+            driver_seconds=run.driver_seconds,
+            cut_ins=run.cut_ins,
+            recommended=recommended,
+        )
+    if save is not None:
+        save(result, run)
+    return result
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run of a case: the baseline (planner and variant None) or a pair with its AVs."""
+
+    planner: str | None
+    variant: ControllerVariant | None
+    avs: int
+    recommended: bool = False
+
+
+def _run_jobs(
+    case: Case,
+    jobs: Sequence[Job],
+    followers: int,
+    planner_params: Mapping[str, Any] | None,
+    realism: Realism,
+    save_dir: Path | None,
+) -> list[RunResult]:
+    def save(result: RunResult, run: PlatoonRun) -> None:
+        assert save_dir is not None
+        name = run_file_name(
+            result.case.scenario,
+            result.case.drive.name,
+            result.planner,
+            result.controller,
+            result.avs,
+        )
+        write_run(save_dir, name, run)
+
+    results = []
+    for job in jobs:
+        avs = job.avs if job.variant is not None else 0
+        result = run_case(
+            case,
+            job.planner,
+            job.variant,
+            humans=followers - job.avs if job.variant is not None else followers,
+            avs=avs,
+            planner_params=planner_params,
+            realism=realism,
+            recommended=job.recommended,
+            save=save if save_dir is not None else None,
+        )
+        results.append(result)
+    return results
 
 
 def evaluate(
@@ -236,29 +413,58 @@ def evaluate(
     controllers: Sequence[ControllerVariant],
     *,
     humans: int = 24,
-    avs: int = 1,
+    avs: int | Sequence[int] = 1,
     planner_params: Mapping[str, Any] | None = None,
-    stock_acc: Callable[[], StockAcc] = SimulatedAccCar,
+    recommended: tuple[str, ControllerVariant] | None = None,
+    realism: Realism = Realism(),
+    save_dir: Path | None = None,
+    workers: int = 1,
     progress: Callable[[str], None] | None = None,
 ) -> Evaluation:
-    """Baseline and every planner x controller on every case; `progress` hears each run."""
-    results = []
-    for case in cases:
-        jobs: list[tuple[str | None, ControllerVariant | None]] = [(None, None)]
-        jobs += [(planner, variant) for planner in planners for variant in controllers]
-        for planner, variant in jobs:
-            results.append(
-                run_case(
-                    case,
-                    planner,
-                    variant,
-                    humans=humans,
-                    avs=avs,
-                    planner_params=planner_params,
-                    stock_acc=stock_acc,
-                )
-            )
+    """Baseline and every planner x controller x AV count on every case.
+
+    The platoon has `humans + max(avs)` followers whatever the AV count (AVs replace humans);
+    `recommended` marks that pair. Cases run in `workers` processes; `progress` hears each
+    finished case. With `save_dir`, every run's trajectories are written there (sim.runs).
+    """
+    counts = [avs] if isinstance(avs, int) else list(avs)
+    if not counts or min(counts) < 1:
+        raise ValueError("every AV count must be at least 1")
+    followers = humans + max(counts)
+    jobs = [Job(None, None, 0)]
+    jobs += [
+        Job(planner, variant, count, recommended == (planner, variant))
+        for count in counts
+        for planner in planners
+        for variant in controllers
+    ]
+    results: list[RunResult] = []
+    if workers <= 1:
+        for case in cases:
+            results += _run_jobs(case, jobs, followers, planner_params, realism, save_dir)
             if progress is not None:
-                label = variant.name if variant is not None else BASELINE
-                progress(f"{case.name} {planner or NO_PLANNER} {label}")
+                progress(case.name)
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [
+                pool.submit(_run_jobs, case, jobs, followers, planner_params, realism, save_dir)
+                for case in cases
+            ]
+            for case, future in zip(cases, futures, strict=True):
+                results += future.result()
+                if progress is not None:
+                    progress(case.name)
     return Evaluation(results)
+
+
+def default_workers() -> int:
+    """One process per core the machine gives this program."""
+    return max(1, len(os.sched_getaffinity(0)))
+
+
+def load_optimum(path: Path) -> dict[str, float]:
+    """Drive name -> optimal fuel saving (%) from `smoothfleet sim optimum`'s CSV."""
+    import csv
+
+    with path.open(newline="") as handle:
+        return {row["drive"]: float(row["fuel_saving_pct"]) for row in csv.DictReader(handle)}

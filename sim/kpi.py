@@ -67,21 +67,40 @@ def fuel_economy_mpg(
 
 
 def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> FloatArray:
-    """When each vehicle passes `point_m` (linear between steps; positions never decrease)."""
+    """When each vehicle passes `point_m` (linear between steps; positions never decrease).
+
+    A column that is NaN where the vehicle was not in the lane (a car that merged in) crosses
+    only if it was in the lane when it passed the point; otherwise its time is NaN.
+    """
     time_s = np.arange(position_m.shape[0]) * dt_s
-    return np.array(
-        [np.interp(point_m, position_m[:, column], time_s) for column in range(position_m.shape[1])]
-    )
+    times = np.full(position_m.shape[1], np.nan)
+    for column in range(position_m.shape[1]):
+        track = position_m[:, column]
+        present = np.isfinite(track)
+        if present.all():
+            times[column] = np.interp(point_m, track, time_s)
+        elif present.any() and track[present][0] <= point_m <= track[present][-1]:
+            times[column] = np.interp(point_m, track[present], time_s[present])
+    return times
 
 
-def throughput_at_vph(position_m: FloatArray, dt_s: float, point_m: float) -> float:
-    """Vehicles per hour over `point_m`: (n - 1) over the spread of their crossing times."""
+def throughput_at_vph(
+    position_m: FloatArray, dt_s: float, point_m: float, merged_m: FloatArray | None = None
+) -> float:
+    """Vehicles per hour over `point_m`: (n - 1) over the spread of their crossing times.
+
+    `merged_m` holds cars that merged into the lane (NaN before): they count where they crossed
+    the point in the lane.
+    """
     n = position_m.shape[1]
     if n < 2:
         raise ValueError("throughput needs at least two vehicles")
     if not (position_m[0].max() <= point_m <= position_m[-1].min()):
         raise ValueError(f"not every vehicle passes {point_m:.0f} m during the run")
     times = crossing_times_s(position_m, dt_s, point_m)
+    if merged_m is not None and merged_m.shape[1]:
+        merged = crossing_times_s(merged_m, dt_s, point_m)
+        n += int(np.count_nonzero(np.isfinite(merged)))
     spread = float(times.max() - times.min())
     if spread <= 0:
         raise ValueError(f"all vehicles cross {point_m:.0f} m at once: throughput undefined")
@@ -98,10 +117,15 @@ def measurement_points_m(position_m: FloatArray, count: int = THROUGHPUT_POINTS)
     return points
 
 
-def throughput_vph(position_m: FloatArray, dt_s: float, count: int = THROUGHPUT_POINTS) -> float:
+def throughput_vph(
+    position_m: FloatArray,
+    dt_s: float,
+    count: int = THROUGHPUT_POINTS,
+    merged_m: FloatArray | None = None,
+) -> float:
     """Average throughput over `count` equi-spaced measurement points (paper's definition)."""
     points = measurement_points_m(position_m, count)
-    return float(np.mean([throughput_at_vph(position_m, dt_s, p) for p in points]))
+    return float(np.mean([throughput_at_vph(position_m, dt_s, p, merged_m) for p in points]))
 
 
 def network_speed_mps(position_m: FloatArray, dt_s: float) -> float:
@@ -138,7 +162,7 @@ def platoon_kpis(
     run: PlatoonRun, model: FuelModel = RAV4_2019, *, throughput_point_m: float | None = None
 ) -> Kpis:
     """The KPIs of a platoon run: fuel, speed, comfort and safety over its simulated vehicles
-    (columns 1..N-1), throughput over every vehicle, the leader included.
+    (columns 1..N-1), throughput over every vehicle, the leader and cars that merged in included.
 
     Throughput is the average over five equi-spaced points, or, given `throughput_point_m`,
     the flow over that one point (the bottleneck's: just downstream of the region).
@@ -146,10 +170,11 @@ def platoon_kpis(
     position = run.position_m[:, 1:]
     speed = run.speed_mps[:, 1:]
     gaps = run.gap_m
+    merged = run.cut_in_position_m
     throughput = (
-        throughput_vph(run.position_m, run.dt_s)
+        throughput_vph(run.position_m, run.dt_s, merged_m=merged)
         if throughput_point_m is None
-        else throughput_at_vph(run.position_m, run.dt_s, throughput_point_m)
+        else throughput_at_vph(run.position_m, run.dt_s, throughput_point_m, merged)
     )
     return Kpis(
         fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),

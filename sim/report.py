@@ -43,55 +43,73 @@ def write_csv(evaluation: Evaluation, path: Path) -> None:
         writer.writerows(rows)
 
 
+SUMMARY_COLUMNS = (
+    "scenario",
+    "planner",
+    "controller",
+    "AVs",
+    "drives",
+    "fuel saving",
+    "of optimum",
+    "throughput",
+    "network speed",
+    "accel RMS",
+    "collisions",
+    "takeovers",
+    "cut-ins",
+    "max AV gap",
+    "in bounds",
+    "distance lost",
+)
+
+
+def _summary_cells(row: dict[str, Any]) -> list[str]:
+    optimum = row["optimum_fuel_saving_pct"]
+    share = (
+        f"{100.0 * row['fuel_saving_pct'] / optimum:.0f} %"
+        if math.isfinite(optimum) and optimum > 0
+        else "n/a"
+    )
+    return [
+        row["scenario"],
+        row["planner"],
+        row["controller"] + (" (recommended)" if row["recommended"] else ""),
+        str(row["avs"]),
+        str(row["cases"]),
+        _pct(row["fuel_saving_pct"]),
+        share,
+        _pct(row["throughput_vph_change_pct"]),
+        _pct(row["network_speed_mps_change_pct"]),
+        _pct(row["accel_rms_mps2_change_pct"]),
+        str(row["collisions"]),
+        str(row["takeovers"]),
+        str(row["cut_ins"]),
+        f"{row['max_av_gap_m']:.0f} m",
+        f"{100.0 * row['within_bounds_share']:.1f} %",
+        f"{row['distance_lost_m']:+.0f} m",
+    ]
+
+
 def summary_table(evaluation: Evaluation) -> Table:
-    """Mean changes per scenario x planner x controller, for the terminal."""
+    """Mean changes per scenario x planner x controller x AVs, for the terminal."""
     table = Table(title="KPI change vs all-human baseline (mean over the scenario's drives)")
-    for column in (
-        "scenario",
-        "planner",
-        "controller",
-        "drives",
-        "fuel saving",
-        "fuel economy",
-        "throughput",
-        "network speed",
-        "accel RMS",
-        "min gap",
-        "collisions",
-    ):
+    for column in SUMMARY_COLUMNS:
         table.add_column(column, justify="left" if column in ("scenario", "planner") else "right")
     for row in evaluation.summary():
-        table.add_row(
-            row["scenario"],
-            row["planner"],
-            row["controller"],
-            str(row["cases"]),
-            _pct(row["fuel_saving_pct"]),
-            _pct(row["fuel_economy_mpg_change_pct"]),
-            _pct(row["throughput_vph_change_pct"]),
-            _pct(row["network_speed_mps_change_pct"]),
-            _pct(row["accel_rms_mps2_change_pct"]),
-            _pct(row["min_gap_m_change_pct"]),
-            str(row["collisions"]),
-        )
+        table.add_row(*_summary_cells(row))
     return table
 
 
 def markdown_table(evaluation: Evaluation) -> str:
     """The same summary as a Markdown table (for docs/simulation.md)."""
     header = (
-        "| scenario | planner | controller | drives | fuel saving | fuel economy | throughput "
-        "| network speed | accel RMS | min gap | collisions |\n"
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|\n"
+        "| "
+        + " | ".join(SUMMARY_COLUMNS)
+        + " |\n|---|---|---|"
+        + "---:|" * (len(SUMMARY_COLUMNS) - 3)
+        + "\n"
     )
-    lines = [
-        f"| {r['scenario']} | {r['planner']} | {r['controller']} | {r['cases']} "
-        f"| {_pct(r['fuel_saving_pct'])} | {_pct(r['fuel_economy_mpg_change_pct'])} "
-        f"| {_pct(r['throughput_vph_change_pct'])} | {_pct(r['network_speed_mps_change_pct'])} "
-        f"| {_pct(r['accel_rms_mps2_change_pct'])} | {_pct(r['min_gap_m_change_pct'])} "
-        f"| {r['collisions']} |"
-        for r in evaluation.summary()
-    ]
+    lines = ["| " + " | ".join(_summary_cells(row)) + " |" for row in evaluation.summary()]
     return header + "\n".join(lines) + "\n"
 
 
@@ -109,8 +127,11 @@ def write_heatmap(evaluation: Evaluation, path: Path) -> None:
 
     summary = evaluation.summary()
     scenarios = evaluation.scenarios()
-    planners = list(dict.fromkeys(p for p, _ in evaluation.variants()))
-    controllers = list(dict.fromkeys(c for _, c in evaluation.variants()))
+    planners = list(dict.fromkeys(p for p, _, _ in evaluation.variants()))
+    several = len({avs for _, _, avs in evaluation.variants()}) > 1
+    controllers = list(
+        dict.fromkeys(_row_label(c, avs, several) for _, c, avs in evaluation.variants())
+    )
     columns = [(p, k) for p in planners for k in HEATMAP_KPIS]
     figure, axes = plt.subplots(
         len(scenarios),
@@ -124,7 +145,7 @@ def write_heatmap(evaluation: Evaluation, path: Path) -> None:
         for row in summary:
             if row["scenario"] != scenario:
                 continue
-            i = controllers.index(row["controller"])
+            i = controllers.index(_row_label(row["controller"], row["avs"], several))
             for j, (planner, kpi) in enumerate(columns):
                 if planner == row["planner"]:
                     values[i, j] = row[f"{kpi}_change_pct"]
@@ -146,6 +167,10 @@ def write_heatmap(evaluation: Evaluation, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path, dpi=120)
     plt.close(figure)
+
+
+def _row_label(controller: str, avs: int, several: bool) -> str:
+    return f"{controller} x{avs} AVs" if several else controller
 
 
 # The issue's aims for the best pair on shockwave drives: throughput and network speed within

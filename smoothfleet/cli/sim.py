@@ -20,8 +20,14 @@ from rich.progress import (
     TimeElapsedColumn,
 )
 
-from sim.drives import DriveError, load_drives
-from sim.evaluate import ControllerVariant, evaluate
+from sim.drives import DriveError, load_drives, shared_data_dir
+from sim.evaluate import ControllerVariant, Evaluation, default_workers, evaluate, load_optimum
+from sim.recommended import (
+    RECOMMENDED_CONTROLLER,
+    RECOMMENDED_PLANNER,
+    RECOMMENDED_PLANNER_PARAMS,
+    registered_variants,
+)
 from sim.recorded import load_recorded_drives
 from sim.report import (
     MAX_LOSS_PCT,
@@ -36,11 +42,7 @@ from sim.scenarios import SCENARIOS, scenario_cases
 # Wide enough for the evaluation table when the output is a file or a pipe.
 console = Console(width=max(Console().width, 160))
 
-# ../shared beside the clone (README): the real drives the evaluation replays.
-SHARED_DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
-SHARED_DRIVES = SHARED_DATA / "trajectories"
-SHARED_INRIX_DRIVES = SHARED_DATA / "trajectories_with_inrix"
-DEFAULT_CONTROLLERS = ("simple:accel", "microaccel:accel", "simple:acc", "microaccel_acc:acc")
+DEFAULT_SCENARIOS = tuple(SCENARIOS)
 
 
 @click.group("sim")
@@ -48,14 +50,49 @@ def sim() -> None:
     """Simulate platoons on real I-24 drives: evaluate planners x controllers."""
 
 
+class IntListOption(click.Option):
+    """An option followed by one or more integers: `--avs 1 2 4 8` (or `--avs 1,2`)."""
+
+    def add_to_parser(self, parser: Any, ctx: click.Context) -> None:
+        super().add_to_parser(parser, ctx)
+        for name in self.opts:
+            option = parser._long_opt.get(name) or parser._short_opt.get(name)
+            if option is None:
+                continue
+            original = option.process
+
+            def greedy(value: str, state: Any, original: Any = original) -> None:
+                values = [value]
+                while state.rargs and state.rargs[0].replace(",", "").isdigit():
+                    values.append(state.rargs.pop(0))
+                original(" ".join(values), state)
+
+            option.process = greedy
+
+    def type_cast_value(self, ctx: click.Context, value: Any) -> list[int]:
+        if value is None:
+            return [1]
+        try:
+            counts = [int(part) for part in str(value).replace(",", " ").split()]
+        except ValueError:
+            raise click.BadParameter(
+                f"{value!r}: AV counts are whole numbers, e.g. --avs 1 2 4 8", ctx, self
+            ) from None
+        if not counts or min(counts) < 1 or max(counts) > 100:
+            raise click.BadParameter(f"{value!r}: each AV count is 1 to 100", ctx, self)
+        return sorted(set(counts))
+
+
 def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
     try:
-        return [ControllerVariant.parse(text) for text in texts or DEFAULT_CONTROLLERS]
+        return [ControllerVariant.parse(text) for text in texts] or registered_variants()
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="--controller") from None
 
 
-def _planner_params(text: str) -> dict[str, Any]:
+def _planner_params(text: str | None) -> dict[str, Any]:
+    if text is None:
+        return dict(RECOMMENDED_PLANNER_PARAMS)
     try:
         params = json.loads(text)
     except json.JSONDecodeError as error:
@@ -65,22 +102,29 @@ def _planner_params(text: str) -> dict[str, Any]:
     return params
 
 
+def _default_folder(name: str) -> Path | None:
+    try:
+        return shared_data_dir() / name
+    except DriveError:
+        return None
+
+
 @sim.command("evaluate")
 @click.option(
     "--drives",
     "drives_dir",
     type=click.Path(path_type=Path),
-    default=SHARED_DRIVES,
-    show_default=True,
-    help="Folder of real drive CSVs (10 Hz).",
+    default=lambda: _default_folder("trajectories"),
+    help="Folder of real drive CSVs (10 Hz) [default: shared/data/trajectories beside the "
+    "checkout, or $SMOOTHFLEET_SHARED_DATA].",
 )
 @click.option(
     "--inrix-drives",
     "inrix_dir",
     type=click.Path(path_type=Path),
-    default=SHARED_INRIX_DRIVES,
-    show_default=True,
-    help="Folder of drives recorded with their INRIX minutes (scenario shockwave_inrix).",
+    default=lambda: _default_folder("trajectories_with_inrix"),
+    help="Folder of drives recorded with their INRIX minutes (scenario shockwave_inrix) "
+    "[default: shared/data/trajectories_with_inrix beside the checkout].",
 )
 @click.option(
     "--scenario",
@@ -100,11 +144,54 @@ def _planner_params(text: str) -> dict[str, Any]:
     "controllers",
     multiple=True,
     help='Controller variant NAME:ACTUATION[:JSON params], e.g. microaccel:accel:{"k":0.4} '
-    f"(repeatable; default: {', '.join(DEFAULT_CONTROLLERS)}).",
+    "(repeatable; default: every registered controller on each actuation, and the "
+    "recommended variant).",
 )
-@click.option("--planner-params", default="{}", help="Planner parameters as JSON.")
-@click.option("--humans", default=24, show_default=True, type=click.IntRange(1, 1000))
-@click.option("--avs", default=1, show_default=True, type=click.IntRange(1, 100))
+@click.option(
+    "--recommended",
+    is_flag=True,
+    help="Evaluate the recommended pair alone (sim/recommended.py) against the baseline.",
+)
+@click.option(
+    "--planner-params",
+    default=None,
+    help="Planner parameters as JSON [default: the recommended pair's].",
+)
+@click.option(
+    "--vehicles",
+    "followers",
+    default=25,
+    show_default=True,
+    type=click.IntRange(2, 1000),
+    help="Vehicles behind the leader (AVs replace humans among them).",
+)
+@click.option(
+    "--avs",
+    cls=IntListOption,
+    default="1",
+    show_default=True,
+    help="AV counts, spread evenly through the platoon (e.g. --avs 1 2 4 8: one AV in 25, in "
+    "~12, in ~6, in ~3), each reported side by side.",
+)
+@click.option(
+    "--optimum",
+    "optimum_csv",
+    type=click.Path(path_type=Path, exists=True, dir_okay=False),
+    help="CSV of `smoothfleet sim optimum`: each drive's optimal bound, for the share column.",
+)
+@click.option(
+    "--save-runs",
+    "runs_dir",
+    type=click.Path(path_type=Path, file_okay=False),
+    help="Write every run's trajectories (Parquet) and runs.csv into this folder.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 64),
+    default=default_workers,
+    show_default="one per core",
+    help="Processes running cases side by side.",
+)
 @click.option(
     "--out",
     "out_dir",
@@ -114,21 +201,28 @@ def _planner_params(text: str) -> dict[str, Any]:
     help="Where evaluation.csv, heatmap.png and summary.md go.",
 )
 def evaluate_command(
-    drives_dir: Path,
-    inrix_dir: Path,
+    drives_dir: Path | None,
+    inrix_dir: Path | None,
     scenarios: tuple[str, ...],
     planners: tuple[str, ...],
     controllers: tuple[str, ...],
-    planner_params: str,
-    humans: int,
-    avs: int,
+    recommended: bool,
+    planner_params: str | None,
+    followers: int,
+    avs: list[int],
+    optimum_csv: Path | None,
+    runs_dir: Path | None,
+    workers: int,
     out_dir: Path,
 ) -> None:
     """Baseline (all human) and every planner x controller over the scenarios."""
     from planner import ALGORITHMS
 
-    variants = _controller_variants(controllers)
-    chosen_planners = list(planners) or ALGORITHMS.names()
+    if recommended and (planners or controllers):
+        raise click.UsageError("--recommended evaluates the recommended pair alone")
+    variants = [RECOMMENDED_CONTROLLER] if recommended else _controller_variants(controllers)
+    chosen_planners = [RECOMMENDED_PLANNER] if recommended else list(planners)
+    chosen_planners = chosen_planners or ALGORITHMS.names()
     unknown = [name for name in chosen_planners if name not in ALGORITHMS]
     if unknown:
         raise click.BadParameter(
@@ -136,14 +230,27 @@ def evaluate_command(
             param_hint="--planner",
         )
     params = _planner_params(planner_params)
-    chosen = list(scenarios) or list(SCENARIOS)
+    if max(avs) >= followers:
+        raise click.BadParameter(
+            f"{max(avs)} AVs leave no human in a platoon of {followers}", param_hint="--avs"
+        )
+    chosen = list(scenarios) or list(DEFAULT_SCENARIOS)
+    if drives_dir is None or (inrix_dir is None and "shockwave_inrix" in chosen):
+        raise click.ClickException(
+            "no shared data found beside the checkout: pass --drives and --inrix-drives, or "
+            "set SMOOTHFLEET_SHARED_DATA"
+        )
     try:
         drives = load_drives(drives_dir)
-        recorded = load_recorded_drives(inrix_dir) if "shockwave_inrix" in chosen else []
+        recorded = (
+            load_recorded_drives(inrix_dir)
+            if "shockwave_inrix" in chosen and inrix_dir is not None
+            else []
+        )
     except DriveError as error:
         raise click.ClickException(str(error)) from None
     cases = scenario_cases(chosen, drives, recorded)
-    total = len(cases) * (1 + len(chosen_planners) * len(variants))
+    optimum = load_optimum(optimum_csv) if optimum_csv is not None else {}
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -152,7 +259,7 @@ def evaluate_command(
         console=console,
         transient=True,
     ) as progress:
-        task = progress.add_task("simulating", total=total)
+        task = progress.add_task("simulating", total=len(cases))
 
         def advance(label: str) -> None:
             progress.update(task, advance=1, description=label[:60])
@@ -162,17 +269,24 @@ def evaluate_command(
                 cases,
                 chosen_planners,
                 variants,
-                humans=humans,
+                humans=followers - max(avs),
                 avs=avs,
                 planner_params=params,
+                recommended=(RECOMMENDED_PLANNER, RECOMMENDED_CONTROLLER),
+                save_dir=runs_dir,
+                workers=workers,
                 progress=advance,
             )
         except ValueError as error:
             raise click.ClickException(str(error)) from None
+    evaluation = Evaluation(evaluation.results, optimum)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_csv(evaluation, out_dir / "evaluation.csv")
     write_heatmap(evaluation, out_dir / "heatmap.png")
     (out_dir / "summary.md").write_text(markdown_table(evaluation))
+    if runs_dir is not None:
+        evaluation.write_runs_index(runs_dir)
+        console.print(f"wrote {len(evaluation.results)} runs to {runs_dir}")
     console.print(summary_table(evaluation))
     best = best_pair(evaluation)
     if best is None:
@@ -183,10 +297,11 @@ def evaluate_command(
     else:
         console.print(
             f"best on shockwave (throughput and speed within {MAX_LOSS_PCT:.0f} %, no collision): "
-            f"{best['planner']} x {best['controller']}: fuel saving "
+            f"{best['planner']} x {best['controller']} ({best['avs']} AV): fuel saving "
             f"{best['fuel_saving_pct']:+.1f} %, throughput "
             f"{best['throughput_vph_change_pct']:+.1f} %, network speed "
-            f"{best['network_speed_mps_change_pct']:+.1f} %, collisions {best['collisions']}"
+            f"{best['network_speed_mps_change_pct']:+.1f} %, collisions {best['collisions']}, "
+            f"takeovers {best['takeovers']}"
         )
     console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")
 

@@ -6,11 +6,13 @@ import csv
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.evaluate import BASELINE, ControllerVariant, Evaluation, RunResult, evaluate
-from sim.kpi import Kpis
+from sim.gaps import GapKpis
+from sim.kpi import Kpis, fuel_economy_mpg
 from sim.report import best_pair, markdown_table, write_csv, write_heatmap
 from sim.scenarios import Case
 from tests.support.servers import cli_env, run_cli
@@ -163,3 +165,92 @@ def test_cli_names_a_bad_controller_and_a_missing_folder(tmp_path: Path) -> None
     assert missing.returncode != 0
     assert "no drive CSV files" in missing.stderr
     assert "Traceback" not in missing.stderr
+
+
+def test_distance_lost_and_gap_figures_per_run() -> None:
+    case = Case("shockwave", drive_from_speeds("d", np.full(10, 20.0)))
+    base_final = np.array([1000.0, 960.0, 930.0])
+    evaluation = Evaluation(
+        [
+            RunResult(case, "-", BASELINE, kpis(40.0, 2000.0, 20.0), final_position_m=base_final),
+            # the AV (column 1) ended 140 m further back than the human in its place
+            RunResult(
+                case,
+                "p",
+                "dropper",
+                kpis(44.0, 1900.0, 19.8),
+                avs=1,
+                final_position_m=np.array([1000.0, 820.0, 790.0]),
+                av_columns=(1,),
+                gaps=GapKpis(175.0, 30.0, 2.0, 0.9),
+                takeovers=1,
+            ),
+        ],
+        {"d": 12.0},
+    )
+    run = evaluation.results[1]
+    assert evaluation.distance_lost_m(run) == pytest.approx(140.0)
+    [row] = [r for r in evaluation.rows() if r["controller"] == "dropper"]
+    assert row["throughput_change_pct"] == pytest.approx(-5.0)
+    assert row["network_speed_change_pct"] == pytest.approx(-1.0)
+    assert row["max_av_gap_m"] == 175.0
+    assert row["gap_out_of_bounds_s"] == 30.0
+    assert row["takeovers"] == 1
+    assert row["distance_lost_m"] == pytest.approx(140.0)
+    assert row["optimum_fuel_saving_pct"] == 12.0
+    # the columns a reviewer needs, in this order first
+    assert list(row)[:15] == [
+        "scenario",
+        "drive",
+        "planner",
+        "controller",
+        "avs",
+        "recommended",
+        "fuel_saving_pct",
+        "throughput_change_pct",
+        "network_speed_change_pct",
+        "collisions",
+        "takeovers",
+        "driver_seconds",
+        "cut_ins",
+        "max_av_gap_m",
+        "gap_out_of_bounds_s",
+    ]
+
+
+def test_saved_runs_recompute_the_kpis(shared_dir: Path, tmp_path: Path) -> None:
+    stop_and_go, _ = short_drives(shared_dir)
+    case = Case("shockwave", stop_and_go)
+    evaluation = evaluate(
+        [case],
+        ["kernel_smooth"],
+        [ControllerVariant("microaccel", "accel")],
+        avs=[1, 2],
+        save_dir=tmp_path / "runs",
+    )
+    index = evaluation.write_runs_index(tmp_path / "runs")
+    with index.open() as handle:
+        runs = list(csv.DictReader(handle))
+    # the baseline and the pair with 1 and with 2 AVs
+    assert [(r["controller"], r["avs"]) for r in runs] == [
+        ("baseline", "0"),
+        ("microaccel/accel", "1"),
+        ("microaccel/accel", "2"),
+    ]
+    for entry, result in zip(runs, evaluation.results, strict=True):
+        table = pd.read_parquet(tmp_path / "runs" / entry["file"])
+        platoon = table[table["vehicle"] <= 25]
+        wide = platoon.pivot(index="time_s", columns="vehicle", values="position_m")
+        speed = platoon.pivot(index="time_s", columns="vehicle", values="speed_mps")
+        # fuel over the followers and throughput over everyone, from the file alone
+        mpg = fuel_economy_mpg(
+            wide.to_numpy()[:, 1:], speed.to_numpy()[:, 1:], float(table["time_s"].iloc[26])
+        )
+        assert mpg == pytest.approx(result.kpis.fuel_economy_mpg, rel=1e-9)
+        assert set(platoon["role"]) == (
+            {"leader", "human"} if result.avs == 0 else {"leader", "human", "av"}
+        )
+        assert (platoon["role"] == "av").sum() == result.avs * len(wide)
+    two = evaluation.results[2]
+    # two AVs in 25 followers: the first right behind the leader, the second 12 places back
+    assert two.av_columns == (1, 13)

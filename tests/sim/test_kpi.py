@@ -115,3 +115,17 @@ def test_a_gap_opened_behind_the_leader_costs_throughput() -> None:
     # the same two cars, but the leader 45 m ahead of car A (4.5 s): crossings at 0, 4.5, 6 s
     # -> 2 intervals over 6 s = 1200 veh/h; without the leader it would still read 2400
     assert platoon_kpis(cruising_platoon(45.0)).throughput_vph == pytest.approx(1200.0)
+
+
+def test_a_car_that_merged_in_counts_where_it_crossed_in_the_lane() -> None:
+    run = cruising_platoon(45.0)
+    # a car merged into the 45 m gap at t = 2 s, 20 m behind the leader, at 10 m/s
+    merged = np.full((10, 1), np.nan)
+    merged[2:, 0] = (45.0 - 20.0) + 10.0 * np.arange(2.0, 10.0)
+    points = measurement_points_m(run.position_m)
+    # it crossed every point (45..75 m) in the lane: 3 intervals over 6 s = 1800 veh/h
+    assert throughput_vph(run.position_m, 1.0, merged_m=merged) == pytest.approx(1800.0)
+    # a point it had passed before merging does not see it
+    early = np.full((10, 1), np.nan)
+    early[8:, 0] = merged[8:, 0]
+    assert throughput_at_vph(run.position_m, 1.0, float(points[0]), early) == pytest.approx(1200.0)

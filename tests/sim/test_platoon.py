@@ -210,10 +210,10 @@ def test_a_policy_without_a_driver_cannot_be_supervised() -> None:
 def test_dropping_back_invites_cut_ins() -> None:
     leader = drive_from_speeds("steady", np.full(3000, 25.0))
 
-    # an AV that falls back to 20 m/s and holds it: its gap grows by 5 m every second
+    # an AV that falls back to 15 m/s and holds it: its gap grows by 10 m every second
     class DropBack(Supervised):
         def accel_mps2(self, observation: AvObservation) -> float:
-            return 0.5 * (20.0 - observation.speed_mps)
+            return 0.5 * (15.0 - observation.speed_mps)
 
     run = simulate_platoon(
         leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
@@ -241,8 +241,9 @@ def test_dropping_back_invites_cut_ins() -> None:
 
 def test_cut_in_hazard_hand_worked() -> None:
     model = CutIns()
-    # 25 m/s with 75 m: 3 s time gap, 1 s beyond the ACC's widest: 0.1 merges per second
-    assert model.hazard_per_s(75.0, 25.0) == pytest.approx(0.1)
-    assert model.hazard_per_s(45.0, 25.0) == 0.0  # 1.8 s: within what an ACC leaves
-    assert model.hazard_per_s(15.0, 3.0) == 0.0  # 5 s but no room for a car
-    assert model.hazard_per_s(30.0, 0.5) == 0.0  # a standing queue
+    # 25 m/s with 100 m: 4 s time gap, 1 s beyond the threshold: 0.1 merges per second;
+    # 2.8 s: under the threshold; 5 s but no room for a car; a standing queue
+    hazard = model.hazard_per_s(
+        np.array([100.0, 70.0, 15.0, 30.0]), np.array([25.0, 25.0, 3.0, 0.5])
+    )
+    np.testing.assert_allclose(hazard, [0.1, 0.0, 0.0, 0.0])
