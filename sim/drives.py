@@ -164,8 +164,3 @@ def shared_data_dir(start: Path | None = None) -> Path:
         f"set {SHARED_DATA_ENV} or pass the folders explicitly"
     )
 
-
-def drive_date(name: str) -> str:
-    """The calendar date of a drive (its name starts YYYY-MM-DD): cross-validation keeps each
-    date on one side, since two drives of one date saw the same day's traffic."""
-    return name[:10]

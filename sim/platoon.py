@@ -189,11 +189,11 @@ class CutIns:
     stock ACC leaves, its 3-bar ~2.0 s, paper "ACC-Based Controller", and 2.4 times the I-24
     human's 1.24 s) and its space gap leaves room for a car with `min_gap_m` on both sides, a
     driver in the next lane merges in at a Poisson rate of `rate_per_s_per_s` per second of time
-    gap beyond it (at 4 s: one merge per 10 s on average). The merging car takes the middle of the gap at the mean of the AV's and its
-    leader's speeds and then drives as an I-24 IDM human. Cut-ins are frequent even at stock
-    gaps (AAA's 2024 road test of driver-assistance systems: one cut-in every 24.4 minutes
-    of ACC driving, the most common event needing the driver); the rate beyond the ACC's widest
-    gap is our assumption, seeded and configurable, so its effect can be bracketed (0 turns it
+    gap beyond it (at 4 s: one merge per 10 s on average). The merging car takes the middle of
+    the gap at the mean of the follower's and its leader's speeds and then drives as an I-24
+    IDM human. Cut-ins are frequent even at stock gaps (AAA's 2024 road test of
+    driver-assistance systems: one cut-in every 24.4 minutes of ACC driving, the most common
+    event needing the driver); the rate beyond the threshold is our assumption, seeded and configurable, so its effect can be bracketed (0 turns it
     off). The field team bounded the AV's gap at 120 m in training for the same reason.
     Cut-in cars count in throughput where they cross a measurement point in this lane (a gap
     they fill is not lost to the road); fuel, speed and comfort stay over the platoon's own

@@ -30,7 +30,7 @@ def registered_variants() -> list[ControllerVariant]:
     variants = [
         ControllerVariant(name, actuation)
         for name, spec in CONTROLLERS.items()
-        for actuation in sorted(spec.actuations)
+        for actuation in sorted(spec.schema.actuations)
     ]
     if RECOMMENDED_CONTROLLER not in variants:
         variants.append(RECOMMENDED_CONTROLLER)

@@ -26,12 +26,11 @@ from app.motion.edie import H_T_S, H_X_M, EdieWindow, EdieWindowError, edie_fiel
 from app.motion.figure import day_figure
 from app.motion.importer import ImportReport, import_motion_file
 from app.motion.store import MotionStoreEmpty, motion_store
-from sim.drives import DriveError, load_drive
+from sim.drives import DriveError, load_drive, shared_data_dir
 from sim.motion.frame import DEFAULT_ANCHOR_X_FT, DEFAULT_ANCHOR_X_M, MotionFrame
 from sim.motion.traffic import MotionRunConfig, boundary_speeds, simulate_motion_run
 from sim.motion.write import write_motion_json
 from smoothfleet.cli.common import CliError, console, database, settings
-from smoothfleet.cli.sim import SHARED_DRIVES
 
 # Real stop-and-go drives whose speeds set the traffic downstream of a generated hour.
 DEFAULT_BOUNDARY_DRIVES = (
@@ -166,8 +165,10 @@ def motion_generate(
         if start_text
         else datetime.now(UTC).replace(minute=0, second=0, microsecond=0)
     )
-    paths = drives or tuple(SHARED_DRIVES / name for name in DEFAULT_BOUNDARY_DRIVES)
     try:
+        paths = drives or tuple(
+            shared_data_dir() / "trajectories" / name for name in DEFAULT_BOUNDARY_DRIVES
+        )
         boundary = boundary_speeds([load_drive(path) for path in paths], duration_s)
         config = MotionRunConfig(
             start_unix_s=start.timestamp(),
