@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,11 @@ COLOUR_SCALE_PCT = 10.0
 
 def write_csv(evaluation: Evaluation, path: Path) -> None:
     """One row per run, absolute KPIs and changes against its baseline."""
-    rows = evaluation.rows()
+    write_rows(evaluation.rows(), path)
+
+
+def write_rows(rows: Sequence[Mapping[str, Any]], path: Path) -> None:
+    """Rows of one shape as a CSV with a header."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))

@@ -19,9 +19,17 @@ from rich.progress import (
     TextColumn,
     TimeElapsedColumn,
 )
+from rich.table import Table
 
 from sim.drives import DriveError, load_drives, shared_data_dir
-from sim.evaluate import ControllerVariant, Evaluation, default_workers, evaluate, load_optimum
+from sim.evaluate import (
+    BASELINE,
+    ControllerVariant,
+    Evaluation,
+    default_workers,
+    evaluate,
+    load_optimum,
+)
 from sim.recommended import (
     RECOMMENDED_CONTROLLER,
     RECOMMENDED_PLANNER,
@@ -36,8 +44,10 @@ from sim.report import (
     summary_table,
     write_csv,
     write_heatmap,
+    write_rows,
 )
 from sim.scenarios import SCENARIOS, scenario_cases
+from sim.selection import choose, cross_validate, held_out_summary
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
 console = Console(width=max(Console().width, 160))
@@ -304,6 +314,140 @@ def evaluate_command(
             f"takeovers {best['takeovers']}"
         )
     console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")
+
+
+# Candidates `sim select` adds to the registered pairs: the gains the evaluation found to matter.
+SELECTION_VARIANTS = (
+    'microaccel:accel:{"k": 0.2}',
+    'microaccel:accel:{"k": 0.05}',
+    'microaccel_acc:acc:{"base": {"k": 0.05}}',
+)
+
+
+@sim.command("select")
+@click.option(
+    "--drives",
+    "drives_dir",
+    type=click.Path(path_type=Path),
+    default=lambda: _default_folder("trajectories"),
+    help="Folder of real drive CSVs [default: shared/data/trajectories beside the checkout].",
+)
+@click.option(
+    "--window",
+    "windows",
+    multiple=True,
+    type=click.FloatRange(min=100),
+    help="Planner smoothing window (m) to try (repeatable; default 1500 and 4000).",
+)
+@click.option(
+    "--controller",
+    "controllers",
+    multiple=True,
+    help="Controller variant to try (repeatable; default: every registered one plus "
+    + ", ".join(SELECTION_VARIANTS)
+    + ").",
+)
+@click.option("--folds", default=7, show_default=True, type=click.IntRange(2, 100))
+@click.option(
+    "--workers",
+    type=click.IntRange(1, 64),
+    default=default_workers,
+    show_default="one per core",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(path_type=Path),
+    default=Path("sim_selection"),
+    show_default=True,
+    help="Where selection.csv (every candidate's runs) and held_out.csv go.",
+)
+def select_command(
+    drives_dir: Path | None,
+    windows: tuple[float, ...],
+    controllers: tuple[str, ...],
+    folds: int,
+    workers: int,
+    out_dir: Path,
+) -> None:
+    """Choose the deployment pair by cross-validation keeping whole dates apart."""
+    if drives_dir is None:
+        raise click.ClickException("no shared data found beside the checkout: pass --drives")
+    variants = (
+        _controller_variants(controllers)
+        if controllers
+        else [
+            *registered_variants(),
+            *(ControllerVariant.parse(text) for text in SELECTION_VARIANTS),
+        ]
+    )
+    variants = list(dict.fromkeys(variants))
+    try:
+        drives = load_drives(drives_dir)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    cases = scenario_cases(["shockwave", "freeflow"], drives)
+    rows: list[dict[str, Any]] = []
+    for window in windows or (1500.0, 4000.0):
+        params = {**RECOMMENDED_PLANNER_PARAMS, "window_m": window}
+        with Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=console,
+            transient=True,
+        ) as progress:
+            task = progress.add_task(f"window {window:.0f} m", total=len(cases))
+
+            def advance(label: str, task: TaskID = task) -> None:
+                progress.update(task, advance=1)
+
+            evaluation = evaluate(
+                cases,
+                [RECOMMENDED_PLANNER],
+                variants,
+                planner_params=params,
+                workers=workers,
+                progress=advance,
+            )
+        for row in evaluation.rows():
+            if row["controller"] != BASELINE:
+                row["candidate"] = f"{row['planner']} x {row['controller']} @ {window:.0f} m"
+                rows.append(row)
+    choices = cross_validate(rows, folds)
+    table = Table(title=f"{folds}-fold cross-validation over dates: choice on training dates")
+    for column in ("held-out dates", "chosen on the other dates", "train fuel saving", "meets"):
+        table.add_column(column)
+    for choice in choices:
+        table.add_row(
+            ", ".join(choice.held_out_dates),
+            choice.chosen.candidate,
+            f"{choice.chosen.fuel_saving_pct:+.1f} %",
+            "yes" if choice.chosen.meets_aims else f"no (short {choice.chosen.shortfall_pct:.1f})",
+        )
+    console.print(table)
+    summary = held_out_summary(choices)
+    result = Table(title="Held-out drives only (each scored by the pair chosen without its date)")
+    for column in summary[0]:
+        result.add_column(column)
+    for line in summary:
+        result.add_row(
+            *(
+                f"{value:+.2f}" if isinstance(value, float) else str(value)
+                for value in line.values()
+            )
+        )
+    console.print(result)
+    deployed = choose(rows)
+    console.print(
+        f"chosen on every date (the deployment pair; its score here is not a result): "
+        f"{deployed.candidate}"
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_rows(rows, out_dir / "selection.csv")
+    write_rows(summary, out_dir / "held_out.csv")
+    console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
 
 
 def fleet_options(command: Callable[..., None]) -> Callable[..., None]:

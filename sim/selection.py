@@ -1,0 +1,134 @@
+"""Choosing the deployment pair honestly: cross-validation that keeps whole dates apart.
+
+Every candidate (planner parameters x planner x controller variant) is simulated once on every
+drive; a fold then chooses, on its training dates only, the candidate with the largest mean
+fuel saving on the shockwave drives among those that meet the aims (paper "Candidate Controller
+Selection": neutral on throughput and network speed in shockwave, no KPI worse in freeflow):
+no collision, shockwave throughput and network speed no worse than -2 %, freeflow fuel,
+throughput and network speed no worse than -1 %. The chosen candidate is scored on the fold's
+held-out dates, which it never saw; the held-out scores of all folds are the result. The
+deployment choice is the same rule on every date (its own score is not a result).
+
+Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `candidate` key).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from sim.folds import DATE_CHARS
+
+Row = Mapping[str, Any]
+
+SHOCKWAVE_MAX_LOSS_PCT = -2.0
+FREEFLOW_MAX_LOSS_PCT = -1.0
+FREEFLOW_KPIS = ("fuel_economy_mpg_change_pct", "throughput_change_pct", "network_speed_change_pct")
+
+
+def _mean(rows: Sequence[Row], key: str) -> float:
+    return float(np.mean([float(row[key]) for row in rows])) if rows else float("nan")
+
+
+@dataclass(frozen=True)
+class Standing:
+    """How a candidate did on a set of drives: the objective and how far it misses the aims."""
+
+    candidate: str
+    fuel_saving_pct: float
+    shortfall_pct: float
+
+    @property
+    def meets_aims(self) -> bool:
+        """No collision and no KPI beyond its allowed loss."""
+        return self.shortfall_pct == 0.0
+
+
+def standing(candidate: str, rows: Sequence[Row]) -> Standing:
+    """The candidate's shockwave fuel saving and its total shortfall against the aims (a
+    collision counts 100 points: never traded for fuel)."""
+    shock = [row for row in rows if row["scenario"] == "shockwave"]
+    free = [row for row in rows if row["scenario"] == "freeflow"]
+    shortfall = 100.0 * sum(int(row["collisions"]) for row in rows)
+    for key in ("throughput_change_pct", "network_speed_change_pct"):
+        shortfall += max(0.0, SHOCKWAVE_MAX_LOSS_PCT - _mean(shock, key)) if shock else 0.0
+    for key in FREEFLOW_KPIS:
+        shortfall += max(0.0, FREEFLOW_MAX_LOSS_PCT - _mean(free, key)) if free else 0.0
+    return Standing(candidate, _mean(shock, "fuel_saving_pct"), shortfall)
+
+
+def choose(rows: Sequence[Row]) -> Standing:
+    """The best candidate on these rows: the most fuel saved among those meeting the aims, or,
+    when none does, the one that misses them least."""
+    by_candidate: dict[str, list[Row]] = {}
+    for row in rows:
+        by_candidate.setdefault(str(row["candidate"]), []).append(row)
+    standings = [standing(name, candidate_rows) for name, candidate_rows in by_candidate.items()]
+    if not standings:
+        raise ValueError("no candidate rows to choose from")
+    meeting = [s for s in standings if s.meets_aims]
+    if meeting:
+        return max(meeting, key=lambda s: s.fuel_saving_pct)
+    return min(standings, key=lambda s: (s.shortfall_pct, -s.fuel_saving_pct))
+
+
+@dataclass(frozen=True)
+class FoldChoice:
+    """One fold: the dates held out, what training chose, and its held-out rows."""
+
+    held_out_dates: tuple[str, ...]
+    chosen: Standing
+    held_out_rows: tuple[Row, ...]
+
+
+def date_of(row: Row) -> str:
+    """The date of a row's drive (cross-validation keeps each date on one side)."""
+    return str(row["drive"])[:DATE_CHARS]
+
+
+def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
+    """Choose on the training dates of each fold, score on its held-out dates.
+
+    The sorted dates are dealt round-robin into `folds` groups (as `sim.folds.date_folds`).
+    """
+    dates = sorted({date_of(row) for row in rows})
+    if folds < 2 or folds > len(dates):
+        raise ValueError(f"{len(dates)} dates cannot make {folds} folds (at least 2)")
+    result = []
+    for index in range(folds):
+        held = set(dates[index::folds])
+        training = [row for row in rows if date_of(row) not in held]
+        chosen = choose(training)
+        scored = tuple(
+            row for row in rows if date_of(row) in held and row["candidate"] == chosen.candidate
+        )
+        result.append(FoldChoice(tuple(sorted(held)), chosen, scored))
+    return result
+
+
+def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
+    """Per scenario, the held-out rows of every fold pooled: each drive scored once, by the
+    candidate chosen without its date."""
+    pooled = [row for choice in choices for row in choice.held_out_rows]
+    summary = []
+    for scenario in dict.fromkeys(str(row["scenario"]) for row in pooled):
+        rows = [row for row in pooled if row["scenario"] == scenario]
+        summary.append(
+            {
+                "scenario": scenario,
+                "drives": len(rows),
+                "fuel_saving_pct": _mean(rows, "fuel_saving_pct"),
+                "throughput_change_pct": _mean(rows, "throughput_change_pct"),
+                "network_speed_change_pct": _mean(rows, "network_speed_change_pct"),
+                "fuel_economy_mpg_change_pct": _mean(rows, "fuel_economy_mpg_change_pct"),
+                "collisions": sum(int(row["collisions"]) for row in rows),
+                "takeovers": sum(int(row["takeovers"]) for row in rows),
+                "cut_ins": sum(int(row["cut_ins"]) for row in rows),
+                "within_bounds_share": _mean(rows, "within_bounds_share"),
+                "distance_lost_m": _mean(rows, "distance_lost_m"),
+            }
+        )
+    return summary
