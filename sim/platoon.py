@@ -184,14 +184,15 @@ class HandBack:
 class CutIns:
     """Vehicles from the next lane merging into a large gap ahead of a follower.
 
-    Rule (for every driver, AV or human, so the all-human baseline meets it too): while a
-    follower's time gap exceeds `accept_time_gap_s` (3.0 s: half again the widest gap a
-    stock ACC leaves, its 3-bar ~2.0 s, paper "ACC-Based Controller", and 2.4 times the I-24
-    human's 1.24 s) and its space gap leaves room for a car with `min_gap_m` on both sides, a
-    driver in the next lane merges in at a Poisson rate of `rate_per_s_per_s` per second of time
-    gap beyond it (at 4 s: one merge per 10 s on average). The merging car takes the middle of
-    the gap at the mean of the follower's and its leader's speeds and then drives as an I-24
-    IDM human. Cut-ins are frequent even at stock gaps (AAA's 2024 road test of
+    Rule (for every driver, AV or human, so the all-human baseline meets it too): the room a
+    merging car needs, `min_gap_m` (a 5 m car with 7 m on each side), does not invite it; the
+    rest of the gap, in seconds at the follower's speed, does once it exceeds
+    `accept_time_gap_s` (3.0 s: half again the widest gap a stock ACC leaves, its 3-bar ~2.0 s,
+    paper "ACC-Based Controller", and 2.4 times the I-24 human's 1.24 s). A driver in the next
+    lane then merges in at a Poisson rate of `rate_per_s_per_s` per second of that time gap
+    beyond the threshold (at 25 m/s: none below 94 m, one merge per 10 s on average at 119 m).
+    The merging car takes the middle of the gap at the mean of the follower's and its leader's
+    speeds and then drives as an I-24 IDM human. Cut-ins are frequent even at stock gaps (AAA's 2024 road test of
     driver-assistance systems: one cut-in every 24.4 minutes of ACC driving, the most common
     event needing the driver); the rate beyond the threshold is our assumption, seeded and
     configurable, so its effect can be bracketed (0 turns it off). The field team bounded the
@@ -209,7 +210,8 @@ class CutIns:
     def hazard_per_s(self, gap_m: FloatArray, speed_mps: FloatArray) -> FloatArray:
         """The merge rate into each gap now (one per follower)."""
         moving = (speed_mps >= MIN_CUT_IN_SPEED_MPS) & (gap_m >= self.min_gap_m)
-        excess = np.divide(gap_m, speed_mps, out=np.zeros_like(gap_m), where=moving)
+        spare = gap_m - self.min_gap_m
+        excess = np.divide(spare, speed_mps, out=np.zeros_like(gap_m), where=moving)
         excess -= self.accept_time_gap_s
         hazard: FloatArray = self.rate_per_s_per_s * np.where(moving, np.maximum(excess, 0.0), 0.0)
         return hazard

@@ -72,9 +72,12 @@ def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_
     assert len(summary) == 2
     assert summary[0]["collisions"] == 0
     assert summary[0]["fuel_saving_pct"] > 0
-    best = best_pair(evaluation)
-    assert best is not None
-    assert best["fuel_saving_pct"] == max(row["fuel_saving_pct"] for row in summary)
+    # Counting every vehicle from the leader on, the AV's smoothing on this wave costs more
+    # than 2 % of network speed (it ends far behind the leader, and cars merge into its gap):
+    # no pair meets the aims here, and the best-pair rule says so (hand-built cases below).
+    assert summary[0]["network_speed_mps_change_pct"] < -2.0
+    assert summary[0]["cut_ins"] > 0
+    assert best_pair(evaluation) is None
 
     write_csv(evaluation, tmp_path / "evaluation.csv")
     with (tmp_path / "evaluation.csv").open() as handle:
@@ -141,7 +144,8 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
         timeout=300,
     )
     assert result.returncode == 0, result.stderr
-    assert "no collision): kernel_smooth x microaccel/accel: fuel saving" in result.stdout
+    # on this short wave the AV's smoothing costs more than 2 % of network speed (above)
+    assert "no pair kept throughput and speed within -2 % on shockwave" in result.stdout
     assert (out / "heatmap.png").exists()
     with (out / "evaluation.csv").open() as handle:
         rows = list(csv.DictReader(handle))

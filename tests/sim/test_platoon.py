@@ -241,9 +241,9 @@ def test_dropping_back_invites_cut_ins() -> None:
 
 def test_cut_in_hazard_hand_worked() -> None:
     model = CutIns()
-    # 25 m/s with 100 m: 4 s time gap, 1 s beyond the threshold: 0.1 merges per second;
-    # 2.8 s: under the threshold; 5 s but no room for a car; a standing queue
+    # 25 m/s with 119 m: (119 - 19) / 25 = 4 s, 1 s beyond the threshold: 0.1 merges per
+    # second; 94 m: 3 s, not beyond; 5 m/s with 30 m: 2.2 s; no room for a car; a standing queue
     hazard = model.hazard_per_s(
-        np.array([100.0, 70.0, 15.0, 30.0]), np.array([25.0, 25.0, 3.0, 0.5])
+        np.array([119.0, 94.0, 30.0, 15.0, 30.0]), np.array([25.0, 25.0, 5.0, 3.0, 0.5])
     )
-    np.testing.assert_allclose(hazard, [0.1, 0.0, 0.0, 0.0])
+    np.testing.assert_allclose(hazard, [0.1, 0.0, 0.0, 0.0, 0.0], atol=1e-12)
