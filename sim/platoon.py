@@ -192,11 +192,11 @@ class CutIns:
     lane then merges in at a Poisson rate of `rate_per_s_per_s` per second of that time gap
     beyond the threshold (at 25 m/s: none below 94 m, one merge per 10 s on average at 119 m).
     The merging car takes the middle of the gap at the mean of the follower's and its leader's
-    speeds and then drives as an I-24 IDM human. Cut-ins are frequent even at stock gaps (AAA's 2024 road test of
-    driver-assistance systems: one cut-in every 24.4 minutes of ACC driving, the most common
-    event needing the driver); the rate beyond the threshold is our assumption, seeded and
-    configurable, so its effect can be bracketed (0 turns it off). The field team bounded the
-    AV's gap at 120 m in training for the same reason.
+    speeds and then drives as an I-24 IDM human. Cut-ins are frequent even at stock gaps (AAA's
+    2024 road test of driver-assistance systems: one cut-in every 24.4 minutes of ACC driving,
+    the most common event needing the driver); the rate beyond the threshold is our
+    assumption, seeded and configurable, so its effect can be bracketed (0 turns it off). The
+    field team bounded the AV's gap at 120 m in training for the same reason.
     Cut-in cars count in throughput where they cross a measurement point in this lane (a gap
     they fill is not lost to the road); fuel, speed and comfort stay over the platoon's own
     vehicles, whose braking for the merging cars is the cost of the gap.

@@ -512,9 +512,9 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     "--drives",
     "drives_dir",
     type=click.Path(path_type=Path),
-    default=SHARED_DRIVES,
-    show_default=True,
-    help="Folder of real drive CSVs (10 Hz) to train and cross-validate on.",
+    default=lambda: _default_folder("trajectories"),
+    help="Folder of real drive CSVs (10 Hz) to train and cross-validate on [default: "
+    "shared/data/trajectories beside the checkout].",
 )
 @click.option("--timesteps", type=click.IntRange(min=1), default=300_000, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
@@ -550,7 +550,7 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 def train_command(
     actuation: str,
-    drives_dir: Path,
+    drives_dir: Path | None,
     timesteps: int,
     seed: int,
     folds: int,
@@ -564,6 +564,8 @@ def train_command(
 
     Needs the `train` extra (torch, stable-baselines3, gymnasium).
     """
+    if drives_dir is None:
+        raise click.ClickException("no shared data found beside the checkout: pass --drives")
     try:
         from sim.rl.env import EnvConfig
         from sim.rl.pipeline import run_training
