@@ -19,12 +19,11 @@ import json
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -58,7 +57,6 @@ from app.motion.store import (
 from sim.motion.frame import METRES_PER_FOOT, MotionFrame
 
 IntArray = NDArray[np.int64]
-Item = TypeVar("Item")
 SECONDS_PER_DAY = 86_400
 # The manifest keeps this many bad documents' reasons (the counts are always complete).
 REASONS_KEPT = 1000
@@ -125,10 +123,8 @@ def import_motion_file(
     known = _known_trajectories(store)
     try:
         with open_motion_file(path) as stream:
-            scratch = staging / "batch.json"
-            parsed = ((batch, *parse_batch(batch, scratch)) for batch in split_documents(stream))
-            for batch, table, indices in read_ahead(parsed):
-                _import_batch(batch, table, indices, frame, known, writer, report)
+            for batch in split_documents(stream):
+                _import_batch(batch, frame, known, writer, report, staging / "batch.json")
                 if progress is not None:
                     progress(batch.bytes_read)
     except MotionFileError as error:
@@ -143,28 +139,15 @@ def import_motion_file(
     return report
 
 
-def read_ahead(items: Iterator[Item]) -> Iterator[Item]:
-    """The items of `items`, the next one made on another thread while this one is used.
-
-    Splitting and parsing the next batch (numpy, DuckDB: they release the GIL) overlaps with
-    the work on this one, so the import uses two cores; one batch ahead keeps memory bounded.
-    """
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="motion-read") as reader:
-        upcoming = reader.submit(next, items, None)
-        while (item := upcoming.result()) is not None:
-            upcoming = reader.submit(next, items, None)
-            yield item
-
-
 def _import_batch(
     batch: DocumentBatch,
-    table: pa.Table,
-    indices: list[int],
     frame: MotionFrame,
     known: set[int],
     writer: _DayWriters,
     report: ImportReport,
+    scratch: Path,
 ) -> None:
+    table, indices = parse_batch(batch, scratch)
     offsets = dict(zip(batch.indices, batch.offsets, strict=True))
     report.bad.extend(batch.bad)
     if table.num_rows == 0:
