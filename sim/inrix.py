@@ -59,6 +59,10 @@ FREEFLOW_FROM_MPS = 25.0
 AUTOCORRELATION_S = 60.0
 
 
+class SimulatedFeedError(ValueError):
+    """Parameters or a road the simulated feed cannot be made with; the message says which."""
+
+
 @dataclass(frozen=True)
 class FeedModel:
     """Parameters of the simulated feed (values: `CALIBRATED`, found by sim.inrix_calibration)."""
@@ -71,6 +75,19 @@ class FeedModel:
     drive_bias_mps: float
     noise_mps: float
     noise_correlation: float
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():
+            if not np.isfinite(value) or value < 0:
+                raise SimulatedFeedError(f"feed model: {name} = {value} must be finite and >= 0")
+        if self.window_s == 0:
+            raise SimulatedFeedError(
+                "feed model: window_s must be > 0 (a reading averages a window)"
+            )
+        if self.noise_correlation >= 1:
+            raise SimulatedFeedError(
+                f"feed model: noise_correlation = {self.noise_correlation} must be < 1"
+            )
 
 
 # Found by `python -m sim.inrix_calibration --calibrate` on the nine real-INRIX drives.
@@ -174,6 +191,12 @@ def simulated_feed(
     drive: Drive, bounds_m: FloatArray, stamps_s: FloatArray, model: FeedModel
 ) -> InrixFeed:
     """The drive's simulated INRIX readings stamped `stamps_s` on the segments `bounds_m`."""
+    for name, values, least in (("segment bounds", bounds_m, 2), ("stamps", stamps_s, 1)):
+        array = np.asarray(values, dtype=np.float64)
+        if array.ndim != 1 or len(array) < least or not np.all(np.isfinite(array)):
+            raise SimulatedFeedError(f"{drive.name}: {name} must be {least}+ finite numbers")
+        if np.any(np.diff(array) <= 0):
+            raise SimulatedFeedError(f"{drive.name}: {name} must increase strictly")
     field = WaveField(drive, model.field_wave_speed_mps)
     times = field_times(stamps_s, model)
     means = window_means(

@@ -18,6 +18,7 @@ from sim.inrix import (
     FeedModel,
     PathErrors,
     ProbePairing,
+    SimulatedFeedError,
     autoregressive_noise,
     drive_seed,
     measured,
@@ -129,6 +130,29 @@ def test_the_simulated_feed_is_the_model_over_the_field_and_reproducible_per_dri
     renamed = Drive("other", STEP_DOWN.dt_s, 0.0, STEP_DOWN.speed_mps)
     other = simulated_feed(renamed, bounds, stamps, noisy)
     assert not np.allclose(other.speed_mps, first.speed_mps)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ({"noise_mps": -1.0}, "noise_mps = -1.0 must be finite and >= 0"),
+        ({"lag_s": float("nan")}, "lag_s = nan must be finite"),
+        ({"window_s": 0.0}, "window_s must be > 0"),
+        ({"noise_correlation": 1.0}, "noise_correlation = 1.0 must be < 1"),
+    ],
+)
+def test_a_feed_model_that_cannot_be_refuses_to_be_made(
+    change: dict[str, float], message: str
+) -> None:
+    with pytest.raises(SimulatedFeedError, match=message):
+        replace(EXACT, **change)
+
+
+def test_the_feed_refuses_segments_or_stamps_out_of_order() -> None:
+    with pytest.raises(SimulatedFeedError, match="step: segment bounds must increase strictly"):
+        simulated_feed(STEP_DOWN, np.array([0.0, 800.0, 700.0]), np.array([60.0]), EXACT)
+    with pytest.raises(SimulatedFeedError, match="step: stamps must be 1\\+ finite numbers"):
+        simulated_feed(STEP_DOWN, np.array([0.0, 800.0]), np.array([]), EXACT)
 
 
 def test_the_car_is_compared_with_the_newest_reading_on_its_segment() -> None:
