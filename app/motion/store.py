@@ -2,9 +2,9 @@
 
 Why not the warehouse: a MOTION day is hundreds of millions of 25 Hz points that are written once
 and then only aggregated (Edie boxes over hours and kilometres). Measured by
-`bench/motion_import.py --warehouse` (docs/performance.md), PostgreSQL's COPY loads them an order of
-magnitude slower than Parquet is written, and an Edie hour is seconds of a full scan there against
-a fraction of a second in DuckDB's columnar scan; the fleet's own pings (1 Hz, 100 cars) stay in
+`bench/motion_import.py --warehouse-points` (docs/performance.md), PostgreSQL's COPY loaded them
+3 to 7 times slower than pyarrow wrote Parquet, and the Edie GROUP BY took 2.7 to 5 times longer
+in PostgreSQL than in DuckDB on the Parquet file; the fleet's own pings (1 Hz, 100 cars) stay in
 the warehouse, and the figure joins the two.
 
 Layout under `SMOOTHFLEET_DATA_DIR/motion` (or `--store`), partitioned by UTC day like the pings:
