@@ -18,7 +18,7 @@ from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
-from app.core.deadline import RequestDeadline
+from app.core.deadline import PROBE_TIMEOUT_S, DatabaseWatch, RequestDeadline
 from app.core.errors import install_error_handlers
 from app.core.headers import SecurityHeaders, install_api_docs
 from app.core.metrics import RequestMetrics
@@ -96,6 +96,7 @@ def create_api(settings: Settings | None = None) -> FastAPI:
             if stop_planner is not None:
                 stop_planner()
             await engine.dispose()
+            await app.state.database_watch.close()
 
     app = FastAPI(
         title="smoothfleet",
@@ -109,7 +110,9 @@ def create_api(settings: Settings | None = None) -> FastAPI:
     app.state.plan_documents = PlanDocuments()
     install_error_handlers(app)
     app.add_middleware(PingFastPath)
-    app.add_middleware(RequestDeadline, deadline_s=settings.api_deadline_s)
+    database_watch = DatabaseWatch(database_url, PROBE_TIMEOUT_S)
+    app.state.database_watch = database_watch
+    app.add_middleware(RequestDeadline, deadline_s=settings.api_deadline_s, watch=database_watch)
     app.add_middleware(BodySizeLimit, max_bytes=settings.max_body_bytes)
     app.add_middleware(RequestMetrics)
     app.add_middleware(SecurityHeaders)

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import AwareDatetime, BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field
+
+from contract.values import Real, StorableText, Timestamp
 
 VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 # A batch is the agent's store-and-forward upload: at most this many pings per request.
@@ -24,21 +26,21 @@ class Ping(BaseModel):
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
     vehicle_id: str = Field(pattern=VEHICLE_ID_PATTERN)
-    ts: AwareDatetime
+    ts: Timestamp
     lat: float = Field(ge=-90, le=90)
     lon: float = Field(ge=-180, le=180)
-    speed_mps: float = Field(ge=0, le=90)
-    accel_mps2: float | None = Field(None, ge=-50, le=50)
-    heading_deg: float | None = Field(None, ge=0, le=360)
+    speed_mps: Real = Field(ge=0, le=90)
+    accel_mps2: Real | None = Field(None, ge=-50, le=50)
+    heading_deg: Real | None = Field(None, ge=0, le=360)
     lane: int | None = Field(None, ge=1, le=12)
     acc_engaged: bool | None = None
     controller_engaged: bool | None = None
-    controller: str | None = Field(None, max_length=64)
-    acc_speed_setting_mph: float | None = Field(None, ge=0, le=200)
+    controller: StorableText | None = Field(None, max_length=64)
+    acc_speed_setting_mph: Real | None = Field(None, ge=0, le=200)
     acc_gap_setting: int | None = Field(None, ge=1, le=3)
     lead_present: bool | None = Field(None, description="the car's 'minicar' lead flag")
-    lead_distance_m: float | None = Field(None, ge=0, le=1000)
-    lead_rel_speed_mps: float | None = Field(None, ge=-90, le=90)
+    lead_distance_m: Real | None = Field(None, ge=0, le=1000)
+    lead_rel_speed_mps: Real | None = Field(None, ge=-90, le=90)
     plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
 
 
@@ -68,23 +70,23 @@ class VehicleStatusReport(BaseModel):
 
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
-    ts: AwareDatetime
-    agent_version: str | None = Field(None, max_length=64)
-    uptime_s: float | None = Field(None, ge=0)
+    ts: Timestamp
+    agent_version: StorableText | None = Field(None, max_length=64)
+    uptime_s: float | None = Field(None, ge=0, le=1e10)  # ~300 years
     can_ok: bool | None = None
-    can_msgs_per_s: float | None = Field(None, ge=0)
+    can_msgs_per_s: Real | None = Field(None, ge=0, le=1e7)
     gps_fix: bool | None = None
     gps_satellites: int | None = Field(None, ge=0, le=255)
     acc_available: bool | None = None
-    controller: str | None = Field(None, max_length=64)
+    controller: StorableText | None = Field(None, max_length=64)
     controller_running: bool | None = None
     plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
-    plan_age_s: float | None = Field(None, ge=0)
+    plan_age_s: Real | None = Field(None, ge=0, le=1e10)
     spool_backlog: int | None = Field(None, ge=0, le=2**31 - 1)
-    disk_free_mb: float | None = Field(None, ge=0)
-    cpu_temp_c: float | None = Field(None, ge=-60, le=150)
+    disk_free_mb: Real | None = Field(None, ge=0, le=1e12)
+    cpu_temp_c: Real | None = Field(None, ge=-60, le=150)
     ups_on_battery: bool | None = None
-    server_rtt_ms: float | None = Field(None, ge=0)
+    server_rtt_ms: Real | None = Field(None, ge=0, le=1e9)
     config_version: int | None = Field(
         None, ge=1, le=2**31 - 1, description="the vehicle config version the agent runs"
     )

@@ -61,6 +61,10 @@ class Principal:
         return self.role in ("operator", "admin")
 
 
+class LookupAbandoned(ConnectionError):
+    """A shared token lookup whose database query was abandoned (answered 503)."""
+
+
 class TokenCache:
     """Token hash -> principal (or refusal), each entry kept `ttl_s` seconds."""
 
@@ -91,7 +95,11 @@ class TokenCache:
         try:
             found = await self._lookup(token_hash)
         except asyncio.CancelledError:
-            future.cancel()
+            # The request that looked the token up gave up (its deadline passed: a hung
+            # database). The others waiting on the same lookup are not cancelled: they learn
+            # the database did not answer, which is a 503 for them too.
+            future.set_exception(LookupAbandoned("the token lookup was abandoned unanswered"))
+            future.exception()
             raise
         except Exception as error:
             future.set_exception(error)

@@ -39,9 +39,9 @@ class Settings(BaseSettings):
     db_connect_timeout_s: float = Field(5.0, gt=0, le=120)
     db_statement_timeout_s: float = Field(30.0, gt=0, le=3600)
     # An API request not answered this long after its body arrived is answered 503 +
-    # Retry-After (app/core/deadline.py): a frozen database never enforces the statement
-    # timeout. 0 disables.
-    api_deadline_s: float = Field(1.5, ge=0, le=300)
+    # Retry-After if the database does not answer a probe either (app/core/deadline.py): a
+    # frozen database never enforces the statement timeout. 0 disables.
+    api_deadline_s: float = Field(0.8, ge=0, le=300)
 
     # HTTP
     host: str = "127.0.0.1"
@@ -81,6 +81,9 @@ class Settings(BaseSettings):
     inrix_url: str | None = None
     inrix_key: SecretStr | None = None
     inrix_poll_period_s: float = Field(60.0, gt=0)
+    # The API refuses snapshots timestamped further back (recordings: `smoothfleet inrix replay`);
+    # the future bound is SMOOTHFLEET_PING_MAX_FUTURE_S, as for pings and status reports.
+    inrix_max_age_days: int = Field(7, ge=1, le=36500)
 
     # Vehicle agent periods and limits handed out in /vehicles/{id}/config.
     agent_ping_period_s: float = Field(1.0, gt=0)

@@ -2,11 +2,14 @@
 
 PostgreSQL's statement timeout is enforced by the server, so a server that is frozen (SIGSTOP,
 a stalled disk, a network black hole) never enforces it, and a request waiting on it would
-wait as long as the freeze lasts. Cars and feeds retry a 503 (their pings stay spooled), so an
-API request that has not started its answer `deadline_s` after its body arrived is answered
-503 with Retry-After; its handler is cancelled and its late result dropped. A 503 is never an
-acknowledgement, so nothing acknowledged can be lost by it: a ping committed after its request
-gave up is stored, and the car's resend is a duplicate.
+wait as long as the freeze lasts. An API request that has not started its answer `deadline_s`
+after its body arrived asks the process's `DatabaseWatch` whether the database still answers
+(one `SELECT 1` on its own connection, within `probe_timeout_s`, shared by every waiting
+request). If it does, the request is merely slow (a busy machine, a big query) and waits
+another `deadline_s`; if not, it is answered 503 with Retry-After, its handler cancelled and
+its late result dropped. Cars and feeds retry a 503 (their pings stay spooled), and a 503 is
+never an acknowledgement: a ping committed after its request gave up is stored, and the car's
+resend is a duplicate.
 
 The clock starts when the request's body has been received (a slow upload is not the
 database's wait) or at once for a request without a body.
@@ -15,12 +18,17 @@ database's wait) or at once for a request without a body.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import math
 import time
+from typing import Any
 
 import orjson
+import psycopg
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from app.core.db import libpq_url
 from app.core.errors import RETRY_AFTER_S
 from app.core.logs import RepeatedMessages
 from contract.errors import DATABASE_UNAVAILABLE
@@ -28,16 +36,79 @@ from contract.errors import DATABASE_UNAVAILABLE
 log = logging.getLogger(__name__)
 log.addFilter(RepeatedMessages())
 
+# How long the database has to answer `SELECT 1` before it counts as hung.
+PROBE_TIMEOUT_S = 0.7
 # Machine clients that retry a 503 on their own; the dashboard's pages are not bounded here.
 DEADLINE_PREFIXES = ("/api/", "/readyz")
 
 
-class RequestDeadline:
-    """ASGI middleware answering 503 to an API request not answered within `deadline_s`."""
+class DatabaseWatch:
+    """Whether the database answers at all, probed at most once per `probe_timeout_s`."""
 
-    def __init__(self, app: ASGIApp, deadline_s: float) -> None:
+    def __init__(self, url: str, probe_timeout_s: float) -> None:
+        self._url = libpq_url(url)
+        self._timeout_s = probe_timeout_s
+        self._connection: psycopg.AsyncConnection[Any] | None = None
+        self._probe: asyncio.Task[bool] | None = None
+        self._verdict = (-float("inf"), True)  # (when, answered)
+
+    async def answers(self) -> bool:
+        """True when a `SELECT 1` came back within the probe timeout.
+
+        A silent database is believed silent for one probe timeout (every request waiting on
+        it is answered at once); an answer is not remembered, since it says nothing of the
+        moment after.
+        """
+        when, answered = self._verdict
+        if not answered and time.monotonic() - when < self._timeout_s:
+            return False
+        if self._probe is None or self._probe.done():
+            self._probe = asyncio.create_task(self._run_probe())
+        return await asyncio.shield(self._probe)
+
+    async def _run_probe(self) -> bool:
+        # Not `asyncio.timeout` around the query: cancelling a psycopg query asks the server to
+        # cancel it, which waits on the very server that does not answer. The attempt is left
+        # to finish (or fail) in the background instead.
+        attempt = asyncio.create_task(self._select_one())
+        done, _ = await asyncio.wait({attempt}, timeout=self._timeout_s)
+        answered = bool(done) and attempt.exception() is None
+        if not done:
+            attempt.add_done_callback(_drop_late_outcome)
+        if not answered:
+            self._connection = None  # abandoned with its attempt
+        self._verdict = (time.monotonic(), answered)
+        return answered
+
+    async def _select_one(self) -> None:
+        connection = self._connection
+        if connection is None or connection.closed:
+            connection = await psycopg.AsyncConnection.connect(
+                self._url, autocommit=True, connect_timeout=max(2, math.ceil(self._timeout_s))
+            )
+        try:
+            await connection.execute("SELECT 1")
+        except BaseException:
+            await connection.close()
+            raise
+        self._connection = connection
+
+    async def close(self) -> None:
+        """Close the probe's connection (at shutdown)."""
+        connection, self._connection = self._connection, None
+        if connection is not None:
+            with contextlib.suppress(psycopg.Error, OSError, TimeoutError):
+                async with asyncio.timeout(self._timeout_s):
+                    await connection.close()
+
+
+class RequestDeadline:
+    """ASGI middleware answering 503 to an API request held by a database that does not answer."""
+
+    def __init__(self, app: ASGIApp, deadline_s: float, watch: DatabaseWatch) -> None:
         self.app = app
         self.deadline_s = deadline_s
+        self.watch = watch
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if (
@@ -80,13 +151,17 @@ class RequestDeadline:
                 await handler
                 return
             if time.monotonic() >= clock_from + self.deadline_s:
-                break
+                if not await self.watch.answers():
+                    break
+                if handler.done() or started:
+                    continue
+                clock_from = time.monotonic()  # merely slow: it gets another deadline
         gave_up = True
         handler.cancel()
         # The cancelled handler finishes (and returns its connection) in the background.
         handler.add_done_callback(_drop_late_outcome)
         log.warning(
-            "%s %s not answered within %.1f s (database hung?): answered 503",
+            "%s %s not answered within %.1f s and the database does not answer: 503",
             scope["method"],
             _route_of(scope),
             self.deadline_s,

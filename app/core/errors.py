@@ -12,6 +12,7 @@ from typing import Any
 
 from fastapi import FastAPI, Request, Response
 from fastapi.exception_handlers import http_exception_handler
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from sqlalchemy.exc import DataError, DBAPIError, InterfaceError, OperationalError
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
@@ -99,7 +100,19 @@ def install_error_handlers(app: FastAPI) -> None:
         log.warning("database connection failed: %s", error)
         return service_unavailable("database unavailable, retry later")
 
+    async def on_invalid_request(request: Request, error: Exception) -> JSONResponse:
+        assert isinstance(error, RequestValidationError)
+        # Each field error as FieldError says it (where, what, which rule), without the
+        # rejected input: it may be what made the request invalid (a NaN, a lone surrogate)
+        # and cannot always be written back as JSON.
+        fields = [
+            {"loc": list(item["loc"]), "msg": item["msg"], "type": item["type"]}
+            for item in error.errors()
+        ]
+        return JSONResponse({"detail": fields}, 422)
+
     app.add_exception_handler(StarletteHTTPException, on_http_error)
+    app.add_exception_handler(RequestValidationError, on_invalid_request)
     app.add_exception_handler(PoolTimeoutError, on_pool_timeout)
     app.add_exception_handler(DBAPIError, on_dbapi_error)
     app.add_exception_handler(ConnectionError, on_os_error)

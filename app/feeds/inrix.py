@@ -16,6 +16,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from contract.units import MPS_PER_MPH
+from contract.values import Real, StorableText, plausible_time
 
 S_PER_MINUTE = 60.0
 
@@ -25,9 +26,9 @@ class InrixFormatError(ValueError):
 
 
 def _as_utc(value: datetime | None) -> datetime | None:
-    if value is not None and value.tzinfo is None:
-        return value.replace(tzinfo=UTC)
-    return value
+    if value is None:
+        return None
+    return plausible_time(value.replace(tzinfo=UTC) if value.tzinfo is None else value)
 
 
 class InrixSegment(BaseModel):
@@ -35,14 +36,14 @@ class InrixSegment(BaseModel):
 
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False, populate_by_name=True)
 
-    code: str = Field(min_length=1, max_length=64)
-    type: str | None = None
-    speed: float | None = Field(None, ge=0, le=250)
-    average: float | None = Field(None, ge=0, le=250)
-    reference: float | None = Field(None, ge=0, le=250)
-    travel_time_minutes: float | None = Field(None, alias="travelTimeMinutes", ge=0)
+    code: StorableText = Field(min_length=1, max_length=64)
+    type: StorableText | None = None
+    speed: Real | None = Field(None, ge=0, le=250)
+    average: Real | None = Field(None, ge=0, le=250)
+    reference: Real | None = Field(None, ge=0, le=250)
+    travel_time_minutes: Real | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
     score: int | None = Field(None, ge=0, le=100)
-    c_value: float | None = Field(None, alias="c-Value", ge=0, le=100)
+    c_value: Real | None = Field(None, alias="c-Value", ge=0, le=100)
     segment_closed: bool = Field(False, alias="segmentClosed")
 
 

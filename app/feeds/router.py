@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, HTTPException, Request
 
 from app.auth import FeedWriterDep
+from app.core.config import Settings
 from app.core.db import SessionDep
 from app.core.errors import error_responses
 from app.feeds.inrix import InrixFormatError, InrixResponse, readings_of
@@ -18,18 +19,37 @@ router = APIRouter(prefix="/api/v1/feeds", tags=["feeds"])
 
 @router.post("/inrix", responses=error_responses(401, 403, 413, 503))
 async def post_inrix(
-    response: InrixResponse, principal: FeedWriterDep, session: SessionDep
+    response: InrixResponse, request: Request, principal: FeedWriterDep, session: SessionDep
 ) -> InrixAnswer:
     """Store the snapshot's readings in SI units (feed or admin token).
 
     Codes not on any corridor are counted in `unknown_codes`, not stored; a resent snapshot
-    stores nothing twice. Answered after the commit.
+    stores nothing twice. Answered after the commit. A snapshot timestamped more than
+    SMOOTHFLEET_PING_MAX_FUTURE_S ahead or SMOOTHFLEET_INRIX_MAX_AGE_DAYS back is refused (422).
     """
+    received_at = datetime.now(UTC)
     try:
         found = readings_of(response)
     except InrixFormatError as error:
         raise HTTPException(422, str(error)) from None
-    result = await store_readings(session, found, datetime.now(UTC))
+    settings: Settings = request.app.state.settings
+    earliest = received_at - timedelta(days=settings.inrix_max_age_days)
+    latest = received_at + timedelta(seconds=settings.ping_max_future_s)
+    for moment in sorted({reading.measured_at for reading in found}):
+        if moment > latest:
+            raise HTTPException(
+                422,
+                f"timestamp {moment.isoformat()} is more than {settings.ping_max_future_s:g} s "
+                "in the future; nothing of this snapshot was stored",
+            )
+        if moment < earliest:
+            raise HTTPException(
+                422,
+                f"timestamp {moment.isoformat()} is older than {settings.inrix_max_age_days} "
+                "days (SMOOTHFLEET_INRIX_MAX_AGE_DAYS; recordings go through `smoothfleet inrix "
+                "replay`); nothing of this snapshot was stored",
+            )
+    result = await store_readings(session, found, received_at)
     return InrixAnswer(
         accepted=result.accepted,
         duplicates=result.duplicates,

@@ -12,6 +12,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.fleet.service import FleetCounts, FleetEntry
+from contract.values import StorableText
 
 
 class ControllerAssignment(BaseModel):
@@ -19,7 +20,7 @@ class ControllerAssignment(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    name: str = Field(min_length=1, examples=["microaccel_acc"])
+    name: StorableText = Field(min_length=1, max_length=64, examples=["microaccel_acc"])
     params: dict[str, Any] = Field(default_factory=dict)
 
 
@@ -29,7 +30,7 @@ class AssignmentIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     lane: int = Field(ge=1, le=12, description="Lane numbered from 1 at the left (median side).")
-    route: str = Field(min_length=1, max_length=64)
+    route: StorableText = Field(min_length=1, max_length=64)
     controller: ControllerAssignment
 
 
@@ -49,7 +50,7 @@ class MaintenanceIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     in_maintenance: bool
-    note: str | None = Field(None, max_length=500)
+    note: StorableText | None = Field(None, max_length=500)
 
 
 class MaintenanceOut(MaintenanceIn):

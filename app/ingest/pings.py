@@ -6,6 +6,7 @@ ingest is testable on its own and the hot path allocates no ORM objects.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
@@ -90,7 +91,7 @@ def parse_body(body: bytes) -> list[object]:
     try:
         document = orjson.loads(body)
     except orjson.JSONDecodeError as error:
-        raise BodyError(f"body is not JSON: {error}") from None
+        document = _lenient_json(body, error)
     if not isinstance(document, dict):
         raise BodyError('body must be a ping object or {"pings": [...]}')
     if "pings" in document:
@@ -107,6 +108,19 @@ def parse_body(body: bytes) -> list[object]:
             'body is neither a ping (vehicle_id, ts, lat, lon, speed_mps) nor {"pings": [...]}'
         )
     return [document]
+
+
+def _lenient_json(body: bytes, strict_error: orjson.JSONDecodeError) -> object:
+    """The body as Python's json module reads it, for what orjson refuses but is not garbage.
+
+    `json.dumps` writes NaN, Infinity and -Infinity by default, and a number like 1e999 or an
+    escaped lone surrogate is valid JSON syntax; read this way, such a value is refused by
+    validation with its item's index, and the other pings of the batch are kept.
+    """
+    try:
+        return json.loads(body)
+    except (ValueError, RecursionError):
+        raise BodyError(f"body is not JSON: {strict_error}") from None
 
 
 def _refuse_foreign(vehicle_ids: Iterable[object], principal: Principal, count: int) -> None:

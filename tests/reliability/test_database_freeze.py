@@ -40,11 +40,15 @@ class Seen:
     slowest_s: Counter[str] = field(default_factory=Counter)
     errors: list[str] = field(default_factory=list)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    # Latency counts from just before the freeze: the server's cold start on a loaded shared
+    # machine (first token lookups, the roster) is not what this test is about.
+    timing: bool = False
 
     def note(self, what: str, answer: httpx.Response, took_s: float) -> None:
         with self.lock:
             self.statuses[what, answer.status_code] += 1
-            self.slowest_s[what] = max(self.slowest_s[what], took_s)
+            if self.timing:
+                self.slowest_s[what] = max(self.slowest_s[what], took_s)
             if answer.status_code == 503:
                 self.retry_after.add(answer.headers.get("Retry-After", ""))
 
@@ -112,8 +116,11 @@ def test_a_frozen_database_is_503_within_2_s_and_recovers_by_itself(
         wait_until_ready(base)
         for client in clients:
             client.start()
-        time.sleep(2)
+        deadline = time.monotonic() + 60
+        while len(seen.acknowledged) < 5 * CARS and time.monotonic() < deadline:
+            time.sleep(0.1)
         before = len(seen.acknowledged)
+        seen.timing = True
         cluster.freeze()
         try:
             time.sleep(FREEZE_S)
@@ -133,7 +140,7 @@ def test_a_frozen_database_is_503_within_2_s_and_recovers_by_itself(
         server.wait(timeout=60)
 
     server_log = (tmp_path / "serve.log").read_text()
-    assert not seen.errors, seen.errors[:3]
+    assert not seen.errors, f"{seen.errors[:3]}\n{server_log[-3000:]}"
     assert before > 0
     assert during["pings", 503] > 0, during
     assert during["/api/v1/fleet", 503] > 0, during

@@ -1,0 +1,68 @@
+"""Values a message may carry only if the warehouse can store them and the domain can mean them.
+
+Pydantic accepts text and numbers PostgreSQL refuses or silently changes: a NUL character (text
+cannot hold one), a lone UTF-16 surrogate (not UTF-8 at all), a float beyond a REAL column's
+range (stored as infinity), and timestamps no clock could have produced (0001-01-01+05:00 is
+1 BC in UTC). Refusing them here, at the edge, names the field in the 422 instead of failing a
+whole group commit later.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from typing import Annotated
+
+from pydantic import AfterValidator, AwareDatetime, Field
+
+# The JSON Schema side of StorableText, so clients and fuzzers know NUL is not text here.
+NO_NUL_PATTERN = "^[^\\u0000]*$"
+# A REAL (float4) column: its largest finite value, and the smallest magnitude it keeps.
+FLOAT4_MAX = 3.4028234663852886e38
+FLOAT4_SMALLEST = 1.401298464324817e-45
+# No message is about a time before the fleet existed or after anyone could plan for.
+EARLIEST = datetime(1970, 1, 1, tzinfo=UTC)
+LATEST = datetime(2200, 1, 1, tzinfo=UTC)
+
+
+def storable_text(value: str) -> str:
+    """The text, if PostgreSQL can store it as given."""
+    if "\x00" in value:
+        raise ValueError("text must not contain the NUL character (\\u0000)")
+    if not value.isascii():
+        try:
+            value.encode("utf-8")
+        except UnicodeEncodeError:
+            raise ValueError("text must not contain a lone UTF-16 surrogate") from None
+    return value
+
+
+def real(value: float) -> float:
+    """A finite float as a REAL column keeps it: a magnitude it cannot hold but as 0 is 0.
+
+    PostgreSQL refuses such a value with "underflow" on one path and stores 0 on another (the
+    binary COPY); here it is 0 on both.
+    """
+    if not math.isfinite(value) or abs(value) > FLOAT4_MAX:
+        raise ValueError("number must be finite and within a REAL's range (about 3.4e38)")
+    if value != 0.0 and abs(value) < FLOAT4_SMALLEST:
+        return 0.0
+    return value
+
+
+def plausible_time(value: datetime) -> datetime:
+    """A timestamp that exists in UTC and lies between 1970 and 2200."""
+    try:
+        utc = value.astimezone(UTC)
+    except OverflowError:
+        raise ValueError("timestamp is outside the calendar once converted to UTC") from None
+    if not EARLIEST <= utc < LATEST:
+        raise ValueError("timestamp must lie between 1970 and 2200 (UTC)")
+    return value
+
+
+StorableText = Annotated[
+    str, AfterValidator(storable_text), Field(json_schema_extra={"pattern": NO_NUL_PATTERN})
+]
+Real = Annotated[float, AfterValidator(real)]
+Timestamp = Annotated[AwareDatetime, AfterValidator(plausible_time)]
