@@ -332,7 +332,10 @@ def test_a_database_outage_is_503_with_retry_after(
         answer = client.post("/api/v1/pings", json=ping(), headers=token)
     assert answer.status_code == 503
     assert answer.headers["Retry-After"] == "5"
-    assert answer.json() == {"detail": "database unavailable, retry later"}
+    assert answer.json() == {
+        "detail": "database unavailable, retry later",
+        "code": "database_unavailable",
+    }
 
 
 def test_pings_of_a_vehicle_just_removed_from_the_roster_are_rejected_per_item(
