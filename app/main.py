@@ -30,7 +30,7 @@ from app.ingest import PingFastPath, ingest_running
 from app.maintenance import maintain_async
 from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
-from app.plans.service import PlanDocuments
+from app.plans.service import HeldPlans, PlanDocuments
 from app.vehicles.router import router as vehicles_router
 
 log = logging.getLogger(__name__)
@@ -108,6 +108,7 @@ def create_api(settings: Settings | None = None) -> FastAPI:
     )
     app.state.settings = settings
     app.state.plan_documents = PlanDocuments()
+    app.state.held_plans = HeldPlans()
     install_error_handlers(app)
     app.add_middleware(PingFastPath)
     database_watch = DatabaseWatch(database_url, PROBE_TIMEOUT_S)

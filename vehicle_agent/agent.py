@@ -597,9 +597,9 @@ class Agent:
             self._server_failed("config", error)
             self._config_schedule.failed(now, 2.0)
             return
-        self._config_schedule.done(now, CONFIG_REFRESH_S)
         current = self.assignment
         if current is not None and current.config == config:
+            self._config_schedule.done(now, CONFIG_REFRESH_S)
             return
         try:
             corridor = (
@@ -607,8 +607,15 @@ class Agent:
                 if current is not None and current.config.corridor_id == config.corridor_id
                 else self.server.corridor(config.corridor_id)
             )
+        except ServerError as error:
+            # the server's trouble, not the config's: keep what runs, ask again soon
+            self._server_failed("corridor", error)
+            self._config_schedule.failed(now, 2.0)
+            return
+        self._config_schedule.done(now, CONFIG_REFRESH_S)
+        try:
             self.configure(config, corridor)
-        except (ServerError, ControllerConfigError, ValueError) as error:
+        except (ControllerConfigError, ValueError) as error:
             log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
             self.stats.server_errors["config"] += 1
             self.assignment = None

@@ -23,6 +23,7 @@ from sqlalchemy.ext.asyncio import AsyncEngine
 from starlette.datastructures import State
 
 from app.core.config import Settings
+from app.core.errors import is_database_outage
 from app.core.ratelimit import RateLimiter
 from app.core.security import TokenRole, hash_token
 
@@ -102,6 +103,11 @@ class TokenCache:
             future.exception()
             raise
         except Exception as error:
+            if is_database_outage(error) and entry is not None and entry[1] is not None:
+                # the database is away: a token known a moment ago still is (a revocation
+                # needs the database too); what it may do is checked as always
+                future.set_result(entry[1])
+                return entry[1]
             future.set_exception(error)
             future.exception()  # marks it retrieved when nobody else waits on it
             raise

@@ -67,6 +67,13 @@ def _is_outage(error: DBAPIError) -> bool:
     )
 
 
+def is_database_outage(error: BaseException) -> bool:
+    """True when `error` says the database cannot be reached (not that a statement is wrong)."""
+    if isinstance(error, DBAPIError):
+        return _is_outage(error)
+    return isinstance(error, PoolTimeoutError | ConnectionError)
+
+
 # FastAPI answers a body it cannot even decode (not UTF-8, ...) with this 400; the interface
 # promises 422 for a body that is not the expected JSON at all.
 UNREADABLE_BODY = "There was an error parsing the body"

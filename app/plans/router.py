@@ -15,12 +15,13 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
 from app.auth import AuthDep, Principal
 from app.core.config import Settings
 from app.core.db import SessionDep
-from app.core.errors import error_responses, service_unavailable
+from app.core.errors import error_responses, is_database_outage, service_unavailable
 from app.plans.schemas import PlanHistoryOut
 from app.plans.service import (
+    HeldPlans,
     PlanDocuments,
     corridor_lanes,
-    latest_valid_plan_id,
+    latest_valid_plan,
     plan_document,
     plan_history,
     vehicle_assignment,
@@ -68,16 +69,40 @@ def _matches(if_none_match: str | None, etag: str) -> bool:
     return "*" in candidates or etag in candidates
 
 
+def _held(request: Request) -> HeldPlans:
+    """This application's memory of what it last served (made by create_api)."""
+    held: HeldPlans = request.app.state.held_plans
+    return held
+
+
 async def _serve_latest(
     request: Request, session: SessionDep, corridor_id: str, lane: int | None
 ) -> Response:
-    lanes = await corridor_lanes(session, corridor_id)
+    held = _held(request)
+    now = datetime.now(UTC)
+    plan_id: int | None = None
+    try:
+        lanes = await corridor_lanes(session, corridor_id)
+        if lanes is not None:
+            held.lanes[corridor_id] = lanes
+            latest = await latest_valid_plan(session, corridor_id, now)
+            if latest is None:
+                held.plans.pop(corridor_id, None)
+            else:
+                held.plans[corridor_id] = latest
+                plan_id = latest[0]
+    except Exception as error:
+        if not is_database_outage(error) or corridor_id not in held.lanes:
+            raise
+        # the database is away: what was read last still holds until its valid_until
+        lanes, plan_id = held.lanes[corridor_id], held.valid_plan_id(corridor_id, now)
+        if plan_id is None or _documents(request).get(plan_id, lane) is None:
+            raise
     if lanes is None:
         raise HTTPException(404, f"unknown corridor {corridor_id}")
     if lane is not None and not 1 <= lane <= lanes:
         raise HTTPException(422, f"lane must be 1-{lanes} on {corridor_id}, got {lane}")
     settings: Settings = request.app.state.settings
-    plan_id = await latest_valid_plan_id(session, corridor_id, datetime.now(UTC))
     if plan_id is None:
         return service_unavailable(
             f"no valid plan for {corridor_id}: leave the car to its stock ACC",
@@ -124,9 +149,16 @@ async def get_vehicle_plan(
         raise HTTPException(
             403, f"a {principal.role} token may not read the plan of vehicle {vehicle_id}"
         )
-    assignment = await vehicle_assignment(session, vehicle_id)
+    held = _held(request)
+    try:
+        assignment = await vehicle_assignment(session, vehicle_id)
+    except Exception as error:
+        if not is_database_outage(error) or vehicle_id not in held.assignments:
+            raise
+        assignment = held.assignments[vehicle_id]
     if assignment is None:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}")
+    held.assignments[vehicle_id] = assignment
     corridor_id, assigned_lane = assignment
     return await _serve_latest(
         request, session, corridor_id, assigned_lane if lane is None else lane

@@ -8,6 +8,7 @@ fleet polling every few seconds costs one indexed lookup of the latest plan_id p
 from __future__ import annotations
 
 from collections import OrderedDict
+from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
@@ -45,6 +46,21 @@ class PlanDocuments:
             self._bodies.popitem(last=False)
 
 
+@dataclass
+class HeldPlans:
+    """What this process last read for each corridor and vehicle, so it keeps serving plans while
+    its database is away: a plan is valid until its own valid_until, whoever can reach what."""
+
+    lanes: dict[str, int] = field(default_factory=dict)
+    plans: dict[str, tuple[int, datetime]] = field(default_factory=dict)
+    assignments: dict[str, tuple[str, int]] = field(default_factory=dict)
+
+    def valid_plan_id(self, corridor_id: str, now: datetime) -> int | None:
+        """The corridor's last served plan if it is still valid at `now`."""
+        held = self.plans.get(corridor_id)
+        return held[0] if held is not None and held[1] > now else None
+
+
 async def corridor_lanes(session: AsyncSession, corridor_id: str) -> int | None:
     """How many lanes the corridor has, or None if it is unknown."""
     lanes = await session.scalar(
@@ -65,19 +81,21 @@ async def vehicle_assignment(session: AsyncSession, vehicle_id: str) -> tuple[st
     return None if row is None else (str(row.corridor_id), int(row.assigned_lane))
 
 
-async def latest_valid_plan_id(
+async def latest_valid_plan(
     session: AsyncSession, corridor_id: str, now: datetime
-) -> int | None:
-    """The newest published plan of the corridor that is still valid at `now`."""
-    plan_id = await session.scalar(
-        text(
-            "SELECT plan_id FROM plan_run WHERE corridor_id = :corridor AND status = 'published' "
-            "AND published_at <= :now AND valid_until > :now "
-            "ORDER BY published_at DESC LIMIT 1"
-        ),
-        {"corridor": corridor_id, "now": now},
-    )
-    return None if plan_id is None else int(plan_id)
+) -> tuple[int, datetime] | None:
+    """The newest published plan of the corridor still valid at `now`: (plan_id, valid_until)."""
+    row = (
+        await session.execute(
+            text(
+                "SELECT plan_id, valid_until FROM plan_run WHERE corridor_id = :corridor "
+                "AND status = 'published' AND published_at <= :now AND valid_until > :now "
+                "ORDER BY published_at DESC LIMIT 1"
+            ),
+            {"corridor": corridor_id, "now": now},
+        )
+    ).first()
+    return None if row is None else (int(row.plan_id), row.valid_until)
 
 
 def _buffers(
