@@ -147,11 +147,63 @@ def _import_batch(
     report: ImportReport,
     scratch: Path,
 ) -> None:
+    """Check a batch's documents, then write the good ones' points, cells and trajectories."""
     table, indices = parse_batch(batch, scratch)
-    offsets = dict(zip(batch.indices, batch.offsets, strict=True))
     report.bad.extend(batch.bad)
-    if table.num_rows == 0:
+    accepted = _accept(table, indices, dict(zip(batch.indices, batch.offsets, strict=True)),
+                       frame, known, report)
+    if accepted is None:
         return
+    tables, days, lengths, first_points = _tables(accepted, frame, report.sha256)
+    for day in np.unique(days):
+        in_day = days == day
+        if in_day.all():
+            writer.write(int(day), tables)
+            continue
+        point_in_day = np.repeat(in_day, lengths)
+        writer.write(
+            int(day),
+            {
+                POINTS: tables[POINTS].filter(pa.array(point_in_day)),
+                CELLS: tables[CELLS].filter(pa.array(point_in_day[first_points])),
+                TRAJECTORIES: tables[TRAJECTORIES].filter(pa.array(in_day)),
+            },
+        )
+    report.documents += len(accepted.keys)
+    report.points += len(accepted.time_s)
+
+
+@dataclass(frozen=True, slots=True)
+class _Accepted:
+    """The documents of a batch that passed every check and are new to the store."""
+
+    table: pa.Table
+    document_ids: list[str]
+    keys: IntArray
+    lengths: IntArray
+    time_s: NDArray[np.float64]
+    x_ft: NDArray[np.float64]
+    y_ft: NDArray[np.float64]
+
+    @property
+    def starts(self) -> IntArray:
+        """Index of each document's first point."""
+        starts: IntArray = np.concatenate([[0], np.cumsum(self.lengths)[:-1]]).astype(np.int64)
+        return starts
+
+
+def _accept(
+    table: pa.Table,
+    indices: list[int],
+    offsets: dict[int, int],
+    frame: MotionFrame,
+    known: set[int],
+    report: ImportReport,
+) -> _Accepted | None:
+    """The documents to import; the others counted in `report` (bad with their reason,
+    other direction, duplicates). `known` gains the accepted documents' keys."""
+    if table.num_rows == 0:
+        return None
     document_ids = pc.struct_field(table.column("_id"), "$oid").to_pylist()
     counts = {
         column: pc.fill_null(pc.list_value_length(table.column(column)), -1).to_numpy()
@@ -162,8 +214,7 @@ def _import_batch(
 
     def refuse(row: int, reason: str) -> None:
         keep[row] = False
-        index = indices[row]
-        report.bad.append(BadDocument(index, offsets[index], reason))
+        report.bad.append(BadDocument(indices[row], offsets[indices[row]], reason))
 
     for row in range(table.num_rows):
         reason = _shape_problem(
@@ -178,13 +229,12 @@ def _import_batch(
         elif direction[row] != frame.direction:
             keep[row] = False
             report.other_direction += 1
-    if not keep.all():
-        table = table.filter(pa.array(keep))
+    shaped = table.filter(pa.array(keep)) if not keep.all() else table
     rows = np.flatnonzero(keep)
     lengths = counts["timestamp"][keep].astype(np.int64)
-    time_s = _flat(table, "timestamp")
-    x_ft = _flat(table, "x_position")
-    y_ft = _flat(table, "y_position")
+    time_s = _flat(shaped, "timestamp")
+    x_ft = _flat(shaped, "x_position")
+    y_ft = _flat(shaped, "y_position")
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
     # Point-level checks, reduced per document.
     finite = np.isfinite(time_s) & np.isfinite(x_ft) & np.isfinite(y_ft)
@@ -193,16 +243,16 @@ def _import_batch(
     step_ok[starts] = True
     good_points = finite & step_ok
     doc_ok = np.logical_and.reduceat(good_points, starts) if len(starts) else np.zeros(0, bool)
-    keys = np.array([trajectory_key(document_ids[row]) for row in rows], dtype=np.int64)
     for position in np.flatnonzero(~doc_ok):
-        first, last = starts[position], starts[position] + lengths[position]
-        broken = int(np.argmax(~good_points[first:last]))
-        reason = (
+        first = starts[position]
+        broken = int(np.argmax(~good_points[first : first + lengths[position]]))
+        refuse(
+            int(rows[position]),
             f"non-finite or null value at point {broken}"
             if not finite[first + broken]
-            else f"timestamps do not increase at point {broken}"
+            else f"timestamps do not increase at point {broken}",
         )
-        refuse(int(rows[position]), reason)
+    keys = np.array([trajectory_key(document_ids[row]) for row in rows], dtype=np.int64)
     fresh = doc_ok.copy()
     for position in np.flatnonzero(doc_ok):
         key = int(keys[position])
@@ -212,16 +262,29 @@ def _import_batch(
         else:
             known.add(key)
     if not fresh.any():
-        return
-    if not fresh.all():
-        point_keep = np.repeat(fresh, lengths)
-        table = table.filter(pa.array(fresh))
-        rows, keys, lengths = rows[fresh], keys[fresh], lengths[fresh]
-        time_s, x_ft, y_ft = time_s[point_keep], x_ft[point_keep], y_ft[point_keep]
-        starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
+        return None
+    point_keep = np.repeat(fresh, lengths)
+    return _Accepted(
+        table=shaped.filter(pa.array(fresh)) if not fresh.all() else shaped,
+        document_ids=[document_ids[row] for row in rows[fresh]],
+        keys=keys[fresh],
+        lengths=lengths[fresh],
+        time_s=time_s[point_keep],
+        x_ft=x_ft[point_keep],
+        y_ft=y_ft[point_keep],
+    )
+
+
+def _tables(
+    accepted: _Accepted, frame: MotionFrame, sha256: str
+) -> tuple[dict[str, pa.Table], IntArray, IntArray, IntArray]:
+    """Points, cells and trajectories of accepted documents; each document's UTC day (days
+    since the epoch), its point count, and each cell row's first point."""
+    table, keys, lengths, time_s = accepted.table, accepted.keys, accepted.lengths, accepted.time_s
+    starts = accepted.starts
     vehicle_class = pc.fill_null(table.column("coarse_vehicle_class"), -1).to_numpy()
-    x_m = frame.x_m(x_ft)
-    lane = frame.lane(y_ft)
+    x_m = frame.x_m(accepted.x_ft)
+    lane = frame.lane(accepted.y_ft)
     steps = trajectory_steps(time_s, x_m, starts, np.repeat(vehicle_class, lengths))
     trajectory_of_point = np.repeat(keys, lengths)
     points = pa.table(
@@ -243,8 +306,8 @@ def _import_batch(
     trajectories = pa.table(
         {
             "trajectory_id": keys,
-            "document_id": [document_ids[row] for row in rows],
-            "source_sha256": [report.sha256] * len(keys),
+            "document_id": accepted.document_ids,
+            "source_sha256": [sha256] * len(keys),
             "first_t_s": time_s[starts],
             "last_t_s": time_s[ends],
             "first_x_m": x_m[starts],
@@ -282,22 +345,8 @@ def _import_batch(
         schema=CELL_SCHEMA,
     )
     days = (time_s[starts] // SECONDS_PER_DAY).astype(np.int64)
-    for day in np.unique(days):
-        in_day = days == day
-        if in_day.all():
-            writer.write(int(day), {POINTS: points, CELLS: cells, TRAJECTORIES: trajectories})
-            continue
-        point_in_day = np.repeat(in_day, lengths)
-        writer.write(
-            int(day),
-            {
-                POINTS: points.filter(pa.array(point_in_day)),
-                CELLS: cells.filter(pa.array(point_in_day[runs.first_point])),
-                TRAJECTORIES: trajectories.filter(pa.array(in_day)),
-            },
-        )
-    report.documents += len(keys)
-    report.points += len(time_s)
+    tables = {POINTS: points, CELLS: cells, TRAJECTORIES: trajectories}
+    return tables, days, lengths, runs.first_point
 
 
 def _shape_problem(
