@@ -149,6 +149,16 @@ CONTROLLER_SCHEMAS: dict[str, ControllerSchema] = {
         MicroAccelAccParams,
         "MicroAccel anticipation as ACC speed setting and gap bars",
     ),
+    "rl_acc": ControllerSchema(
+        frozenset({"acc"}),
+        RlParams,
+        "PPO-trained policy: ACC speed setting and gap bars (paper, ACC-Based Controller)",
+    ),
+    "rl_accel": ControllerSchema(
+        frozenset({"accel"}),
+        RlParams,
+        "PPO-trained policy: acceleration request bounded by MicroAccel's a_safe",
+    ),
 }
 
 

@@ -43,11 +43,13 @@ def test_clip_keeps_the_setting_within_20_and_73_mph() -> None:
 
 
 def test_registry_is_what_the_server_validates_against() -> None:
-    assert set(CONTROLLERS) == {"simple", "microaccel", "microaccel_acc"}
+    assert set(CONTROLLERS) == {"simple", "microaccel", "microaccel_acc", "rl_acc", "rl_accel"}
     assert controller_actuations() == {
         "simple": frozenset({"acc", "accel"}),
         "microaccel": frozenset({"accel"}),
         "microaccel_acc": frozenset({"acc"}),
+        "rl_acc": frozenset({"acc"}),
+        "rl_accel": frozenset({"accel"}),
     }
     assert CONTROLLER_ACTUATIONS == controller_actuations()
     # every controller of the contract has an implementation, and only those

@@ -26,6 +26,8 @@ from vehicle_agent.controllers.acc_clip import AccClip
 from vehicle_agent.controllers.base import Controller
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.controllers.microaccel_acc import MicroAccelAccController
+from vehicle_agent.controllers.rl_acc import RlAccController
+from vehicle_agent.controllers.rl_accel import RlAccelController
 from vehicle_agent.controllers.simple import SimpleController
 
 
@@ -41,6 +43,8 @@ BUILDERS: dict[str, Callable[[Actuation, Any], Controller]] = {
     "simple": SimpleController,
     "microaccel": MicroAccelController,
     "microaccel_acc": MicroAccelAccController,
+    "rl_acc": RlAccController,
+    "rl_accel": RlAccelController,
 }
 CONTROLLERS: dict[str, ControllerSpec] = {
     name: ControllerSpec(schema, BUILDERS[name]) for name, schema in CONTROLLER_SCHEMAS.items()

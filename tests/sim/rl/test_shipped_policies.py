@@ -1,0 +1,54 @@
+"""The policies the agent ships, and how they drive."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from sim.av import agent_policy
+from sim.drives import load_drive
+from sim.emulator.acc import SimulatedAccCar
+from sim.energy import RAV4_2019
+from sim.gaps import GapBounds, gap_kpis
+from sim.kpi import platoon_kpis
+from sim.plans import SimulatedPlanner
+from sim.platoon import platoon_roles, simulate_platoon
+
+STOP_AND_GO = "data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("actuation", "within_bounds"),
+    [
+        # measured 0.47: the acc policy drops back up to 263 m behind the leader (a weakness
+        # of this 300k-step policy, docs/simulation.md), and saves 19.6 % of fuel doing so
+        ("acc", 0.45),
+        # measured 0.88: closer than 7 m in the queues (a_safe's standstill gap is 5 m)
+        ("accel", 0.85),
+    ],
+)
+def test_the_shipped_policy_drives_a_real_stop_and_go_drive_without_collision(
+    shared_dir: Path, actuation: str, within_bounds: float
+) -> None:
+    drive = load_drive(shared_dir / STOP_AND_GO).slice(300.0, 300.0)
+    humans = simulate_platoon(drive, platoon_roles(humans=24, avs=0))
+    planner = SimulatedPlanner.for_drive(drive, "kernel_smooth")
+    policy = agent_policy(
+        f"rl_{actuation}",
+        actuation,
+        planner,
+        stock_acc=SimulatedAccCar() if actuation == "acc" else None,
+    )
+    mixed = simulate_platoon(
+        drive,
+        platoon_roles(humans=24, avs=1),
+        [policy],
+        av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+    )
+    assert mixed.collisions == 0
+    envelope = gap_kpis(mixed.gap_m[:, :1], mixed.speed_mps[:, 1:2], mixed.dt_s, GapBounds())
+    assert envelope.within_bounds_share >= within_bounds
+    # less fuel per distance than the all-human platoon behind the same drive
+    assert platoon_kpis(mixed).fuel_economy_mpg > platoon_kpis(humans).fuel_economy_mpg
