@@ -226,7 +226,9 @@ def main() -> None:
         )
         for key, controller in (
             ("toyota_rav4", "microaccel"),
+            ("toyota_rav4", "rl_accel"),
             ("nissan_rogue", "microaccel_acc"),
+            ("nissan_rogue", "rl_acc"),
             ("cadillac_xt5", "microaccel_acc"),
         ):
             r = control_step(key, controller, args.steps, Path(spool_dir))
