@@ -1,39 +1,35 @@
-"""Charts drawn on the server as SVG: line, bar and heatmap, with axes, units and legends.
-
-Nothing is fetched at run time (no CDN, no JavaScript library): a page carries its charts as
-inline SVG, and heatmaps embed their cells as a small PNG made here with numpy and zlib. The
-layout and colour functions are pure, so tests check them directly.
+"""Charts drawn on the server by matplotlib (a dependency already): line, bar and heatmap, with
+axes, units and legends, served inside the page as PNG (no script library, no CDN).
 
 Conventions: the x axis of a road chart is postmile increasing to the right (the direction of
 travel); a time-space heatmap has time to the right and postmile upward, as in the paper's
-figures; speed scales run red (slow, congested) to green (free flow).
+figures; speed scales run red (slow, congested) to green (free flow). Axes fit their data (a
+single point gets room on both sides); time axes are labelled in the zone people read
+(`dashboard_timezone`). Each chart is drawn on its own `Figure`, never pyplot's global state, so
+concurrent requests do not share one.
 """
 
 from __future__ import annotations
 
 import base64
+import io
 import math
-import struct
-import zlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from datetime import UTC, datetime
-from html import escape
+from dataclasses import dataclass
+from datetime import datetime
 from typing import Literal
+from zoneinfo import ZoneInfo
 
 import numpy as np
-from markupsafe import Markup
+from markupsafe import Markup, escape
+from matplotlib.axes import Axes
+from matplotlib.colors import Colormap, LinearSegmentedColormap
+from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-WIDTH = 760
-HEIGHT = 300
-MARGIN_LEFT = 66
-MARGIN_RIGHT = 20
-MARGIN_TOP = 30
-MARGIN_BOTTOM = 46
-LEGEND_WIDTH = 96  # colour legend beside a heatmap
-MAX_BAR_WIDTH = 60
-
+WIDTH_IN = 7.6
+HEIGHT_IN = 3.0
+DPI = 100
 PALETTE = ("#2563eb", "#dc2626", "#16a34a", "#9333ea", "#ea580c", "#0891b2", "#4b5563")
 NO_DATA_COLOUR = "#e5e7eb"
 
@@ -52,13 +48,18 @@ AMOUNT_STOPS: tuple[tuple[float, str], ...] = (
     (0.66, "#ef6548"),
     (1.0, "#7f0000"),
 )
+# A lone point on a time axis gets this much room on each side (s).
+LONE_TIME_PAD_S = 1800.0
+TICK_STEPS_MIN = (1, 2, 5, 10, 15, 30, 60, 120, 180, 360, 720, 1440)
+
+UTC_ZONE = ZoneInfo("UTC")  # time axes of charts given no zone
 
 AxisKind = Literal["linear", "time"]
 
 
 @dataclass(frozen=True)
 class Axis:
-    """An axis: its label with the unit, linear or time (epoch seconds, shown in UTC)."""
+    """An axis: its label (with unit), whether it shows epoch seconds as clock times, bounds."""
 
     label: str
     kind: AxisKind = "linear"
@@ -68,7 +69,7 @@ class Axis:
 
 @dataclass(frozen=True)
 class Series:
-    """A named line: x and y values (None breaks the line), drawn as a line or a step."""
+    """A named line of (x, y) points; None in y is a gap."""
 
     name: str
     x: Sequence[float]
@@ -80,7 +81,7 @@ class Series:
 
 @dataclass(frozen=True)
 class Band:
-    """A shaded x range (a buffer region, a time the controller was engaged)."""
+    """A shaded x range (engaged time, a buffer region)."""
 
     start: float
     end: float
@@ -96,253 +97,142 @@ class ColourScale:
     label: str
     stops: tuple[tuple[float, str], ...] = SPEED_STOPS
 
-    def rgb(self, values: NDArray[np.float64]) -> NDArray[np.uint8]:
-        """RGB per value (shape + (3,)); NaN gives the no-data grey."""
-        positions = np.array([stop[0] for stop in self.stops])
-        colours = np.array([hex_rgb(stop[1]) for stop in self.stops], dtype=np.float64)
-        span = self.upper - self.lower if self.upper > self.lower else 1.0
-        fraction = np.clip((values - self.lower) / span, 0.0, 1.0)
-        fraction = np.where(np.isnan(fraction), 0.0, fraction)
-        channels = [np.interp(fraction, positions, colours[:, c]) for c in range(3)]
-        rgb = np.stack(channels, axis=-1)
-        rgb[np.isnan(values)] = hex_rgb(NO_DATA_COLOUR)
-        result: NDArray[np.uint8] = np.rint(rgb).astype(np.uint8)
-        return result
-
-    def hex(self, value: float) -> str:
-        """The colour of one value as #rrggbb."""
-        red, green, blue = (int(c) for c in self.rgb(np.array([value], dtype=np.float64))[0])
-        return f"#{red:02x}{green:02x}{blue:02x}"
-
-
-@dataclass(frozen=True)
-class Frame:
-    """Where the plot area sits in the SVG and how data maps onto it."""
-
-    x_lower: float
-    x_upper: float
-    y_lower: float
-    y_upper: float
-    width: int = WIDTH
-    height: int = HEIGHT
-    right: int = MARGIN_RIGHT
-    plot: tuple[float, float, float, float] = field(init=False)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(
-            self,
-            "plot",
-            (
-                MARGIN_LEFT,
-                MARGIN_TOP,
-                self.width - MARGIN_LEFT - self.right,
-                self.height - MARGIN_TOP - MARGIN_BOTTOM,
-            ),
+    @property
+    def colour_map(self) -> Colormap:
+        """The stops as a matplotlib colour map, NaN drawn as "no data" grey."""
+        return LinearSegmentedColormap.from_list(self.label, list(self.stops)).with_extremes(
+            bad=NO_DATA_COLOUR
         )
 
-    def px(self, x: float) -> float:
-        """SVG x of a data x."""
-        left, _, width, _ = self.plot
-        span = self.x_upper - self.x_lower or 1.0
-        return left + (x - self.x_lower) / span * width
-
-    def py(self, y: float) -> float:
-        """SVG y of a data y (up is larger)."""
-        _, top, _, height = self.plot
-        span = self.y_upper - self.y_lower or 1.0
-        return top + height - (y - self.y_lower) / span * height
-
-
-def hex_rgb(colour: str) -> tuple[int, int, int]:
-    """#rrggbb as integers."""
-    return int(colour[1:3], 16), int(colour[3:5], 16), int(colour[5:7], 16)
-
-
-def nice_step(span: float, target_ticks: int = 6) -> float:
-    """A 1-2-5 step giving about `target_ticks` ticks over `span`."""
-    if span <= 0 or not math.isfinite(span):
-        return 1.0
-    raw = span / max(1, target_ticks)
-    magnitude = 10.0 ** math.floor(math.log10(raw))
-    for multiple in (1, 2, 2.5, 5, 10):
-        if raw <= multiple * magnitude:
-            return multiple * magnitude
-    return 10 * magnitude
+    def hex(self, value: float) -> str:
+        """The colour of one value as #rrggbb, interpolated between the stops (NaN: no data)."""
+        if not math.isfinite(value):
+            return NO_DATA_COLOUR
+        span = self.upper - self.lower if self.upper > self.lower else 1.0
+        fraction = min(max((value - self.lower) / span, 0.0), 1.0)
+        positions = [stop[0] for stop in self.stops]
+        channels = [
+            round(
+                float(
+                    np.interp(
+                        fraction,
+                        positions,
+                        [int(c[1 + 2 * k : 3 + 2 * k], 16) for _, c in self.stops],
+                    )
+                )
+            )
+            for k in range(3)
+        ]
+        return "#" + "".join(f"{channel:02x}" for channel in channels)
 
 
-def linear_ticks(lower: float, upper: float, target_ticks: int = 6) -> list[float]:
-    """Tick values at a 1-2-5 step inside [lower, upper]."""
-    step = nice_step(upper - lower, target_ticks)
-    first = math.ceil(lower / step - 1e-9) * step
-    ticks = []
-    value = first
-    while value <= upper + step * 1e-9:
-        ticks.append(round(value, 10))
-        value += step
+def local_time_ticks(start_s: float, end_s: float, zone: ZoneInfo) -> dict[float, str]:
+    """Ticks on whole local minutes, 4 to 8 of them, labelled HH:MM in `zone` (with the date
+    when the span crosses midnight)."""
+    span_min = max((end_s - start_s) / 60.0, 1.0)
+    step = next((s for s in TICK_STEPS_MIN if span_min / s <= 8), TICK_STEPS_MIN[-1])
+    offset = datetime.fromtimestamp(start_s, zone).utcoffset()
+    shift = 0.0 if offset is None else offset.total_seconds()
+    # local minutes since the epoch, rounded up to the step (zones shift by whole minutes)
+    tick = math.ceil((start_s + shift) / 60.0 / step) * step * 60.0 - shift
+    days = {datetime.fromtimestamp(t, zone).date() for t in (start_s, end_s)}
+    shape = "%m-%d %H:%M" if len(days) > 1 else "%H:%M"
+    ticks = {}
+    while tick <= end_s:
+        ticks[tick] = datetime.fromtimestamp(tick, zone).strftime(shape)
+        tick += step * 60.0
     return ticks
 
 
-TIME_STEPS_S = (
-    1,
-    2,
-    5,
-    10,
-    15,
-    30,
-    60,
-    120,
-    300,
-    600,
-    900,
-    1800,
-    3600,
-    7200,
-    10800,
-    21600,
-    43200,
-    86400,
-    172800,
-    604800,
-)
-
-
-def time_ticks(lower: float, upper: float, target_ticks: int = 6) -> list[float]:
-    """Tick times (epoch seconds) at a round clock step inside [lower, upper]."""
-    span = upper - lower
-    step = next((s for s in TIME_STEPS_S if span / s <= target_ticks), TIME_STEPS_S[-1])
-    first = math.ceil(lower / step) * step
-    return [float(t) for t in range(int(first), int(upper) + 1, step)]
-
-
-def format_tick(value: float, kind: AxisKind, span: float) -> str:
-    """A tick label: clock time (UTC) for time axes, trimmed numbers otherwise."""
-    if kind == "time":
-        moment = datetime.fromtimestamp(value, UTC)
-        if span > 2 * 86400:
-            return moment.strftime("%m-%d")
-        if span > 600:
-            return moment.strftime("%H:%M")
-        return moment.strftime("%H:%M:%S")
-    if abs(value) >= 1000 or value == int(value):
-        return f"{value:,.0f}"
-    return f"{value:g}"
-
-
-def bounds(
-    values: Sequence[float | None],
-    lower: float | None,
-    upper: float | None,
-    *,
-    headroom: bool = False,
+def fit(
+    values: Sequence[float], lower: float | None, upper: float | None, *, time: bool = False
 ) -> tuple[float, float]:
-    """Axis bounds: given ones, else the data's range (a flat range is widened by 1).
-
-    With `headroom`, a data-derived upper bound moves up to the next tick, so the highest value
-    is not drawn on the frame.
-    """
+    """Axis bounds that hold the data (given bounds win); a lone value gets room both sides."""
     finite = [v for v in values if v is not None and math.isfinite(v)]
     low = lower if lower is not None else (min(finite) if finite else 0.0)
     high = upper if upper is not None else (max(finite) if finite else 1.0)
     if high <= low:
-        high = low + 1.0
-    if headroom and upper is None:
-        step = nice_step(high - low, 5)
-        high = math.ceil((high + 0.02 * (high - low)) / step) * step
+        pad = LONE_TIME_PAD_S if time else max(abs(low) * 0.1, 0.5)
+        low, high = (low - pad if lower is None else low), high + pad
     return low, high
 
 
-def _axes(frame: Frame, x_axis: Axis, y_axis: Axis, *, grid: bool = True) -> list[str]:
-    left, top, width, height = frame.plot
-    parts = [
-        f'<rect class="plot-area" x="{left}" y="{top}" width="{width}" height="{height}" '
-        'fill="white" stroke="#9ca3af"/>'
-    ]
-    x_span = frame.x_upper - frame.x_lower
-    x_ticks = (
-        time_ticks(frame.x_lower, frame.x_upper)
-        if x_axis.kind == "time"
-        else linear_ticks(frame.x_lower, frame.x_upper)
-    )
-    for tick in x_ticks:
-        x = frame.px(tick)
-        if grid:
-            parts.append(
-                f'<line x1="{x:.1f}" y1="{top}" x2="{x:.1f}" y2="{top + height}" stroke="#e5e7eb"/>'
-            )
-        parts.append(
-            f'<text class="tick x-tick" x="{x:.1f}" y="{top + height + 16}" '
-            f'text-anchor="middle">{escape(format_tick(tick, x_axis.kind, x_span))}</text>'
-        )
-    y_span = frame.y_upper - frame.y_lower
-    for tick in linear_ticks(frame.y_lower, frame.y_upper, 5):
-        y = frame.py(tick)
-        if grid:
-            parts.append(
-                f'<line x1="{left}" y1="{y:.1f}" x2="{left + width}" y2="{y:.1f}" '
-                'stroke="#e5e7eb"/>'
-            )
-        parts.append(
-            f'<text class="tick y-tick" x="{left - 6}" y="{y + 4:.1f}" text-anchor="end">'
-            f"{escape(format_tick(tick, y_axis.kind, y_span))}</text>"
-        )
-    parts.append(
-        f'<text class="axis-label x-label" x="{left + width / 2:.1f}" y="{frame.height - 8}" '
-        f'text-anchor="middle">{escape(x_axis.label)}</text>'
-    )
-    parts.append(
-        f'<text class="axis-label y-label" transform="translate(16 {top + height / 2:.1f}) '
-        f'rotate(-90)" text-anchor="middle">{escape(y_axis.label)}</text>'
-    )
-    return parts
+def _figure(height_in: float = HEIGHT_IN) -> tuple[Figure, Axes]:
+    figure = Figure(figsize=(WIDTH_IN, height_in), dpi=DPI, layout="constrained")
+    return figure, figure.add_subplot()
 
 
-def _svg(chart_id: str, title: str, frame: Frame, body: list[str]) -> Markup:
+def _label_x(axes: Axes, axis: Axis, low: float, high: float, zone: ZoneInfo) -> None:
+    axes.set_xlim(low, high)
+    if axis.kind == "time":
+        ticks = local_time_ticks(low, high, zone)
+        axes.set_xticks(list(ticks), list(ticks.values()))
+        axes.set_xlabel(f"{axis.label} ({datetime.fromtimestamp(low, zone).tzname()})")
+    else:
+        axes.set_xlabel(axis.label)
+
+
+def png_image(figure: Figure, chart_id: str, title: str) -> Markup:
+    """The figure as an <img> carrying its PNG, its id and its title as alternative text."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=DPI)
+    encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
     return Markup(
-        f'<svg class="chart" data-chart="{escape(chart_id)}" role="img" '
-        f'aria-label="{escape(title)}" viewBox="0 0 {frame.width} {frame.height}" '
-        f'xmlns="http://www.w3.org/2000/svg"><title>{escape(title)}</title>'
-        + "".join(body)
-        + "</svg>"
+        f'<img class="chart" data-chart="{escape(chart_id)}" alt="{escape(title)}" '
+        f'title="{escape(title)}" src="data:image/png;base64,{encoded}">'
     )
 
 
-def _legend(items: Sequence[tuple[str, str, bool]], frame: Frame) -> list[str]:
-    """Swatches above the plot, right-aligned: (name, colour, is_band)."""
-    parts = []
-    x = frame.width - frame.right
-    for name, colour, is_band in reversed(items):
-        text_width = 7 * len(name)
-        x -= text_width + 26
-        swatch = (
-            f'<rect x="{x}" y="9" width="14" height="10" fill="{colour}" opacity="0.6"/>'
-            if is_band
-            else f'<line x1="{x}" y1="14" x2="{x + 14}" y2="14" stroke="{colour}" '
-            'stroke-width="3"/>'
+def line_figure(
+    title: str,
+    series: Sequence[Series],
+    x_axis: Axis,
+    y_axis: Axis,
+    *,
+    bands: Sequence[Band] = (),
+    band_label: str = "",
+    zone: ZoneInfo = UTC_ZONE,
+    height: int = 300,
+) -> Figure:
+    """Lines (or steps, or points) over a shared x axis, with shaded bands and a legend."""
+    figure, axes = _figure(height / DPI)
+    xs = [x for s in series for x in s.x]
+    ys = [y for s in series for y in s.y if y is not None]
+    x_low, x_high = fit(xs, x_axis.lower, x_axis.upper, time=x_axis.kind == "time")
+    y_low, y_high = fit(ys, y_axis.lower, y_axis.upper)
+    if y_axis.upper is None:
+        y_high = y_low + (y_high - y_low) * 1.08
+    for index, band in enumerate(bands):
+        axes.axvspan(
+            band.start,
+            band.end,
+            color=band.colour,
+            alpha=0.45,
+            linewidth=0,
+            label=band_label if index == 0 and band_label else None,
         )
-        parts.append(
-            f'<g class="legend-item">{swatch}<text x="{x + 18}" y="18">{escape(name)}</text></g>'
-        )
-    return parts
-
-
-def _path(series: Series, frame: Frame) -> str:
-    commands: list[str] = []
-    pen_down = False
-    previous_y: float | None = None
-    for x, y in zip(series.x, series.y, strict=True):
-        if y is None or not math.isfinite(y):
-            pen_down = False
-            continue
-        px, py = frame.px(x), frame.py(y)
-        if not pen_down:
-            commands.append(f"M{px:.1f},{py:.1f}")
-        elif series.style == "step" and previous_y is not None:
-            commands.append(f"H{px:.1f}V{py:.1f}")
+    for index, one in enumerate(series):
+        colour = one.colour or PALETTE[index % len(PALETTE)]
+        y = np.array([np.nan if v is None else v for v in one.y], dtype=np.float64)
+        if one.style == "points":
+            axes.plot(one.x, y, "o", color=colour, markersize=4, label=one.name)
         else:
-            commands.append(f"L{px:.1f},{py:.1f}")
-        pen_down = True
-        previous_y = py
-    return "".join(commands)
+            axes.plot(
+                one.x,
+                y,
+                color=colour,
+                linewidth=1.8,
+                linestyle="--" if one.dashed else "-",
+                drawstyle="steps-post" if one.style == "step" else "default",
+                label=one.name,
+            )
+    _label_x(axes, x_axis, x_low, x_high, zone)
+    axes.set_ylim(y_low, y_high)
+    axes.set_ylabel(y_axis.label)
+    axes.set_title(title, fontsize=10)
+    axes.grid(alpha=0.3)
+    axes.legend(fontsize=8, loc="best")
+    return figure
 
 
 def line_chart(
@@ -354,46 +244,60 @@ def line_chart(
     *,
     bands: Sequence[Band] = (),
     band_label: str = "",
-    width: int = WIDTH,
-    height: int = HEIGHT,
+    zone: ZoneInfo = UTC_ZONE,
+    height: int = 300,
 ) -> Markup:
-    """Lines (or steps, or points) over a shared x axis, with shaded bands and a legend."""
-    xs = [x for s in series for x in s.x] + [b.start for b in bands] + [b.end for b in bands]
-    ys = [y for s in series for y in s.y]
-    x_lower, x_upper = bounds(xs, x_axis.lower, x_axis.upper)
-    y_lower, y_upper = bounds(ys, y_axis.lower, y_axis.upper, headroom=True)
-    frame = Frame(x_lower, x_upper, y_lower, y_upper, width, height)
-    left, top, plot_width, plot_height = frame.plot
-    body = _axes(frame, x_axis, y_axis)
-    for band in bands:
-        start, end = max(band.start, x_lower), min(band.end, x_upper)
-        if end > start:
-            body.append(
-                f'<rect class="band" x="{frame.px(start):.1f}" y="{top}" '
-                f'width="{frame.px(end) - frame.px(start):.1f}" height="{plot_height}" '
-                f'fill="{band.colour}" opacity="0.45"/>'
-            )
-    legend: list[tuple[str, str, bool]] = []
-    if bands and band_label:
-        legend.append((band_label, bands[0].colour, True))
-    for index, one in enumerate(series):
-        colour = one.colour or PALETTE[index % len(PALETTE)]
-        legend.append((one.name, colour, False))
-        if one.style == "points":
-            for x, y in zip(one.x, one.y, strict=True):
-                if y is not None and math.isfinite(y):
-                    body.append(
-                        f'<circle cx="{frame.px(x):.1f}" cy="{frame.py(y):.1f}" r="2.5" '
-                        f'fill="{colour}"/>'
-                    )
-            continue
-        dash = ' stroke-dasharray="6 4"' if one.dashed else ""
-        body.append(
-            f'<path class="series" data-series="{escape(one.name)}" d="{_path(one, frame)}" '
-            f'fill="none" stroke="{colour}" stroke-width="2"{dash}/>'
+    """The line chart as an <img> carrying its PNG."""
+    return png_image(
+        line_figure(
+            title,
+            series,
+            x_axis,
+            y_axis,
+            bands=bands,
+            band_label=band_label,
+            zone=zone,
+            height=height,
+        ),
+        chart_id,
+        title,
+    )
+
+
+def bar_figure(
+    title: str,
+    labels: Sequence[str],
+    values: Sequence[float | None],
+    x_label: str,
+    y_axis: Axis,
+    *,
+    value_format: str = "{:.0f}",
+    colour: str = PALETTE[0],
+    height: int = 300,
+) -> Figure:
+    """One bar per label (each label once), each with its value written above it."""
+    figure, axes = _figure(height / DPI)
+    heights = [0.0 if v is None or not math.isfinite(v) else v for v in values]
+    positions = np.arange(len(labels))
+    bars = axes.bar(positions, heights, width=0.7, color=colour)
+    if len(labels) <= 31:
+        axes.bar_label(
+            bars,
+            labels=[
+                "" if v is None or not math.isfinite(v) else value_format.format(v) for v in values
+            ],
+            fontsize=8,
         )
-    body.extend(_legend(legend, frame))
-    return _svg(chart_id, title, frame, body)
+    every = max(1, math.ceil(len(labels) / 15))
+    axes.set_xticks(positions[::every], list(labels)[::every])
+    axes.set_xlim(-0.6, len(labels) - 0.4)
+    low, high = fit([0.0, *heights], y_axis.lower, y_axis.upper)
+    axes.set_ylim(low, high if y_axis.upper is not None else low + (high - low) * 1.12)
+    axes.set_xlabel(x_label)
+    axes.set_ylabel(y_axis.label)
+    axes.set_title(title, fontsize=10)
+    axes.grid(axis="y", alpha=0.3)
+    return figure
 
 
 def bar_chart(
@@ -406,76 +310,60 @@ def bar_chart(
     *,
     value_format: str = "{:.0f}",
     colour: str = PALETTE[0],
-    width: int = WIDTH,
-    height: int = HEIGHT,
+    height: int = 300,
 ) -> Markup:
-    """One bar per label, each with its value written above it."""
-    y_lower, y_upper = bounds([0.0, *values], y_axis.lower, y_axis.upper, headroom=True)
-    frame = Frame(0.0, float(max(1, len(labels))), y_lower, y_upper, width, height)
-    left, top, plot_width, plot_height = frame.plot
-    body = [
-        f'<rect class="plot-area" x="{left}" y="{top}" width="{plot_width}" '
-        f'height="{plot_height}" fill="white" stroke="#9ca3af"/>'
-    ]
-    for tick in linear_ticks(y_lower, y_upper, 5):
-        y = frame.py(tick)
-        body.append(
-            f'<line x1="{left}" y1="{y:.1f}" x2="{left + plot_width}" y2="{y:.1f}" '
-            'stroke="#e5e7eb"/>'
-            f'<text class="tick y-tick" x="{left - 6}" y="{y + 4:.1f}" text-anchor="end">'
-            f"{escape(format_tick(tick, 'linear', y_upper - y_lower))}</text>"
-        )
-    slot = plot_width / max(1, len(labels))
-    bar_width = min(slot * 0.7, MAX_BAR_WIDTH)
-    label_every = max(1, math.ceil(len(labels) * 60 / plot_width))
-    for index, (label, value) in enumerate(zip(labels, values, strict=True)):
-        centre = left + slot * (index + 0.5)
-        if value is not None and math.isfinite(value):
-            y = frame.py(value)
-            body.append(
-                f'<rect class="bar" x="{centre - bar_width / 2:.1f}" y="{y:.1f}" '
-                f'width="{bar_width:.1f}" height="{frame.py(y_lower) - y:.1f}" fill="{colour}">'
-                f"<title>{escape(label)}: {escape(value_format.format(value))}</title></rect>"
-            )
-            if len(labels) <= 31:
-                body.append(
-                    f'<text class="bar-value" x="{centre:.1f}" y="{y - 4:.1f}" '
-                    f'text-anchor="middle">{escape(value_format.format(value))}</text>'
-                )
-        if index % label_every == 0:
-            body.append(
-                f'<text class="tick x-tick" x="{centre:.1f}" y="{top + plot_height + 16}" '
-                f'text-anchor="middle">{escape(label)}</text>'
-            )
-    body.append(
-        f'<text class="axis-label x-label" x="{left + plot_width / 2:.1f}" y="{height - 8}" '
-        f'text-anchor="middle">{escape(x_label)}</text>'
-        f'<text class="axis-label y-label" transform="translate(16 {top + plot_height / 2:.1f}) '
-        f'rotate(-90)" text-anchor="middle">{escape(y_axis.label)}</text>'
+    """The bar chart as an <img> carrying its PNG."""
+    return png_image(
+        bar_figure(
+            title,
+            labels,
+            values,
+            x_label,
+            y_axis,
+            value_format=value_format,
+            colour=colour,
+            height=height,
+        ),
+        chart_id,
+        title,
     )
-    return _svg(chart_id, title, frame, body)
 
 
-def png_bytes(rgb: NDArray[np.uint8]) -> bytes:
-    """An RGB image (rows top to bottom) as a PNG file."""
-    height, width, _ = rgb.shape
+def heatmap_figure(
+    title: str,
+    values: NDArray[np.float64],
+    x_range: tuple[float, float],
+    y_range: tuple[float, float],
+    x_axis: Axis,
+    y_axis: Axis,
+    scale: ColourScale,
+    *,
+    zone: ZoneInfo = UTC_ZONE,
+    height: int = 340,
+) -> Figure:
+    """A regular grid of cells (values[row, column], row 0 at the bottom) with a colour bar.
 
-    def chunk(kind: bytes, data: bytes) -> bytes:
-        return (
-            struct.pack(">I", len(data))
-            + kind
-            + data
-            + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-        )
-
-    rows = np.concatenate([np.zeros((height, 1), dtype=np.uint8), rgb.reshape(height, -1)], axis=1)
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)  # 8-bit RGB
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
-        + chunk(b"IEND", b"")
+    NaN cells are "no data" (grey, and said so under the colour bar).
+    """
+    figure, axes = _figure(height / DPI)
+    image = axes.imshow(
+        np.ma.masked_invalid(values),
+        origin="lower",
+        aspect="auto",
+        extent=(x_range[0], x_range[1], y_range[0], y_range[1]),
+        cmap=scale.colour_map,
+        vmin=scale.lower,
+        vmax=scale.upper,
+        interpolation="nearest",
     )
+    bar = figure.colorbar(image, ax=axes, pad=0.01)
+    bar.set_label(scale.label)
+    if np.isnan(values).any():
+        bar.ax.set_xlabel("grey: no data", fontsize=7)
+    _label_x(axes, x_axis, x_range[0], x_range[1], zone)
+    axes.set_ylabel(y_axis.label)
+    axes.set_title(title, fontsize=10)
+    return figure
 
 
 def heatmap(
@@ -488,57 +376,14 @@ def heatmap(
     y_axis: Axis,
     scale: ColourScale,
     *,
-    width: int = WIDTH,
+    zone: ZoneInfo = UTC_ZONE,
     height: int = 340,
 ) -> Markup:
-    """A regular grid of cells (values[row, column], row 0 at the bottom) with a colour legend.
-
-    NaN cells are "no data" (grey, and named in the legend).
-    """
-    frame = Frame(x_range[0], x_range[1], y_range[0], y_range[1], width, height, LEGEND_WIDTH)
-    left, top, plot_width, plot_height = frame.plot
-    image = base64.b64encode(png_bytes(scale.rgb(values[::-1]))).decode("ascii")
-    body = [
-        f'<image class="cells" x="{left}" y="{top}" width="{plot_width}" height="{plot_height}" '
-        f'preserveAspectRatio="none" style="image-rendering:pixelated" '
-        f'href="data:image/png;base64,{image}"/>'
-    ]
-    axes = _axes(frame, x_axis, y_axis, grid=False)
-    axes[0] = (
-        f'<rect class="plot-area" x="{left}" y="{top}" width="{plot_width}" '
-        f'height="{plot_height}" fill="none" stroke="#9ca3af"/>'
+    """The heatmap as an <img> carrying its PNG."""
+    return png_image(
+        heatmap_figure(
+            title, values, x_range, y_range, x_axis, y_axis, scale, zone=zone, height=height
+        ),
+        chart_id,
+        title,
     )
-    body.extend(axes)
-    body.extend(_colour_legend(scale, frame))
-    return _svg(chart_id, title, frame, body)
-
-
-def _colour_legend(scale: ColourScale, frame: Frame) -> list[str]:
-    left, top, plot_width, plot_height = frame.plot
-    x = left + plot_width + 18
-    gradient = f"legend-{abs(hash((scale.lower, scale.upper, scale.label))) % 10**8}"
-    stops = "".join(
-        f'<stop offset="{position:.2f}" stop-color="{colour}"/>' for position, colour in scale.stops
-    )
-    parts = [
-        f'<defs><linearGradient id="{gradient}" x1="0" y1="1" x2="0" y2="0">{stops}'
-        "</linearGradient></defs>",
-        f'<g class="colour-legend"><rect x="{x}" y="{top}" width="14" height="{plot_height - 30}" '
-        f'fill="url(#{gradient})" stroke="#9ca3af"/>',
-    ]
-    bar_height = plot_height - 30
-    for tick in linear_ticks(scale.lower, scale.upper, 5):
-        y = top + bar_height - (tick - scale.lower) / (scale.upper - scale.lower) * bar_height
-        parts.append(
-            f'<text class="tick legend-tick" x="{x + 18}" y="{y + 4:.1f}">'
-            f"{escape(format_tick(tick, 'linear', scale.upper - scale.lower))}</text>"
-        )
-    parts.append(
-        f'<rect x="{x}" y="{top + plot_height - 16}" width="14" height="12" '
-        f'fill="{NO_DATA_COLOUR}" stroke="#9ca3af"/>'
-        f'<text class="tick" x="{x + 18}" y="{top + plot_height - 6}">no data</text>'
-        f'<text class="axis-label legend-label" transform="translate({x + 74} '
-        f'{top + plot_height / 2:.1f}) rotate(-90)" text-anchor="middle">'
-        f"{escape(scale.label)}</text></g>"
-    )
-    return parts

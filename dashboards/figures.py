@@ -10,23 +10,20 @@ trajectory on top, red while its controller was engaged and white while not.
 
 from __future__ import annotations
 
-import base64
-import io
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from zoneinfo import ZoneInfo
 
 import numpy as np
-from markupsafe import Markup, escape
+from markupsafe import Markup
 from matplotlib.collections import LineCollection
 from matplotlib.colors import LinearSegmentedColormap
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from contract.units import MPH_PER_MPS
-from dashboards.charts import SPEED_STOPS
+from dashboards.charts import SPEED_STOPS, local_time_ticks, png_image
 
 ENGAGED_COLOUR = "#e11d48"
 NOT_ENGAGED_COLOUR = "#ffffff"
@@ -59,35 +56,6 @@ def trajectory_pieces(
     starts = np.stack([t[:-1], x[:-1]], axis=-1)[keep]
     ends = np.stack([t[1:], x[1:]], axis=-1)[keep]
     return np.stack([starts, ends], axis=1), trajectory.engaged[:-1][keep]
-
-
-TICK_STEPS_MIN = (1, 2, 5, 10, 15, 30, 60, 120, 180, 360)
-
-
-def local_time_ticks(start_s: float, end_s: float, zone: ZoneInfo) -> dict[float, str]:
-    """Ticks on whole local minutes, 4 to 8 of them, labelled HH:MM in `zone`."""
-    span_min = max((end_s - start_s) / 60.0, 1.0)
-    step = next((s for s in TICK_STEPS_MIN if span_min / s <= 8), TICK_STEPS_MIN[-1])
-    first = datetime.fromtimestamp(start_s, zone)
-    offset_s = first.utcoffset()
-    shift = 0.0 if offset_s is None else offset_s.total_seconds()
-    # local minutes since the epoch, rounded up to the step (zones shift by whole minutes)
-    tick = math.ceil((start_s + shift) / 60.0 / step) * step * 60.0 - shift
-    ticks = {}
-    while tick <= end_s:
-        ticks[tick] = datetime.fromtimestamp(tick, zone).strftime("%H:%M")
-        tick += step * 60.0
-    return ticks
-
-
-def _png(figure: Figure, alt: str, chart_id: str) -> Markup:
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=100)
-    encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
-    return Markup(
-        f'<img class="figure" data-chart="{escape(chart_id)}" alt="{escape(alt)}" '
-        f'src="data:image/png;base64,{encoded}">'
-    )
 
 
 def time_space(
@@ -135,4 +103,4 @@ def time_space(
     axes.set_xlabel(f"local time ({time_range[0].astimezone(zone).tzname()})")
     axes.set_ylabel("postmile (direction of travel ↑)")
     axes.set_title(title, fontsize=11)
-    return _png(figure, title, chart_id)
+    return png_image(figure, chart_id, title)

@@ -1,8 +1,10 @@
-"""The dashboard's pages: login, fleet health (piStatus), vehicle, plans, feeds, analytics.
+"""The dashboard's pages: login, fleet health (piStatus), map, time-space, vehicle, plans,
+feeds, analytics, and the error pages.
 
-Pages are rendered on the server (Jinja2) with their charts as inline SVG; the fleet page
-refreshes its table from `/fleet/live` without reloading. Speeds are shown in mph and places in
-postmiles (people's units on US roads); times in UTC.
+Pages are rendered on the server (Jinja2) with their charts drawn by matplotlib (PNG inside the
+page); the fleet, map and time-space pages refresh their live part from `.../live` without
+reloading. Speeds are shown in mph and places in postmiles (people's units on US roads); times in
+the corridor's local time (`dashboard_timezone`).
 """
 
 from __future__ import annotations
@@ -635,7 +637,7 @@ async def _entry_or_404(request: Request, session: SessionDep, vehicle_id: str) 
         ) from None
 
 
-def _speed_chart(entry: FleetEntry, trace: data.Trace) -> Any:
+def _speed_chart(entry: FleetEntry, trace: data.Trace, zone: ZoneInfo) -> Any:
     times = [moment.timestamp() for moment in trace.ts]
     bands = []
     start: float | None = None
@@ -661,10 +663,11 @@ def _speed_chart(entry: FleetEntry, trace: data.Trace) -> Any:
                 dashed=True,
             ),
         ],
-        Axis("time (UTC)", "time"),
+        Axis("time", "time"),
         Axis("speed (mph)", lower=0.0),
         bands=bands,
         band_label="controller engaged",
+        zone=zone,
     )
 
 
@@ -688,7 +691,7 @@ async def _vehicle_context(
     if entry.last_ping is not None:
         trace = await data.vehicle_trace(session, vehicle_id, entry.last_ping.ts, TRACE_WINDOW)
         if trace.ts:
-            context["speed_chart"] = _speed_chart(entry, trace)
+            context["speed_chart"] = _speed_chart(entry, trace, display_zone(_settings(request)))
     context["statuses"] = await data.status_history(session, vehicle_id)
     engagement = await data.vehicle_engagement(
         session, vehicle_id, datetime.now(UTC) - timedelta(days=ANALYTICS_DAYS)
@@ -845,6 +848,7 @@ def _time_space_chart(
     since: datetime,
     until: datetime,
     speed_upper_mph: float,
+    zone: ZoneInfo,
 ) -> Any:
     times = np.linspace(since.timestamp(), until.timestamp(), HEATMAP_COLUMNS, endpoint=False)
     times += (times[1] - times[0]) / 2
@@ -858,9 +862,10 @@ def _time_space_chart(
         grid,
         (since.timestamp(), until.timestamp()),
         (float(low), float(high)),
-        Axis("time (UTC)", "time"),
+        Axis("time", "time"),
         Axis("postmile (direction of travel ↑)"),
         ColourScale(0.0, speed_upper_mph, "speed (mph)"),
+        zone=zone,
     )
 
 
@@ -914,6 +919,7 @@ async def _plan_page(
         # The time axis begins with the first plan drawn, not an hour before it.
         since = max(since, datetime.fromtimestamp(float(field.published_at[0]), UTC))
         upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
+        zone = display_zone(_settings(request))
         context["target_map"] = _time_space_chart(
             "plan-heatmap",
             f"Target speed of lane {lane}, recent plans",
@@ -922,6 +928,7 @@ async def _plan_page(
             since,
             until,
             upper,
+            zone,
         )
         if not np.all(np.isnan(field.tse_mps)):
             context["tse_map"] = _time_space_chart(
@@ -932,6 +939,7 @@ async def _plan_page(
                 since,
                 until,
                 upper,
+                zone,
             )
     return _render(request, "plans.html", user, **context)
 
@@ -994,6 +1002,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
         "ping_chart": None,
         "last_minute": minutes[-1] if minutes else None,
     }
+    zone = display_zone(_settings(request))
     if snapshots:
         context["inrix_chart"] = line_chart(
             "inrix-latency",
@@ -1007,9 +1016,10 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(snapshots) < 3 else "line",
                 )
             ],
-            Axis("INRIX measurement time (UTC)", "time"),
+            Axis("INRIX measurement time", "time"),
             Axis("latency: received − measured (s)", lower=0.0),
             height=240,
+            zone=zone,
         )
     if minutes:
         context["ping_chart"] = line_chart(
@@ -1024,9 +1034,10 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
                     style="points" if len(minutes) < 3 else "line",
                 )
             ],
-            Axis("time (UTC)", "time"),
+            Axis("time", "time"),
             Axis("pings per second", lower=0.0),
             height=240,
+            zone=zone,
         )
     return _render(request, "feeds.html", user, **context)
 
@@ -1047,13 +1058,15 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
     )
     now = datetime.now(UTC)
     if cached is None or (now - cached[0]).total_seconds() >= ANALYTICS_REFRESH_S:
-        cached = (now, await _analytics_context(session, now))
+        cached = (now, await _analytics_context(session, now, display_zone(_settings(request))))
         request.app.state.analytics_page = cached
     computed_at, context = cached
     return _render(request, "analytics.html", user, computed_at=computed_at, **context)
 
 
-async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, Any]:
+async def _analytics_context(
+    session: AsyncSession, now: datetime, zone: ZoneInfo
+) -> dict[str, Any]:
     """What the analytics page shows, as of `now`."""
     since = now - timedelta(days=ANALYTICS_DAYS)
     engagement = await data.fleet_engagement(session, since)
@@ -1081,7 +1094,7 @@ async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, 
         )
     if hourly:
         hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
-        hour_axis = Axis("hour (UTC)", "time", hourly_since.timestamp(), now.timestamp())
+        hour_axis = Axis("hour", "time")
         style: Literal["points", "line"] = "points" if len(hourly) < 3 else "line"
         charts["pings"] = line_chart(
             "pings-hourly",
@@ -1090,6 +1103,7 @@ async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, 
             hour_axis,
             Axis("pings per hour", lower=0.0),
             height=220,
+            zone=zone,
         )
         charts["vehicles"] = line_chart(
             "vehicles-hourly",
@@ -1106,6 +1120,7 @@ async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, 
             hour_axis,
             Axis("vehicles", lower=0.0),
             height=220,
+            zone=zone,
         )
     if adherence:
         charts["adherence"] = bar_chart(
@@ -1118,11 +1133,11 @@ async def _analytics_context(session: AsyncSession, now: datetime) -> dict[str, 
             value_format="{:.1f}",
             colour="#dc2626",
         )
-    await _edie_charts(session, context)
+    await _edie_charts(session, context, zone)
     return context
 
 
-async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
+async def _edie_charts(session: SessionDep, context: dict[str, Any], zone: ZoneInfo) -> None:
     """Bulk speed and fuel per distance of the last hour with pings (paper, Results)."""
     newest = await data.newest_ping_ts(session)
     corridors = await data.corridors(session)
@@ -1160,9 +1175,10 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
         speed,
         x_range,
         postmiles,
-        Axis("time (UTC)", "time"),
+        Axis("time", "time"),
         Axis("postmile (direction of travel ↑)"),
         ColourScale(0.0, upper, "bulk speed (mph)"),
+        zone=zone,
     )
     finite = fuel[np.isfinite(fuel)]
     fuel_upper = float(np.percentile(finite, 95)) if finite.size else 1.0
@@ -1172,7 +1188,8 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any]) -> None:
         fuel,
         x_range,
         postmiles,
-        Axis("time (UTC)", "time"),
+        Axis("time", "time"),
         Axis("postmile (direction of travel ↑)"),
         ColourScale(0.0, max(fuel_upper, 1e-3), "fuel per distance (g/km)", AMOUNT_STOPS),
+        zone=zone,
     )

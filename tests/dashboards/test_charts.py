@@ -1,10 +1,12 @@
-"""Chart building blocks: ticks, colour scales, the PNG encoder and the SVG they produce."""
+"""Charts (matplotlib on the server): axes fit their data, time in the readers' zone, legends,
+colour scales, and the page's <img>."""
 
 from __future__ import annotations
 
-import struct
-import zlib
+import base64
+import re
 from datetime import UTC, datetime
+from zoneinfo import ZoneInfo
 
 import numpy as np
 import pytest
@@ -14,53 +16,32 @@ from dashboards.charts import (
     Axis,
     Band,
     ColourScale,
-    Frame,
     Series,
     bar_chart,
-    bounds,
-    format_tick,
-    heatmap,
+    bar_figure,
+    fit,
+    heatmap_figure,
     line_chart,
-    linear_ticks,
-    nice_step,
-    png_bytes,
-    time_ticks,
+    line_figure,
+    local_time_ticks,
 )
 
-
-@pytest.mark.parametrize(
-    ("span", "step"), [(10.0, 2.0), (63.0, 20.0), (0.9, 0.2), (1000.0, 200.0), (14.0, 2.5)]
-)
-def test_ticks_use_round_steps(span: float, step: float) -> None:
-    assert nice_step(span, 6) == pytest.approx(step)
+CHICAGO = ZoneInfo("America/Chicago")
+START = datetime(2022, 11, 16, 12, 7, 30, tzinfo=UTC).timestamp()  # 06:07:30 CST
 
 
-def test_linear_ticks_stay_inside_the_range() -> None:
-    assert linear_ticks(0.0, 9.06) == [0.0, 2.0, 4.0, 6.0, 8.0]
-    assert linear_ticks(-3.0, 3.0) == [-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]
+def test_time_ticks_fall_on_whole_local_minutes() -> None:
+    ticks = local_time_ticks(START, START + 3600.0, CHICAGO)
+    assert list(ticks.values()) == ["06:10", "06:20", "06:30", "06:40", "06:50", "07:00"]
+    overnight = local_time_ticks(START + 17.5 * 3600, START + 19.5 * 3600, CHICAGO)
+    assert next(iter(overnight.values())) == "11-16 23:45"  # the date, across midnight
 
 
-def test_time_ticks_fall_on_round_clock_times() -> None:
-    start = datetime(2022, 11, 16, 12, 3, 20, tzinfo=UTC).timestamp()
-    ticks = time_ticks(start, start + 3600)
-    labels = [format_tick(t, "time", 3600) for t in ticks]
-    assert labels == ["12:10", "12:20", "12:30", "12:40", "12:50", "13:00"]
-
-
-def test_a_data_derived_upper_bound_gets_headroom_to_the_next_tick() -> None:
-    assert bounds([0.0, 55.9], 0.0, None, headroom=True) == (0.0, 60.0)
-    assert bounds([0.0, 55.9], 0.0, None) == (0.0, 55.9)
-    assert bounds([], None, None) == (0.0, 1.0)
-    assert bounds([3.0, 3.0], None, None) == (3.0, 4.0)
-
-
-def test_frame_maps_data_onto_the_plot_area_with_y_up() -> None:
-    frame = Frame(0.0, 10.0, 0.0, 100.0)
-    left, top, width, height = frame.plot
-    assert frame.px(0.0) == left
-    assert frame.px(10.0) == left + width
-    assert frame.py(0.0) == top + height
-    assert frame.py(100.0) == top
+def test_axes_fit_their_data_and_a_lone_point_gets_room() -> None:
+    assert fit([3.0, 9.0], None, None) == (3.0, 9.0)
+    assert fit([3.0, 9.0], 0.0, None) == (0.0, 9.0)
+    assert fit([START], None, None, time=True) == (START - 1800.0, START + 1800.0)
+    assert fit([], None, None) == (0.0, 1.0)
 
 
 def test_speed_scale_runs_red_to_green_and_grey_for_no_data() -> None:
@@ -72,73 +53,76 @@ def test_speed_scale_runs_red_to_green_and_grey_for_no_data() -> None:
     assert scale.hex(float("nan")) == NO_DATA_COLOUR
 
 
-def test_png_encoder_writes_a_valid_rgb_image() -> None:
-    image = np.zeros((2, 3, 3), dtype=np.uint8)
-    image[0, 0] = (255, 0, 0)
-    data = png_bytes(image)
-    assert data[:8] == b"\x89PNG\r\n\x1a\n"
-    length, kind = struct.unpack(">I4s", data[8:16])
-    assert (length, kind) == (13, b"IHDR")
-    width, height, depth, colour_type = struct.unpack(">IIBB", data[16:26])
-    assert (width, height, depth, colour_type) == (3, 2, 8, 2)
-    idat_length = struct.unpack(">I", data[33:37])[0]
-    raw = zlib.decompress(data[41 : 41 + idat_length])
-    assert raw[:4] == b"\x00\xff\x00\x00"  # filter byte, then the red pixel
-    assert len(raw) == 2 * (1 + 3 * 3)
+def test_a_time_line_chart_spans_its_data_in_local_time_with_legend_and_bands() -> None:
+    times = [START + 60.0 * i for i in range(31)]
+    figure = line_figure(
+        "Speed",
+        [
+            Series("speed", times, [20.0 + i for i in range(31)]),
+            Series("plan target", times, [30.0] * 15 + [None] + [35.0] * 15, style="step"),
+        ],
+        Axis("time", "time"),
+        Axis("speed (mph)", lower=0.0),
+        bands=[Band(times[3], times[9])],
+        band_label="controller engaged",
+        zone=CHICAGO,
+    )
+    axes = figure.axes[0]
+    assert axes.get_xlim() == (times[0], times[-1])  # no empty hour before the data
+    assert axes.get_xlabel() == "time (CST)"
+    assert [t.get_text() for t in axes.get_xticklabels()][0] == "06:10"
+    assert axes.get_ylim()[0] == 0.0
+    assert axes.get_ylim()[1] == pytest.approx(50.0 * 1.08)
+    legend = [text.get_text() for text in axes.get_legend().get_texts()]
+    assert legend == ["controller engaged", "speed", "plan target"]
 
 
-def test_line_chart_has_axis_labels_legend_bands_and_breaks_at_missing_values() -> None:
-    svg = str(
+def test_bar_chart_labels_each_day_once_and_writes_each_value() -> None:
+    figure = bar_figure(
+        "Share",
+        ["11-16", "11-17"],
+        [38.0, 78.0],
+        "day (UTC)",
+        Axis("engaged (%)", lower=0.0, upper=100.0),
+        value_format="{:.0f} %",
+    )
+    axes = figure.axes[0]
+    assert [t.get_text() for t in axes.get_xticklabels()] == ["11-16", "11-17"]
+    assert sorted(t.get_text() for t in axes.texts) == ["38 %", "78 %"]
+    assert axes.get_ylim() == (0.0, 100.0)
+
+
+def test_a_heatmap_has_its_colour_bar_and_says_grey_is_no_data() -> None:
+    figure = heatmap_figure(
+        "Field",
+        np.array([[10.0, np.nan], [30.0, 60.0]]),
+        (START, START + 600.0),
+        (0.0, 1.0),
+        Axis("time", "time"),
+        Axis("postmile (direction of travel ↑)"),
+        ColourScale(0.0, 60.0, "speed (mph)"),
+        zone=CHICAGO,
+    )
+    axes, bar = figure.axes
+    assert axes.get_ylabel() == "postmile (direction of travel ↑)"
+    assert bar.get_ylabel() == "speed (mph)"
+    assert bar.get_xlabel() == "grey: no data"
+
+
+def test_a_chart_is_an_img_carrying_a_png_with_its_id_and_title() -> None:
+    html = str(
         line_chart(
             "demo",
-            "Demo",
-            [Series("target speed", [0.0, 1.0, 2.0, 3.0], [10.0, None, 30.0, 40.0])],
+            "Demo <chart>",
+            [Series("a", [0.0, 1.0], [1.0, 2.0])],
             Axis("postmile (direction of travel →)"),
-            Axis("speed (mph)", lower=0.0),
-            bands=[Band(1.0, 2.0)],
-            band_label="buffer region",
+            Axis("speed (mph)"),
         )
     )
-    assert 'data-chart="demo"' in svg
-    assert "postmile (direction of travel →)" in svg
-    assert "speed (mph)" in svg
-    assert ">buffer region</text>" in svg
-    assert ">target speed</text>" in svg
-    path = svg.split('data-series="target speed" d="')[1].split('"')[0]
-    assert path.count("M") == 2  # the gap at x = 1 lifts the pen
-
-
-def test_bar_chart_writes_each_value() -> None:
-    svg = str(
-        bar_chart(
-            "share",
-            "Share",
-            ["11-16", "11-17"],
-            [38.0, 78.0],
-            "day (UTC)",
-            Axis("engaged (%)", lower=0.0, upper=100.0),
-            value_format="{:.0f} %",
-        )
+    assert html.startswith('<img class="chart" data-chart="demo" alt="Demo &lt;chart&gt;"')
+    found = re.search(r'src="data:image/png;base64,([^"]+)"', html)
+    assert found is not None
+    assert base64.b64decode(found.group(1))[:8] == b"\x89PNG\r\n\x1a\n"
+    assert 'data-chart="share"' in str(
+        bar_chart("share", "Share", ["11-16"], [38.0], "day", Axis("engaged (%)"))
     )
-    assert ">38 %</text>" in svg
-    assert ">78 %</text>" in svg
-    assert svg.count('class="bar"') == 2
-
-
-def test_heatmap_embeds_its_cells_and_a_colour_legend() -> None:
-    values = np.array([[10.0, np.nan], [30.0, 60.0]])
-    svg = str(
-        heatmap(
-            "field",
-            "Field",
-            values,
-            (0.0, 20.0),
-            (0.0, 1.0),
-            Axis("time (UTC)", "time"),
-            Axis("postmile (direction of travel ↑)"),
-            ColourScale(0.0, 60.0, "speed (mph)"),
-        )
-    )
-    assert 'href="data:image/png;base64,' in svg
-    assert "speed (mph)" in svg
-    assert ">no data</text>" in svg
