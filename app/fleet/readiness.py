@@ -12,7 +12,8 @@ Hysteresis: the checks graded from status reports change level only when the new
 over every report for `hold_s` (SMOOTHFLEET_READINESS_HOLD_S), so one slow report from a busy
 server or a loaded car never flips a verdict. The level is replayed from the reports of the last
 few hold periods, so every server process and every restart agree. The two age checks (last
-ping, last status) need no hold: an age is itself a time held.
+ping, last status) need no hold: an age is itself a time held; they are measured against the
+newest ping the server has stored (app.fleet.service), so a server that falls behind ages no car.
 
 Adding a check is one function and one entry in CHECKS.
 """
@@ -73,6 +74,7 @@ class Thresholds:
     gps_satellites: tuple[float, float]
     agent_version: str | None
     hold_s: float = 0.0
+    server_lag_s: float = 0.0
 
     @classmethod
     def from_settings(cls, settings: Settings) -> Thresholds:
@@ -88,6 +90,7 @@ class Thresholds:
             gps_satellites=settings.readiness_gps_satellites,
             agent_version=settings.readiness_agent_version,
             hold_s=settings.readiness_hold_s,
+            server_lag_s=settings.readiness_server_lag_s,
         )
 
     def can_rates(self, schedule: CanSchedule) -> tuple[float, float]:

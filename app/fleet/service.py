@@ -220,6 +220,26 @@ async def _earlier_statuses(
     return history
 
 
+async def _ingest_clock(
+    session: AsyncSession,
+    now: datetime,
+    limits: Thresholds,
+    rows: Sequence[Any] | None,
+) -> datetime:
+    """The time the age checks measure against: the newest ping the server has stored from any
+    car, but never more than `limits.server_lag_s` behind now.
+
+    A server that falls behind (a loaded machine, a slow page, a database wait) stores every
+    car's pings late alike: measured against what it has stored, no car ages, while a car silent
+    among reporting ones still does. A fleet silent for longer than the allowance (the night
+    before, the feed down) ages against the wall clock."""
+    if rows is None:
+        rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, None))).all()
+    newest = max((row[3].ts for row in rows if row[3] is not None), default=None)
+    floor = now - timedelta(seconds=limits.server_lag_s)
+    return now if newest is None else max(min(now, newest), floor)
+
+
 VERDICT_ORDER = {"not cleared": 0, "maintenance": 1, "inactive": 2, "cleared": 3}
 
 
@@ -244,6 +264,7 @@ async def fleet(
         [row[0].vehicle_id for row in rows if row[4] is not None],
         now - timedelta(seconds=HOLD_PERIODS_REPLAYED * limits.hold_s),
     )
+    clock = await _ingest_clock(session, now, limits, rows if vehicle_id is None else None)
     entries = []
     for vehicle, lanes, postmile_at_start, ping_row, status_row in rows:
         last_ping = _to_last_ping(
@@ -272,7 +293,7 @@ async def fleet(
                 postmile_at_start=float(postmile_at_start),
                 last_ping=last_ping,
                 last_status=last_status,
-                readiness=assess(facts, now, limits),
+                readiness=assess(facts, clock, limits),
             )
         )
     entries.sort(key=lambda entry: VERDICT_ORDER[entry.readiness.verdict])

@@ -258,3 +258,31 @@ def test_a_dip_in_one_report_does_not_flip_a_car_but_a_lasting_fault_does(api: A
     assert faulty["problems"] == ["CAN 5/s ≤ 15/s for Rogue"]
     verdicts = [v["verdict"] for v in fleet["vehicles"]]
     assert verdicts == sorted(verdicts, key=lambda v: v != "not cleared")
+
+
+def test_a_server_behind_its_fleet_ages_no_car_but_a_silent_car_among_reporting_ones_ages(
+    api: Api,
+) -> None:
+    now = datetime.now(UTC).replace(microsecond=0)
+    # Everything the server has stored is 90 s old (it fell behind): nobody is red for it.
+    for vehicle_id in ("SF-001", "SF-002"):
+        post_pings(
+            api.client,
+            api.tokens["admin"],
+            drive(vehicle_id, now - timedelta(seconds=92), 0, 25, 3),
+        )
+        post_status(
+            api.client,
+            api.tokens["admin"],
+            vehicle_id,
+            **healthy_status(now - timedelta(seconds=90)),
+        )
+    behind = api.get("/api/v1/fleet").json()
+    assert [checks(vehicle(behind, v))["ping"] for v in ("SF-001", "SF-002")] == ["green"] * 2
+    assert vehicle(behind, "SF-001")["verdict"] == "cleared"
+
+    # SF-001 reports again; SF-002 stays silent among reporting cars and ages.
+    report_healthy(api, "SF-001")
+    caught_up = api.get("/api/v1/fleet").json()
+    assert checks(vehicle(caught_up, "SF-002"))["ping"] == "red"
+    assert vehicle(caught_up, "SF-002")["problems"][0].startswith("no ping for 9")

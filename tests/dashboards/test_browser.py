@@ -100,6 +100,8 @@ def test_fleet_page_fills_live_and_a_stale_status_turns_red(
             seeded_database_url,
             planner_enabled=False,
             readiness_status_age_s=(3.0, 6.0),
+            # the whole test fleet falls silent at once: ages against the wall clock after 1 s
+            readiness_server_lag_s=1.0,
             dashboard_refresh_s=1.0,
         ) as base,
         httpx.Client(base_url=base, timeout=30) as client,
