@@ -9,7 +9,8 @@
    runs the engage logic and the controller, and (RAV4) limits, encodes and safety-checks the
    acceleration request and sends it. The emulator's own stepping is not timed. Baseline in the
    same run: decoding the same frames with cantools alone (the least any agent must do).
-   Goal (issue 5): p99 <= 1 ms.
+   Goal (issue 5): p99 <= 1 ms. Then each controller's `step` alone on one observation (what
+   it adds to a tick; issue 13's policies beside the hand-designed controllers).
 2. The agent (its three threads, as `smoothfleet-agent` runs them) on a RAV4 driving behind a
    leader while the bus carries --fps frames/s (the car's own ~200 frames/s topped up with
    frames of ids the agent does not watch; a virtual bus does not filter, so the agent sees and
@@ -38,6 +39,7 @@ from sim.emulator.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_c
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock, SystemClock
+from vehicle_agent.controllers import Observation, TargetProfile, build_controller
 from vehicle_agent.engage import EngagePolicy, Mode
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.runner import run_agent
@@ -133,6 +135,34 @@ def control_step(key: str, controller: str, steps: int, spool_dir: Path) -> dict
         "base_p99_us": float(np.percentile(decode_ns, 99)) / 1000,
         "frames": float(np.mean(frames_per_period)),
         "control_steps": float(agent.stats.control_steps),
+    }
+
+
+def controller_alone(name: str, actuation: str, steps: int) -> dict[str, float]:
+    """`controller.step` timed alone on one observation (what a controller adds to a tick)."""
+    profile = TargetProfile(np.linspace(0.0, 5000.0, 51), np.full(51, 25.0))
+    observation = Observation(
+        time_s=0.0,
+        speed_mps=24.0,
+        target_speed_mps=25.0,
+        position_m=1000.0,
+        target=profile,
+        lead_present=True,
+        lead_distance_m=40.0,
+        lead_rel_speed_mps=-1.0,
+        acc_speed_setting_mph=55.0,
+        acc_gap_setting=3,
+    )
+    controller = build_controller(name, actuation)
+    elapsed_ns = []
+    for step in range(steps + 500):
+        started = time.perf_counter_ns()
+        controller.step(observation)
+        if step >= 500:
+            elapsed_ns.append(time.perf_counter_ns() - started)
+    return {
+        "p50_us": float(np.percentile(elapsed_ns, 50)) / 1000,
+        "p99_us": float(np.percentile(elapsed_ns, 99)) / 1000,
     }
 
 
@@ -238,6 +268,15 @@ def main() -> None:
                 f"{r['base_p50_us']:5.0f} / {r['base_p99_us']:5.0f}"
                 f"         {r['p50_us'] / r['base_p50_us']:4.1f}x"
             )
+        print("\n   the controller alone (same observation, microseconds): p50 / p99")
+        for name, actuation in (
+            ("microaccel", "accel"),
+            ("rl_accel", "accel"),
+            ("microaccel_acc", "acc"),
+            ("rl_acc", "acc"),
+        ):
+            alone = controller_alone(name, actuation, args.steps)
+            print(f"   {name:30s} {alone['p50_us']:7.1f} / {alone['p99_us']:7.1f}")
         print(
             f"\n2. agent on a {args.fps} frames/s bus for {args.seconds:.0f} s (RAV4, microaccel)"
         )
