@@ -3,8 +3,8 @@
 Why not the warehouse: a MOTION day is hundreds of millions of 25 Hz points that are written once
 and then only aggregated (Edie boxes over hours and kilometres). Measured by
 `bench/motion_import.py --warehouse-points` (docs/performance.md), PostgreSQL's COPY loaded them
-3 to 7 times slower than pyarrow wrote Parquet, and the Edie GROUP BY took 2.7 to 5 times longer
-in PostgreSQL than in DuckDB on the Parquet file; the fleet's own pings (1 Hz, 100 cars) stay in
+3 to 7 times slower than pyarrow wrote Parquet, and the Edie GROUP BY took 5 times longer in
+PostgreSQL than in DuckDB on the Parquet file; the fleet's own pings (1 Hz, 100 cars) stay in
 the warehouse, and the figure joins the two.
 
 Layout under `SMOOTHFLEET_DATA_DIR/motion` (or `--store`), partitioned by UTC day like the pings:
