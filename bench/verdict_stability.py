@@ -29,6 +29,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import httpx
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import sync_playwright
 
 from smoothfleet.cli.demo_status import VerdictTracker
@@ -48,9 +49,16 @@ class Window:
     cleared: list[int] = field(default_factory=list)
     polls: int = 0
     pages: int = 0
+    slowest: tuple[float, str] = (0.0, "")
+    slow_pages: list[str] = field(default_factory=list)
 
     def line(self) -> str:
-        pages = f", {self.pages} pages loaded by Chromium" if self.pages else ""
+        pages = ""
+        if self.pages or self.slow_pages:
+            pages = (
+                f", {self.pages} pages loaded by Chromium (slowest {self.slowest[0]:.1f} s: "
+                f"{self.slowest[1]}; not answered: {', '.join(self.slow_pages) or 'none'})"
+            )
         low, high = (min(self.cleared), max(self.cleared)) if self.cleared else (0, 0)
         return (
             f"{self.name:9s}: {len(self.tracker.changes)} verdict changes over {self.polls} polls "
@@ -104,8 +112,15 @@ def browse(base: str, password: str, window: Window, stop: threading.Event) -> N
         paths = [*menu, f"{base}/vehicles/SF-001"]
         while not stop.is_set():
             for path in paths:
-                page.goto(path, wait_until="load")
+                started = time.monotonic()
+                try:
+                    page.goto(path, wait_until="load", timeout=60_000)
+                except PlaywrightTimeout:
+                    window.slow_pages.append(f"{path} (no answer in 60 s)")
+                    continue
                 window.pages += 1
+                took = time.monotonic() - started
+                window.slowest = max(window.slowest, (took, path))
                 if stop.is_set():
                     break
         browser.close()
