@@ -31,10 +31,14 @@ The returned trajectory is then replayed in the real simulator (`simulate_platoo
 
 from __future__ import annotations
 
+import csv
+import hashlib
+import json
 import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, cast
 
 import numba
@@ -486,3 +490,78 @@ def optimal_trajectory(
         seconds=time.perf_counter() - started,
         run=run,
     )
+
+
+# Columns of `smoothfleet sim optimum`'s CSV (the evaluation reads `drive` and
+# `fuel_saving_pct`); bump CACHE_VERSION whenever the solver's result can change.
+OPTIMUM_COLUMNS = (
+    "drive",
+    "fuel_saving_pct",
+    "total_fuel_saving_pct",
+    "max_gap_m",
+    "min_gap_m",
+    "gap_out_of_bounds_s",
+    "time_gap_violation_s",
+    "collisions",
+    "iterations",
+    "seconds",
+)
+CACHE_VERSION = 1
+
+
+def result_row(result: OptimumResult) -> dict[str, str | float | int]:
+    """One CSV row of a drive's bound (OPTIMUM_COLUMNS)."""
+    return {
+        "drive": result.drive_name,
+        "fuel_saving_pct": round(result.fuel_saving_pct, 4),
+        "total_fuel_saving_pct": round(result.total_fuel_saving_pct, 4),
+        "max_gap_m": round(result.max_gap_m, 3),
+        "min_gap_m": round(result.min_gap_m, 3),
+        "gap_out_of_bounds_s": round(result.gap_out_of_bounds_s, 2),
+        "time_gap_violation_s": round(result.time_gap_violation_s, 2),
+        "collisions": result.collisions,
+        "iterations": result.iterations,
+        "seconds": round(result.seconds, 2),
+    }
+
+
+def cache_key(
+    drive: Drive, humans: int, bounds: GapBounds, settings: OptimumSettings, model: FuelModel
+) -> str:
+    """What a cached bound was computed from: the drive's speeds and every setting."""
+    digest = hashlib.sha256(np.ascontiguousarray(drive.speed_mps).tobytes())
+    digest.update(repr((CACHE_VERSION, drive.dt_s, humans, bounds, settings, model)).encode())
+    return digest.hexdigest()
+
+
+def load_cached_row(directory: Path, name: str, key: str) -> dict[str, str | float | int] | None:
+    """The cached row of a drive if it was computed from the same inputs, else None."""
+    path = directory / f"{name}.json"
+    if not path.is_file():
+        return None
+    try:
+        stored = json.loads(path.read_text())
+    except json.JSONDecodeError:
+        return None
+    if not isinstance(stored, dict) or stored.get("key") != key:
+        return None
+    row = stored.get("row")
+    return row if isinstance(row, dict) else None
+
+
+def save_cached(directory: Path, result: OptimumResult, key: str) -> dict[str, str | float | int]:
+    """Keep a drive's bound (row and accelerations) so a rerun and the evaluation reuse it."""
+    directory.mkdir(parents=True, exist_ok=True)
+    row = result_row(result)
+    np.save(directory / f"{result.drive_name}.npy", result.accel_mps2)
+    (directory / f"{result.drive_name}.json").write_text(json.dumps({"key": key, "row": row}))
+    return row
+
+
+def write_optimum_csv(rows: list[dict[str, str | float | int]], path: Path) -> None:
+    """The per-drive bounds as CSV (OPTIMUM_COLUMNS), one row per drive."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=OPTIMUM_COLUMNS)
+        writer.writeheader()
+        writer.writerows(rows)

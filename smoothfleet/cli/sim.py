@@ -623,3 +623,101 @@ def train_command(
     console.print(
         f"wrote {result.policy_path} (sha256 {result.sha256[:12]}) and {result.manifest_path}"
     )
+
+
+@sim.command("optimum")
+@click.option(
+    "--drives",
+    "drives_dir",
+    type=click.Path(path_type=Path),
+    default=SHARED_DRIVES,
+    show_default=True,
+    help="Folder of real drive CSVs (10 Hz).",
+)
+@click.option(
+    "--drive",
+    "names",
+    multiple=True,
+    help="Only the drive with this name (file name without .csv; repeatable).",
+)
+@click.option("--humans", default=24, show_default=True, type=click.IntRange(0, 1000))
+@click.option(
+    "--control-interval",
+    default=1.0,
+    show_default=True,
+    type=click.FloatRange(min=0.1),
+    help="Seconds each piece of the piecewise-constant AV acceleration lasts.",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(path_type=Path),
+    default=Path("sim_results"),
+    show_default=True,
+    help="Where optimum.csv and the per-drive cache (optimum/) go.",
+)
+def optimum_command(
+    drives_dir: Path, names: tuple[str, ...], humans: int, control_interval: float, out_dir: Path
+) -> None:
+    """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
+
+    Each drive's result is cached in OUT/optimum/ (reused while the drive and the settings
+    are the same); OUT/optimum.csv gets one row per drive, rewritten after each drive.
+    """
+    try:
+        from sim.optimum import (
+            OptimumSettings,
+            cache_key,
+            load_cached_row,
+            optimal_trajectory,
+            save_cached,
+            write_optimum_csv,
+        )
+    except ImportError as error:
+        raise click.ClickException(
+            f"sim optimum needs the optimize extra (pip install -e '.[optimize]'): {error}"
+        ) from None
+    from sim.energy import RAV4_2019
+    from sim.gaps import GapBounds
+
+    try:
+        drives = load_drives(drives_dir)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    if names:
+        unknown = sorted(set(names) - {drive.name for drive in drives})
+        if unknown:
+            raise click.BadParameter(
+                f"no drive {', '.join(unknown)} in {drives_dir}", param_hint="--drive"
+            )
+        drives = [drive for drive in drives if drive.name in names]
+    settings = OptimumSettings(control_interval_s=control_interval)
+    bounds = GapBounds()
+    cache = out_dir / "optimum"
+    rows = []
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    ) as progress:
+        task = progress.add_task("optimising", total=len(drives))
+        for drive in drives:
+            progress.update(task, description=drive.name[:60])
+            key = cache_key(drive, humans, bounds, settings, RAV4_2019)
+            row = load_cached_row(cache, drive.name, key)
+            if row is None:
+                result = optimal_trajectory(drive, humans=humans, bounds=bounds, settings=settings)
+                row = save_cached(cache, result, key)
+            rows.append(row)
+            write_optimum_csv(rows, out_dir / "optimum.csv")
+            progress.advance(task)
+    for row in rows:
+        console.print(
+            f"{row['drive']}: fuel saving {float(row['fuel_saving_pct']):+.2f} %, largest gap "
+            f"{float(row['max_gap_m']):.1f} m, {float(row['gap_out_of_bounds_s']):.1f} s out of "
+            f"bounds, {row['collisions']} collisions, {float(row['seconds']):.0f} s"
+        )
+    console.print(f"wrote {out_dir / 'optimum.csv'}")
