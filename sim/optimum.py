@@ -64,6 +64,11 @@ FloatArray = NDArray[np.float64]
 
 # The humans behind the AV in the evaluation's platoon.
 HUMANS = 24
+# L-BFGS-B's status when its line search fails, its steps per line search (scipy's default 20
+# is short for the fuel model's kinks), and the least decrease (g) worth a restart.
+ABNORMAL_LINE_SEARCH = 2
+LINE_SEARCH_STEPS = 50
+IMPROVEMENT_G = 1e-3
 _MICROACCEL = MicroAccelParams()
 
 
@@ -211,8 +216,8 @@ def _platoon_cost_gradient_py(
     The fuel term is (F + F_other) / (D + D_other) * D_ref in grams: F, D the followers' fuel
     and distance, `others` = [F_other, D_other, D_ref, X_end, v_end...] (the leader's fuel and
     distance, the all-human platoon's distance that scales the ratio back to grams, the sum of
-    the followers' end positions and each follower's end speed not to fall short of: each metre
-    and each m/s short is penalised, squared).
+    the followers' end positions and each follower's end speed not to fall short of: the
+    metres short per follower and each m/s short are penalised, squared).
     Follower 0 is the AV, 1.. the IDM humans. The forward sweep is `simulate_platoon`'s step;
     the backward sweep is its adjoint (reverse-mode derivative of every operation, the clips
     included: a clipped quantity passes no gradient through the clipped argument).
@@ -270,10 +275,11 @@ def _platoon_cost_gradient_py(
             + max(gap - high, 0.0) ** 2
             + max(min_time_gap * v[k, 0] - gap, 0.0) ** 2
         ) * dt
+    # per follower, so the weight means the same as the envelope's (metres squared)
     shortfall = others[3]
     for i in range(n):
         shortfall -= x[steps, i]
-    shortfall = max(shortfall, 0.0)
+    shortfall = max(shortfall, 0.0) / n
     penalty += shortfall * shortfall
     for i in range(n):
         penalty += max(others[4 + i] - v[steps, i], 0.0) ** 2
@@ -288,7 +294,7 @@ def _platoon_cost_gradient_py(
     adj_x = np.full(n, -total_fuel * scale / distance)
     adj_v = np.zeros(n)
     for i in range(n):
-        adj_x[i] -= weight * 2.0 * shortfall
+        adj_x[i] -= weight * 2.0 * shortfall / n
         adj_v[i] = -weight * 2.0 * max(others[4 + i] - v[steps, i], 0.0)
     new_x = np.zeros(n)
     new_v = np.zeros(n)
@@ -450,17 +456,25 @@ def optimal_trajectory(
     speeds = guess
     iterations = 0
     for weight in settings.penalty_weights:
-        solution = minimize(
-            cost,
-            speeds,
-            args=(weight,),
-            jac=True,
-            method="L-BFGS-B",
-            bounds=[(0.0, None)] * len(speeds),
-            options={"maxiter": settings.max_iterations},
-        )
-        speeds = np.asarray(solution.x, dtype=np.float64)
-        iterations += int(solution.nit)
+        budget = settings.max_iterations
+        while budget > 0:
+            solution = minimize(
+                cost,
+                speeds,
+                args=(weight,),
+                jac=True,
+                method="L-BFGS-B",
+                bounds=[(0.0, None)] * len(speeds),
+                options={"maxiter": budget, "maxls": LINE_SEARCH_STEPS},
+            )
+            iterations += int(solution.nit)
+            budget -= max(int(solution.nit), 1)
+            improved = float(solution.fun) < cost(speeds, weight)[0] - IMPROVEMENT_G
+            speeds = np.asarray(solution.x, dtype=np.float64)
+            # A failed line search on a kink of the fuel model (the fuel cut) leaves the
+            # quasi-Newton memory useless: start it afresh from there while that still helps.
+            if solution.status != ABNORMAL_LINE_SEARCH or not improved:
+                break
     accel = np.repeat(accelerations(speeds)[1], per_piece)[:steps]
     run = simulate_platoon(
         drive,
@@ -506,7 +520,7 @@ OPTIMUM_COLUMNS = (
     "iterations",
     "seconds",
 )
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 def result_row(result: OptimumResult) -> dict[str, str | float | int]:

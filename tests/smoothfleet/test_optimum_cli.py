@@ -1,0 +1,65 @@
+"""`smoothfleet sim optimum` in a subprocess: a folder of drives in, optimum.csv and a cache out."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.optimum import OPTIMUM_COLUMNS
+from tests.support.servers import cli_env, run_cli
+
+
+def _write_drive(path: Path, speed_kmh: np.ndarray) -> None:
+    """A drive CSV as the recorder writes it: unix `Time` at 0.1 s, `Velocity` in km/h."""
+    times = 1.6e9 + 0.1 * np.arange(len(speed_kmh))
+    lines = ["Time,Velocity"] + [f"{t:.1f},{v:.4f}" for t, v in zip(times, speed_kmh, strict=True)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.slow
+def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    t = np.arange(0.0, 60.05, 0.1)
+    _write_drive(drives / "steady.csv", np.full(len(t), 90.0))
+    _write_drive(drives / "dip.csv", 90.0 - 45.0 * np.exp(-(((t - 20.0) / 5.0) ** 2)))
+    out = tmp_path / "out"
+    args = ("sim", "optimum", "--drives", str(drives), "--humans", "4", "--out", str(out))
+
+    first = run_cli(*args, env=cli_env(), timeout=300)
+    assert first.returncode == 0, first.stderr
+    with (out / "optimum.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert tuple(rows[0]) == OPTIMUM_COLUMNS
+    assert [row["drive"] for row in rows] == ["dip", "steady"]
+    by_drive = {row["drive"]: row for row in rows}
+    assert float(by_drive["dip"]["fuel_saving_pct"]) > 1.0
+    assert abs(float(by_drive["steady"]["fuel_saving_pct"])) < 0.1
+    for row in rows:
+        assert int(row["collisions"]) == 0
+        assert float(row["gap_out_of_bounds_s"]) == 0.0
+        accel = np.load(out / "optimum" / f"{row['drive']}.npy")
+        assert len(accel) == 600
+
+    # same drives, same settings: the cached rows come back as they were
+    cached = (out / "optimum" / "dip.json").stat().st_mtime_ns
+    again = run_cli(*args, "--drive", "dip", env=cli_env(), timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert (out / "optimum" / "dip.json").stat().st_mtime_ns == cached
+    with (out / "optimum.csv").open(newline="") as handle:
+        assert list(csv.DictReader(handle)) == [by_drive["dip"]]
+
+
+def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path) -> None:
+    missing = run_cli("sim", "optimum", "--drives", str(tmp_path / "nowhere"), env=cli_env())
+    assert missing.returncode != 0
+    assert "nowhere" in missing.stderr
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    _write_drive(drives / "steady.csv", np.full(20, 90.0))
+    unknown = run_cli("sim", "optimum", "--drives", str(drives), "--drive", "nope", env=cli_env())
+    assert unknown.returncode != 0
+    assert "no drive nope" in unknown.stderr
