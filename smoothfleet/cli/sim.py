@@ -630,9 +630,9 @@ def train_command(
     "--drives",
     "drives_dir",
     type=click.Path(path_type=Path),
-    default=SHARED_DRIVES,
-    show_default=True,
-    help="Folder of real drive CSVs (10 Hz).",
+    default=lambda: _default_folder("trajectories"),
+    help="Folder of real drive CSVs (10 Hz) [default: shared/data/trajectories beside the "
+    "checkout, or $SMOOTHFLEET_SHARED_DATA].",
 )
 @click.option(
     "--drive",
@@ -657,7 +657,11 @@ def train_command(
     help="Where optimum.csv and the per-drive cache (optimum/) go.",
 )
 def optimum_command(
-    drives_dir: Path, names: tuple[str, ...], humans: int, control_interval: float, out_dir: Path
+    drives_dir: Path | None,
+    names: tuple[str, ...],
+    humans: int,
+    control_interval: float,
+    out_dir: Path,
 ) -> None:
     """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
 
@@ -680,6 +684,11 @@ def optimum_command(
     from sim.energy import RAV4_2019
     from sim.gaps import GapBounds
 
+    if drives_dir is None:
+        raise click.ClickException(
+            "no shared data found beside the checkout: pass --drives, or set "
+            "SMOOTHFLEET_SHARED_DATA"
+        )
     try:
         drives = load_drives(drives_dir)
     except DriveError as error:
