@@ -54,12 +54,16 @@ def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Pat
 
 
 def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path) -> None:
-    missing = run_cli("sim", "optimum", "--drives", str(tmp_path / "nowhere"), env=cli_env())
+    missing = run_cli(
+        "sim", "optimum", "--drives", str(tmp_path / "nowhere"), env=cli_env(), timeout=300
+    )
     assert missing.returncode != 0
     assert "nowhere" in missing.stderr
     drives = tmp_path / "drives"
     drives.mkdir()
     _write_drive(drives / "steady.csv", np.full(20, 90.0))
-    unknown = run_cli("sim", "optimum", "--drives", str(drives), "--drive", "nope", env=cli_env())
+    unknown = run_cli(
+        "sim", "optimum", "--drives", str(drives), "--drive", "nope", env=cli_env(), timeout=300
+    )
     assert unknown.returncode != 0
     assert "no drive nope" in unknown.stderr
