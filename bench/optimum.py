@@ -38,10 +38,7 @@ from sim.platoon import platoon_roles, simulate_platoon
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVES = ROOT.parent / "shared/data/trajectories"
-DEFAULT_DRIVES = (
-    DRIVES / "2021-03-08-22-35-14_masterArray_0_5373.csv",
-    DRIVES / "2021-04-05-21-39-05_masterArray_1_9955.csv",
-)
+DEFAULT_DRIVES = (DRIVES / "2021-03-08-22-35-14_masterArray_0_5373.csv",)
 
 
 def best_of(repeat: int, run: Callable[[], object]) -> tuple[float, float]:
