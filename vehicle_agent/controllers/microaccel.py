@@ -64,6 +64,38 @@ def safety_accel(
     return -k * (speed_mps - safe_speed_mps) + safe_speed_rate_mps2
 
 
+def safety_term(
+    speed_mps: float,
+    gap_m: float,
+    rel_speed_mps: float,
+    lead_accel_mps2: float,
+    *,
+    k: float,
+    standstill_gap_m: float,
+    min_accel_mps2: float,
+    lead_min_accel_mps2: float,
+) -> float:
+    """a_safe from what the radar measures: v_safe, its rate, then -k (v - v_safe) + dv_safe/dt
+    (paper eq. a_safe)."""
+    lead_speed = max(speed_mps + rel_speed_mps, 0.0)
+    v_safe = safe_speed(
+        gap_m,
+        lead_speed,
+        standstill_gap_m=standstill_gap_m,
+        min_accel_mps2=min_accel_mps2,
+        lead_min_accel_mps2=lead_min_accel_mps2,
+    )
+    rate = safe_speed_rate(
+        v_safe,
+        rel_speed_mps,
+        lead_speed,
+        lead_accel_mps2,
+        min_accel_mps2=min_accel_mps2,
+        lead_min_accel_mps2=lead_min_accel_mps2,
+    )
+    return safety_accel(speed_mps, v_safe, rate, k)
+
+
 def target_accel(speed_mps: float, target_speed_mps: float, k: float) -> float:
     """a_target = -k (v - v_target) (paper eq. a_target)."""
     return -k * (speed_mps - target_speed_mps)

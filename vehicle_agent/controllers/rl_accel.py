@@ -13,12 +13,7 @@ import math
 
 from contract.controllers import Actuation, MicroAccelParams, RlParams
 from vehicle_agent.controllers.base import AccelCommand, Controller, Observation
-from vehicle_agent.controllers.microaccel import (
-    LeadAccelEstimator,
-    safe_speed,
-    safe_speed_rate,
-    safety_accel,
-)
+from vehicle_agent.controllers.microaccel import LeadAccelEstimator, safety_term
 from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_MAX_MPS2,
     ACCEL_ACTION_MIN_MPS2,
@@ -42,23 +37,17 @@ def bounded_request(
     """min(request, a_safe) within the action bounds; without a measured leader, the request."""
     command = request_mps2
     if gap_m is not None and rel_speed_mps is not None:
-        lead_speed = max(speed_mps + rel_speed_mps, 0.0)
-        v_safe = safe_speed(
+        safe = safety_term(
+            speed_mps,
             gap_m,
-            lead_speed,
+            rel_speed_mps,
+            lead_accel_mps2,
+            k=SAFETY.k,
             standstill_gap_m=SAFETY.standstill_gap_m,
             min_accel_mps2=SAFETY.min_accel_mps2,
             lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
         )
-        rate = safe_speed_rate(
-            v_safe,
-            rel_speed_mps,
-            lead_speed,
-            lead_accel_mps2,
-            min_accel_mps2=SAFETY.min_accel_mps2,
-            lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
-        )
-        command = min(command, safety_accel(speed_mps, v_safe, rate, SAFETY.k))
+        command = min(command, safe)
     return min(max(command, ACCEL_ACTION_MIN_MPS2), ACCEL_ACTION_MAX_MPS2)
 
 

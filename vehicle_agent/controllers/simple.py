@@ -17,13 +17,7 @@ from vehicle_agent.controllers.base import (
     Controller,
     Observation,
 )
-from vehicle_agent.controllers.microaccel import (
-    LeadAccelEstimator,
-    safe_speed,
-    safe_speed_rate,
-    safety_accel,
-    target_accel,
-)
+from vehicle_agent.controllers.microaccel import LeadAccelEstimator, safety_term, target_accel
 
 
 class SimpleController(Controller):
@@ -51,22 +45,17 @@ class SimpleController(Controller):
             rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
             lead_speed = max(observation.speed_mps + rel, 0.0)
             lead_accel = self.lead_accel.update(observation.time_s, lead_speed)
-            v_safe = safe_speed(
+            safe = safety_term(
+                observation.speed_mps,
                 float(observation.lead_distance_m),  # type: ignore[arg-type]
-                lead_speed,
+                rel,
+                lead_accel,
+                k=params.k,
                 standstill_gap_m=params.standstill_gap_m,
                 min_accel_mps2=params.safety_min_accel_mps2,
                 lead_min_accel_mps2=params.lead_min_accel_mps2,
             )
-            rate = safe_speed_rate(
-                v_safe,
-                rel,
-                lead_speed,
-                lead_accel,
-                min_accel_mps2=params.safety_min_accel_mps2,
-                lead_min_accel_mps2=params.lead_min_accel_mps2,
-            )
-            command = min(command, safety_accel(observation.speed_mps, v_safe, rate, params.k))
+            command = min(command, safe)
             return AccelCommand(
                 min(max(command, params.safety_min_accel_mps2), params.max_accel_mps2)
             )
