@@ -28,10 +28,8 @@ from sim.gaps import GapBounds
 from sim.optimum import (
     HUMANS,
     OptimumSettings,
-    _envelope,
-    _fuel_coefficients,
-    _idm_coefficients,
     _platoon_cost_gradient,
+    _sweep_inputs,
     optimal_trajectory,
 )
 from sim.platoon import platoon_roles, simulate_platoon
@@ -56,20 +54,7 @@ def bench_drive(path: Path, repeat: int) -> None:
     """Print the figures of one drive."""
     drive = load_drive(path)
     baseline = simulate_platoon(drive, platoon_roles(HUMANS + 1, 0))
-    fixed = (
-        drive.position_m,
-        drive.speed_mps,
-        baseline.position_m[0, 1:].copy(),
-        baseline.speed_mps[0, 1:].copy(),
-        _idm_coefficients(I24_IDM),
-        _fuel_coefficients(RAV4_2019),
-        _envelope(GapBounds(), OptimumSettings()),
-        drive.dt_s,
-        baseline.vehicle_length_m,
-        np.concatenate(
-            [[0.0, 0.0, 1.0, baseline.position_m[-1, 1:].sum()], baseline.speed_mps[-1, 1:]]
-        ),
-    )
+    fixed = _sweep_inputs(drive, baseline, GapBounds(), OptimumSettings(), I24_IDM, RAV4_2019)
     request = np.diff(baseline.speed_mps[:, 1]) / drive.dt_s
     gradient = np.zeros(drive.steps)
     _platoon_cost_gradient(request, *fixed, 1.0, gradient)  # compile or load the cache

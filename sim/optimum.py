@@ -378,6 +378,41 @@ _platoon_cost_gradient = cast(
 )
 
 
+def _sweep_inputs(
+    drive: Drive,
+    baseline: PlatoonRun,
+    bounds: GapBounds,
+    settings: OptimumSettings,
+    idm: IdmParams,
+    model: FuelModel,
+) -> tuple[Any, ...]:
+    """The adjoint sweep's arguments after the requests, for this drive and its all-human run."""
+    dt = drive.dt_s
+    leader_fuel_g = float(model.fuel_rate_gps(drive.speed_mps[:-1], drive.accel_mps2[:-1]).sum())
+    return (
+        drive.position_m,
+        drive.speed_mps,
+        baseline.position_m[0, 1:].copy(),
+        baseline.speed_mps[0, 1:].copy(),
+        _idm_coefficients(idm),
+        _fuel_coefficients(model),
+        _envelope(bounds, settings),
+        dt,
+        baseline.vehicle_length_m,
+        np.concatenate(
+            [
+                [
+                    leader_fuel_g * dt,
+                    float(drive.position_m[-1]),
+                    _distance_m(baseline),
+                    float(baseline.position_m[-1, 1:].sum()) + settings.margin_m,
+                ],
+                baseline.speed_mps[-1, 1:],
+            ]
+        ),
+    )
+
+
 def optimal_trajectory(
     drive: Drive,
     *,
@@ -411,29 +446,7 @@ def optimal_trajectory(
     start_speed = float(baseline.speed_mps[0, 1])
     ends = np.append(piece_starts[1:], steps)
     guess = np.asarray(baseline.speed_mps[ends, 1], dtype=np.float64)
-    fixed: tuple[Any, ...] = (
-        drive.position_m,
-        drive.speed_mps,
-        baseline.position_m[0, 1:].copy(),
-        baseline.speed_mps[0, 1:].copy(),
-        _idm_coefficients(idm),
-        _fuel_coefficients(model),
-        _envelope(bounds, settings),
-        dt,
-        baseline.vehicle_length_m,
-        np.concatenate(
-            [
-                [
-                    float(model.fuel_rate_gps(drive.speed_mps[:-1], drive.accel_mps2[:-1]).sum())
-                    * dt,
-                    float(drive.position_m[-1]),
-                    _distance_m(baseline),
-                    float(baseline.position_m[-1, 1:].sum()) + settings.margin_m,
-                ],
-                baseline.speed_mps[-1, 1:],
-            ]
-        ),
-    )
+    fixed = _sweep_inputs(drive, baseline, bounds, settings, idm, model)
     gradient = np.zeros(steps)
 
     def accelerations(speeds: FloatArray) -> tuple[FloatArray, FloatArray]:

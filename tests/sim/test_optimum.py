@@ -15,10 +15,8 @@ from sim.gaps import GapBounds
 from sim.optimum import (
     OptimumSettings,
     ReplayPolicy,
-    _envelope,
-    _fuel_coefficients,
-    _idm_coefficients,
     _platoon_cost_gradient,
+    _sweep_inputs,
     optimal_trajectory,
     platoon_fuel_g,
 )
@@ -39,21 +37,13 @@ def test_adjoint_gradient_matches_finite_differences() -> None:
     drive = drive_from_speeds("dip", 20.0 - 6.0 * np.exp(-(((t - 15.0) / 4.0) ** 2)))
     baseline = simulate_platoon(drive, platoon_roles(6, 0))
     steps = drive.steps
-    # a tight envelope and a sum-of-positions target so every penalty term is active
-    fixed = (
-        drive.position_m,
-        drive.speed_mps,
-        baseline.position_m[0, 1:].copy(),
-        baseline.speed_mps[0, 1:].copy(),
-        _idm_coefficients(I24_IDM),
-        _fuel_coefficients(RAV4_2019),
-        _envelope(GapBounds(min_gap_m=25.0, max_gap_m=35.0), OptimumSettings()),
-        drive.dt_s,
-        baseline.vehicle_length_m,
-        np.concatenate(
-            [[100.0, 800.0, 5000.0, baseline.position_m[-1, 1:].sum() + 50.0], [21.0] * 6]
-        ),
-    )
+    # a tight envelope and end targets out of reach, so every penalty term is active
+    tight = GapBounds(min_gap_m=25.0, max_gap_m=35.0)
+    inputs = _sweep_inputs(drive, baseline, tight, OptimumSettings(), I24_IDM, RAV4_2019)
+    end_state = inputs[-1].copy()
+    end_state[3] += 50.0  # the followers' end positions fall short
+    end_state[4:] = 21.0  # and so do their end speeds
+    fixed = (*inputs[:-1], end_state)
     rng = np.random.default_rng(7)
     human = np.diff(baseline.speed_mps[:, 1]) / drive.dt_s
     request = np.clip(human + rng.normal(0.0, 0.3, steps), -2.9, 1.4)
