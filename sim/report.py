@@ -18,6 +18,7 @@ import numpy as np
 from rich.table import Table
 
 from sim.evaluate import KPI_DIRECTION, PAPER_KPIS, Evaluation
+from sim.platoon import PlatoonRun
 
 # KPIs drawn in the heatmap: the paper's three and comfort.
 HEATMAP_KPIS = (*PAPER_KPIS, "accel_rms_mps2")
@@ -195,3 +196,62 @@ def best_pair(evaluation: Evaluation, scenario: str = "shockwave") -> dict[str, 
         and row["network_speed_mps_change_pct"] >= MAX_LOSS_PCT
     ]
     return max(candidates, key=lambda row: row["fuel_saving_pct"], default=None)
+
+
+def write_time_space(
+    runs: Sequence[tuple[str, PlatoonRun]], path: Path, title: str, speed_max_mps: float = 35.0
+) -> None:
+    """PNG: one time-space panel per run (position vs time of every vehicle, coloured by
+    speed); AV trajectories drawn thicker and outlined, cars that merged in dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import Normalize
+
+    figure, axes = plt.subplots(
+        1, len(runs), figsize=(6.5 * len(runs), 5.5), sharey=True, squeeze=False
+    )
+    norm = Normalize(0.0, speed_max_mps)
+    image = None
+    for axis, (label, run) in zip(axes[0], runs, strict=True):
+        time_s = run.time_s
+        tracks = [
+            (run.position_m[:, i], run.speed_mps[:, i], bool(run.is_av[i]), False)
+            for i in range(run.position_m.shape[1])
+        ]
+        if run.cut_in_position_m is not None and run.cut_in_speed_mps is not None:
+            tracks += [
+                (run.cut_in_position_m[:, i], run.cut_in_speed_mps[:, i], False, True)
+                for i in range(run.cut_ins)
+            ]
+        for position, speed, is_av, merged in tracks:
+            present = np.isfinite(position)
+            points = np.column_stack([time_s[present], position[present] / 1000.0])
+            segments = np.stack([points[:-1], points[1:]], axis=1)
+            if is_av:
+                axis.plot(points[:, 0], points[:, 1], color="black", linewidth=3.0, zorder=2)
+            lines = LineCollection(
+                list(segments),
+                cmap="RdYlGn",
+                norm=norm,
+                linewidths=1.8 if is_av else 0.7,
+                linestyles="dashed" if merged else "solid",
+                zorder=3 if is_av else 1,
+            )
+            lines.set_array(speed[present][:-1])
+            image = axis.add_collection(lines)
+        axis.set_xlim(0.0, float(time_s[-1]))
+        axis.set_ylim(
+            float(np.nanmin(run.position_m)) / 1000.0, float(np.nanmax(run.position_m)) / 1000.0
+        )
+        axis.set_title(label)
+        axis.set_xlabel("time since the drive's start (s)")
+    axes[0][0].set_ylabel("position along the drive (km)")
+    if image is not None:
+        figure.colorbar(image, ax=axes[0].tolist(), label="speed (m/s)")
+    figure.suptitle(title)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(path, dpi=110)
+    plt.close(figure)

@@ -21,15 +21,18 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from sim.drives import DriveError, load_drives, shared_data_dir
+from sim.drives import DriveError, load_drive, load_drives, shared_data_dir
 from sim.evaluate import (
     BASELINE,
     ControllerVariant,
     Evaluation,
+    RunResult,
     default_workers,
     evaluate,
     load_optimum,
+    run_case,
 )
+from sim.platoon import PlatoonRun
 from sim.recommended import (
     RECOMMENDED_CONTROLLER,
     RECOMMENDED_PLANNER,
@@ -45,8 +48,9 @@ from sim.report import (
     write_csv,
     write_heatmap,
     write_rows,
+    write_time_space,
 )
-from sim.scenarios import SCENARIOS, scenario_cases
+from sim.scenarios import SCENARIOS, Case, scenario_cases
 from sim.selection import choose, cross_validate, held_out_summary
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -448,6 +452,54 @@ def select_command(
     write_rows(rows, out_dir / "selection.csv")
     write_rows(summary, out_dir / "held_out.csv")
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
+
+
+@sim.command("time-space")
+@click.option(
+    "--drive",
+    "drive_path",
+    type=click.Path(path_type=Path, exists=True, dir_okay=False),
+    default=lambda: _default_folder("trajectories/2021-03-15-12-46-38_masterArray_0_8314.csv"),
+    help="Real drive CSV [default: a stop-and-go drive of 2021-03-15 from the shared data].",
+)
+@click.option("-o", "--output", type=click.Path(path_type=Path), required=True)
+def time_space_command(drive_path: Path | None, output: Path) -> None:
+    """All-human platoon vs the recommended pair on one drive, as time-space diagrams."""
+    if drive_path is None:
+        raise click.ClickException("no shared data found beside the checkout: pass --drive")
+    try:
+        drive = load_drive(drive_path)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    case = Case("shockwave", drive)
+    runs: dict[str, PlatoonRun] = {}
+
+    def keep(result: RunResult, run: PlatoonRun) -> None:
+        runs[result.controller] = run
+
+    baseline = run_case(case, None, None, humans=25, avs=0, save=keep)
+    chosen = run_case(
+        case,
+        RECOMMENDED_PLANNER,
+        RECOMMENDED_CONTROLLER,
+        humans=24,
+        avs=1,
+        planner_params=RECOMMENDED_PLANNER_PARAMS,
+        save=keep,
+    )
+    evaluation = Evaluation([baseline, chosen])
+    label = (
+        f"{RECOMMENDED_PLANNER} x {RECOMMENDED_CONTROLLER.name}\nfuel saving "
+        f"{evaluation.fuel_saving_pct(chosen):+.1f} %, network speed "
+        f"{evaluation.change_pct(chosen, 'network_speed_mps'):+.1f} %, "
+        f"{chosen.cut_ins} cut-ins, {chosen.takeovers} takeovers"
+    )
+    write_time_space(
+        [("all human\n(25 IDM drivers)", runs[BASELINE]), (label, runs[chosen.controller])],
+        output,
+        f"{drive.name}: leader + 25 followers (the AV thick, cars merging in dashed)",
+    )
+    console.print(f"{label}\nwrote {output}")
 
 
 def fleet_options(command: Callable[..., None]) -> Callable[..., None]:
