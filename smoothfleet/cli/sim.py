@@ -385,7 +385,7 @@ def select_command(
             *(ControllerVariant.parse(text) for text in SELECTION_VARIANTS),
         ]
     )
-    variants = list(dict.fromkeys(variants))
+    variants = list({variant.name: variant for variant in variants}.values())
     try:
         drives = load_drives(drives_dir)
     except DriveError as error:
