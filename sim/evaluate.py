@@ -267,7 +267,11 @@ class Evaluation:
 
 def case_kpis(case: Case, run: PlatoonRun) -> Kpis:
     """A run's KPIs; the bottleneck's throughput is measured just downstream of its region."""
-    point = case.bottleneck.measure_point_m if case.bottleneck is not None else None
+    point = None
+    if case.bottleneck is not None:
+        # just downstream of the region, or, when the platoon's tail has not got that far by
+        # the drive's end (AVs that fell far behind), the furthest point every vehicle reached
+        point = min(case.bottleneck.measure_point_m, float(run.position_m[-1].min()))
     return platoon_kpis(run, throughput_point_m=point)
 
 

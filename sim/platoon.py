@@ -26,7 +26,8 @@ from numpy.typing import NDArray
 
 from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 from sim.drives import Drive
-from vehicle_agent.stopping import required_braking_mps2
+from vehicle_agent.controllers.microaccel import LeadAccelEstimator
+from vehicle_agent.stopping import LEAD_ACCEL_FILTER_S, required_braking_mps2
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -243,6 +244,10 @@ class _AvState:
     policy: AvPolicy
     engaged: bool = True
     calm_since_s: float | None = None
+    # The leader's braking as the radar's successive speeds show it (as the agent estimates it).
+    lead_accel: LeadAccelEstimator = field(
+        default_factory=lambda: LeadAccelEstimator(LEAD_ACCEL_FILTER_S)
+    )
 
 
 def simulate_platoon(
@@ -445,12 +450,16 @@ def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) ->
     """The agent's stopping check on what its radar sees; hand back, or take over again."""
     policy = av.policy
     authority = policy.braking_authority_mps2  # type: ignore[attr-defined]
-    seen = observation.gap_m <= hand_back.radar_range_m
-    need = (
-        required_braking_mps2(observation.speed_mps, observation.gap_m, observation.lead_speed_mps)
-        if seen
-        else 0.0
-    )
+    if observation.gap_m <= hand_back.radar_range_m:
+        need = required_braking_mps2(
+            observation.speed_mps,
+            observation.gap_m,
+            observation.lead_speed_mps,
+            av.lead_accel.update(observation.time_s, observation.lead_speed_mps),
+        )
+    else:
+        av.lead_accel.reset()
+        need = 0.0
     if av.engaged:
         if need > authority:
             av.engaged = False

@@ -59,7 +59,7 @@ from vehicle_agent.server import (
 )
 from vehicle_agent.spool import PingSpool
 from vehicle_agent.state import CarStateReader
-from vehicle_agent.stopping import reading_needs_hand_back
+from vehicle_agent.stopping import StoppingCheck
 
 log = logging.getLogger(__name__)
 
@@ -179,6 +179,7 @@ class Agent:
         self.wave_speed_mps = wave_speed_mps
         self.codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
         self.reader = CarStateReader(car, self.codec)
+        self.stopping = StoppingCheck(car.actuation)
         self.safety = SafetyLayer(car, self.codec)
         self.sender = SafeSender(bus, self.safety)
         self.sequencer = ButtonSequencer()
@@ -263,7 +264,7 @@ class Agent:
                 in_lane=self._in_lane(fix, assignment),
                 plan_fresh=plan_fresh,
                 actuator_ok=now >= self._actuator_fault_until,
-                stop_within_authority=not reading_needs_hand_back(reading, self.car.actuation),
+                stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
             self.engage_policy,

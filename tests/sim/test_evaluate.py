@@ -247,9 +247,7 @@ def test_saved_runs_recompute_the_kpis(shared_dir: Path, tmp_path: Path) -> None
         wide = platoon.pivot(index="time_s", columns="vehicle", values="position_m")
         speed = platoon.pivot(index="time_s", columns="vehicle", values="speed_mps")
         # fuel over the followers and throughput over everyone, from the file alone
-        mpg = fuel_economy_mpg(
-            wide.to_numpy()[:, 1:], speed.to_numpy()[:, 1:], float(table["time_s"].iloc[26])
-        )
+        mpg = fuel_economy_mpg(wide.to_numpy()[:, 1:], speed.to_numpy()[:, 1:], stop_and_go.dt_s)
         assert mpg == pytest.approx(result.kpis.fuel_economy_mpg, rel=1e-9)
         assert set(platoon["role"]) == (
             {"leader", "human"} if result.avs == 0 else {"leader", "human", "av"}

@@ -9,8 +9,8 @@ import pytest
 from vehicle_agent.cars import CarReading
 from vehicle_agent.stopping import (
     STOCK_ACC_MAX_BRAKING_MPS2,
+    StoppingCheck,
     braking_authority_mps2,
-    reading_needs_hand_back,
     required_braking_mps2,
     stop_exceeds_authority,
 )
@@ -53,7 +53,7 @@ def test_from_a_car_reading() -> None:
         lead_distance_m=100.0,
         lead_rel_speed_mps=-28.0,
     )
-    assert reading_needs_hand_back(closing, "accel")
+    assert StoppingCheck("accel").needs_hand_back(0.0, closing)
     flag_only = CarReading(
         speed_mps=28.0,
         acc_available=True,
@@ -62,5 +62,38 @@ def test_from_a_car_reading() -> None:
         acc_gap_setting=3,
         lead_present=True,
     )
-    assert not reading_needs_hand_back(flag_only, "acc")
-    assert not reading_needs_hand_back(None, "accel")
+    assert not StoppingCheck("acc").needs_hand_back(0.0, flag_only)
+    assert not StoppingCheck("accel").needs_hand_back(0.0, None)
+
+
+def test_a_leader_braking_hard_right_ahead() -> None:
+    # both at 28 m/s, 37.6 m apart (an ACC's 1.2 s + 4 m), the leader braking at 8 m/s^2 and
+    # already down to 25.6 m/s: it stops within 25.6^2 / 16 = 40.96 m, so the ego must stop
+    # within 37.6 - 2 + 40.96 = 76.56 m: 28^2 / (2 x 76.56) = 5.12 m/s^2
+    need = required_braking_mps2(28.0, 37.6, 25.6, lead_accel_mps2=-8.0)
+    assert need == pytest.approx(784.0 / (2 * 76.56))
+    assert need > braking_authority_mps2("acc")
+    # holding its speed, the same closing needs only 2.4^2 / (2 x 35.6) = 0.08 m/s^2
+    assert required_braking_mps2(28.0, 37.6, 25.6) == pytest.approx(5.76 / 71.2)
+
+
+def test_the_agents_check_estimates_the_leaders_braking() -> None:
+    check = StoppingCheck("accel")
+
+    def reading(lead_speed: float) -> CarReading:
+        return CarReading(
+            speed_mps=28.0,
+            acc_available=True,
+            acc_engaged=True,
+            acc_speed_setting_mph=63.0,
+            acc_gap_setting=1,
+            lead_present=True,
+            lead_distance_m=37.6,
+            lead_rel_speed_mps=lead_speed - 28.0,
+        )
+
+    # steady, then the leader slows 0.8 m/s every 0.1 s: handed back within a few steps
+    assert not check.needs_hand_back(0.0, reading(28.0))
+    verdicts = [check.needs_hand_back(0.1 * k, reading(28.0 - 0.8 * k)) for k in range(1, 6)]
+    assert verdicts[-1]
+    assert not verdicts[0]
