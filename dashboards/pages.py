@@ -677,6 +677,8 @@ async def _vehicle_context(
     entry = await _entry_or_404(request, session, vehicle_id)
     context: dict[str, Any] = {
         "entry": entry,
+        "generated_at": datetime.now(UTC),
+        "refresh_s": _settings(request).dashboard_refresh_s,
         "checks": CHECKS,
         "lanes": list(range(1, entry.corridor_lanes + 1)),
         "controllers": sorted(
@@ -729,6 +731,17 @@ async def vehicle_page(
         saved=saved_message.get(saved or ""),
         error=None,
         **context,
+    )
+
+
+@router.get("/vehicles/{vehicle_id}/live")
+async def vehicle_live(
+    request: Request, user: UserDep, session: SessionDep, vehicle_id: str
+) -> HTMLResponse:
+    """The vehicle's verdict and checks, for the page's periodic refresh."""
+    entry = await _entry_or_404(request, session, vehicle_id)
+    return _render(
+        request, "_vehicle_checks.html", user, entry=entry, generated_at=datetime.now(UTC)
     )
 
 

@@ -392,6 +392,11 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         assert 'data-chart="vehicle-engagement"' in vehicle
         assert "100 %" in vehicle  # every ping engaged
         assert "1.0.0" in vehicle  # the status history shows the agent version
+        assert 'data-live-url="/vehicles/SF-001/live"' in vehicle
+        vehicle_live = client.get("/vehicles/SF-001/live").text
+        assert "<html" not in vehicle_live
+        assert 'data-field="verdict">cleared</span>' in vehicle_live
+        assert vehicle_live.count('class="check-card') == 12
 
         plans = client.get("/plans").text
         for chart in ("plan-lane-1", "plan-lane-4", "plan-heatmap", "tse-heatmap"):
