@@ -994,6 +994,21 @@ async def plan_page(
 @router.get("/feeds")
 async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
     """INRIX freshness and latency, pings per second, rejected inputs."""
+    context = await _feeds_context(request, session)
+    return _render(request, "feeds.html", user, **context)
+
+
+@router.get("/feeds/live")
+async def feeds_live(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
+    """The feeds page's content, for its periodic refresh."""
+    context = await _feeds_context(request, session)
+    return _render(request, "_feeds_live.html", user, **context)
+
+
+FEEDS_MIN_REFRESH_S = 15.0  # two charts per refresh; INRIX arrives once a minute
+
+
+async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, Any]:
     now = datetime.now(UTC)
     latest = await data.latest_inrix(session)
     inrix_since = now - timedelta(hours=6)
@@ -1014,6 +1029,8 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
         "inrix_chart": None,
         "ping_chart": None,
         "last_minute": minutes[-1] if minutes else None,
+        "generated_at": now,
+        "refresh_s": max(_settings(request).dashboard_refresh_s, FEEDS_MIN_REFRESH_S),
     }
     zone = display_zone(_settings(request))
     if snapshots:
@@ -1052,7 +1069,7 @@ async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HT
             height=240,
             zone=zone,
         )
-    return _render(request, "feeds.html", user, **context)
+    return context
 
 
 # --- analytics ----------------------------------------------------------------------------------

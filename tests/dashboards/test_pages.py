@@ -406,6 +406,10 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         assert "kernel_smooth_buffer" in plans
 
         feeds = client.get("/feeds").text
+        assert 'data-live-url="/feeds/live"' in feeds
+        feeds_live = client.get("/feeds/live").text
+        assert "<html" not in feeds_live
+        assert 'data-chart="ping-rate"' in feeds_live
         assert 'data-field="inrix-latency"' in feeds
         assert 'data-chart="ping-rate"' in feeds
 
