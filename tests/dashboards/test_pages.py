@@ -401,8 +401,7 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         plans = client.get("/plans").text
         for chart in ("plan-lane-1", "plan-lane-4", "plan-heatmap", "tse-heatmap"):
             assert f'data-chart="{chart}"' in plans
-        assert "postmile (direction of travel →)" in plans
-        assert "speed (mph)" in plans
+        assert 'alt="Target speed of lane 1 along the corridor"' in plans  # axes: test_charts
         assert "kernel_smooth_buffer" in plans
 
         feeds = client.get("/feeds").text
