@@ -1,27 +1,27 @@
-"""Ping ingest throughput and latency, each figure against a baseline measured in the same run.
+"""Ping ingest against the plainest async FastAPI handler, both measured in the same run.
 
-    .venv/bin/python -m bench.ingest [--duration 8] [--rounds 3] [--workers 2]
+    .venv/bin/python -m bench.ingest [--duration 8] [--rounds 2] [--workers 2]
 
 Starts an embedded PostgreSQL in a temporary directory, migrates and seeds it, starts the real
-server (`smoothfleet serve --no-planner`, group commit) and, beside it on the same database, a
-naive FastAPI app doing one INSERT per request (bench/naive_ingest.py), with the same workers.
-Then, in alternating slices (so the load of other work on the machine falls on both alike):
-1. single-ping POSTs to each: pings/s, p50/p99 latency, and the ratio of the two;
-2. batches of 100 pings to the real server, and a raw psycopg COPY of the very rows that slice
-   stored (truncated and copied back in one transaction): pings/s and the ratio.
-Load comes from wrk (a separate process; `apt-get install -y wrk` on Debian) running a Lua
-script that makes every ping unique (100 vehicles, one ping per vehicle per second on the seed
-corridor), so every ping is a new row. The table is emptied before every slice.
+server (`smoothfleet serve --no-planner`, group commit) and, beside it on the same database, the
+plain handler (bench/naive_ingest.py: one INSERT ... ON CONFLICT DO NOTHING per request through
+a psycopg pool, durable commit), with the same workers. Load comes from bench/load.py in this
+process. In alternating slices (so the load of other work on the machine falls on both alike):
+1. single pings at saturation (closed loop, `--connections` clients back to back);
+2. single pings at fixed offered rates (500, 1,000, 2,000 pings/s, constant rate, latency from
+   when each request was due: no coordinated omission);
+3. batches of 100 and of 1,000 pings to the real server (closed loop), and a raw psycopg COPY
+   of the very rows that slice stored (truncated and copied back in one transaction).
+Every ping is unique (100 vehicles on the seed corridor, one ping per vehicle per second).
+Figures: pings/s, p50, p99, p99.9 and max latency in ms, non-2xx answers.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import io
 import os
-import re
-import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -41,73 +41,12 @@ from app.core.embedded import database_url, embedded_server, ensure_database
 from app.core.security import issue_token
 from app.migrate import upgrade
 from app.seed import seed
+from bench.load import Body, Latencies, constant_rate, saturate
 from contract.corridor import CorridorGeometry
 
 REPO = Path(__file__).resolve().parents[1]
 VEHICLES = 100
-
-LUA = r"""
--- One ping per vehicle per second: request n of thread t carries vehicle n % 100 + 1 at second
--- floor(n / 100) of the thread's own 4-hour window, so no two pings share (vehicle_id, ts).
-local base = tonumber(os.getenv("BENCH_BASE_EPOCH"))
-local batch = tonumber(os.getenv("BENCH_BATCH"))
-local token = os.getenv("BENCH_TOKEN")
-local positions = { __POSITIONS__ }
-local threads = 0
-local counter = 0
-
-function setup(thread)
-  thread:set("thread_number", threads)
-  threads = threads + 1
-end
-
-function init(args)
-  wrk.method = "POST"
-  wrk.headers["Content-Type"] = "application/json"
-  wrk.headers["Authorization"] = "Bearer " .. token
-end
-
-local function ping(n)
-  local vehicle = n % 100 + 1
-  local second = base + thread_number * 14400 + math.floor(n / 100)
-  local where = positions[vehicle]
-  return string.format(
-    '{"vehicle_id":"SF-%03d","ts":"%s","lat":%.7f,"lon":%.7f,"speed_mps":%.2f,' ..
-    '"accel_mps2":0.12,"heading_deg":%.1f,"lane":%d,"acc_engaged":true,' ..
-    '"controller_engaged":true,"controller":"microaccel_acc","acc_speed_setting_mph":55,' ..
-    '"acc_gap_setting":2,"lead_present":true,"lead_distance_m":35.5,' ..
-    '"lead_rel_speed_mps":-0.4,"plan_id":1}',
-    vehicle, os.date("!%Y-%m-%dT%H:%M:%SZ", second), where[1], where[2],
-    20 + (n % 13), where[3], (vehicle - 1) % 4 + 1)
-end
-
-function request()
-  local body
-  if batch == 0 then
-    body = ping(counter)
-    counter = counter + 1
-  else
-    local parts = {}
-    for k = 1, batch do
-      parts[k] = ping(counter)
-      counter = counter + 1
-    end
-    body = '{"pings":[' .. table.concat(parts, ",") .. ']}'
-  end
-  return wrk.format(nil, nil, nil, body)
-end
-"""
-
-
-@dataclass(frozen=True)
-class LoadResult:
-    """What wrk measured."""
-
-    requests_per_s: float
-    p50_ms: float
-    p99_ms: float
-    requests: int
-    errors: int
+SLICE_PINGS = 10**6
 
 
 def free_port() -> int:
@@ -118,43 +57,47 @@ def free_port() -> int:
         return int(probe.getsockname()[1])
 
 
-def _ms(text: str) -> float:
-    value, unit = re.fullmatch(r"([\d.]+)(us|ms|s|m)", text).groups()  # type: ignore[union-attr]
-    return float(value) * {"us": 1e-3, "ms": 1.0, "s": 1e3, "m": 6e4}[unit]
+class Pings:
+    """Unique ping bodies: 100 vehicles along the corridor, one ping per vehicle per second."""
 
+    def __init__(self, positions: list[tuple[float, float, float]]) -> None:
+        self.positions = positions
+        # 30 days back, and each slice 10^6 pings (10^4 s) further: inside the retention
+        # window, never in the future, every (vehicle_id, ts) new.
+        self.base = int((datetime.now(UTC) - timedelta(days=30)).timestamp())
+        self.used = 0  # pings handed out so far, so every slice's pings are new rows
 
-def run_wrk(
-    base_url: str, script: Path, *, batch: int, token: str, duration_s: int, connections: int
-) -> LoadResult:
-    env = {
-        **os.environ,
-        "BENCH_BASE_EPOCH": str(int((datetime.now(UTC) - timedelta(hours=20)).timestamp())),
-        "BENCH_BATCH": str(batch),
-        "BENCH_TOKEN": token,
-    }
-    command = [
-        "wrk",
-        "-t1",
-        f"-c{connections}",
-        f"-d{duration_s}s",
-        "--latency",
-        "--timeout",
-        "10s",
-        "-s",
-        str(script),
-        f"{base_url}/api/v1/pings",
-    ]
-    output = subprocess.run(command, env=env, capture_output=True, text=True, check=True).stdout
-    rate = float(re.search(r"Requests/sec:\s+([\d.]+)", output).group(1))  # type: ignore[union-attr]
-    p50 = _ms(re.search(r"\s50%\s+(\S+)", output).group(1))  # type: ignore[union-attr]
-    p99 = _ms(re.search(r"\s99%\s+(\S+)", output).group(1))  # type: ignore[union-attr]
-    requests = int(re.search(r"(\d+) requests in", output).group(1))  # type: ignore[union-attr]
-    found = re.search(r"Non-2xx or 3xx responses: (\d+)", output)
-    socket_errors = re.search(r"Socket errors: (.*)", output)
-    errors = int(found.group(1)) if found else 0
-    if socket_errors:
-        print(f"    wrk: socket errors {socket_errors.group(1)}")
-    return LoadResult(rate, p50, p99, requests, errors)
+    def _one(self, n: int) -> str:
+        lat, lon, heading = self.positions[n % VEHICLES]
+        ts = datetime.fromtimestamp(self.base + n // VEHICLES, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        return (
+            f'{{"vehicle_id":"SF-{n % VEHICLES + 1:03d}","ts":"{ts}","lat":{lat:.7f},'
+            f'"lon":{lon:.7f},"speed_mps":24.5,"accel_mps2":0.12,"heading_deg":{heading:.1f},'
+            '"lane":2,"acc_engaged":true,"controller_engaged":true,"controller":"microaccel_acc",'
+            '"acc_speed_setting_mph":55,"acc_gap_setting":2,"lead_present":true,'
+            '"lead_distance_m":35.5,"lead_rel_speed_mps":-0.4,"plan_id":1}'
+        )
+
+    def single(self) -> Body:
+        start = self.used
+        self.used += SLICE_PINGS
+
+        def body(i: int) -> bytes:
+            return self._one(start + i).encode()
+
+        return body
+
+    def batches(self, size: int) -> Body:
+        start = self.used
+        self.used += SLICE_PINGS
+
+        def body(i: int) -> bytes:
+            first = start + i * size
+            return (
+                '{"pings":[' + ",".join(self._one(first + k) for k in range(size)) + "]}"
+            ).encode()
+
+        return body
 
 
 @contextmanager
@@ -210,8 +153,8 @@ def copy_rate(url: str) -> tuple[float, int]:
     return rows / elapsed, rows
 
 
-def corridor_positions(url: str) -> str:
-    """A Lua table of (lat, lon, heading) for 100 vehicles spread along the seed corridor."""
+def corridor_positions(url: str) -> list[tuple[float, float, float]]:
+    """(lat, lon, heading) of 100 vehicles spread along the seed corridor."""
     with psycopg.connect(libpq_url(url)) as connection:
         segments = connection.execute(
             "SELECT start_x_m, end_x_m, start_lat, start_lon, end_lat, end_lon "
@@ -224,9 +167,7 @@ def corridor_positions(url: str) -> str:
     x = np.linspace(100, geometry.length_m - 100, VEHICLES)
     lat, lon = geometry.position(x)
     heading = geometry.heading_deg(x)
-    return ", ".join(
-        f"{{{a:.7f}, {o:.7f}, {h:.1f}}}" for a, o, h in zip(lat, lon, heading, strict=True)
-    )
+    return [(float(a), float(o), float(h)) for a, o, h in zip(lat, lon, heading, strict=True)]
 
 
 def load_conditions() -> str:
@@ -236,46 +177,52 @@ def load_conditions() -> str:
 
 @dataclass
 class Totals:
-    """A measurement summed over its rounds."""
+    """A measurement over its slices: every latency, answered pings, rows, errors."""
 
+    latencies: list[np.ndarray] = field(default_factory=list)
     pings: float = 0.0
     seconds: float = 0.0
-    p50_ms: list[float] = field(default_factory=list)
-    p99_ms: list[float] = field(default_factory=list)
     rows: int = 0
     errors: int = 0
 
-    def add(self, result: LoadResult, pings_per_request: int, seconds: float, rows: int) -> None:
-        self.pings += result.requests_per_s * pings_per_request * seconds
-        self.seconds += seconds
-        self.p50_ms.append(result.p50_ms)
-        self.p99_ms.append(result.p99_ms)
+    def add(self, result: Latencies, pings_per_request: int, rows: int) -> None:
+        self.latencies.append(result.seconds)
+        self.pings += len(result.seconds) * pings_per_request
+        self.seconds += result.duration_s
         self.rows += rows
-        self.errors += result.errors
+        self.errors += result.non_2xx
 
     @property
     def rate(self) -> float:
-        return self.pings / self.seconds
+        return self.pings / self.seconds if self.seconds else 0.0
 
-    def latency(self) -> str:
-        return f"{statistics.median(self.p50_ms):.1f} | {max(self.p99_ms):.1f}"
+    def row(self, what: str, extra: str = "") -> str:
+        every = np.concatenate(self.latencies) * 1000 if self.latencies else np.zeros(1)
+        p50, p99, p999 = np.percentile(every, [50, 99, 99.9])
+        return (
+            f"| {what} | {self.rate:,.0f} | {p50:.1f} | {p99:.1f} | {p999:.1f} | "
+            f"{every.max():.1f} | {self.rows:,} | {self.errors} | {extra} |"
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=int, default=8, help="seconds per load slice")
-    parser.add_argument("--rounds", type=int, default=3, help="slices per measurement")
+    parser.add_argument("--rounds", type=int, default=2, help="slices per measurement")
     parser.add_argument("--workers", type=int, default=2, help="uvicorn workers per server")
-    parser.add_argument("--connections", type=int, default=64, help="wrk connections")
-    parser.add_argument("--batch", type=int, default=100, help="pings per batch request")
+    parser.add_argument("--connections", type=int, default=32, help="clients at saturation")
+    parser.add_argument(
+        "--rates", default="500,1000,2000", help="offered single-ping rates, pings/s"
+    )
     args = parser.parse_args()
-    if shutil.which("wrk") is None:
-        sys.exit("bench/ingest.py needs wrk: apt-get install -y wrk (Debian/Ubuntu)")
+    rates = [int(rate) for rate in args.rates.split(",")]
 
     print(f"machine before the run: {load_conditions()}")
-    single, baseline, batched = Totals(), Totals(), Totals()
-    copy_rows = 0
-    copy_seconds = 0.0
+    saturated = {"ours": Totals(), "plain": Totals()}
+    offered = {(side, rate): Totals() for side in ("ours", "plain") for rate in rates}
+    batched = {size: Totals() for size in (100, 1000)}
+    copy_rows = dict.fromkeys(batched, 0)
+    copy_seconds = dict.fromkeys(batched, 0.0)
     with tempfile.TemporaryDirectory(prefix="sf-bench-ingest-") as scratch:
         scratch_dir = Path(scratch)
         with embedded_server(scratch_dir / "pgdata", delete_on_exit=True) as server_url:
@@ -287,8 +234,7 @@ def main() -> None:
                 seed(session)
                 token = issue_token(session, "operator", name="bench")
             engine.dispose()
-            script = scratch_dir / "pings.lua"
-            script.write_text(LUA.replace("__POSITIONS__", corridor_positions(url)))
+            pings = Pings(corridor_positions(url))
             env = {
                 **os.environ,
                 "SMOOTHFLEET_DATABASE_URL": url,
@@ -296,8 +242,11 @@ def main() -> None:
                 # One operator token carries the whole load: measure ingest, not the limiter.
                 "SMOOTHFLEET_RATE_LIMIT_PER_TOKEN_PER_S": "0",
             }
-            ours_port, naive_port = free_port(), free_port()
-            ours_url, naive_url = (f"http://127.0.0.1:{p}" for p in (ours_port, naive_port))
+            ours_port, plain_port = free_port(), free_port()
+            bases = {
+                "ours": f"http://127.0.0.1:{ours_port}",
+                "plain": f"http://127.0.0.1:{plain_port}",
+            }
             ours = [
                 str(Path(sys.executable).parent / "smoothfleet"),
                 "serve",
@@ -306,14 +255,14 @@ def main() -> None:
                 "--port",
                 str(ours_port),
             ]
-            naive = [
+            plain = [
                 sys.executable,
                 "-m",
                 "uvicorn",
                 "bench.naive_ingest:create_app",
                 "--factory",
                 "--port",
-                str(naive_port),
+                str(plain_port),
                 "--workers",
                 str(args.workers),
                 "--log-level",
@@ -321,62 +270,89 @@ def main() -> None:
                 "--no-access-log",
             ]
 
-            def measure(base: str, batch: int, totals: Totals, seconds: int) -> None:
+            def run(load: object) -> Latencies:
                 truncate(url)
-                result = run_wrk(
-                    base,
-                    script,
-                    batch=batch,
-                    token=token,
-                    duration_s=seconds,
-                    connections=args.connections,
-                )
-                totals.add(result, max(batch, 1), seconds, count_pings(url))
+                return asyncio.run(load)  # type: ignore[arg-type]
 
-            # Both servers run side by side; the slices alternate so that the load the other
-            # engineers put on the shared machine falls on both sides alike.
             with (
-                server(ours, env, ours_url, scratch_dir / "serve.log"),
-                server(naive, env, naive_url, scratch_dir / "naive.log"),
+                server(ours, env, bases["ours"], scratch_dir / "serve.log"),
+                server(plain, env, bases["plain"], scratch_dir / "plain.log"),
             ):
-                for base in (ours_url, naive_url):  # warm-up
-                    measure(base, 0, Totals(), 2)
+                for base in bases.values():  # warm-up
+                    run(
+                        saturate(
+                            f"{base}/api/v1/pings",
+                            token,
+                            pings.single(),
+                            connections=8,
+                            duration_s=2,
+                        )
+                    )
                 for _ in range(args.rounds):
-                    measure(ours_url, 0, single, args.duration)
-                    measure(naive_url, 0, baseline, args.duration)
-                    measure(ours_url, args.batch, batched, args.duration)
-                    rate, rows = copy_rate(url)
-                    copy_rows += rows
-                    copy_seconds += rows / rate
+                    for side, base in bases.items():
+                        result = run(
+                            saturate(
+                                f"{base}/api/v1/pings",
+                                token,
+                                pings.single(),
+                                connections=args.connections,
+                                duration_s=args.duration,
+                            )
+                        )
+                        saturated[side].add(result, 1, count_pings(url))
+                    for rate in rates:
+                        for side, base in bases.items():
+                            result = run(
+                                constant_rate(
+                                    f"{base}/api/v1/pings",
+                                    token,
+                                    pings.single(),
+                                    rate=rate,
+                                    duration_s=args.duration,
+                                )
+                            )
+                            offered[side, rate].add(result, 1, count_pings(url))
+                    for size in batched:
+                        result = run(
+                            saturate(
+                                f"{bases['ours']}/api/v1/pings",
+                                token,
+                                pings.batches(size),
+                                connections=4,
+                                duration_s=args.duration,
+                            )
+                        )
+                        batched[size].add(result, size, count_pings(url))
+                        rate, rows = copy_rate(url)
+                        copy_rows[size] += rows
+                        copy_seconds[size] += rows / rate
             truncate(url)
 
     print(f"machine after the run:  {load_conditions()}")
     print(
-        f"wrk: 1 thread, {args.connections} connections; {args.rounds} alternating slices of "
-        f"{args.duration} s per measurement; {args.workers} uvicorn worker(s) per server"
+        f"{args.rounds} alternating slices of {args.duration} s per measurement; "
+        f"{args.workers} uvicorn worker(s) per server; saturation: {args.connections} clients"
     )
     print()
-    print("| what | pings/s | p50 ms | p99 ms | rows stored | non-2xx | vs baseline |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    print(
-        f"| single pings, smoothfleet (group commit) | {single.rate:,.0f} | {single.latency()} | "
-        f"{single.rows:,} | {single.errors} | {single.rate / baseline.rate:.2f}x |"
-    )
-    print(
-        f"| single pings, naive one INSERT per request | {baseline.rate:,.0f} | "
-        f"{baseline.latency()} | {baseline.rows:,} | {baseline.errors} | 1x |"
-    )
-    copy_per_s = copy_rows / copy_seconds
-    print(
-        f"| batches of {args.batch}, smoothfleet | {batched.rate:,.0f} | {batched.latency()} | "
-        f"{batched.rows:,} | {batched.errors} | {batched.rate / copy_per_s:.0%} of COPY |"
-    )
-    print(
-        f"| raw psycopg COPY of those rows (one transaction per slice) | {copy_per_s:,.0f} | | "
-        f"| {copy_rows:,} | | 100% |"
-    )
+    print("| what | pings/s | p50 ms | p99 ms | p99.9 ms | max ms | rows stored | non-2xx | |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---|")
+    ratio = saturated["ours"].rate / saturated["plain"].rate
+    print(saturated["ours"].row("saturation, smoothfleet", f"{ratio:.2f}x the plain handler"))
+    print(saturated["plain"].row("saturation, plain handler"))
+    for rate in rates:
+        for side, name in (("ours", "smoothfleet"), ("plain", "plain handler")):
+            print(offered[side, rate].row(f"{rate:,} pings/s offered, {name}"))
+    for size, totals in batched.items():
+        rows, seconds = copy_rows[size], copy_seconds[size]
+        copy_per_s = rows / seconds if seconds else 0.0
+        print(
+            totals.row(
+                f"batches of {size:,}, smoothfleet", f"{totals.rate / copy_per_s:.0%} of COPY"
+            )
+        )
+        print(f"| raw COPY of those rows | {copy_per_s:,.0f} | | | | | {rows:,} | | 100% |")
     print()
-    print("p50: median over the slices; p99: the worst slice's.")
+    print("Latency: every request of every slice; at offered rates from when it was due.")
 
 
 if __name__ == "__main__":

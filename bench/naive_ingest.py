@@ -1,8 +1,9 @@
-"""The baseline of bench/ingest.py: a plain FastAPI handler doing one INSERT per request.
+"""The baseline of bench/ingest.py: the plainest reasonable async FastAPI ping handler.
 
-What a first version of the ping endpoint looks like: FastAPI parses and validates the ping,
-a session from the app's engine inserts it (ON CONFLICT DO NOTHING) and commits, and the answer
-has the interface's shape. No authentication, map-matching or grouping.
+FastAPI parses and validates the ping; one `INSERT ... ON CONFLICT DO NOTHING` through a
+psycopg async connection pool, committed (durably: the server's default synchronous_commit)
+before the answer, which has the interface's shape. No authentication, map-matching or
+grouping: what a competent first version of the endpoint looks like.
 
     SMOOTHFLEET_DATABASE_URL=... uvicorn bench.naive_ingest:create_app --factory
 """
@@ -14,45 +15,44 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
-from sqlalchemy import text
-from sqlalchemy.ext.asyncio import async_sessionmaker
+from psycopg_pool import AsyncConnectionPool
 
-from app.core.db import SessionDep, make_async_engine
+from app.core.db import libpq_url
 from contract.vehicles import Ping
 
-INSERT_ONE = text(
-    """
+INSERT_ONE = """
     INSERT INTO fact_vehicle_ping (
         vehicle_id, ts, lat, lon, speed_mps, accel_mps2, heading_deg, lane,
         is_acc_engaged, is_controller_engaged, controller, acc_speed_setting_mph,
         acc_gap_setting, is_lead_present, lead_distance_m, lead_rel_speed_mps, plan_id
     ) VALUES (
-        :vehicle_id, :ts, :lat, :lon, :speed_mps, :accel_mps2, :heading_deg, :lane,
-        :acc_engaged, :controller_engaged, :controller, :acc_speed_setting_mph,
-        :acc_gap_setting, :lead_present, :lead_distance_m, :lead_rel_speed_mps, :plan_id
+        %(vehicle_id)s, %(ts)s, %(lat)s, %(lon)s, %(speed_mps)s, %(accel_mps2)s,
+        %(heading_deg)s, %(lane)s, %(acc_engaged)s, %(controller_engaged)s, %(controller)s,
+        %(acc_speed_setting_mph)s, %(acc_gap_setting)s, %(lead_present)s, %(lead_distance_m)s,
+        %(lead_rel_speed_mps)s, %(plan_id)s
     )
     ON CONFLICT (vehicle_id, ts) DO NOTHING
-    RETURNING 1
-    """
-)
+"""
 
 
 def create_app() -> FastAPI:
     """The baseline app on SMOOTHFLEET_DATABASE_URL."""
-    url = os.environ["SMOOTHFLEET_DATABASE_URL"]
+    pool = AsyncConnectionPool(
+        libpq_url(os.environ["SMOOTHFLEET_DATABASE_URL"]), min_size=10, max_size=10, open=False
+    )
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        engine = make_async_engine(url, pool_size=10)
-        app.state.sessionmaker = async_sessionmaker(engine, expire_on_commit=False)
+        await pool.open()
         yield
-        await engine.dispose()
+        await pool.close()
 
     app = FastAPI(lifespan=lifespan)
 
     @app.post("/api/v1/pings")
-    async def post_ping(ping: Ping, session: SessionDep) -> dict[str, object]:
-        inserted = (await session.execute(INSERT_ONE, ping.model_dump())).first() is not None
+    async def post_ping(ping: Ping) -> dict[str, object]:
+        async with pool.connection() as connection:  # commits when the block ends
+            inserted = (await connection.execute(INSERT_ONE, ping.model_dump())).rowcount == 1
         return {"accepted": int(inserted), "duplicates": int(not inserted), "rejected": []}
 
     return app

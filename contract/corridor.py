@@ -246,9 +246,7 @@ class CorridorGeometry:
         ]
         self._segments = [
             (float(start[0]), float(start[1]), float(step[0]), float(step[1]), float(length2))
-            for start, step, length2 in zip(
-                self._starts, self._steps, self._step_len2, strict=True
-            )
+            for start, step, length2 in zip(self._starts, self._steps, self._step_len2, strict=True)
         ]
         self._vertex_x = [float(x) for x in self.x_m]
 

@@ -10,19 +10,22 @@ whole group commit later.
 from __future__ import annotations
 
 import math
+import re
 from datetime import UTC, datetime
 from typing import Annotated
 
-from pydantic import AfterValidator, AwareDatetime, Field
+from pydantic import AfterValidator, AwareDatetime, BeforeValidator, Field
 
 # The JSON Schema side of StorableText, so clients and fuzzers know NUL is not text here.
 NO_NUL_PATTERN = "^[^\\u0000]*$"
-# A REAL (float4) column: its largest finite value, and the smallest magnitude it keeps.
+# A REAL (float4) column: its largest finite value, and a magnitude below which a value is
+# stored as 0 (REAL keeps nothing under ~1.4e-45; the margin covers unit conversions at ingest).
 FLOAT4_MAX = 3.4028234663852886e38
-FLOAT4_SMALLEST = 1.401298464324817e-45
+NEGLIGIBLE = 1e-30
 # No message is about a time before the fleet existed or after anyone could plan for.
 EARLIEST = datetime(1970, 1, 1, tzinfo=UTC)
 LATEST = datetime(2200, 1, 1, tzinfo=UTC)
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
 def storable_text(value: str) -> str:
@@ -37,16 +40,34 @@ def storable_text(value: str) -> str:
     return value
 
 
-def real(value: float) -> float:
+def real(value: float | None) -> float | None:
     """A finite float as a REAL column keeps it: a magnitude it cannot hold but as 0 is 0.
 
     PostgreSQL refuses such a value with "underflow" on one path and stores 0 on another (the
     binary COPY); here it is 0 on both.
     """
+    if value is None:
+        return None
     if not math.isfinite(value) or abs(value) > FLOAT4_MAX:
         raise ValueError("number must be finite and within a REAL's range (about 3.4e38)")
-    if value != 0.0 and abs(value) < FLOAT4_SMALLEST:
+    if value != 0.0 and abs(value) < NEGLIGIBLE:
         return 0.0
+    return value
+
+
+def time_text(value: object) -> object:
+    """A timestamp arrives as ISO 8601 text (as documented), never as a number of seconds
+    (which pydantic would read as Unix time), neither bare nor quoted."""
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    if number or (isinstance(value, str) and _NUMBER.fullmatch(value.strip())):
+        raise ValueError("timestamp must be ISO 8601 text, e.g. 2026-11-30T12:00:00Z")
+    return value
+
+
+def json_number(value: object) -> object:
+    """A number field takes JSON numbers only: true is not 1, and "25" is not 25, here."""
+    if isinstance(value, bool | str):
+        raise ValueError("must be a JSON number")
     return value
 
 
@@ -64,5 +85,4 @@ def plausible_time(value: datetime) -> datetime:
 StorableText = Annotated[
     str, AfterValidator(storable_text), Field(json_schema_extra={"pattern": NO_NUL_PATTERN})
 ]
-Real = Annotated[float, AfterValidator(real)]
-Timestamp = Annotated[AwareDatetime, AfterValidator(plausible_time)]
+Timestamp = Annotated[AwareDatetime, BeforeValidator(time_text), AfterValidator(plausible_time)]

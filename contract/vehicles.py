@@ -7,13 +7,15 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, field_validator
 
-from contract.values import Real, StorableText, Timestamp
+from contract.values import StorableText, Timestamp, json_number, real
 
 VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 # A batch is the agent's store-and-forward upload: at most this many pings per request.
 MAX_PINGS_PER_BATCH = 1000
+# Plan ids stay below 2^53: every JSON reader (IEEE doubles) holds them exactly.
+MAX_JSON_INTEGER = 2**53 - 1
 
 
 class Ping(BaseModel):
@@ -29,19 +31,42 @@ class Ping(BaseModel):
     ts: Timestamp
     lat: float = Field(ge=-90, le=90)
     lon: float = Field(ge=-180, le=180)
-    speed_mps: Real = Field(ge=0, le=90)
-    accel_mps2: Real | None = Field(None, ge=-50, le=50)
-    heading_deg: Real | None = Field(None, ge=0, le=360)
+    speed_mps: float = Field(ge=0, le=90)
+    accel_mps2: float | None = Field(None, ge=-50, le=50)
+    heading_deg: float | None = Field(None, ge=0, le=360)
     lane: int | None = Field(None, ge=1, le=12)
-    acc_engaged: bool | None = None
-    controller_engaged: bool | None = None
+    acc_engaged: StrictBool | None = None
+    controller_engaged: StrictBool | None = None
     controller: StorableText | None = Field(None, max_length=64)
-    acc_speed_setting_mph: Real | None = Field(None, ge=0, le=200)
+    acc_speed_setting_mph: float | None = Field(None, ge=0, le=200)
     acc_gap_setting: int | None = Field(None, ge=1, le=3)
-    lead_present: bool | None = Field(None, description="the car's 'minicar' lead flag")
-    lead_distance_m: Real | None = Field(None, ge=0, le=1000)
-    lead_rel_speed_mps: Real | None = Field(None, ge=-90, le=90)
-    plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
+    lead_present: StrictBool | None = Field(None, description="the car's 'minicar' lead flag")
+    lead_distance_m: float | None = Field(None, ge=0, le=1000)
+    lead_rel_speed_mps: float | None = Field(None, ge=-90, le=90)
+    plan_id: int | None = Field(None, ge=0, le=MAX_JSON_INTEGER)
+
+    _numbers = field_validator(
+        "lat",
+        "lon",
+        "speed_mps",
+        "accel_mps2",
+        "heading_deg",
+        "lane",
+        "acc_speed_setting_mph",
+        "acc_gap_setting",
+        "lead_distance_m",
+        "lead_rel_speed_mps",
+        "plan_id",
+        mode="before",
+    )(json_number)
+    _real = field_validator(
+        "speed_mps",
+        "accel_mps2",
+        "heading_deg",
+        "acc_speed_setting_mph",
+        "lead_distance_m",
+        "lead_rel_speed_mps",
+    )(real)
 
 
 class PingBatch(BaseModel):
@@ -73,23 +98,40 @@ class VehicleStatusReport(BaseModel):
     ts: Timestamp
     agent_version: StorableText | None = Field(None, max_length=64)
     uptime_s: float | None = Field(None, ge=0, le=1e10)  # ~300 years
-    can_ok: bool | None = None
-    can_msgs_per_s: Real | None = Field(None, ge=0, le=1e7)
-    gps_fix: bool | None = None
+    can_ok: StrictBool | None = None
+    can_msgs_per_s: float | None = Field(None, ge=0, le=1e7)
+    gps_fix: StrictBool | None = None
     gps_satellites: int | None = Field(None, ge=0, le=255)
-    acc_available: bool | None = None
+    acc_available: StrictBool | None = None
     controller: StorableText | None = Field(None, max_length=64)
-    controller_running: bool | None = None
-    plan_id: int | None = Field(None, ge=0, le=2**63 - 1)
-    plan_age_s: Real | None = Field(None, ge=0, le=1e10)
+    controller_running: StrictBool | None = None
+    plan_id: int | None = Field(None, ge=0, le=MAX_JSON_INTEGER)
+    plan_age_s: float | None = Field(None, ge=0, le=1e10)
     spool_backlog: int | None = Field(None, ge=0, le=2**31 - 1)
-    disk_free_mb: Real | None = Field(None, ge=0, le=1e12)
-    cpu_temp_c: Real | None = Field(None, ge=-60, le=150)
-    ups_on_battery: bool | None = None
-    server_rtt_ms: Real | None = Field(None, ge=0, le=1e9)
+    disk_free_mb: float | None = Field(None, ge=0, le=1e12)
+    cpu_temp_c: float | None = Field(None, ge=-60, le=150)
+    ups_on_battery: StrictBool | None = None
+    server_rtt_ms: float | None = Field(None, ge=0, le=1e9)
     config_version: int | None = Field(
         None, ge=1, le=2**31 - 1, description="the vehicle config version the agent runs"
     )
+
+    _numbers = field_validator(
+        "uptime_s",
+        "can_msgs_per_s",
+        "gps_satellites",
+        "plan_id",
+        "plan_age_s",
+        "spool_backlog",
+        "disk_free_mb",
+        "cpu_temp_c",
+        "server_rtt_ms",
+        "config_version",
+        mode="before",
+    )(json_number)
+    _real = field_validator(
+        "can_msgs_per_s", "plan_age_s", "disk_free_mb", "cpu_temp_c", "server_rtt_ms"
+    )(real)
 
 
 class StatusAnswer(BaseModel):

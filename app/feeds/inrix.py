@@ -16,7 +16,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from contract.units import MPS_PER_MPH
-from contract.values import Real, StorableText, plausible_time
+from contract.values import StorableText, plausible_time, real, time_text
 
 S_PER_MINUTE = 60.0
 
@@ -38,13 +38,15 @@ class InrixSegment(BaseModel):
 
     code: StorableText = Field(min_length=1, max_length=64)
     type: StorableText | None = None
-    speed: Real | None = Field(None, ge=0, le=250)
-    average: Real | None = Field(None, ge=0, le=250)
-    reference: Real | None = Field(None, ge=0, le=250)
-    travel_time_minutes: Real | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
+    speed: float | None = Field(None, ge=0, le=250)
+    average: float | None = Field(None, ge=0, le=250)
+    reference: float | None = Field(None, ge=0, le=250)
+    travel_time_minutes: float | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
     score: int | None = Field(None, ge=0, le=100)
-    c_value: Real | None = Field(None, alias="c-Value", ge=0, le=100)
+    c_value: float | None = Field(None, alias="c-Value", ge=0, le=100)
     segment_closed: bool = Field(False, alias="segmentClosed")
+
+    _real = field_validator("speed", "average", "reference", "travel_time_minutes", "c_value")(real)
 
 
 class InrixSegmentSet(BaseModel):
@@ -55,6 +57,7 @@ class InrixSegmentSet(BaseModel):
     timestamp: datetime | None = None
     segments: list[InrixSegment]
 
+    _text = field_validator("timestamp", mode="before")(time_text)
     _utc = field_validator("timestamp")(_as_utc)
 
 
@@ -69,11 +72,35 @@ class InrixResult(BaseModel):
 class InrixResponse(BaseModel):
     """A segment-speed response as returned by the provider."""
 
-    model_config = ConfigDict(extra="ignore", populate_by_name=True)
+    model_config = ConfigDict(
+        extra="ignore",
+        populate_by_name=True,
+        # Every set needs a time: its own timestamp, or the response's createdDate.
+        json_schema_extra={
+            "anyOf": [
+                {"required": ["createdDate"], "properties": {"createdDate": {"type": "string"}}},
+                {
+                    "properties": {
+                        "result": {
+                            "properties": {
+                                "segmentspeeds": {
+                                    "items": {
+                                        "required": ["timestamp"],
+                                        "properties": {"timestamp": {"type": "string"}},
+                                    }
+                                }
+                            }
+                        }
+                    }
+                },
+            ]
+        },
+    )
 
     result: InrixResult
     created_date: datetime | None = Field(None, alias="createdDate")
 
+    _text = field_validator("created_date", mode="before")(time_text)
     _utc = field_validator("created_date")(_as_utc)
 
 

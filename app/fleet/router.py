@@ -60,7 +60,10 @@ async def get_fleet(
     make: Annotated[str | None, Query(description="Only vehicles of this make.")] = None,
     problem: Annotated[
         str | None,
-        Query(description="Only vehicles with this problem: " + ", ".join(PROBLEM_FILTERS)),
+        Query(
+            description="Only vehicles with this problem: " + ", ".join(PROBLEM_FILTERS),
+            json_schema_extra={"enum": list(PROBLEM_FILTERS)},
+        ),
     ] = None,
 ) -> FleetOut:
     """Every vehicle with its last ping, last status, readiness checks and verdict (ops token)."""

@@ -86,8 +86,9 @@ class TimeWindow:
         )
 
 
-def parse_body(body: bytes) -> list[object]:
-    """The items of a body holding one ping or `{"pings": [...]}`; BodyError otherwise."""
+def parse_body(body: bytes) -> tuple[list[object], bool]:
+    """The items of a body holding one ping or `{"pings": [...]}` and whether it was the
+    batch; BodyError otherwise."""
     try:
         document = orjson.loads(body)
     except orjson.JSONDecodeError as error:
@@ -102,12 +103,12 @@ def parse_body(body: bytes) -> list[object]:
             raise BodyError(
                 f"a batch holds at most {MAX_PINGS_PER_BATCH} pings, this one has {len(items)}"
             )
-        return items
+        return items, True
     if not any(name in document for name in REQUIRED_FIELDS):
         raise BodyError(
             'body is neither a ping (vehicle_id, ts, lat, lon, speed_mps) nor {"pings": [...]}'
         )
-    return [document]
+    return [document], False
 
 
 def _lenient_json(body: bytes, strict_error: orjson.JSONDecodeError) -> object:
@@ -161,14 +162,16 @@ def _all_valid(body: bytes) -> list[Ping] | None:
 def read_pings(body: bytes, principal: Principal) -> tuple[list[tuple[int, Ping]], list[Rejected]]:
     """The body's well-formed pings (with their index) and the rejection of each other item.
 
-    BodyError when the body is not a ping or a batch; ForeignVehicle when a vehicle token
-    carries another vehicle's ping (valid or not).
+    BodyError when the body is not a ping or a batch, or is a lone ping that is not valid (a
+    batch keeps its good pings; a lone ping has nothing to keep, and the body violates the
+    documented schema); ForeignVehicle when a vehicle token carries another vehicle's ping
+    (valid or not).
     """
     quick = _all_valid(body)
     if quick is not None:
         _refuse_foreign((ping.vehicle_id for ping in quick), principal, len(quick))
         return list(enumerate(quick)), []
-    items = parse_body(body)
+    items, batch = parse_body(body)
     _refuse_foreign(
         (item.get("vehicle_id") for item in items if isinstance(item, dict)), principal, len(items)
     )
@@ -182,6 +185,8 @@ def read_pings(body: bytes, principal: Principal) -> tuple[list[tuple[int, Ping]
             pings.append((index, Ping.model_validate(item)))
         except ValidationError as error:
             rejected.append(Rejected(index, _describe(error)))
+    if rejected and not batch:
+        raise BodyError(f"not a valid ping: {rejected[0].error}")
     return pings, rejected
 
 

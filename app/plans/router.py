@@ -11,6 +11,7 @@ from datetime import UTC, datetime
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, HTTPException, Path, Query, Request, Response
+from pydantic import BeforeValidator
 
 from app.auth import AuthDep, Principal
 from app.core.config import Settings
@@ -28,6 +29,7 @@ from app.plans.service import (
 )
 from contract.errors import NO_VALID_PLAN
 from contract.plans import PlanOut
+from contract.values import time_text
 from contract.vehicles import VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["plans"])
@@ -101,7 +103,8 @@ async def _serve_latest(
     if lanes is None:
         raise HTTPException(404, f"unknown corridor {corridor_id}")
     if lane is not None and not 1 <= lane <= lanes:
-        raise HTTPException(422, f"lane must be 1-{lanes} on {corridor_id}, got {lane}")
+        # A lane the corridor does not have has no plan: not found, as an unknown corridor.
+        raise HTTPException(404, f"no lane {lane} on {corridor_id} (lanes 1-{lanes})")
     settings: Settings = request.app.state.settings
     if plan_id is None:
         return service_unavailable(
@@ -170,8 +173,12 @@ async def get_plan_history(
     principal: AuthDep,
     session: SessionDep,
     corridor: Annotated[str | None, Query(description="corridor id (all when omitted)")] = None,
-    since: Annotated[datetime | None, Query(description="runs started at or after")] = None,
-    until: Annotated[datetime | None, Query(description="runs started before")] = None,
+    since: Annotated[
+        datetime | None, BeforeValidator(time_text), Query(description="runs started at or after")
+    ] = None,
+    until: Annotated[
+        datetime | None, BeforeValidator(time_text), Query(description="runs started before")
+    ] = None,
     status: Annotated[Literal["published", "skipped", "failed"] | None, Query()] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
 ) -> PlanHistoryOut:

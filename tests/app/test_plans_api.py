@@ -161,7 +161,7 @@ def test_bad_queries_say_what_was_wrong(served: Served) -> None:
     assert unknown.json() == {"detail": "unknown corridor I-40-EB"}
     bad_lane = served.get(LATEST, corridor="I-24-WB", lane=5)
     assert bad_lane.status_code == 422
-    assert bad_lane.json() == {"detail": "lane must be 1-4 on I-24-WB, got 5"}
+    assert bad_lane.json() == {"detail": "no lane 5 on I-24-WB (lanes 1-4)"}
 
 
 def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None:
@@ -281,4 +281,4 @@ def test_a_car_asks_for_the_lane_of_the_config_it_runs(served: Served) -> None:
     assert [lane["lane"] for lane in own.json()["lanes"]] == [2]
     assert [lane["lane"] for lane in asked.json()["lanes"]] == [3]
     assert asked.headers["ETag"] != own.headers["ETag"]
-    assert served.get(path, role="vehicle", lane=9).status_code == 422
+    assert served.get(path, role="vehicle", lane=9).status_code == 404

@@ -1,13 +1,17 @@
-"""Schemathesis over the whole OpenAPI, with a valid token and without one.
+"""Schemathesis over the whole OpenAPI with vehicle, operator and admin tokens and without one.
 
 Every operation gets generated valid and invalid requests (examples, coverage of boundaries and
-fuzzing). Checks: no 5xx, every status code documented, every body in its documented shape
-(errors: `{"detail": ...}`). The run's seed is fixed so CI is repeatable; run the same command
+fuzzing) and every default check: no 5xx, every status code and header documented, every body
+in its documented shape (errors: `{"detail": ...}`), schema-violating requests refused and
+schema-valid ones accepted (two exceptions, stated in schemathesis.toml beside this file).
+Timestamps are drawn from the last hour (schemathesis_hooks.py): the API's window around now
+cannot be said in JSON Schema. The run's seed is fixed so CI is repeatable; run the same command
 without `--seed` for fresh cases (see docs/operations.md).
 """
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -24,14 +28,7 @@ from tests.planner.facts import inrix_snapshot, standing_slowdown
 from tests.support.servers import live_server
 from tests.support.tokens import issue
 
-CHECKS = ",".join(
-    (
-        "not_a_server_error",
-        "status_code_conformance",
-        "content_type_conformance",
-        "response_schema_conformance",
-    )
-)
+REPO = Path(__file__).resolve().parents[2]
 SEED = "20261123"
 SECONDS_PER_RUN = "40"
 
@@ -57,10 +54,10 @@ def api_with_a_plan(seeded_database_url: str, seeded_engine: Engine) -> Iterator
 def fuzz(base: str, workdir: Path, *headers: str) -> subprocess.CompletedProcess[str]:
     command = [
         str(Path(sys.executable).parent / "schemathesis"),
+        "--config-file",
+        str(Path(__file__).with_name("schemathesis.toml")),
         "run",
         f"{base}/openapi.json",
-        "--checks",
-        CHECKS,
         "--phases",
         "examples,coverage,fuzzing",
         "--max-time",
@@ -74,8 +71,13 @@ def fuzz(base: str, workdir: Path, *headers: str) -> subprocess.CompletedProcess
         "--no-color",
         *[part for header in headers for part in ("-H", header)],
     ]
+    env = {
+        **os.environ,
+        "SCHEMATHESIS_HOOKS": "tests.security.schemathesis_hooks",
+        "PYTHONPATH": str(REPO),
+    }
     return subprocess.run(
-        command, cwd=workdir, capture_output=True, text=True, timeout=600, check=False
+        command, cwd=workdir, env=env, capture_output=True, text=True, timeout=600, check=False
     )
 
 
@@ -89,13 +91,14 @@ def cases_passed(report: str) -> int:
 
 
 @pytest.mark.slow
-def test_fuzzing_with_an_admin_token_finds_no_server_error_and_no_shape_violation(
-    api_with_a_plan: str, seeded_engine: Engine, tmp_path: Path
+@pytest.mark.parametrize("role", ["vehicle", "operator", "admin"])
+def test_fuzzing_with_a_token_passes_every_default_check(
+    api_with_a_plan: str, seeded_engine: Engine, tmp_path: Path, role: str
 ) -> None:
-    token = issue(seeded_engine, "admin")
+    token = issue(seeded_engine, role, "SF-001" if role == "vehicle" else None)  # type: ignore[arg-type]
     result = fuzz(api_with_a_plan, tmp_path, f"Authorization: Bearer {token}")
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
-    assert cases_passed(result.stdout) >= 500
+    assert cases_passed(result.stdout) >= 200
 
 
 @pytest.mark.slow
@@ -104,5 +107,5 @@ def test_fuzzing_without_a_token_is_only_ever_refused_in_the_documented_shape(
 ) -> None:
     result = fuzz(api_with_a_plan, tmp_path)
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
-    assert cases_passed(result.stdout) >= 500
+    assert cases_passed(result.stdout) >= 200
     assert "returned only 401/403 responses" in result.stdout
