@@ -52,6 +52,8 @@ class _Connection:
     async def post(self, head: bytes, body: bytes) -> int:
         self.writer.write(head + str(len(body)).encode() + b"\r\n\r\n" + body)
         status_line = await self.reader.readline()
+        if not status_line:
+            raise ConnectionResetError("the server closed this keep-alive connection")
         length = 0
         while True:
             line = await self.reader.readline()
@@ -91,7 +93,11 @@ async def constant_rate(
     async def one(i: int, due: float) -> None:
         nonlocal errors
         connection = idle.pop() if idle else await _connect(host, port)
-        status = await connection.post(head, body(i))
+        try:
+            status = await connection.post(head, body(i))
+        except ConnectionError:  # closed while idle (keep-alive timeout): never read, resend
+            connection = await _connect(host, port)
+            status = await connection.post(head, body(i))
         latencies.append(time.perf_counter() - due)
         if status >= 300:
             errors += 1

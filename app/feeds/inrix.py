@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator
 
 from contract.units import MPS_PER_MPH
-from contract.values import StorableText, plausible_time, real, time_text
+from contract.values import StorableText, json_number, plausible_time, real, time_text
 
 S_PER_MINUTE = 60.0
 
@@ -44,8 +44,11 @@ class InrixSegment(BaseModel):
     travel_time_minutes: float | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
     score: int | None = Field(None, ge=0, le=100)
     c_value: float | None = Field(None, alias="c-Value", ge=0, le=100)
-    segment_closed: bool = Field(False, alias="segmentClosed")
+    segment_closed: StrictBool = Field(False, alias="segmentClosed")
 
+    _numbers = field_validator(
+        "speed", "average", "reference", "travel_time_minutes", "score", "c_value", mode="before"
+    )(json_number)
     _real = field_validator("speed", "average", "reference", "travel_time_minutes", "c_value")(real)
 
 
