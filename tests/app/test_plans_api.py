@@ -160,7 +160,7 @@ def test_bad_queries_say_what_was_wrong(served: Served) -> None:
     assert unknown.status_code == 404
     assert unknown.json() == {"detail": "unknown corridor I-40-EB"}
     bad_lane = served.get(LATEST, corridor="I-24-WB", lane=5)
-    assert bad_lane.status_code == 422
+    assert bad_lane.status_code == 404  # no plan of a lane the corridor lacks
     assert bad_lane.json() == {"detail": "no lane 5 on I-24-WB (lanes 1-4)"}
 
 
