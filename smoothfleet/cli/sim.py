@@ -59,6 +59,18 @@ console = Console(width=max(Console().width, 160))
 DEFAULT_SCENARIOS = tuple(SCENARIOS)
 
 
+def progress_bar() -> Progress:
+    """The bar every long `sim` command shows: what runs, how far, how long."""
+    return Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+    )
+
+
 @click.group("sim")
 def sim() -> None:
     """Simulate platoons on real I-24 drives: evaluate planners x controllers."""
@@ -265,14 +277,7 @@ def evaluate_command(
         raise click.ClickException(str(error)) from None
     cases = scenario_cases(chosen, drives, recorded)
     optimum = load_optimum(optimum_csv) if optimum_csv is not None else {}
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
+    with progress_bar() as progress:
         task = progress.add_task("simulating", total=len(cases))
 
         def advance(label: str) -> None:
@@ -394,14 +399,7 @@ def select_command(
     rows: list[dict[str, Any]] = []
     for window in windows or (1500.0, 4000.0):
         params = {**RECOMMENDED_PLANNER_PARAMS, "window_m": window}
-        with Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TimeElapsedColumn(),
-            console=console,
-            transient=True,
-        ) as progress:
+        with progress_bar() as progress:
             task = progress.add_task(f"window {window:.0f} m", total=len(cases))
 
             def advance(label: str, task: TaskID = task) -> None:
@@ -633,14 +631,7 @@ def train_command(
         )
     except (DriveError, ValueError) as error:
         raise click.ClickException(str(error)) from None
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
+    with progress_bar() as progress:
         tasks: dict[str, TaskID] = {}
 
         def advance(stage: str, done: int, total: int) -> None:
@@ -756,14 +747,7 @@ def optimum_command(
     bounds = GapBounds()
     cache = out_dir / "optimum"
     rows = []
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
+    with progress_bar() as progress:
         task = progress.add_task("optimising", total=len(drives))
         for drive in drives:
             progress.update(task, description=drive.name[:60])
