@@ -243,7 +243,8 @@ def test_saved_runs_recompute_the_kpis(shared_dir: Path, tmp_path: Path) -> None
     ]
     for entry, result in zip(runs, evaluation.results, strict=True):
         table = pd.read_parquet(tmp_path / "runs" / entry["file"])
-        platoon = table[table["vehicle"] <= 25]
+        # the platoon's own vehicles come first; cars that merged in are numbered after them
+        platoon = table[table["vehicle"] < len(result.final_position_m)]
         wide = platoon.pivot(index="time_s", columns="vehicle", values="position_m")
         speed = platoon.pivot(index="time_s", columns="vehicle", values="speed_mps")
         # fuel over the followers and throughput over everyone, from the file alone
@@ -254,5 +255,6 @@ def test_saved_runs_recompute_the_kpis(shared_dir: Path, tmp_path: Path) -> None
         )
         assert (platoon["role"] == "av").sum() == result.avs * len(wide)
     two = evaluation.results[2]
-    # two AVs in 25 followers: the first right behind the leader, the second 12 places back
-    assert two.av_columns == (1, 13)
+    # 26 followers (24 humans + the largest AV count), two AVs: the first right behind the
+    # leader, the second 13 places back
+    assert two.av_columns == (1, 14)
