@@ -97,3 +97,26 @@ def test_the_agents_check_estimates_the_leaders_braking() -> None:
     verdicts = [check.needs_hand_back(0.1 * k, reading(28.0 - 0.8 * k)) for k in range(1, 6)]
     assert verdicts[-1]
     assert not verdicts[0]
+
+
+def test_a_car_cutting_in_is_a_new_leader_not_a_braking_one() -> None:
+    check = StoppingCheck("accel")
+
+    def reading(gap: float, lead_speed: float) -> CarReading:
+        return CarReading(
+            speed_mps=25.0,
+            acc_available=True,
+            acc_engaged=True,
+            acc_speed_setting_mph=56.0,
+            acc_gap_setting=2,
+            lead_present=True,
+            lead_distance_m=gap,
+            lead_rel_speed_mps=lead_speed - 25.0,
+        )
+
+    assert not check.needs_hand_back(0.0, reading(80.0, 25.0))
+    # a car cuts in 40 m ahead at 22 m/s: a 40 m gap jump and a 3 m/s speed step in 0.1 s,
+    # which read as braking at 30 m/s^2 would hand back; it needs 0.12 m/s^2
+    assert not any(
+        check.needs_hand_back(0.1 * k, reading(40.0 - 0.3 * k, 22.0)) for k in range(1, 20)
+    )
