@@ -16,6 +16,20 @@ from vehicle_agent.stopping import (
 )
 
 
+def radar(speed: float, gap: float | None, lead_speed: float | None) -> CarReading:
+    """An engaged car's reading with the leader its radar reports (None: only flagged)."""
+    return CarReading(
+        speed_mps=speed,
+        acc_available=True,
+        acc_engaged=True,
+        acc_speed_setting_mph=60.0,
+        acc_gap_setting=2,
+        lead_present=True,
+        lead_distance_m=gap,
+        lead_rel_speed_mps=None if lead_speed is None else lead_speed - speed,
+    )
+
+
 def test_authority_per_actuation() -> None:
     # acceleration requests are limited to -3 m/s^2; a stock ACC brakes 3.5 m/s^2 (ISO 15622)
     assert braking_authority_mps2("accel") == 3.0
@@ -43,26 +57,8 @@ def test_the_crash_of_issue_12_hands_back_at_once() -> None:
 
 
 def test_from_a_car_reading() -> None:
-    closing = CarReading(
-        speed_mps=28.0,
-        acc_available=True,
-        acc_engaged=True,
-        acc_speed_setting_mph=63.0,
-        acc_gap_setting=3,
-        lead_present=True,
-        lead_distance_m=100.0,
-        lead_rel_speed_mps=-28.0,
-    )
-    assert StoppingCheck("accel").needs_hand_back(0.0, closing)
-    flag_only = CarReading(
-        speed_mps=28.0,
-        acc_available=True,
-        acc_engaged=True,
-        acc_speed_setting_mph=63.0,
-        acc_gap_setting=3,
-        lead_present=True,
-    )
-    assert not StoppingCheck("acc").needs_hand_back(0.0, flag_only)
+    assert StoppingCheck("accel").needs_hand_back(0.0, radar(28.0, 100.0, 0.0))
+    assert not StoppingCheck("acc").needs_hand_back(0.0, radar(28.0, None, None))
     assert not StoppingCheck("accel").needs_hand_back(0.0, None)
 
 
@@ -81,16 +77,7 @@ def test_the_agents_check_estimates_the_leaders_braking() -> None:
     check = StoppingCheck("accel")
 
     def reading(lead_speed: float) -> CarReading:
-        return CarReading(
-            speed_mps=28.0,
-            acc_available=True,
-            acc_engaged=True,
-            acc_speed_setting_mph=63.0,
-            acc_gap_setting=1,
-            lead_present=True,
-            lead_distance_m=37.6,
-            lead_rel_speed_mps=lead_speed - 28.0,
-        )
+        return radar(28.0, 37.6, lead_speed)
 
     # steady, then the leader slows 0.8 m/s every 0.1 s: handed back within a few steps
     assert not check.needs_hand_back(0.0, reading(28.0))
@@ -103,16 +90,7 @@ def test_a_car_cutting_in_is_a_new_leader_not_a_braking_one() -> None:
     check = StoppingCheck("accel")
 
     def reading(gap: float, lead_speed: float) -> CarReading:
-        return CarReading(
-            speed_mps=25.0,
-            acc_available=True,
-            acc_engaged=True,
-            acc_speed_setting_mph=56.0,
-            acc_gap_setting=2,
-            lead_present=True,
-            lead_distance_m=gap,
-            lead_rel_speed_mps=lead_speed - 25.0,
-        )
+        return radar(25.0, gap, lead_speed)
 
     assert not check.needs_hand_back(0.0, reading(80.0, 25.0))
     # a car cuts in 40 m ahead at 22 m/s: a 40 m gap jump and a 3 m/s speed step in 0.1 s,
