@@ -8,6 +8,11 @@ stored token through timing; the stored hash is still compared with `hmac.compar
 Revocation: setting `api_token.revoked_at` takes effect in every server process within
 `token_cache_ttl_s` (default 5 s), the life of a cache entry; unknown tokens are cached as
 refused for the same time, so guessing costs no database round trip per request.
+
+An entry in use is looked up again in the background during the last `REFRESH_AHEAD_SHARE` of
+its life, so a car's requests never wait for their token's lookup (a wait that every car met
+every few seconds, and that held every in-flight request of a shared token at once); an entry
+is never used past its life, so revocation still takes effect within the TTL.
 """
 
 from __future__ import annotations
@@ -45,6 +50,8 @@ LOOKUP_SQL = text(
 
 # Bounds the memory a flood of random tokens can take; the cache is simply emptied when full.
 MAX_CACHED_TOKENS = 10_000
+# The last share of an entry's life in which a request using it starts its background lookup.
+REFRESH_AHEAD_SHARE = 0.4
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,16 +88,41 @@ class TokenCache:
         self._clock = clock
         self._entries: dict[str, tuple[float, Principal | None]] = {}
         self._pending: dict[str, asyncio.Future[Principal | None]] = {}
+        self._refreshes: set[asyncio.Task[Principal | None]] = set()
 
     async def principal(self, token: str) -> Principal | None:
         """The principal of a presented token, or None if it is unknown or revoked."""
         token_hash = hash_token(token)
         entry = self._entries.get(token_hash)
-        if entry is not None and entry[0] > self._clock():
+        now = self._clock()
+        if entry is not None and entry[0] > now:
+            if entry[0] - now < self._ttl_s * REFRESH_AHEAD_SHARE:
+                self._refresh_in_background(token_hash, entry)
             return entry[1]
         pending = self._pending.get(token_hash)
         if pending is not None:
             return await asyncio.shield(pending)
+        return await self._look_up_and_keep(token_hash, entry)
+
+    def _refresh_in_background(
+        self, token_hash: str, entry: tuple[float, Principal | None]
+    ) -> None:
+        if token_hash in self._pending:
+            return
+        task = asyncio.create_task(self._look_up_and_keep(token_hash, entry))
+        self._refreshes.add(task)
+        task.add_done_callback(self._refresh_done)
+
+    def _refresh_done(self, task: asyncio.Task[Principal | None]) -> None:
+        self._refreshes.discard(task)
+        if not task.cancelled():
+            # A failed refresh changes nothing: the entry lives out its TTL, and the first
+            # request after that looks the token up itself (and meets the error).
+            task.exception()
+
+    async def _look_up_and_keep(
+        self, token_hash: str, entry: tuple[float, Principal | None] | None
+    ) -> Principal | None:
         future: asyncio.Future[Principal | None] = asyncio.get_running_loop().create_future()
         self._pending[token_hash] = future
         try:

@@ -4,7 +4,10 @@ Every ping needs its vehicle's corridor (lanes, map-matching geometry); asking t
 ping would double the work of the hot path, so the directory is loaded once and refreshed every
 `roster_cache_ttl_s`. A vehicle added to the roster is seen at once: an unknown vehicle_id makes
 the next request reload the directory (at most once per `MIN_RELOAD_INTERVAL_S`, so a stream of
-bad ids cannot turn into a stream of queries).
+bad ids cannot turn into a stream of queries). In the last `REFRESH_AHEAD_SHARE` of a snapshot's
+life the next request starts its reload in the background and goes on with the snapshot, so
+under traffic no request waits for a reload (every request in flight used to wait for one
+every `roster_cache_ttl_s`: a stall in the ingest tail, docs/performance.md).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ from sqlalchemy.ext.asyncio import AsyncEngine
 from contract.corridor import CorridorGeometry
 
 MIN_RELOAD_INTERVAL_S = 2.0
+REFRESH_AHEAD_SHARE = 0.2
 
 VEHICLES_SQL = text("SELECT vehicle_id, corridor_id FROM dim_vehicle")
 CORRIDORS_SQL = text("SELECT corridor_id, lanes FROM dim_corridor")
@@ -81,6 +85,7 @@ class FleetDirectoryCache:
         self._directory: FleetDirectory | None = None
         self._loaded_at = -float("inf")
         self._lock = asyncio.Lock()
+        self._refresh: asyncio.Task[FleetDirectory] | None = None
 
     async def directory(
         self, vehicle_ids: Collection[str] = (), *, reload: bool = False
@@ -88,17 +93,31 @@ class FleetDirectoryCache:
         """A fresh enough directory that knows `vehicle_ids` if the roster does."""
         current = self._directory
         now = self._clock()
-        if not reload and current is not None and now - self._loaded_at < self._ttl_s:
+        age = now - self._loaded_at
+        if not reload and current is not None and age < self._ttl_s:
             unknown = any(v not in current.vehicle_corridor for v in vehicle_ids)
-            if not unknown or now - self._loaded_at < MIN_RELOAD_INTERVAL_S:
+            if not unknown or age < MIN_RELOAD_INTERVAL_S:
+                if age > self._ttl_s * (1 - REFRESH_AHEAD_SHARE) and self._refresh is None:
+                    self._refresh = asyncio.create_task(self._reload(now))
+                    self._refresh.add_done_callback(self._refresh_done)
                 return current
+        return await self._reload(now)
+
+    async def _reload(self, requested_at: float) -> FleetDirectory:
         async with self._lock:
             # Another request may have reloaded while this one waited for the lock.
-            if self._directory is not None and self._loaded_at >= now:
+            if self._directory is not None and self._loaded_at >= requested_at:
                 return self._directory
             self._directory = await self._load()
             self._loaded_at = self._clock()
             return self._directory
+
+    def _refresh_done(self, task: asyncio.Task[FleetDirectory]) -> None:
+        self._refresh = None
+        if not task.cancelled():
+            # A failed background reload changes nothing: the snapshot lives out its TTL and
+            # the first request after that reloads itself (and meets the error).
+            task.exception()
 
     async def _load(self) -> FleetDirectory:
         async with self._engine.connect() as connection:

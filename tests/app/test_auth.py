@@ -135,3 +135,39 @@ def test_every_api_path_needs_a_token(seeded_database_url: str, path: str, metho
         answer = client.request(method, path, json={})
     assert answer.status_code == 401
     assert answer.headers["WWW-Authenticate"] == "Bearer"
+
+
+def test_a_token_in_use_is_looked_up_again_before_its_entry_expires_without_a_wait(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Near the end of an entry's life a request gets the entry at once and starts the lookup
+    in the background; the lookup's answer (here: revoked) serves the requests after it."""
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    clock = Clock()
+
+    async def scenario() -> tuple[bool, bool, bool]:
+        engine = make_async_engine(seeded_database_url)
+        release = asyncio.Event()
+        try:
+            cache = TokenCache(engine, ttl_s=5, clock=clock)
+            original = cache._lookup
+            await cache.principal(token)  # first lookup at t = 0: entry until t = 5
+            revoke(seeded_engine)
+
+            async def held(token_hash: str) -> Principal | None:
+                await release.wait()
+                return await original(token_hash)
+
+            cache._lookup = held  # type: ignore[method-assign]
+            clock.now = 4.0  # in the last 40 % of the entry's life
+            answered_at_once = await asyncio.wait_for(cache.principal(token), 1) is not None
+            refreshing = bool(cache._refreshes)
+            release.set()
+            while cache._refreshes:
+                await asyncio.sleep(0.01)
+            clock.now = 4.5  # before the first entry would have expired
+            return answered_at_once, refreshing, await cache.principal(token) is None
+        finally:
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) == (True, True, True)
