@@ -16,7 +16,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator
 
 from contract.units import MPS_PER_MPH
-from contract.values import StorableText, json_number, plausible_time, real, time_text
+from contract.values import JsonFloat, StorableText, json_number, plausible_time, real, time_text
 
 S_PER_MINUTE = 60.0
 
@@ -38,17 +38,15 @@ class InrixSegment(BaseModel):
 
     code: StorableText = Field(min_length=1, max_length=64)
     type: StorableText | None = None
-    speed: float | None = Field(None, ge=0, le=250)
-    average: float | None = Field(None, ge=0, le=250)
-    reference: float | None = Field(None, ge=0, le=250)
-    travel_time_minutes: float | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
+    speed: JsonFloat | None = Field(None, ge=0, le=250)
+    average: JsonFloat | None = Field(None, ge=0, le=250)
+    reference: JsonFloat | None = Field(None, ge=0, le=250)
+    travel_time_minutes: JsonFloat | None = Field(None, alias="travelTimeMinutes", ge=0, le=1e6)
     score: int | None = Field(None, ge=0, le=100)
-    c_value: float | None = Field(None, alias="c-Value", ge=0, le=100)
+    c_value: JsonFloat | None = Field(None, alias="c-Value", ge=0, le=100)
     segment_closed: StrictBool = Field(False, alias="segmentClosed")
 
-    _numbers = field_validator(
-        "speed", "average", "reference", "travel_time_minutes", "score", "c_value", mode="before"
-    )(json_number)
+    _integers = field_validator("score", mode="before")(json_number)
     _real = field_validator("speed", "average", "reference", "travel_time_minutes", "c_value")(real)
 
 
