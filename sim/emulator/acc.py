@@ -92,6 +92,38 @@ def stock_acc_accel(
     return clipped
 
 
+def stock_acc_accel_one(
+    speed_mps: float,
+    set_speed_mps: float,
+    time_gap_s: float,
+    lead_distance_m: float | None,
+    lead_speed_mps: float | None,
+    params: StockAccParams,
+) -> float:
+    """`stock_acc_accel` for one car in plain floats (None: no leader).
+
+    The emulated car evaluates its ACC at every 20 ms sub-step, and the demo runs a hundred of
+    them: numpy's per-call overhead on scalars made this the largest cost of a fleet step
+    (docs/performance.md, Demo fleet). Same equations as the vectorised form (tested equal).
+    """
+    accel = params.speed_gain * (set_speed_mps - speed_mps)
+    if (
+        lead_distance_m is not None
+        and lead_speed_mps is not None
+        and math.isfinite(lead_distance_m)
+        and lead_distance_m <= params.sensor_range_m
+    ):
+        gap_control = params.gap_gain * (
+            lead_distance_m - params.standstill_gap_m - time_gap_s * speed_mps
+        ) + params.rel_speed_gain * (lead_speed_mps - speed_mps)
+        accel = min(accel, gap_control)
+        if lead_speed_mps < speed_mps:
+            margin = max(lead_distance_m - params.standstill_gap_m, 0.5)
+            closing = params.closing_slack_mps2 - (speed_mps - lead_speed_mps) ** 2 / (2.0 * margin)
+            accel = min(accel, closing)
+    return min(max(accel, params.min_accel_mps2), params.max_accel_mps2)
+
+
 class StockAcc:
     """One car's ACC state machine: main switch, engaged, set speed (mph) and gap bars."""
 
@@ -154,15 +186,14 @@ class StockAcc:
         """The acceleration the engaged ACC makes (0 when disengaged: the driver's business)."""
         if not self.engaged or self.set_speed_mph is None:
             return 0.0
-        value = stock_acc_accel(
+        return stock_acc_accel_one(
             speed_mps,
             self.set_speed_mph * MPS_PER_MPH,
             self.params.time_gaps_s[self.gap_setting - 1],
-            math.nan if lead_distance_m is None else lead_distance_m,
-            math.nan if lead_speed_mps is None else lead_speed_mps,
+            lead_distance_m,
+            lead_speed_mps,
             self.params,
         )
-        return float(value)
 
 
 def _bounded(speed_mph: int) -> int:

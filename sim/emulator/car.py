@@ -12,9 +12,11 @@ button board pressing the real switches would; the agent tells its own presses a
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import can
@@ -37,6 +39,41 @@ MAX_SUBSTEP_S = 0.02
 # What the driver's feet do: brake pedal (m/s^2) and gas pedal (m/s^2).
 DRIVER_BRAKE_MPS2 = -2.5
 DRIVER_GAS_MPS2 = 1.0
+# Payloads kept per message for frames whose signals repeat (a counter's cycle, a constant HUD):
+# a hundred emulated cars re-encoding identical frames was a tenth of the demo fleet's step.
+PAYLOADS_PER_MESSAGE = 64
+
+
+@dataclass(frozen=True)
+class Track:
+    """A corridor's vertices in plain floats: one GPS fix costs a bisection, not numpy calls
+    (the emulator makes a fix for every agent tick of every car of the demo fleet)."""
+
+    x_m: list[float]
+    lat: list[float]
+    lon: list[float]
+    heading_deg: list[float]  # of each step between vertices
+
+    def fix(self, x_m: float) -> tuple[float, float, float]:
+        """(lat, lon, heading) at `x_m`, as `CorridorGeometry.position` and `heading_deg` give
+        them (clamped to the ends, linear between vertices)."""
+        step = min(max(bisect.bisect_right(self.x_m, x_m) - 1, 0), len(self.heading_deg) - 1)
+        start, end = self.x_m[step], self.x_m[step + 1]
+        fraction = min(max((x_m - start) / (end - start), 0.0), 1.0)
+        lat = self.lat[step] + fraction * (self.lat[step + 1] - self.lat[step])
+        lon = self.lon[step] + fraction * (self.lon[step + 1] - self.lon[step])
+        return lat, lon, self.heading_deg[step]
+
+
+@lru_cache(maxsize=8)
+def track_of(corridor: CorridorGeometry) -> Track:
+    """The plain-float track of a corridor (shared by every emulated car on it)."""
+    return Track(
+        corridor.x_m.tolist(),
+        corridor.lat.tolist(),
+        corridor.lon.tolist(),
+        corridor.heading_deg(corridor.x_m[:-1]).tolist(),
+    )
 
 
 @dataclass
@@ -88,6 +125,9 @@ class CarEmulator:
         self._frame_ids = {name: self.codec.frame_id(name) for name in self.frames}
         self._next_send = dict.fromkeys(self.frames, start_s)
         self._counters = dict.fromkeys(self.frames, 0)
+        self._payloads: dict[str, dict[tuple[tuple[str, float], ...], bytes]] = {
+            name: {} for name in self.frames
+        }
         self._agent_buttons: frozenset[CruiseButton] = frozenset()
         self._agent_command_s = -math.inf
         self._agent_accel = 0.0
@@ -132,14 +172,13 @@ class CarEmulator:
         """Where the car is, as a GPS receiver would report it (needs a corridor)."""
         if self.corridor is None:
             return None
-        lat, lon = self.corridor.position(self.position_m)
-        heading = self.corridor.heading_deg(self.position_m)
+        lat, lon, heading = track_of(self.corridor).fix(self.position_m)
         return GpsFix(
             time_s=time_s,
-            lat=float(lat),
-            lon=float(lon),
+            lat=lat,
+            lon=lon,
             speed_mps=self.speed_mps,
-            heading_deg=float(heading[0]),
+            heading_deg=heading,
             satellites=12,
             lane=self.lane,
         )
@@ -246,10 +285,21 @@ class CarEmulator:
             self.send_raw(
                 can.Message(
                     arbitration_id=self._frame_ids[name],
-                    data=self.codec.encode(name, signals),
+                    data=self._payload(name, signals),
                     is_extended_id=False,
                 )
             )
+
+    def _payload(self, name: str, signals: dict[str, float]) -> bytes:
+        """The encoded frame, from the message's recent payloads when its signals repeat."""
+        payloads = self._payloads[name]
+        key = tuple(signals.items())
+        data = payloads.get(key)
+        if data is None:
+            if len(payloads) >= PAYLOADS_PER_MESSAGE:
+                payloads.clear()
+            data = payloads[key] = self.codec.encode(name, signals)
+        return data
 
     def send_raw(self, frame: can.Message) -> None:
         """Put any frame on the bus (tests use it for garbage)."""

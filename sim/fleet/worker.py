@@ -21,6 +21,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -118,51 +119,57 @@ class FleetCar:
         return self.agent.car.actuation == "accel"
 
 
-class Worker:
-    """The cars of one spec, stepped together in real time."""
+class Fleet:
+    """The cars of one worker and the traffic they drive in, stepped together in real time.
 
-    def __init__(self, spec: WorkerSpec) -> None:
-        self.spec = spec
-        self.stop = threading.Event()
-        self.http = httpx.Client(base_url=spec.server_url, limits=httpx.Limits(max_connections=16))
-        first = spec.vehicles[0]
-        self.corridor = self._corridor(first)
-        self.lap_m = self.corridor.length_m - 2 * WRAP_MARGIN_M
-        drive = load_drive(Path(spec.drive_path)) if spec.drive_path else synthetic_waves()
-        self.traffic = CorridorTraffic(drive, start_offset_s=spec.traffic_offset_s)
-        starts = np.array([vehicle.position_m for vehicle in spec.vehicles])
-        speeds = self.traffic.speed_mps(self.demo_time_s(), starts)
+    No network here: `server_for` gives each car's agent its server client (None: an agent that
+    never talks to a server, configured by the caller, as bench/fleet_step.py does).
+    """
+
+    def __init__(
+        self,
+        vehicles: list[VehicleSpec],
+        corridor: CorridorGeometry,
+        traffic: CorridorTraffic,
+        *,
+        epoch_unix_s: float,
+        spool_dir: Path,
+        dbc_cache: Path,
+        server_for: Callable[[VehicleSpec], ServerClient | None],
+    ) -> None:
+        self.corridor = corridor
+        self.epoch_unix_s = epoch_unix_s
+        self.lap_m = corridor.length_m - 2 * WRAP_MARGIN_M
+        self.traffic = traffic
+        starts = np.array([vehicle.position_m for vehicle in vehicles])
+        speeds = traffic.speed_mps(self.demo_time_s(), starts)
         self.leaders = TrafficLeaders(
-            self.traffic, starts + START_TIME_GAP_S * speeds + 5.0, self.demo_time_s()
+            traffic, starts + START_TIME_GAP_S * speeds + 5.0, self.demo_time_s()
         )
         self.cars = [
-            self._car(index, vehicle, float(speed))
-            for index, (vehicle, speed) in enumerate(zip(spec.vehicles, speeds, strict=True))
+            self._car(index, vehicle, float(speed), spool_dir, dbc_cache, server_for(vehicle))
+            for index, (vehicle, speed) in enumerate(zip(vehicles, speeds, strict=True))
         ]
         self.steps = 0
         self.engaged_steps = 0
         self.distance_m = 0.0
         self.fuel_g = 0.0
         self.driving_s = 0.0
-        self.late_steps = 0
-        self.control_cpu_s = 0.0
         self.last_step_s = time.monotonic()
 
     def demo_time_s(self) -> float:
         """Seconds since the demo started (the traffic's clock)."""
-        return time.time() - self.spec.epoch_unix_s
+        return time.time() - self.epoch_unix_s
 
-    def _corridor(self, vehicle: VehicleSpec) -> CorridorGeometry:
-        client = ServerClient(self.http, vehicle.vehicle_id, vehicle.token)
-        for _ in range(30):
-            try:
-                return client.corridor(self.spec.corridor_id)
-            except ServerError as error:
-                log.warning("corridor geometry not available yet: %s", error)
-                time.sleep(1.0)
-        raise SystemExit(f"fleet worker: no geometry for corridor {self.spec.corridor_id}")
-
-    def _car(self, index: int, vehicle: VehicleSpec, speed_mps: float) -> FleetCar:
+    def _car(
+        self,
+        index: int,
+        vehicle: VehicleSpec,
+        speed_mps: float,
+        spool_dir: Path,
+        dbc_cache: Path,
+        server: ServerClient | None,
+    ) -> FleetCar:
         car = car_for(vehicle.make, vehicle.model, vehicle.year)
         channel = f"fleet-{vehicle.vehicle_id}"
         car_bus = can.Bus(interface="virtual", channel=channel)
@@ -178,7 +185,7 @@ class Worker:
             corridor=self.corridor,
             lane=vehicle.lane,
             start_s=now,
-            dbc_cache=Path(self.spec.dbc_cache),
+            dbc_cache=dbc_cache,
         )
         emulator.driver_engage(DRIVER_SET_SPEED_MPH)
         agent = Agent(
@@ -187,11 +194,22 @@ class Worker:
             bus=agent_bus,
             clock=clock,
             gps=EmulatorGps(emulator, clock),
-            spool=PingSpool(Path(self.spec.spool_dir) / f"{vehicle.vehicle_id}.sqlite"),
-            server=ServerClient(self.http, vehicle.vehicle_id, vehicle.token),
-            dbc_cache=Path(self.spec.dbc_cache),
+            # Safe against the worker dying, not a power cut of the host: flushing a hundred
+            # spools to one disk every second would block the control loop (vehicle_agent/spool.py).
+            spool=PingSpool(spool_dir / f"{vehicle.vehicle_id}.sqlite", power_safe=False),
+            server=server,
+            dbc_cache=dbc_cache,
         )
         return FleetCar(vehicle, clock, emulator, agent, (car_bus, agent_bus))
+
+    def start(self) -> float:
+        """Bring every car to now in one go (through the time it took to build the fleet)."""
+        start = time.monotonic()
+        for car in self.cars:
+            car.clock.set(start)
+            car.emulator.step(start)
+        self.last_step_s = start
+        return start
 
     def control_step(self) -> None:
         """Advance traffic and cars to now, then every agent's tick and ping."""
@@ -225,18 +243,58 @@ class Worker:
         self.driving_s += dt * len(self.cars)
         self.steps += 1
 
+    def close(self) -> tuple[int, int]:
+        """Hand every car back, upload what is spooled, close the buses; (spooled, uploaded)."""
+        uploaded = spooled = 0
+        for car in self.cars:
+            car.agent.upload()
+            spooled += car.agent.stats.pings_spooled
+            uploaded += car.agent.stats.pings_uploaded
+            car.agent.shutdown()
+            for bus in car.buses:
+                bus.shutdown()
+        return spooled, uploaded
+
+
+class Worker:
+    """The cars of one spec, stepped together in real time, talking to the server."""
+
+    def __init__(self, spec: WorkerSpec) -> None:
+        self.spec = spec
+        self.stop = threading.Event()
+        self.http = httpx.Client(base_url=spec.server_url, limits=httpx.Limits(max_connections=16))
+        drive = load_drive(Path(spec.drive_path)) if spec.drive_path else synthetic_waves()
+        self.fleet = Fleet(
+            spec.vehicles,
+            self._corridor(spec.vehicles[0]),
+            CorridorTraffic(drive, start_offset_s=spec.traffic_offset_s),
+            epoch_unix_s=spec.epoch_unix_s,
+            spool_dir=Path(spec.spool_dir),
+            dbc_cache=Path(spec.dbc_cache),
+            server_for=lambda vehicle: ServerClient(self.http, vehicle.vehicle_id, vehicle.token),
+        )
+        self.late_steps = 0
+        self.control_cpu_s = 0.0
+
+    def _corridor(self, vehicle: VehicleSpec) -> CorridorGeometry:
+        client = ServerClient(self.http, vehicle.vehicle_id, vehicle.token)
+        for _ in range(30):
+            try:
+                return client.corridor(self.spec.corridor_id)
+            except ServerError as error:
+                log.warning("corridor geometry not available yet: %s", error)
+                time.sleep(1.0)
+        raise SystemExit(f"fleet worker: no geometry for corridor {self.spec.corridor_id}")
+
     def control_loop(self) -> None:
         """One control step every CONTROL_PERIOD_S until stopped (late steps are counted)."""
-        start = time.monotonic()
-        for car in self.cars:  # through the time it took to build the fleet, in one go
-            car.clock.set(start)
-            car.emulator.step(start)
-        self.last_step_s = start
+        fleet = self.fleet
+        start = fleet.start()
         next_step = time.monotonic()
-        window = (self.steps, self.late_steps, start)
+        window = (fleet.steps, self.late_steps, start)
         while not self.stop.is_set():
             cpu_before = time.thread_time()
-            self.control_step()
+            fleet.control_step()
             self.control_cpu_s += time.thread_time() - cpu_before
             next_step += CONTROL_PERIOD_S
             pause = next_step - time.monotonic()
@@ -245,7 +303,7 @@ class Worker:
             else:
                 self.late_steps += 1
                 next_step = time.monotonic()
-            if self.steps - window[0] >= PROGRESS_STEPS:
+            if fleet.steps - window[0] >= PROGRESS_STEPS:
                 window = self._write_progress(window)
 
     def _write_progress(self, window: tuple[int, int, float]) -> tuple[int, int, float]:
@@ -254,14 +312,14 @@ class Worker:
         if self.spec.progress_path is not None:
             path = Path(self.spec.progress_path)
             progress = {
-                "window_steps": self.steps - window[0],
+                "window_steps": self.fleet.steps - window[0],
                 "window_late_steps": self.late_steps - window[1],
                 "window_wall_s": now - window[2],
             }
             partial = path.with_suffix(".partial")
             partial.write_text(json.dumps(progress))
             partial.replace(path)  # readers never see half a file
-        return self.steps, self.late_steps, now
+        return self.fleet.steps, self.late_steps, now
 
     def network_loop(self, cars: list[FleetCar]) -> None:
         """The agents' blocking HTTP calls, each when due."""
@@ -280,7 +338,7 @@ class Worker:
             threads.append(
                 threading.Thread(
                     target=self.network_loop,
-                    args=(self.cars[part::NETWORK_THREADS],),
+                    args=(self.fleet.cars[part::NETWORK_THREADS],),
                     name=f"network-{part}",
                     daemon=True,
                 )
@@ -293,28 +351,23 @@ class Worker:
         return self.finish()
 
     def finish(self) -> dict[str, Any]:
-        """Hand every car back, upload what is spooled, close the buses."""
-        uploaded = spooled = 0
-        for car in self.cars:
-            car.agent.upload()
-            spooled += car.agent.stats.pings_spooled
-            uploaded += car.agent.stats.pings_uploaded
-            car.agent.shutdown()
-            for bus in car.buses:
-                bus.shutdown()
+        """Hand every car back, upload what is spooled, close the buses; the summary."""
+        fleet = self.fleet
+        spooled, uploaded = fleet.close()
         self.http.close()
+        cars = max(1, len(fleet.cars))
         return {
-            "vehicles": len(self.cars),
-            "control_steps": self.steps,
+            "vehicles": len(fleet.cars),
+            "control_steps": fleet.steps,
             "late_steps": self.late_steps,
             "control_cpu_s": self.control_cpu_s,
-            "control_wall_s": self.driving_s / max(1, len(self.cars)),
-            "engaged_share": self.engaged_steps / max(1, self.steps * len(self.cars)),
+            "control_wall_s": fleet.driving_s / cars,
+            "engaged_share": fleet.engaged_steps / max(1, fleet.steps * cars),
             "pings_spooled": spooled,
             "pings_uploaded": uploaded,
-            "distance_m": self.distance_m,
-            "driving_s": self.driving_s,
-            "fuel_g": self.fuel_g,
+            "distance_m": fleet.distance_m,
+            "driving_s": fleet.driving_s,
+            "fuel_g": fleet.fuel_g,
         }
 
 

@@ -9,9 +9,12 @@ from pathlib import Path
 
 import can
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from sim.emulator.car import CarEmulator
+from sim.emulator.car import CarEmulator, track_of
 from sim.emulator.leaders import ConstantSpeedLeader, SpeedProfileLeader
+from sim.emulator.rig import seed_geometry
 from vehicle_agent.cars import CruiseButton, car_for
 from vehicle_agent.codec import codec_for
 from vehicle_agent.state import CarStateReader
@@ -174,3 +177,13 @@ def test_speed_profile_leader_integrates_its_speeds() -> None:
     assert leader.state(10.0) == pytest.approx((250.0, 20.0))
     assert leader.state(5.0) == pytest.approx((100.0 + 5 * 12.5, 15.0))
     assert leader.state(25.0) == pytest.approx((250.0 + 200.0 + 100.0, 20.0))
+
+
+@given(x_m=st.floats(-500.0, 20_000.0))
+def test_the_gps_fix_is_the_corridors_own_position_and_heading(x_m: float) -> None:
+    corridor = seed_geometry()
+    lat, lon, heading = track_of(corridor).fix(x_m)
+    expected_lat, expected_lon = corridor.position(x_m)
+    assert lat == pytest.approx(float(expected_lat), abs=1e-9)
+    assert lon == pytest.approx(float(expected_lon), abs=1e-9)
+    assert heading == float(corridor.heading_deg(x_m)[0])

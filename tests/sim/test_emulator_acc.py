@@ -6,8 +6,16 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from sim.emulator.acc import SimulatedAccCar, StockAcc, StockAccParams, stock_acc_accel
+from sim.emulator.acc import (
+    SimulatedAccCar,
+    StockAcc,
+    StockAccParams,
+    stock_acc_accel,
+    stock_acc_accel_one,
+)
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers import AccSetPoint
 
@@ -46,6 +54,28 @@ def test_the_model_is_vectorised_over_cars() -> None:
         PARAMS,
     )
     np.testing.assert_allclose(accel, [0.9408, -0.92])
+
+
+@given(
+    speed=st.floats(0.0, 40.0),
+    set_speed=st.floats(8.0, 40.0),
+    time_gap=st.sampled_from(PARAMS.time_gaps_s),
+    lead=st.one_of(st.none(), st.tuples(st.floats(0.0, 150.0), st.floats(0.0, 40.0))),
+)
+def test_the_one_car_form_equals_the_vectorised_one(
+    speed: float, set_speed: float, time_gap: float, lead: tuple[float, float] | None
+) -> None:
+    gap, lead_speed = lead if lead is not None else (None, None)
+    expected = stock_acc_accel(
+        speed,
+        set_speed,
+        time_gap,
+        math.nan if gap is None else gap,
+        math.nan if lead_speed is None else lead_speed,
+        PARAMS,
+    )
+    one = stock_acc_accel_one(speed, set_speed, time_gap, gap, lead_speed, PARAMS)
+    assert one == pytest.approx(float(expected), abs=1e-12)
 
 
 def press(acc: StockAcc, button: CruiseButton, start: float, length: float) -> None:

@@ -30,9 +30,14 @@ def test_the_spool_is_bounded_and_counts_what_it_dropped(tmp_path: Path) -> None
         PingSpool(tmp_path / "other.sqlite", max_rows=0)
 
 
-def test_a_crashed_agent_loses_nothing_written(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("power_safe", "synchronous"), [(True, 2), (False, 1)])
+def test_a_crashed_agent_loses_nothing_written(
+    tmp_path: Path, power_safe: bool, synchronous: int
+) -> None:
     path = tmp_path / "spool.sqlite"
-    crashed = PingSpool(path)
+    crashed = PingSpool(path, power_safe=power_safe)
+    # FULL (2): on disk through a power cut; NORMAL (1): through the process dying only.
+    assert crashed._db.execute("PRAGMA synchronous").fetchone()[0] == synchronous
     for index in range(3):
         crashed.add({"n": index})
     # Never closed: a second process opens the same file as the restarted agent would.
@@ -66,3 +71,4 @@ def test_the_backlog_matches_the_file_through_drops_removals_and_a_restart(
     assert smaller.backlog() == 1
     assert [ping["n"] for _, ping in smaller.oldest(10)] == [7]
     assert smaller.counter("dropped") == 5
+
