@@ -14,6 +14,10 @@ process. In alternating slices (so the load of other work on the machine falls o
    of the very rows that slice stored (truncated and copied back in one transaction).
 Every ping is unique (100 vehicles on the seed corridor, one ping per vehicle per second).
 Figures: pings/s, p50, p99, p99.9 and max latency in ms, non-2xx answers.
+
+`--probe-stalls` starts both servers with bench/stall_probe on their PYTHONPATH and prints, per
+server, the garbage collections over 2 ms and the event-loop callbacks over 10 ms that happened
+while its load ran: what held requests that were otherwise ready.
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ from bench.load import Body, Latencies, constant_rate, saturate
 from contract.corridor import CorridorGeometry
 
 REPO = Path(__file__).resolve().parents[1]
+STALL_PROBE = Path(__file__).resolve().parent / "stall_probe"
 VEHICLES = 100
 SLICE_PINGS = 10**6
 
@@ -170,6 +175,33 @@ def corridor_positions(url: str) -> list[tuple[float, float, float]]:
     return [(float(a), float(o), float(h)) for a, o, h in zip(lat, lon, heading, strict=True)]
 
 
+def stalls_during(prefix: Path, windows: list[tuple[float, float]]) -> str:
+    """A summary of the stall probe's notes (bench/stall_probe) that fall in the windows."""
+    kinds: dict[str, list[float]] = {}
+    callbacks: dict[str, list[float]] = {}
+    for path in prefix.parent.glob(prefix.name + ".*"):
+        for line in path.read_text().splitlines():
+            stamp, what, held_ms = line.split("\t")
+            if not any(start <= float(stamp) <= end for start, end in windows):
+                continue
+            kind = what if what.startswith("gc") else "callback > 10 ms"
+            kinds.setdefault(kind, []).append(float(held_ms))
+            if not what.startswith("gc"):
+                callbacks.setdefault(what.removeprefix("callback "), []).append(float(held_ms))
+    seconds = sum(end - start for start, end in windows)
+    lines = [f"  over {seconds:.0f} s of load:"]
+    for kind, held in sorted(kinds.items()):
+        lines.append(
+            f"  {kind:<18} {len(held):5d} times, {sum(held):8.1f} ms in all, "
+            f"longest {max(held):6.1f} ms"
+        )
+    for what, held in sorted(callbacks.items(), key=lambda item: -sum(item[1]))[:3]:
+        lines.append(f"    {len(held):4d} x {max(held):6.1f} ms max  {what}")
+    if not kinds:
+        lines.append("  none noted")
+    return "\n".join(lines)
+
+
 def load_conditions() -> str:
     one, five, _ = os.getloadavg()
     return f"{os.cpu_count()} CPUs, load average {one:.2f} (1 min) / {five:.2f} (5 min)"
@@ -214,6 +246,9 @@ def main() -> None:
     parser.add_argument(
         "--rates", default="500,1000,2000", help="offered single-ping rates, pings/s"
     )
+    parser.add_argument(
+        "--probe-stalls", action="store_true", help="note long GCs and loop callbacks"
+    )
     args = parser.parse_args()
     rates = [int(rate) for rate in args.rates.split(",")]
 
@@ -242,6 +277,14 @@ def main() -> None:
                 # One operator token carries the whole load: measure ingest, not the limiter.
                 "SMOOTHFLEET_RATE_LIMIT_PER_TOKEN_PER_S": "0",
             }
+            envs = {side: dict(env) for side in ("ours", "plain")}
+            if args.probe_stalls:
+                for side, side_env in envs.items():
+                    side_env["PYTHONPATH"] = os.pathsep.join(
+                        [str(STALL_PROBE), str(REPO), side_env.get("PYTHONPATH", "")]
+                    )
+                    side_env["SMOOTHFLEET_STALL_LOG"] = str(scratch_dir / f"stalls-{side}")
+            loaded: dict[str, list[tuple[float, float]]] = {"ours": [], "plain": []}
             ours_port, plain_port = free_port(), free_port()
             bases = {
                 "ours": f"http://127.0.0.1:{ours_port}",
@@ -270,16 +313,19 @@ def main() -> None:
                 "--no-access-log",
             ]
 
-            def run(load: object) -> Latencies:
+            def run(load: object, side: str = "ours") -> Latencies:
                 truncate(url)
-                return asyncio.run(load)  # type: ignore[arg-type]
+                started = time.time()
+                result: Latencies = asyncio.run(load)  # type: ignore[arg-type]
+                loaded[side].append((started, time.time()))
+                return result
 
             with (
-                server(ours, env, bases["ours"], scratch_dir / "serve.log"),
-                server(plain, env, bases["plain"], scratch_dir / "plain.log"),
+                server(ours, envs["ours"], bases["ours"], scratch_dir / "serve.log"),
+                server(plain, envs["plain"], bases["plain"], scratch_dir / "plain.log"),
             ):
                 for base in bases.values():  # warm-up
-                    run(
+                    asyncio.run(
                         saturate(
                             f"{base}/api/v1/pings",
                             token,
@@ -288,6 +334,7 @@ def main() -> None:
                             duration_s=2,
                         )
                     )
+                    truncate(url)
                 for _ in range(args.rounds):
                     for side, base in bases.items():
                         result = run(
@@ -297,7 +344,8 @@ def main() -> None:
                                 pings.single(),
                                 connections=args.connections,
                                 duration_s=args.duration,
-                            )
+                            ),
+                            side,
                         )
                         saturated[side].add(result, 1, count_pings(url))
                     for rate in rates:
@@ -309,7 +357,8 @@ def main() -> None:
                                     pings.single(),
                                     rate=rate,
                                     duration_s=args.duration,
-                                )
+                                ),
+                                side,
                             )
                             offered[side, rate].add(result, 1, count_pings(url))
                     for size in batched:
@@ -323,10 +372,15 @@ def main() -> None:
                             )
                         )
                         batched[size].add(result, size, count_pings(url))
-                        rate, rows = copy_rate(url)
+                        copied_per_s, rows = copy_rate(url)
                         copy_rows[size] += rows
-                        copy_seconds[size] += rows / rate
+                        copy_seconds[size] += rows / copied_per_s
             truncate(url)
+            stalls = {
+                side: stalls_during(scratch_dir / f"stalls-{side}", windows)
+                for side, windows in loaded.items()
+                if args.probe_stalls
+            }
 
     print(f"machine after the run:  {load_conditions()}")
     print(
@@ -353,6 +407,10 @@ def main() -> None:
         print(f"| raw COPY of those rows | {copy_per_s:,.0f} | | | | | {rows:,} | | 100% |")
     print()
     print("Latency: every request of every slice; at offered rates from when it was due.")
+    for side, notes in stalls.items():
+        print()
+        print(f"stalls in the {'smoothfleet' if side == 'ours' else 'plain'} server's processes:")
+        print(notes)
 
 
 if __name__ == "__main__":
