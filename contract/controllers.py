@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
+
+from contract.values import StorableText, json_number
 
 Actuation = Literal["acc", "accel"]
 ACTUATIONS: tuple[Actuation, ...] = ("acc", "accel")
@@ -20,11 +22,23 @@ ACTUATIONS: tuple[Actuation, ...] = ("acc", "accel")
 MIN_GAP_SETTING = 1
 MAX_GAP_SETTING = 3
 
+# Parameters arrive as JSON: a number is a JSON number and a flag a JSON boolean, as the schema
+# (`controller_choice_schema`) says; lax coercion would take "0.5" or 1 and so accept what the
+# schema calls invalid. Non-finite numbers (NaN, 1e999) are refused: JSONB cannot store them.
+_PARAMS_CONFIG = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+# A bar count as JSON Schema's "integer" reads it (2 or 2.0), never text or a boolean.
+# (Field before the validator: the other order leaves `ge`/`le` unnamed in the JSON Schema.)
+GapSetting = Annotated[
+    int,
+    Field(strict=False, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING),
+    BeforeValidator(json_number),
+]
+
 
 class LaneChangeParams(BaseModel):
     """Lane-change recovery parameters (paper values where the paper gives them)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _PARAMS_CONFIG
 
     enabled: bool = True
     # h_safe: acceptable time gap (s); C_safe: acceptable time to collision (s).
@@ -47,7 +61,7 @@ class LaneChangeParams(BaseModel):
 class MicroAccelParams(BaseModel):
     """MicroAccel gains and limits (paper eq. a_safe, a_target, a_MPC)."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _PARAMS_CONFIG
 
     # k: gain of the safety and target terms (1/s).
     k: float = Field(0.5, gt=0, le=5)
@@ -70,7 +84,7 @@ class MicroAccelParams(BaseModel):
 class SimpleParams(BaseModel):
     """Simple controller parameters."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _PARAMS_CONFIG
 
     # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
     k: float = Field(0.5, gt=0, le=5)
@@ -82,13 +96,13 @@ class SimpleParams(BaseModel):
     safety_min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
     # Added to the target on acc cars (mph), e.g. to offset a speedometer bias.
     speed_offset_mph: float = Field(0.0, ge=-10, le=10)
-    gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+    gap_setting: GapSetting = MAX_GAP_SETTING
 
 
 class MicroAccelAccParams(BaseModel):
     """MicroAccel-to-set-points parameters."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = _PARAMS_CONFIG
 
     base: MicroAccelParams = MicroAccelParams()
     # How far ahead the plan is read (s at the current speed), and at least this far (m).
@@ -100,8 +114,8 @@ class MicroAccelAccParams(BaseModel):
     # deceleration this strong (m/s^2).
     slowdown_mps: float = Field(2.0, gt=0)
     slowdown_accel_mps2: float = Field(-0.3, lt=0)
-    congested_gap_setting: int = Field(MAX_GAP_SETTING, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
-    free_gap_setting: int = Field(2, ge=MIN_GAP_SETTING, le=MAX_GAP_SETTING)
+    congested_gap_setting: GapSetting = MAX_GAP_SETTING
+    free_gap_setting: GapSetting = 2
     gap_dwell_s: float = Field(10.0, ge=0)
 
 
@@ -111,7 +125,7 @@ class RlParams(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    policy: str | None = Field(None, min_length=1)
+    policy: StorableText | None = Field(None, min_length=1)
 
 
 class ControllerConfigError(ValueError):
@@ -122,6 +136,11 @@ class ControllerConfigError(ValueError):
         super().__init__(message)
         self.field = field
         self.reason = reason
+
+
+class WrongActuation(ControllerConfigError):
+    """A registered controller with valid parameters that cannot drive this vehicle's actuation:
+    the assignment is sound, but not for this car (the API answers 409, not 422)."""
 
 
 @dataclass(frozen=True)
@@ -172,18 +191,16 @@ def validate_controller(
 ) -> BaseModel:
     """The controller's params model, or ControllerConfigError naming the field at fault.
 
-    `actuation` None checks the name and the parameters only.
+    The message first (name, then parameters), the vehicle last: WrongActuation only for a
+    controller that is valid in itself. `actuation` None checks the message only.
     """
     schema = CONTROLLER_SCHEMAS.get(name)
     if schema is None:
         known = ", ".join(sorted(CONTROLLER_SCHEMAS))
         reason = f"{name!r} is not one of {known}"
         raise ControllerConfigError("controller.name", reason, f"controller {reason}")
-    if actuation is not None and actuation not in schema.actuations:
-        reason = f"{name!r} cannot drive actuation {actuation!r}"
-        raise ControllerConfigError("controller.name", reason, f"controller {reason}")
     try:
-        return schema.params_model.model_validate(dict(params or {}))
+        model = schema.params_model.model_validate(dict(params or {}))
     except ValidationError as error:
         detail = error.errors()[0]
         where = ".".join(str(part) for part in detail.get("loc", ()))
@@ -192,3 +209,49 @@ def validate_controller(
         raise ControllerConfigError(
             f"controller.{field}", reason, f"controller {name}: {field}: {reason}"
         ) from None
+    if actuation is not None and actuation not in schema.actuations:
+        reason = f"{name!r} cannot drive actuation {actuation!r}"
+        raise WrongActuation("controller.name", reason, f"controller {reason}")
+    return model
+
+
+def controller_choice_schema() -> dict[str, Any]:
+    """The JSON Schema of a config's `controller` object, `{"name": ..., "params": {...}}`:
+    exactly what `validate_controller` accepts apart from the actuation (a property of the
+    vehicle, not of the message). One alternative per registry entry, the name a `const` and
+    the params its own model's schema (ranges stated, unknown fields refused), so the OpenAPI
+    document follows the registry: a new controller is still one model and one entry.
+    """
+    alternatives: list[dict[str, Any]] = []
+    for name, schema in CONTROLLER_SCHEMAS.items():
+        params = schema.params_model.model_json_schema()
+        drives = " and ".join(f"`{kind}`" for kind in ACTUATIONS if kind in schema.actuations)
+        alternatives.append(
+            {
+                "type": "object",
+                "title": name,
+                "description": f"{schema.summary}; drives {drives} cars",
+                "properties": {
+                    "name": {"const": name},
+                    "params": _inlined(params, params.get("$defs", {})),
+                },
+                "required": ["name"],
+                "additionalProperties": False,
+            }
+        )
+    return {"oneOf": alternatives}
+
+
+def _inlined(schema: Any, definitions: Mapping[str, Any]) -> Any:
+    """`schema` with each `{"$ref": "#/$defs/X"}` replaced by X itself (the params models nest
+    but never recurse), so the alternative stands alone wherever a document puts it."""
+    if isinstance(schema, list):
+        return [_inlined(item, definitions) for item in schema]
+    if not isinstance(schema, dict):
+        return schema
+    reference = schema.get("$ref")
+    if isinstance(reference, str) and reference.startswith("#/$defs/"):
+        target = dict(definitions[reference.removeprefix("#/$defs/")])
+        rest = {key: value for key, value in schema.items() if key != "$ref"}
+        return _inlined({**target, **rest}, definitions)
+    return {key: _inlined(value, definitions) for key, value in schema.items() if key != "$defs"}

@@ -16,6 +16,13 @@ VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 MAX_PINGS_PER_BATCH = 1000
 # Plan ids stay below 2^53: every JSON reader (IEEE doubles) holds them exactly.
 MAX_JSON_INTEGER = 2**53 - 1
+# The rule on a report's time that JSON Schema cannot state (it is relative to the server's
+# clock): the server keeps reports as long as pings, and a car's GPS clock is never far ahead.
+REPORT_TIME_WINDOW = (
+    "The car's clock. Must lie within the server's window around its own clock: at most "
+    "SMOOTHFLEET_PING_RETENTION_DAYS (default 90) days behind and SMOOTHFLEET_PING_MAX_FUTURE_S "
+    "(default 300) s ahead; a report outside it is refused with 422 and not stored."
+)
 
 
 class Ping(BaseModel):
@@ -77,7 +84,7 @@ class VehicleStatusReport(BaseModel):
 
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
-    ts: Timestamp
+    ts: Timestamp = Field(description=REPORT_TIME_WINDOW)
     agent_version: StorableText | None = Field(None, max_length=64)
     uptime_s: JsonFloat | None = Field(None, ge=0, le=1e10)  # ~300 years
     can_ok: StrictBool | None = None

@@ -8,6 +8,7 @@ vehicles then keep their pings spooled and retry.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from typing import Any
 
 from fastapi import FastAPI, Request, Response
@@ -27,11 +28,14 @@ log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a r
 RETRY_AFTER_S = 5
 
 
-def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
+def error_responses(
+    *codes: int, described: Mapping[int, str] | None = None
+) -> dict[int | str, dict[str, Any]]:
     """OpenAPI `responses=` entries declaring the error shape for the given status codes.
 
     422 is always declared: any request can be malformed, and its body has this same shape; so
-    is 429 wherever a token is needed (app/core/ratelimit.py).
+    is 429 wherever a token is needed (app/core/ratelimit.py). `described` says what a code
+    means on this operation, where the general description would not.
     """
     codes = tuple(sorted({*codes, 422, *((429,) if 401 in codes else ())}))
     descriptions = {
@@ -44,6 +48,7 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
         429: "too many requests",
         503: "database unavailable or nothing valid to serve; retry after Retry-After",
     }
+    descriptions.update(described or {})
     return {
         code: {"model": ErrorResponse, "description": descriptions.get(code, "error")}
         for code in codes

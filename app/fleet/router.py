@@ -26,6 +26,7 @@ from app.fleet.schemas import (
 )
 from app.fleet.service import (
     PROBLEM_FILTERS,
+    AssignmentConflict,
     AssignmentError,
     VehicleNotFound,
     change_assignment,
@@ -39,6 +40,15 @@ from contract.vehicles import VEHICLE_ID_PATTERN
 router = APIRouter(prefix="/api/v1", tags=["operations"])
 
 VehicleId = Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)]
+
+ASSIGNMENT_INVALID = (
+    "the body breaks its schema (a controller not in the registry, parameters outside their "
+    "model): the list of rejected fields"
+)
+ASSIGNMENT_CONFLICT = (
+    "a valid assignment this vehicle cannot take: a lane beyond its corridor's lanes, or a "
+    "controller that cannot drive its actuation (the field in the same shape as a 422)"
+)
 
 
 def thresholds(request: Request) -> Thresholds:
@@ -79,15 +89,21 @@ async def get_fleet(
     )
 
 
-@router.put("/vehicles/{vehicle_id}/assignment", responses=error_responses(401, 403, 404, 422, 503))
+@router.put(
+    "/vehicles/{vehicle_id}/assignment",
+    responses=error_responses(
+        401, 403, 404, 409, 422, 503, described={409: ASSIGNMENT_CONFLICT, 422: ASSIGNMENT_INVALID}
+    ),
+)
 async def put_assignment(
     vehicle_id: VehicleId, body: AssignmentIn, principal: OperatorDep, session: SessionDep
 ) -> AssignmentOut:
     """Change the lane, route and controller a vehicle drives (operator or admin).
 
-    The car picks the change up the next time it fetches its config. 422 names the field and the
-    reason when the lane is not on the vehicle's corridor, or the controller or its parameters
-    are not what the car can run (the same schema the agent builds from: contract.controllers).
+    The car picks the change up the next time it fetches its config. The body's schema is the
+    one the agent builds its controller from (contract.controllers): 422 names the field and the
+    reason when the body breaks it; 409, in the same shape, when a valid assignment does not fit
+    this vehicle (a lane beyond its corridor's, a controller for the other actuation).
     """
     try:
         vehicle = await change_assignment(
@@ -104,8 +120,9 @@ async def put_assignment(
     except AssignmentError as error:
         # FastAPI's own shape for a rejected field (docs/interfaces.md, "Errors")
         where = ["body", *error.field.split(".")]
+        status = 409 if isinstance(error, AssignmentConflict) else 422
         raise HTTPException(
-            422, [{"loc": where, "msg": error.reason, "type": "value_error"}]
+            status, [{"loc": where, "msg": error.reason, "type": "value_error"}]
         ) from None
     await session.refresh(vehicle, ["updated_at"])
     return AssignmentOut(

@@ -7,12 +7,13 @@ warehouse columns (`is_acc_engaged`, `has_gps_fix`), so a status reads the same 
 from __future__ import annotations
 
 from datetime import datetime
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
 
 from app.fleet.service import FleetCounts, FleetEntry
-from contract.values import StorableText
+from contract.controllers import controller_choice_schema
+from contract.values import StorableText, storable_text
 
 
 class ControllerAssignment(BaseModel):
@@ -24,14 +25,41 @@ class ControllerAssignment(BaseModel):
     params: dict[str, Any] = Field(default_factory=dict)
 
 
+# White space as `str.strip()` removes it, spelled out: `\s` means different sets in Python,
+# in JavaScript and in the Rust engine pydantic uses, so a pattern with it would not say the same
+# thing to every reader of the document.
+WHITE_SPACE = (
+    "\\u0009-\\u000d\\u001c-\\u0020\\u0085\\u00a0\\u1680\\u2000-\\u200a"
+    "\\u2028\\u2029\\u202f\\u205f\\u3000"
+)
+# A route names something: no NUL, and at least one character that is not white space (the
+# service strips it).
+ROUTE_PATTERN = f"^[{WHITE_SPACE}]*[^{WHITE_SPACE}\\u0000][^\\u0000]*$"
+
+
 class AssignmentIn(BaseModel):
-    """What a vehicle should drive: lane, route and controller (all three, PUT semantics)."""
+    """What a vehicle should drive: lane, route and controller (all three, PUT semantics).
+
+    The document states the controller as one alternative per registered controller with its
+    own parameters (`contract.controllers.controller_choice_schema`); the service checks the
+    same registry. What depends on the vehicle, not the message (its corridor's lanes, the
+    actuation the controller must drive), is answered 409.
+    """
 
     model_config = ConfigDict(extra="forbid")
 
-    lane: int = Field(ge=1, le=12, description="Lane numbered from 1 at the left (median side).")
-    route: StorableText = Field(min_length=1, max_length=64)
-    controller: ControllerAssignment
+    lane: int = Field(
+        ge=1,
+        le=12,
+        description="Lane numbered from 1 at the left (median side); at most the number of "
+        "lanes of the vehicle's corridor (409 otherwise).",
+    )
+    route: Annotated[str, AfterValidator(storable_text)] = Field(
+        min_length=1, max_length=64, pattern=ROUTE_PATTERN
+    )
+    controller: Annotated[
+        ControllerAssignment, WithJsonSchema(controller_choice_schema(), mode="validation")
+    ]
 
 
 class AssignmentOut(AssignmentIn):
@@ -39,6 +67,7 @@ class AssignmentOut(AssignmentIn):
 
     model_config = ConfigDict(extra="forbid")
 
+    controller: ControllerAssignment
     vehicle_id: str
     corridor_id: str
     updated_at: datetime

@@ -26,7 +26,7 @@ from app.fleet.readiness import (
     assess,
 )
 from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
-from contract.controllers import ControllerConfigError, validate_controller
+from contract.controllers import ControllerConfigError, WrongActuation, validate_controller
 from contract.units import METRES_PER_MILE
 
 log = logging.getLogger(__name__)
@@ -54,6 +54,11 @@ class AssignmentError(ValueError):
         super().__init__(f"{field}: {reason}")
         self.field = field
         self.reason = reason
+
+
+class AssignmentConflict(AssignmentError):
+    """A well-formed assignment this vehicle cannot take: a lane beyond its corridor's, or a
+    controller that cannot drive its actuation (the API's 409; the request itself is valid)."""
 
 
 @dataclass(frozen=True)
@@ -331,19 +336,26 @@ async def change_assignment(
 ) -> Vehicle:
     """Give a vehicle a new lane, route and controller (the car picks it up with its config)."""
     vehicle = await _vehicle_for_update(session, vehicle_id)
-    lanes = await session.scalar(
-        select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
-    )
-    if lanes is None or not 1 <= lane <= lanes:
-        raise AssignmentError("lane", f"{vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}")
+    # What is wrong with the assignment itself first (AssignmentError), then what does not fit
+    # this vehicle (AssignmentConflict), so a bad request is never answered as a conflict.
     route = route.strip()
     if not route:
         raise AssignmentError("route", "must not be empty")
+    if lane < 1:
+        raise AssignmentError("lane", f"lanes are numbered from 1, not {lane}")
     try:
         # the schema the car builds its controller from: a config it cannot run is never saved
         validate_controller(controller_name, vehicle.actuation, controller_params)
+    except WrongActuation as error:
+        raise AssignmentConflict(error.field, error.reason) from None
     except ControllerConfigError as error:
         raise AssignmentError(error.field, error.reason) from None
+    lanes = await session.scalar(
+        select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
+    )
+    if lanes is None or lane > lanes:
+        reason = f"{vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}"
+        raise AssignmentConflict("lane", reason)
     vehicle.assigned_lane = lane
     vehicle.route = route
     vehicle.controller_name = controller_name

@@ -28,6 +28,11 @@ router = APIRouter(prefix="/api/v1", tags=["vehicles"])
 
 VehicleId = Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)]
 
+STATUS_INVALID = (
+    "the report breaks its schema, or its `ts` lies outside the server's window around now "
+    "(see `ts`): the list of rejected fields, or a sentence naming `ts`"
+)
+
 _PING_SCHEMA = Ping.model_json_schema()
 _PINGS_BODY: dict[str, Any] = {
     "requestBody": {
@@ -97,7 +102,7 @@ async def post_pings(request: Request) -> Response:
 
 @router.post(
     "/vehicles/{vehicle_id}/status",
-    responses=error_responses(401, 403, 404, 413, 503),
+    responses=error_responses(401, 403, 404, 413, 503, described={422: STATUS_INVALID}),
     summary="Post a piStatus report",
 )
 async def post_status(

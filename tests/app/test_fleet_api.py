@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sys
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from typing import Any
@@ -11,6 +12,7 @@ import httpx
 import pytest
 from sqlalchemy import Engine
 
+from app.fleet.schemas import WHITE_SPACE
 from tests.support.fleet import drive, healthy_status, post_pings, post_status
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
@@ -161,35 +163,52 @@ def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
 
 
 @pytest.mark.parametrize(
-    ("body", "field", "reason"),
+    ("body", "status", "field", "reason"),
     [
-        ({**ASSIGNMENT, "lane": 5}, ["lane"], "I-24-WB has lanes 1 to 4, not 5"),
+        # valid assignments this car cannot take: a conflict with the vehicle, not a bad body
+        ({**ASSIGNMENT, "lane": 5}, 409, ["lane"], "I-24-WB has lanes 1 to 4, not 5"),
         (
             {**ASSIGNMENT, "controller": {"name": "microaccel"}},
+            409,
             ["controller", "name"],
             "'microaccel' cannot drive actuation 'acc'",
         ),
-        ({**ASSIGNMENT, "controller": {"name": "pid"}}, ["controller", "name"], "'pid' is not"),
+        (
+            {**ASSIGNMENT, "controller": {"name": "pid"}},
+            422,
+            ["controller", "name"],
+            "'pid' is not",
+        ),
         # what the agent's schema refuses is refused before it is saved
         (
             {**ASSIGNMENT, "controller": {"name": "simple", "params": {"bogus": 1}}},
+            422,
             ["controller", "params", "bogus"],
             "Extra inputs are not permitted",
         ),
         (
             {**ASSIGNMENT, "controller": {"name": "simple", "params": {"k": -0.5}}},
+            422,
             ["controller", "params", "k"],
             "greater than 0",
         ),
         (
             {**ASSIGNMENT, "controller": {"name": "simple", "params": {"k": "fast"}}},
+            422,
             ["controller", "params", "k"],
             "valid number",
         ),
+        (
+            {**ASSIGNMENT, "controller": {"name": "simple", "params": {"k": "0.4"}}},
+            422,
+            ["controller", "params", "k"],
+            "valid number",
+        ),
+        ({**ASSIGNMENT, "route": " \t"}, 422, ["route"], "should match pattern"),
     ],
 )
 def test_an_assignment_the_car_cannot_take_is_refused_with_the_field(
-    api: Api, body: dict[str, Any], field: list[str], reason: str
+    api: Api, body: dict[str, Any], status: int, field: list[str], reason: str
 ) -> None:
     def config() -> Any:
         path = "/api/v1/vehicles/SF-001/config"
@@ -197,12 +216,18 @@ def test_an_assignment_the_car_cannot_take_is_refused_with_the_field(
 
     before = config()
     response = api.put("/api/v1/vehicles/SF-001/assignment", body)
-    assert response.status_code == 422
+    assert response.status_code == status
     (error,) = response.json()["detail"]
     assert error["loc"] == ["body", *field]
     assert reason in error["msg"]
     # nothing was saved: the car's config is what it was
     assert config() == before
+
+
+def test_the_documented_white_space_is_what_the_service_strips() -> None:
+    white = re.compile(f"[{WHITE_SPACE}]")
+    every = (chr(code) for code in range(sys.maxunicode + 1))
+    assert [c for c in every if bool(white.fullmatch(c)) != c.isspace()] == []
 
 
 def test_assignment_of_an_unknown_vehicle_is_404(api: Api) -> None:

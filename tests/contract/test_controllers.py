@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+from typing import Any
+
+import jsonschema_rs
 import pytest
 
 from contract.controllers import (
     CONTROLLER_SCHEMAS,
     ControllerConfigError,
     MicroAccelParams,
+    WrongActuation,
+    controller_choice_schema,
     validate_controller,
 )
 
@@ -42,6 +47,54 @@ def test_a_refusal_names_the_field_and_the_reason(
         validate_controller(name, actuation, params)
     assert refused.value.field == field
     assert reason in refused.value.reason
+
+
+def test_a_controller_for_the_other_actuation_is_its_own_error() -> None:
+    """The API answers it 409 (the body is valid, the vehicle cannot take it), so it is typed."""
+    with pytest.raises(WrongActuation):
+        validate_controller("microaccel", "acc", {})
+    with pytest.raises(ControllerConfigError) as refused:
+        validate_controller("pid", "acc", {})
+    assert not isinstance(refused.value, WrongActuation)
+
+
+@pytest.mark.parametrize(
+    ("controller", "valid"),
+    [
+        ({"name": "simple"}, True),
+        ({"name": "simple", "params": {"k": 0.4, "gap_setting": 2}}, True),
+        ({"name": "simple", "params": {"gap_setting": 2.0}}, True),  # JSON Schema's integer
+        ({"name": "microaccel_acc", "params": {"base": {"lane_change": {"c": 0.5}}}}, True),
+        ({"name": "rl_acc", "params": {"policy": "policies/a.npz"}}, True),
+        ({"name": "pid"}, False),
+        ({"name": "simple", "params": {"k": "0.5"}}, False),  # text is not a number
+        ({"name": "simple", "params": {"k": True}}, False),
+        ({"name": "simple", "params": {"k": 0}}, False),  # k > 0
+        ({"name": "simple", "params": {"gap_setting": 2.5}}, False),
+        ({"name": "simple", "params": {"gap_setting": "2"}}, False),
+        ({"name": "simple", "params": {"bogus": 1}}, False),
+        ({"name": "microaccel", "params": {"lane_change": {"enabled": 1}}}, False),
+        ({"name": "microaccel", "params": {"lane_change": {"c": 1.5}}}, False),
+        ({"name": "microaccel_acc", "params": {"base": {"bogus": 1}}}, False),
+        ({"name": "rl_acc", "params": {"policy": ""}}, False),
+        ({"name": "rl_acc", "params": {"policy": "a\u0000b"}}, False),
+    ],
+)
+def test_the_documented_schema_accepts_exactly_what_validation_accepts(
+    controller: dict[str, Any], valid: bool
+) -> None:
+    documented = jsonschema_rs.validator_for(controller_choice_schema()).is_valid(controller)
+    try:
+        validate_controller(controller["name"], None, controller.get("params"))
+        accepted = True
+    except ControllerConfigError:
+        accepted = False
+    assert (documented, accepted) == (valid, valid)
+
+
+def test_every_registered_controller_is_one_alternative_of_the_schema() -> None:
+    alternatives = controller_choice_schema()["oneOf"]
+    assert [a["properties"]["name"]["const"] for a in alternatives] == list(CONTROLLER_SCHEMAS)
 
 
 def test_nested_params_are_validated_whole() -> None:

@@ -359,4 +359,5 @@ def test_hostile_assignments_never_5xx(
         content=raw_json(body),
         headers={**admin, "content-type": "application/json"},
     )
-    assert answer.status_code in (200, 422), (answer.status_code, answer.text)
+    # 409: a valid assignment this car cannot take (a lane beyond its corridor's 4)
+    assert answer.status_code in (200, 409, 422), (answer.status_code, answer.text)
