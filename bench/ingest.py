@@ -66,19 +66,26 @@ class Pings:
     """Unique ping bodies: 100 vehicles along the corridor, one ping per vehicle per second."""
 
     def __init__(self, positions: list[tuple[float, float, float]]) -> None:
-        self.positions = positions
+        self._where = [  # each vehicle's place, formatted once
+            f'"lat":{lat:.7f},"lon":{lon:.7f},"heading_deg":{heading:.1f},'
+            for lat, lon, heading in positions
+        ]
         # 30 days back, and each slice 10^6 pings (10^4 s) further: inside the retention
         # window, never in the future, every (vehicle_id, ts) new.
         self.base = int((datetime.now(UTC) - timedelta(days=30)).timestamp())
         self.used = 0  # pings handed out so far, so every slice's pings are new rows
+        self._second = -1
+        self._ts = ""
 
     def _one(self, n: int) -> str:
-        lat, lon, heading = self.positions[n % VEHICLES]
-        ts = datetime.fromtimestamp(self.base + n // VEHICLES, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+        vehicle = n % VEHICLES
+        second = self.base + n // VEHICLES
+        if second != self._second:  # 100 pings share each second: format it once
+            self._second = second
+            self._ts = datetime.fromtimestamp(second, UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
         return (
-            f'{{"vehicle_id":"SF-{n % VEHICLES + 1:03d}","ts":"{ts}","lat":{lat:.7f},'
-            f'"lon":{lon:.7f},"speed_mps":24.5,"accel_mps2":0.12,"heading_deg":{heading:.1f},'
-            '"lane":2,"acc_engaged":true,"controller_engaged":true,"controller":"microaccel_acc",'
+            f'{{"vehicle_id":"SF-{vehicle + 1:03d}","ts":"{self._ts}",{self._where[vehicle]}'
+            '"speed_mps":24.5,"accel_mps2":0.12,"lane":2,"acc_engaged":true,"controller_engaged":true,"controller":"microaccel_acc",'
             '"acc_speed_setting_mph":55,"acc_gap_setting":2,"lead_present":true,'
             '"lead_distance_m":35.5,"lead_rel_speed_mps":-0.4,"plan_id":1}'
         )

@@ -1,6 +1,12 @@
 """The SQL of the ping fast path, in one place.
 
-A group of requests' pings is written in one transaction on one connection:
+A small group (the common case: a few single pings that arrived together) is one statement on
+an autocommit connection, `INSERT ... VALUES ... ON CONFLICT DO NOTHING RETURNING`: one round
+trip that also commits, so the request is answered after one visit to PostgreSQL instead of
+four (COPY start, COPY end, INSERT, COMMIT). The rows it returns are those inserted; a sent row
+not among them was already stored.
+
+A larger group (batch uploads) is written in one transaction on that connection:
 1. binary COPY of the rows (numbered n = 0, 1, ...) into the connection's temporary table
    `ping_incoming` (emptied at every commit); psycopg formats the rows in C;
 2. one INSERT ... SELECT from it into fact_vehicle_ping with ON CONFLICT DO NOTHING, so a resent
@@ -10,6 +16,8 @@ A group of requests' pings is written in one transaction on one connection:
 """
 
 from __future__ import annotations
+
+import functools
 
 # (column, PostgreSQL type) in the order of app.ingest.pings.PingRow, with x_m (computed by the
 # writer from lat/lon) after lane.
@@ -43,6 +51,21 @@ CREATE_INCOMING = (
     "CREATE TEMPORARY TABLE IF NOT EXISTS ping_incoming (n int4, LIKE fact_vehicle_ping) "
     "ON COMMIT DELETE ROWS"
 )
+
+# Up to this many rows a group takes the one-statement path; beyond it COPY's cheaper
+# formatting of each row pays for its extra round trips (bench/ingest.py).
+SMALL_GROUP_ROWS = 64
+
+
+@functools.cache
+def insert_values(rows: int) -> str:
+    """The one-statement INSERT of `rows` rows (one query text per size, so each is prepared)."""
+    one = "(" + ", ".join(["%s"] * len(PING_COLUMNS)) + ")"
+    return (
+        f"INSERT INTO fact_vehicle_ping ({_NAMES}) VALUES {', '.join([one] * rows)} "
+        "ON CONFLICT (vehicle_id, ts) DO NOTHING RETURNING vehicle_id, ts"
+    )
+
 
 COPY_INCOMING = f"COPY ping_incoming (n, {_NAMES}) FROM STDIN (FORMAT BINARY)"
 

@@ -1,11 +1,11 @@
 """Group commit for pings: many requests' rows in one INSERT, each answered after the commit.
 
 Requests hand their validated rows to the process's PingWriter and wait. The writer takes
-everything queued, writes it with one statement (app.ingest.sql) in one transaction, commits,
-and only then tells each request how many of its rows were inserted and how many were
-duplicates. Up to `concurrency` groups are in flight at once: while one group is being written
-the next one collects, so under load a group holds many requests and at low load a lone ping
-is written at once (no timer adds latency).
+everything queued, writes it (app.ingest.sql: one autocommit statement for a small group, COPY
+in one transaction for a large one), and only once it is committed tells each request how many
+of its rows were inserted and how many were duplicates. Up to `concurrency` groups are in
+flight at once: while one group is being written the next one collects, so under load a group
+holds many requests and at low load a lone ping is written at once (no timer adds latency).
 
 Duplicates are counted per request, also across requests of one group: the first occurrence of
 a (vehicle_id, ts) in the group is the one sent to the database, later ones are duplicates at
@@ -22,9 +22,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import datetime
+from typing import Any
 
 import numpy as np
 import psycopg
+from psycopg.pq import TransactionStatus
 from sqlalchemy.ext.asyncio import AsyncConnection, AsyncEngine
 
 from app.core import metrics
@@ -35,8 +37,11 @@ from app.ingest.sql import (
     CREATE_INCOMING,
     INSERT_FROM_INCOMING,
     PING_COLUMNS,
+    SMALL_GROUP_ROWS,
+    insert_values,
 )
 from contract.corridor import trusted_heading
+from contract.values import NEGLIGIBLE
 
 log = logging.getLogger(__name__)
 
@@ -44,6 +49,8 @@ log = logging.getLogger(__name__)
 # parameters stay a few MB and a statement takes well under the statement timeout.
 MAX_GROUP_ROWS = 20_000
 _LANE = PingRow._fields.index("lane")  # x_m follows lane in the table
+# Positions of the REAL (float4) columns in a written row (the row number excluded).
+_FLOAT4 = tuple(n for n, (_, pg_type) in enumerate(PING_COLUMNS) if pg_type == "float4")
 
 
 class WriterStopped(RuntimeError):
@@ -106,6 +113,9 @@ class PingWriter:
             self._runner = None
         await asyncio.gather(*self._flushes, return_exceptions=True)
         for connection in self._idle:
+            # In autocommit mode: not fit for the engine's pool, whose users expect transactions.
+            with contextlib.suppress(Exception):
+                await connection.invalidate()
             await connection.close()
         self._idle.clear()
         while not self._queue.empty():
@@ -122,6 +132,26 @@ class PingWriter:
         answer: asyncio.Future[WriteOutcome] = asyncio.get_running_loop().create_future()
         self._queue.put_nowait(_Submission(rows, answer))
         return await answer
+
+    async def _connect(self) -> AsyncConnection:
+        """A connection of the engine (its timeouts), switched to autocommit for the writer.
+
+        Never returned to the engine's pool: the writer keeps it until it fails or stops.
+        """
+        connection = await self._engine.connect()
+        try:
+            pooled = await connection.get_raw_connection()
+            driver = pooled.driver_connection
+            assert isinstance(driver, psycopg.AsyncConnection)
+            if driver.info.transaction_status != TransactionStatus.IDLE:
+                await driver.rollback()  # the pool's pre-ping opened one
+            await driver.set_autocommit(True)
+        except BaseException:
+            with contextlib.suppress(Exception):
+                await connection.invalidate()
+                await connection.close()
+            raise
+        return connection
 
     async def _run(self) -> None:
         while True:
@@ -190,27 +220,19 @@ class PingWriter:
                 sent.append(row)
                 owner.append(number)
         started = time.perf_counter()
-        x_m = _map_match(sent)
-        connection = self._idle.pop() if self._idle else await self._engine.connect()
+        values = [
+            (*row[: _LANE + 1], position, *row[_LANE + 1 : -1])
+            for row, position in zip(sent, _map_match(sent), strict=True)
+        ]
+        connection = self._idle.pop() if self._idle else await self._connect()
         try:
             pooled = await connection.get_raw_connection()
             driver = pooled.driver_connection
             assert isinstance(driver, psycopg.AsyncConnection)
-            # Commit (not a transaction block): the pool's pre-ping may already have opened the
-            # transaction. On any error the connection is discarded, its transaction with it.
-            async with driver.cursor() as cursor:
-                if "ping_incoming" not in pooled.info:
-                    await cursor.execute(CREATE_INCOMING)
-                async with cursor.copy(COPY_INCOMING) as copy:
-                    copy.set_types(COPY_TYPES)
-                    for number, (row, position) in enumerate(zip(sent, x_m, strict=True)):
-                        await copy.write_row(
-                            (number, *row[: _LANE + 1], position, *row[_LANE + 1 : -1])
-                        )
-                await cursor.execute(INSERT_FROM_INCOMING)
-                already_stored = {n for (n,) in await cursor.fetchall()}
-            await driver.commit()
-            pooled.info["ping_incoming"] = True
+            if len(values) <= SMALL_GROUP_ROWS:
+                already_stored = await _insert_small(driver, values)
+            else:
+                already_stored = await _copy_large(driver, values, pooled.info)
         except BaseException:
             with contextlib.suppress(Exception):
                 await connection.invalidate()
@@ -226,6 +248,47 @@ class PingWriter:
             else:
                 accepted[number] += 1
         return [WriteOutcome(a, d) for a, d in zip(accepted, duplicates, strict=True)]
+
+
+Values = tuple[object, ...]
+
+
+async def _insert_small(driver: psycopg.AsyncConnection[Any], values: Sequence[Values]) -> set[int]:
+    """Write a small group in one statement that commits; the positions already stored.
+
+    The statement sends floats as float8, which PostgreSQL's cast to a REAL column refuses as
+    "underflow" when the value is too small to keep; COPY's binary float4 stores such a value
+    as 0, and so does this path (pings are not checked against it: contract.vehicles.Ping).
+    """
+    parameters: list[object] = []
+    for row in values:
+        fields = list(row)
+        for position in _FLOAT4:
+            value = fields[position]
+            if isinstance(value, float) and value != 0.0 and abs(value) < NEGLIGIBLE:
+                fields[position] = 0.0
+        parameters.extend(fields)
+    async with driver.cursor() as cursor:
+        await cursor.execute(insert_values(len(values)), parameters)
+        inserted = {(vehicle_id, ts) for vehicle_id, ts in await cursor.fetchall()}
+    return {n for n, row in enumerate(values) if (row[0], row[1]) not in inserted}
+
+
+async def _copy_large(
+    driver: psycopg.AsyncConnection[Any], values: Sequence[Values], info: dict[object, object]
+) -> set[int]:
+    """Write a large group by COPY in one transaction; the positions already stored."""
+    async with driver.cursor() as cursor:
+        if "ping_incoming" not in info:
+            await cursor.execute(CREATE_INCOMING)
+            info["ping_incoming"] = True
+        async with driver.transaction():
+            async with cursor.copy(COPY_INCOMING) as copy:
+                copy.set_types(COPY_TYPES)
+                for number, row in enumerate(values):
+                    await copy.write_row((number, *row))
+            await cursor.execute(INSERT_FROM_INCOMING)
+            return {n for (n,) in await cursor.fetchall()}
 
 
 def _fail(group: Sequence[_Submission], error: Exception) -> None:
@@ -244,15 +307,19 @@ _TEXT_FIELDS = tuple(
 
 def _refusal(error: Exception, rows: Sequence[PingRow]) -> RefusedByDatabase:
     """What a lone request is told when its rows were refused, naming the field if known."""
-    if isinstance(error, UnicodeEncodeError):  # refused while encoding, before PostgreSQL
-        for row in rows:
-            for position, name in _TEXT_FIELDS:
-                value = row[position]
-                if isinstance(value, str) and not value.isascii():
-                    try:
-                        value.encode()
-                    except UnicodeEncodeError:
-                        return UnstorableValue(name, "text holds a lone UTF-16 surrogate")
+    for row in rows:
+        for position, name in _TEXT_FIELDS:
+            value = row[position]
+            if not isinstance(value, str):
+                continue
+            if "\x00" in value:
+                return UnstorableValue(name, "text holds a NUL (0x00) character")
+            if not value.isascii():
+                try:
+                    value.encode()
+                except UnicodeEncodeError:
+                    return UnstorableValue(name, "text holds a lone UTF-16 surrogate")
+    if isinstance(error, UnicodeEncodeError):
         return UnstorableValue("text", "text holds a lone UTF-16 surrogate")
     assert isinstance(error, psycopg.Error)
     reason = error.diag.message_primary or type(error).__name__

@@ -16,6 +16,7 @@ import httpx
 import pytest
 from sqlalchemy import Engine, text
 
+from app.ingest.sql import SMALL_GROUP_ROWS
 from tests.support.api import OFF_CORRIDOR, ON_CORRIDOR_X_M, fresh_ts, ping, serving
 from tests.support.tokens import bearer, issue
 
@@ -125,6 +126,58 @@ def test_a_resent_ping_is_a_duplicate_never_a_second_row(
     again = api.post("/api/v1/pings", json={"pings": [second, first]}, headers=car)
     assert again.json() == {"accepted": 0, "duplicates": 2, "rejected": []}
     assert len(stored(seeded_engine)) == 2
+
+
+@pytest.mark.parametrize(
+    "size", [1, SMALL_GROUP_ROWS, SMALL_GROUP_ROWS + 1], ids=["one", "one-statement", "copy"]
+)
+def test_both_ways_of_writing_a_group_store_the_same_row_and_find_the_resent(
+    api: httpx.Client, car: dict[str, str], seeded_engine: Engine, size: int
+) -> None:
+    """A small group is one INSERT statement, a large one a COPY: what they store is the same,
+    a value too small for a REAL is 0 in both, and both tell resent pings from new ones."""
+    fields = {
+        "speed_mps": 27.5,
+        "accel_mps2": 1e-300,
+        "heading_deg": 301.0,
+        "lane": 2,
+        "acc_engaged": True,
+        "controller_engaged": False,
+        "controller": "microaccel_acc",
+        "acc_speed_setting_mph": 62,
+        "acc_gap_setting": 3,
+        "lead_present": True,
+        "lead_distance_m": 41.5,
+        "lead_rel_speed_mps": -1.25,
+        "plan_id": None,
+    }
+    first = ping(**fields)
+    assert api.post("/api/v1/pings", json=first, headers=car).json()["accepted"] == 1
+    batch = [first, *(ping(**fields) for _ in range(size - 1))]
+
+    answer = api.post("/api/v1/pings", json={"pings": batch}, headers=car)
+
+    assert answer.json() == {"accepted": size - 1, "duplicates": 1, "rejected": []}
+    rows = stored(seeded_engine)
+    assert len(rows) == size
+    expected = {**fields, "accel_mps2": 0.0}
+    for row in rows:
+        assert row["x_m"] is not None
+        assert {
+            "speed_mps": row["speed_mps"],
+            "accel_mps2": row["accel_mps2"],
+            "heading_deg": row["heading_deg"],
+            "lane": row["lane"],
+            "acc_engaged": row["is_acc_engaged"],
+            "controller_engaged": row["is_controller_engaged"],
+            "controller": row["controller"],
+            "acc_speed_setting_mph": row["acc_speed_setting_mph"],
+            "acc_gap_setting": row["acc_gap_setting"],
+            "lead_present": row["is_lead_present"],
+            "lead_distance_m": row["lead_distance_m"],
+            "lead_rel_speed_mps": row["lead_rel_speed_mps"],
+            "plan_id": row["plan_id"],
+        } == expected
 
 
 def test_the_same_ping_in_concurrent_requests_is_stored_once_and_counted_everywhere(
