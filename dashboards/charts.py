@@ -172,8 +172,9 @@ def _label_x(axes: Axes, axis: Axis, low: float, high: float, zone: ZoneInfo) ->
         axes.set_xlabel(axis.label)
 
 
-def png_image(figure: Figure, chart_id: str, title: str) -> Markup:
-    """The figure as an <img> carrying its PNG, its id and its title as alternative text."""
+def chart(chart_id: str, figure: Figure) -> Markup:
+    """The figure as an <img> carrying its PNG, its id, and its title as alternative text."""
+    title = "; ".join(axes.get_title() for axes in figure.axes if axes.get_title())
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png", dpi=DPI)
     encoded = base64.b64encode(buffer.getvalue()).decode("ascii")
@@ -235,35 +236,6 @@ def line_figure(
     return figure
 
 
-def line_chart(
-    chart_id: str,
-    title: str,
-    series: Sequence[Series],
-    x_axis: Axis,
-    y_axis: Axis,
-    *,
-    bands: Sequence[Band] = (),
-    band_label: str = "",
-    zone: ZoneInfo = UTC_ZONE,
-    height: int = 300,
-) -> Markup:
-    """The line chart as an <img> carrying its PNG."""
-    return png_image(
-        line_figure(
-            title,
-            series,
-            x_axis,
-            y_axis,
-            bands=bands,
-            band_label=band_label,
-            zone=zone,
-            height=height,
-        ),
-        chart_id,
-        title,
-    )
-
-
 def bar_figure(
     title: str,
     labels: Sequence[str],
@@ -298,35 +270,6 @@ def bar_figure(
     axes.set_title(title, fontsize=10)
     axes.grid(axis="y", alpha=0.3)
     return figure
-
-
-def bar_chart(
-    chart_id: str,
-    title: str,
-    labels: Sequence[str],
-    values: Sequence[float | None],
-    x_label: str,
-    y_axis: Axis,
-    *,
-    value_format: str = "{:.0f}",
-    colour: str = PALETTE[0],
-    height: int = 300,
-) -> Markup:
-    """The bar chart as an <img> carrying its PNG."""
-    return png_image(
-        bar_figure(
-            title,
-            labels,
-            values,
-            x_label,
-            y_axis,
-            value_format=value_format,
-            colour=colour,
-            height=height,
-        ),
-        chart_id,
-        title,
-    )
 
 
 def heatmap_figure(
@@ -364,26 +307,3 @@ def heatmap_figure(
     axes.set_ylabel(y_axis.label)
     axes.set_title(title, fontsize=10)
     return figure
-
-
-def heatmap(
-    chart_id: str,
-    title: str,
-    values: NDArray[np.float64],
-    x_range: tuple[float, float],
-    y_range: tuple[float, float],
-    x_axis: Axis,
-    y_axis: Axis,
-    scale: ColourScale,
-    *,
-    zone: ZoneInfo = UTC_ZONE,
-    height: int = 340,
-) -> Markup:
-    """The heatmap as an <img> carrying its PNG."""
-    return png_image(
-        heatmap_figure(
-            title, values, x_range, y_range, x_axis, y_axis, scale, zone=zone, height=height
-        ),
-        chart_id,
-        title,
-    )

@@ -6,6 +6,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 from typing import Any
+from zoneinfo import ZoneInfo
 
 import numpy as np
 from numpy.typing import NDArray
@@ -81,11 +82,30 @@ async def status_history(
     )
 
 
-async def vehicle_engagement(
-    session: AsyncSession, vehicle_id: str, since: datetime
+async def engagement_per_day(
+    session: AsyncSession, since: datetime, zone: ZoneInfo, *, vehicle_id: str | None = None
 ) -> Sequence[RowMapping]:
-    """analytics.engagement_daily of the vehicle from `since`'s day (oldest first)."""
-    return await _view(session, "engagement_daily", since, vehicle_id=vehicle_id)
+    """Share of pings on the corridor with the controller engaged per local day of `zone`, from
+    `since` (oldest first; one vehicle's or the fleet's, pooled over pings).
+
+    The figure of analytics.engagement_daily / engagement_fleet_daily, grouped by the day
+    people there lived (the field team's days were Central time) instead of the UTC day those
+    views export: an evening in Nashville is the next UTC day.
+    """
+    only = " AND vehicle_id = :vehicle_id" if vehicle_id is not None else ""
+    return await _rows(
+        session,
+        "SELECT (ts AT TIME ZONE :zone)::date AS day, count(*) AS pings, "
+        "count(DISTINCT vehicle_id) AS vehicles, "
+        "count(*) FILTER (WHERE is_controller_engaged) AS engaged_pings, "
+        "(count(*) FILTER (WHERE is_controller_engaged))::double precision / count(*) "
+        "AS engagement_share "
+        f"FROM fact_vehicle_ping WHERE x_m IS NOT NULL AND ts >= :since{only} "
+        "GROUP BY 1 ORDER BY 1",
+        zone=zone.key,
+        since=since,
+        **({"vehicle_id": vehicle_id} if vehicle_id is not None else {}),
+    )
 
 
 async def _view(
@@ -418,26 +438,24 @@ def rejected_inputs() -> RejectedInputs:
 # --- analytics ----------------------------------------------------------------------------------
 
 
-async def fleet_engagement(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """analytics.engagement_fleet_daily from `since`'s day."""
-    return await _view(session, "engagement_fleet_daily", since)
-
-
 async def fleet_pings_hourly(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
     """analytics.fleet_ping_hourly from `since`'s hour."""
     return await _view(session, "fleet_ping_hourly", since)
 
 
-async def fleet_adherence(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """Plan adherence per day over the fleet (pooled over pings) from `since`'s day."""
-    sql, params = view_query("plan_adherence_daily", since=since)
+async def adherence_per_day(
+    session: AsyncSession, since: datetime, zone: ZoneInfo
+) -> Sequence[RowMapping]:
+    """Plan adherence over the fleet (pooled over pings) per local day of `zone`, from `since`:
+    analytics.plan_adherence_daily's figures by the local day (see `engagement_per_day`)."""
     return await _rows(
         session,
-        "SELECT day, sum(pings) AS pings, "
-        "sum(mean_abs_speed_error_mps * pings) / sum(pings) AS mean_abs_speed_error_mps, "
-        "sum(mean_speed_error_mps * pings) / sum(pings) AS mean_speed_error_mps "
-        f"FROM ({sql}) daily GROUP BY day ORDER BY day",
-        **params,
+        "SELECT (ts AT TIME ZONE :zone)::date AS day, count(*) AS pings, "
+        "avg(abs(speed_error_mps)) AS mean_abs_speed_error_mps, "
+        "avg(speed_error_mps) AS mean_speed_error_mps "
+        "FROM analytics.plan_adherence WHERE ts >= :since GROUP BY 1 ORDER BY 1",
+        zone=zone.key,
+        since=since,
     )
 
 

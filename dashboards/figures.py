@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from contract.units import MPH_PER_MPS
-from dashboards.charts import SPEED_STOPS, local_time_ticks, png_image
+from dashboards.charts import SPEED_STOPS, chart, local_time_ticks
 
 ENGAGED_COLOUR = "#e11d48"
 NOT_ENGAGED_COLOUR = "#ffffff"
@@ -103,4 +103,4 @@ def time_space(
     axes.set_xlabel(f"local time ({time_range[0].astimezone(zone).tzname()})")
     axes.set_ylabel("postmile (direction of travel ↑)")
     axes.set_title(title, fontsize=11)
-    return png_image(figure, chart_id, title)
+    return chart(chart_id, figure)

@@ -76,9 +76,10 @@ from dashboards.charts import (
     Band,
     ColourScale,
     Series,
-    bar_chart,
-    heatmap,
-    line_chart,
+    bar_figure,
+    chart,
+    heatmap_figure,
+    line_figure,
 )
 from dashboards.corridor_map import CAR_COLOURS, CarState, MapCar, corridor_map
 from dashboards.figures import time_space
@@ -93,6 +94,9 @@ PLAN_HISTORY = timedelta(minutes=60)
 ANALYTICS_DAYS = 30
 ADHERENCE_DAYS = 7  # every ping looked up in its plan: a week is the page's budget
 ANALYTICS_REFRESH_S = 60.0  # the analytics page's figures are recomputed at most this often
+# Parts of pages drawn with matplotlib refresh at most this often (s): a figure costs ~0.1 s of
+# the server's CPU, and what they show changes by the minute (plans, INRIX) or slowly.
+FIGURE_MIN_REFRESH_S = 15.0
 HEATMAP_COLUMNS = 240
 HEATMAP_ROWS = 180
 
@@ -137,6 +141,19 @@ def _render(
         {"user": user, "now": datetime.now(UTC), **context},
         status_code=status_code,
     )
+
+
+def _figure_refresh_s(request: Request) -> float:
+    """How often a part of a page drawn with matplotlib refreshes itself."""
+    return max(_settings(request).dashboard_refresh_s, FIGURE_MIN_REFRESH_S)
+
+
+def _page(request: Request, user: PageUser, name: str, **context: Any) -> HTMLResponse:
+    """Page `name`, or at its `/live` path only the part that refreshes itself (the page polls
+    it; static/dashboard.js): one handler and one context serve both."""
+    if request.url.path.endswith("/live"):
+        return _render(request, f"_{name}_live.html", user, **context)
+    return _render(request, f"{name}.html", user, **context)
 
 
 def install(app: FastAPI) -> None:
@@ -378,6 +395,7 @@ async def _fleet_context(
 
 
 @router.get("/fleet")
+@router.get("/fleet/live")
 async def fleet_page(
     request: Request,
     user: UserDep,
@@ -388,21 +406,7 @@ async def fleet_page(
 ) -> HTMLResponse:
     """piStatus: every vehicle's checks and whether it is cleared for deployment."""
     context = await _fleet_context(request, session, route, make, problem)
-    return _render(request, "fleet.html", user, page="fleet", **context)
-
-
-@router.get("/fleet/live")
-async def fleet_live(
-    request: Request,
-    user: UserDep,
-    session: SessionDep,
-    route: str | None = None,
-    make: str | None = None,
-    problem: str | None = None,
-) -> HTMLResponse:
-    """The fleet page's counts and table, for its periodic refresh."""
-    context = await _fleet_context(request, session, route, make, problem)
-    return _render(request, "_fleet_live.html", user, **context)
+    return _page(request, user, "fleet", page="fleet", **context)
 
 
 # --- map --------------------------------------------------------------------------------------
@@ -471,28 +475,19 @@ async def _map_context(
 
 
 @router.get("/map")
+@router.get("/map/live")
 async def map_page(
     request: Request, user: UserDep, session: SessionDep, corridor: str | None = None
 ) -> HTMLResponse:
     """The corridor with every car, the plan's targets per lane and the buffers."""
     context = await _map_context(request, session, corridor)
-    return _render(request, "map.html", user, **context)
-
-
-@router.get("/map/live")
-async def map_live(
-    request: Request, user: UserDep, session: SessionDep, corridor: str | None = None
-) -> HTMLResponse:
-    """The map and its counts, for the page's periodic refresh."""
-    context = await _map_context(request, session, corridor)
-    return _render(request, "_map_live.html", user, **context)
+    return _page(request, user, "map", **context)
 
 
 # --- time-space -------------------------------------------------------------------------------
 
 TIME_SPACE_COLUMNS = 360
 TIME_SPACE_ROWS = 200
-TIME_SPACE_MIN_REFRESH_S = 15.0  # a matplotlib figure per refresh: the plans change every 60 s
 TIME_SPACE_FIELDS = {"tse": "fused TSE speed", "target": "plan target speed"}
 
 
@@ -522,7 +517,7 @@ async def _time_space_context(
         "field": field_name,
         "fields": TIME_SPACE_FIELDS,
         "generated_at": now,
-        "refresh_s": max(settings.dashboard_refresh_s, TIME_SPACE_MIN_REFRESH_S),
+        "refresh_s": _figure_refresh_s(request),
         "figure": None,
         "cars": 0,
         "window_share": None,
@@ -588,6 +583,7 @@ async def _time_space_context(
 
 
 @router.get("/timespace")
+@router.get("/timespace/live")
 async def time_space_page(
     request: Request,
     user: UserDep,
@@ -599,22 +595,7 @@ async def time_space_page(
 ) -> HTMLResponse:
     """The paper's time-space view: the speed field with every fleet car's trajectory on top."""
     context = await _time_space_context(request, session, corridor, lane, hours, field)
-    return _render(request, "timespace.html", user, **context)
-
-
-@router.get("/timespace/live")
-async def time_space_live(
-    request: Request,
-    user: UserDep,
-    session: SessionDep,
-    corridor: str | None = None,
-    lane: Annotated[int, Query(ge=1, le=12)] = 1,
-    hours: Annotated[float, Query(gt=0, le=24)] = 2.0,
-    field: str = "tse",
-) -> HTMLResponse:
-    """The figure and shares, for the page's periodic refresh."""
-    context = await _time_space_context(request, session, corridor, lane, hours, field)
-    return _render(request, "_timespace_live.html", user, **context)
+    return _page(request, user, "timespace", **context)
 
 
 # --- vehicle ------------------------------------------------------------------------------------
@@ -649,33 +630,87 @@ def _speed_chart(entry: FleetEntry, trace: data.Trace, zone: ZoneInfo) -> Any:
             start = None
     if start is not None:
         bands.append(Band(start, times[-1] + 1.0, "#bbf7d0"))
-    return line_chart(
+    return chart(
         "vehicle-speed",
-        f"Speed of {entry.vehicle.vehicle_id} against its plan's target",
-        [
-            Series("speed", times, [v * MPH_PER_MPS for v in trace.speed_mps], "#2563eb"),
-            Series(
-                "plan target",
-                times,
-                [None if v is None else v * MPH_PER_MPS for v in trace.target_mps],
-                "#dc2626",
-                style="step",
-                dashed=True,
-            ),
-        ],
-        Axis("time", "time"),
-        Axis("speed (mph)", lower=0.0),
-        bands=bands,
-        band_label="controller engaged",
-        zone=zone,
+        line_figure(
+            f"Speed of {entry.vehicle.vehicle_id} against its plan's target",
+            [
+                Series("speed", times, [v * MPH_PER_MPS for v in trace.speed_mps], "#2563eb"),
+                Series(
+                    "plan target",
+                    times,
+                    [None if v is None else v * MPH_PER_MPS for v in trace.target_mps],
+                    "#dc2626",
+                    style="step",
+                    dashed=True,
+                ),
+            ],
+            Axis("time", "time"),
+            Axis("speed (mph)", lower=0.0),
+            bands=bands,
+            band_label="controller engaged",
+            zone=zone,
+        ),
     )
+
+
+def _engagement_chart(chart_id: str, title: str, rows: Any, zone: ZoneInfo) -> Any:
+    """Engagement share per local day, as bars (vehicle and analytics pages)."""
+    return chart(
+        chart_id,
+        bar_figure(
+            title,
+            [row["day"].strftime("%m-%d") for row in rows],
+            [100.0 * row["engagement_share"] for row in rows],
+            f"day ({zone.key})",
+            Axis("time with controller engaged (%)", lower=0.0, upper=100.0),
+            value_format="{:.0f} %",
+        ),
+    )
+
+
+def local_days_ago(now: datetime, zone: ZoneInfo, days: int) -> datetime:
+    """The start of the local day `days` days before `now`'s (charts per day begin there)."""
+    day = now.astimezone(zone).date() - timedelta(days=days)
+    return datetime.combine(day, datetime.min.time(), zone)
+
+
+async def _vehicle_history(
+    request: Request, session: AsyncSession, entry: FleetEntry
+) -> dict[str, Any]:
+    """The car's recent past: speed against its plan, engagement per local day, its reports."""
+    vehicle_id = entry.vehicle.vehicle_id
+    now = datetime.now(UTC)
+    zone = display_zone(_settings(request))
+    context: dict[str, Any] = {
+        "entry": entry,
+        "history_generated_at": now,
+        "history_refresh_s": _figure_refresh_s(request),
+        "zone_name": zone.key,
+        "speed_chart": None,
+        "engagement_chart": None,
+    }
+    if entry.last_ping is not None:
+        trace = await data.vehicle_trace(session, vehicle_id, entry.last_ping.ts, TRACE_WINDOW)
+        if trace.ts:
+            context["speed_chart"] = _speed_chart(entry, trace, zone)
+    context["statuses"] = await data.status_history(session, vehicle_id)
+    engagement = await data.engagement_per_day(
+        session, local_days_ago(now, zone, ANALYTICS_DAYS), zone, vehicle_id=vehicle_id
+    )
+    context["engagement"] = engagement
+    if engagement:
+        context["engagement_chart"] = _engagement_chart(
+            "vehicle-engagement", f"Engagement of {vehicle_id} per day", engagement, zone
+        )
+    return context
 
 
 async def _vehicle_context(
     request: Request, session: SessionDep, vehicle_id: str
 ) -> dict[str, Any]:
     entry = await _entry_or_404(request, session, vehicle_id)
-    context: dict[str, Any] = {
+    return {
         "entry": entry,
         "generated_at": datetime.now(UTC),
         "refresh_s": _settings(request).dashboard_refresh_s,
@@ -687,29 +722,8 @@ async def _vehicle_context(
             if entry.vehicle.actuation in actuations
         ),
         "params_json": json.dumps(entry.vehicle.controller_params),
-        "speed_chart": None,
-        "engagement_chart": None,
+        **await _vehicle_history(request, session, entry),
     }
-    if entry.last_ping is not None:
-        trace = await data.vehicle_trace(session, vehicle_id, entry.last_ping.ts, TRACE_WINDOW)
-        if trace.ts:
-            context["speed_chart"] = _speed_chart(entry, trace, display_zone(_settings(request)))
-    context["statuses"] = await data.status_history(session, vehicle_id)
-    engagement = await data.vehicle_engagement(
-        session, vehicle_id, datetime.now(UTC) - timedelta(days=ANALYTICS_DAYS)
-    )
-    context["engagement"] = engagement
-    if engagement:
-        context["engagement_chart"] = bar_chart(
-            "vehicle-engagement",
-            f"Engagement of {vehicle_id} per day",
-            [row["day"].strftime("%m-%d") for row in engagement],
-            [100.0 * row["engagement_share"] for row in engagement],
-            "day (UTC)",
-            Axis("time with controller engaged (%)", lower=0.0, upper=100.0),
-            value_format="{:.0f} %",
-        )
-    return context
 
 
 @router.get("/vehicles/{vehicle_id}")
@@ -740,9 +754,17 @@ async def vehicle_live(
 ) -> HTMLResponse:
     """The vehicle's verdict and checks, for the page's periodic refresh."""
     entry = await _entry_or_404(request, session, vehicle_id)
-    return _render(
-        request, "_vehicle_checks.html", user, entry=entry, generated_at=datetime.now(UTC)
-    )
+    return _render(request, "_vehicle_live.html", user, entry=entry, generated_at=datetime.now(UTC))
+
+
+@router.get("/vehicles/{vehicle_id}/history/live")
+async def vehicle_history_live(
+    request: Request, user: UserDep, session: SessionDep, vehicle_id: str
+) -> HTMLResponse:
+    """The vehicle's speed chart, engagement and status reports, for their periodic refresh."""
+    entry = await _entry_or_404(request, session, vehicle_id)
+    context = await _vehicle_history(request, session, entry)
+    return _render(request, "_vehicle_history_live.html", user, **context)
 
 
 @router.post("/vehicles/{vehicle_id}/assignment")
@@ -835,18 +857,20 @@ def _plan_charts(profiles: list[data.LaneProfile]) -> list[tuple[int, Any]]:
         charts.append(
             (
                 profile.lane,
-                line_chart(
+                chart(
                     f"plan-lane-{profile.lane}",
-                    f"Target speed of lane {profile.lane} along the corridor",
-                    [
-                        Series("fused TSE", x, tse, "#9ca3af"),
-                        Series("target speed", x, target, "#2563eb"),
-                    ],
-                    Axis("postmile (direction of travel →)"),
-                    Axis("speed (mph)", lower=0.0),
-                    bands=[Band(start, end) for start, end in profile.buffers()],
-                    band_label="buffer region",
-                    height=240,
+                    line_figure(
+                        f"Target speed of lane {profile.lane} along the corridor",
+                        [
+                            Series("fused TSE", x, tse, "#9ca3af"),
+                            Series("target speed", x, target, "#2563eb"),
+                        ],
+                        Axis("postmile (direction of travel →)"),
+                        Axis("speed (mph)", lower=0.0),
+                        bands=[Band(start, end) for start, end in profile.buffers()],
+                        band_label="buffer region",
+                        height=240,
+                    ),
                 ),
             )
         )
@@ -869,27 +893,29 @@ def _time_space_chart(
     postmiles = np.linspace(low, high, HEATMAP_ROWS, endpoint=False)
     postmiles += (postmiles[1] - postmiles[0]) / 2
     grid = data.sample_plans(field, values, times, postmiles) * MPH_PER_MPS
-    return heatmap(
+    return chart(
         chart_id,
-        title,
-        grid,
-        (since.timestamp(), until.timestamp()),
-        (float(low), float(high)),
-        Axis("time", "time"),
-        Axis("postmile (direction of travel ↑)"),
-        ColourScale(0.0, speed_upper_mph, "speed (mph)"),
-        zone=zone,
+        heatmap_figure(
+            title,
+            grid,
+            (since.timestamp(), until.timestamp()),
+            (float(low), float(high)),
+            Axis("time", "time"),
+            Axis("postmile (direction of travel ↑)"),
+            ColourScale(0.0, speed_upper_mph, "speed (mph)"),
+            zone=zone,
+        ),
     )
 
 
-async def _plan_page(
+async def _plans_context(
     request: Request,
-    user: PageUser,
-    session: SessionDep,
+    session: AsyncSession,
     plan: PlanRun | None,
     corridor_id: str | None,
     lane: int,
-) -> HTMLResponse:
+) -> dict[str, Any]:
+    """A plan run (None: the corridor's latest) with its charts, and the recent runs."""
     corridors = await data.corridors(session)
     corridor = next(
         (c for c in corridors if c.corridor_id == (plan.corridor_id if plan else corridor_id)),
@@ -907,16 +933,19 @@ async def _plan_page(
         "tse_map": None,
         "inputs": {},
         "params": "",
+        "fixed_plan": plan is not None,
+        "generated_at": datetime.now(UTC),
+        "refresh_s": _figure_refresh_s(request),
     }
     if corridor is None:
-        return _render(request, "plans.html", user, **context)
+        return context
     if plan is None:
         plan = await data.latest_plan(session, corridor.corridor_id)
         context["plan"] = plan
     context["runs"] = await data.plan_runs(session, corridor.corridor_id)
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
-        return _render(request, "plans.html", user, **context)
+        return context
     context["inputs"] = dict(_readable_pair(name, value) for name, value in plan.inputs.items())
     context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
     context["lane_charts"] = _plan_charts(await data.plan_profiles(session, plan))
@@ -954,10 +983,11 @@ async def _plan_page(
                 upper,
                 zone,
             )
-    return _render(request, "plans.html", user, **context)
+    return context
 
 
 @router.get("/plans")
+@router.get("/plans/live")
 async def plans_page(
     request: Request,
     user: UserDep,
@@ -966,7 +996,8 @@ async def plans_page(
     lane: Annotated[int, Query(ge=1, le=12)] = 1,
 ) -> HTMLResponse:
     """The latest plan of a corridor: targets per lane, buffers, time-space maps, provenance."""
-    return await _plan_page(request, user, session, None, corridor, lane)
+    context = await _plans_context(request, session, None, corridor, lane)
+    return _page(request, user, "plans", **context)
 
 
 @router.get("/plans/{plan_id}")
@@ -985,27 +1016,19 @@ async def plan_page(
             "Unknown plan",
             f"There is no plan {plan_id}. The plans page lists the recent runs.",
         )
-    return await _plan_page(request, user, session, plan, plan.corridor_id, lane)
+    context = await _plans_context(request, session, plan, plan.corridor_id, lane)
+    return _render(request, "plans.html", user, **context)
 
 
 # --- feeds --------------------------------------------------------------------------------------
 
 
 @router.get("/feeds")
+@router.get("/feeds/live")
 async def feeds_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
     """INRIX freshness and latency, pings per second, rejected inputs."""
     context = await _feeds_context(request, session)
-    return _render(request, "feeds.html", user, **context)
-
-
-@router.get("/feeds/live")
-async def feeds_live(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
-    """The feeds page's content, for its periodic refresh."""
-    context = await _feeds_context(request, session)
-    return _render(request, "_feeds_live.html", user, **context)
-
-
-FEEDS_MIN_REFRESH_S = 15.0  # two charts per refresh; INRIX arrives once a minute
+    return _page(request, user, "feeds", **context)
 
 
 async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, Any]:
@@ -1030,44 +1053,48 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
         "ping_chart": None,
         "last_minute": minutes[-1] if minutes else None,
         "generated_at": now,
-        "refresh_s": max(_settings(request).dashboard_refresh_s, FEEDS_MIN_REFRESH_S),
+        "refresh_s": _figure_refresh_s(request),
     }
     zone = display_zone(_settings(request))
     if snapshots:
-        context["inrix_chart"] = line_chart(
+        context["inrix_chart"] = chart(
             "inrix-latency",
-            "INRIX latency per snapshot",
-            [
-                Series(
-                    "latency",
-                    [row["measured_at"].timestamp() for row in snapshots],
-                    [row["latency_s"] for row in snapshots],
-                    "#9333ea",
-                    style="points" if len(snapshots) < 3 else "line",
-                )
-            ],
-            Axis("INRIX measurement time", "time"),
-            Axis("latency: received − measured (s)", lower=0.0),
-            height=240,
-            zone=zone,
+            line_figure(
+                "INRIX latency per snapshot",
+                [
+                    Series(
+                        "latency",
+                        [row["measured_at"].timestamp() for row in snapshots],
+                        [row["latency_s"] for row in snapshots],
+                        "#9333ea",
+                        style="points" if len(snapshots) < 3 else "line",
+                    )
+                ],
+                Axis("INRIX measurement time", "time"),
+                Axis("latency: received − measured (s)", lower=0.0),
+                height=240,
+                zone=zone,
+            ),
         )
     if minutes:
-        context["ping_chart"] = line_chart(
+        context["ping_chart"] = chart(
             "ping-rate",
-            "Pings per second, per minute of GPS time",
-            [
-                Series(
-                    "pings per second",
-                    [row["minute"].timestamp() for row in minutes],
-                    [row["pings"] / 60.0 for row in minutes],
-                    "#2563eb",
-                    style="points" if len(minutes) < 3 else "line",
-                )
-            ],
-            Axis("time", "time"),
-            Axis("pings per second", lower=0.0),
-            height=240,
-            zone=zone,
+            line_figure(
+                "Pings per second, per minute of GPS time",
+                [
+                    Series(
+                        "pings per second",
+                        [row["minute"].timestamp() for row in minutes],
+                        [row["pings"] / 60.0 for row in minutes],
+                        "#2563eb",
+                        style="points" if len(minutes) < 3 else "line",
+                    )
+                ],
+                Axis("time", "time"),
+                Axis("pings per second", lower=0.0),
+                height=240,
+                zone=zone,
+            ),
         )
     return context
 
@@ -1076,12 +1103,13 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
 
 
 @router.get("/analytics")
+@router.get("/analytics/live")
 async def analytics_page(request: Request, user: UserDep, session: SessionDep) -> HTMLResponse:
     """Engagement per day, pings and vehicles per hour, plan adherence, Edie fields.
 
     The figures cover days and hours (and a week of plan adherence, the costly part), so each
-    server process computes them at most once every ANALYTICS_REFRESH_S and serves that copy;
-    the page says when it was computed.
+    server process computes them at most once every ANALYTICS_REFRESH_S and serves that copy,
+    which the page polls for as often; it says when the copy was computed.
     """
     cached: tuple[datetime, dict[str, Any]] | None = getattr(
         request.app.state, "analytics_page", None
@@ -1091,20 +1119,31 @@ async def analytics_page(request: Request, user: UserDep, session: SessionDep) -
         cached = (now, await _analytics_context(session, now, display_zone(_settings(request))))
         request.app.state.analytics_page = cached
     computed_at, context = cached
-    return _render(request, "analytics.html", user, computed_at=computed_at, **context)
+    return _page(
+        request,
+        user,
+        "analytics",
+        generated_at=computed_at,
+        refresh_s=ANALYTICS_REFRESH_S,
+        **context,
+    )
 
 
 async def _analytics_context(
     session: AsyncSession, now: datetime, zone: ZoneInfo
 ) -> dict[str, Any]:
     """What the analytics page shows, as of `now`."""
-    since = now - timedelta(days=ANALYTICS_DAYS)
-    engagement = await data.fleet_engagement(session, since)
+    engagement = await data.engagement_per_day(
+        session, local_days_ago(now, zone, ANALYTICS_DAYS), zone
+    )
     hourly_since = (now - timedelta(hours=48)).replace(minute=0, second=0, microsecond=0)
     hourly = await data.fleet_pings_hourly(session, hourly_since)
-    adherence = await data.fleet_adherence(session, now - timedelta(days=ADHERENCE_DAYS))
+    adherence = await data.adherence_per_day(
+        session, local_days_ago(now, zone, ADHERENCE_DAYS), zone
+    )
     context: dict[str, Any] = {
         "page": "analytics",
+        "zone_name": zone.key,
         "engagement": engagement,
         "hourly": hourly,
         "adherence": adherence,
@@ -1113,55 +1152,58 @@ async def _analytics_context(
     }
     charts = context["charts"]
     if engagement:
-        charts["engagement"] = bar_chart(
+        charts["engagement"] = _engagement_chart(
             "engagement-share",
             "Share of fleet time with the controller engaged, per day",
-            [row["day"].strftime("%m-%d") for row in engagement],
-            [100.0 * row["engagement_share"] for row in engagement],
-            "day (UTC)",
-            Axis("time with controller engaged (%)", lower=0.0, upper=100.0),
-            value_format="{:.0f} %",
+            engagement,
+            zone,
         )
     if hourly:
         hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
         hour_axis = Axis("hour", "time")
         style: Literal["points", "line"] = "points" if len(hourly) < 3 else "line"
-        charts["pings"] = line_chart(
+        charts["pings"] = chart(
             "pings-hourly",
-            "Pings per hour",
-            [Series("pings", hours, [float(r["pings"]) for r in hourly], style=style)],
-            hour_axis,
-            Axis("pings per hour", lower=0.0),
-            height=220,
-            zone=zone,
+            line_figure(
+                "Pings per hour",
+                [Series("pings", hours, [float(r["pings"]) for r in hourly], style=style)],
+                hour_axis,
+                Axis("pings per hour", lower=0.0),
+                height=220,
+                zone=zone,
+            ),
         )
-        charts["vehicles"] = line_chart(
+        charts["vehicles"] = chart(
             "vehicles-hourly",
-            "Vehicles heard per hour",
-            [
-                Series(
-                    "vehicles",
-                    hours,
-                    [float(r["vehicles"]) for r in hourly],
-                    "#16a34a",
-                    style=style,
-                )
-            ],
-            hour_axis,
-            Axis("vehicles", lower=0.0),
-            height=220,
-            zone=zone,
+            line_figure(
+                "Vehicles heard per hour",
+                [
+                    Series(
+                        "vehicles",
+                        hours,
+                        [float(r["vehicles"]) for r in hourly],
+                        "#16a34a",
+                        style=style,
+                    )
+                ],
+                hour_axis,
+                Axis("vehicles", lower=0.0),
+                height=220,
+                zone=zone,
+            ),
         )
     if adherence:
-        charts["adherence"] = bar_chart(
+        charts["adherence"] = chart(
             "plan-adherence",
-            "Mean |speed − plan target| per day",
-            [row["day"].strftime("%m-%d") for row in adherence],
-            [row["mean_abs_speed_error_mps"] * MPH_PER_MPS for row in adherence],
-            "day (UTC)",
-            Axis("mean |speed − target| (mph)", lower=0.0),
-            value_format="{:.1f}",
-            colour="#dc2626",
+            bar_figure(
+                "Mean |speed − plan target| per day",
+                [row["day"].strftime("%m-%d") for row in adherence],
+                [row["mean_abs_speed_error_mps"] * MPH_PER_MPS for row in adherence],
+                f"day ({zone.key})",
+                Axis("mean |speed − target| (mph)", lower=0.0),
+                value_format="{:.1f}",
+                colour="#dc2626",
+            ),
         )
     await _edie_charts(session, context, zone)
     return context
@@ -1199,27 +1241,31 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any], zone: ZoneI
     x_range = (t0, t0 + columns * h_t)
     context["edie_window"] = (since, until, corridor.corridor_id)
     upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
-    context["charts"]["edie_speed"] = heatmap(
+    context["charts"]["edie_speed"] = chart(
         "edie-speed",
-        "Bulk speed u = q / ρ of the fleet's pings",
-        speed,
-        x_range,
-        postmiles,
-        Axis("time", "time"),
-        Axis("postmile (direction of travel ↑)"),
-        ColourScale(0.0, upper, "bulk speed (mph)"),
-        zone=zone,
+        heatmap_figure(
+            "Bulk speed u = q / ρ of the fleet's pings",
+            speed,
+            x_range,
+            postmiles,
+            Axis("time", "time"),
+            Axis("postmile (direction of travel ↑)"),
+            ColourScale(0.0, upper, "bulk speed (mph)"),
+            zone=zone,
+        ),
     )
     finite = fuel[np.isfinite(fuel)]
     fuel_upper = float(np.percentile(finite, 95)) if finite.size else 1.0
-    context["charts"]["edie_fuel"] = heatmap(
+    context["charts"]["edie_fuel"] = chart(
         "edie-fuel",
-        "Bulk fuel consumption ψ = f / q",
-        fuel,
-        x_range,
-        postmiles,
-        Axis("time", "time"),
-        Axis("postmile (direction of travel ↑)"),
-        ColourScale(0.0, max(fuel_upper, 1e-3), "fuel per distance (g/km)", AMOUNT_STOPS),
-        zone=zone,
+        heatmap_figure(
+            "Bulk fuel consumption ψ = f / q",
+            fuel,
+            x_range,
+            postmiles,
+            Axis("time", "time"),
+            Axis("postmile (direction of travel ↑)"),
+            ColourScale(0.0, max(fuel_upper, 1e-3), "fuel per distance (g/km)", AMOUNT_STOPS),
+            zone=zone,
+        ),
     )

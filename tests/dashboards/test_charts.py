@@ -17,11 +17,10 @@ from dashboards.charts import (
     Band,
     ColourScale,
     Series,
-    bar_chart,
     bar_figure,
+    chart,
     fit,
     heatmap_figure,
-    line_chart,
     line_figure,
     local_time_ticks,
 )
@@ -111,12 +110,14 @@ def test_a_heatmap_has_its_colour_bar_and_says_grey_is_no_data() -> None:
 
 def test_a_chart_is_an_img_carrying_a_png_with_its_id_and_title() -> None:
     html = str(
-        line_chart(
+        chart(
             "demo",
-            "Demo <chart>",
-            [Series("a", [0.0, 1.0], [1.0, 2.0])],
-            Axis("postmile (direction of travel →)"),
-            Axis("speed (mph)"),
+            line_figure(
+                "Demo <chart>",
+                [Series("a", [0.0, 1.0], [1.0, 2.0])],
+                Axis("postmile (direction of travel →)"),
+                Axis("speed (mph)"),
+            ),
         )
     )
     assert html.startswith('<img class="chart" data-chart="demo" alt="Demo &lt;chart&gt;"')
@@ -124,5 +125,5 @@ def test_a_chart_is_an_img_carrying_a_png_with_its_id_and_title() -> None:
     assert found is not None
     assert base64.b64decode(found.group(1))[:8] == b"\x89PNG\r\n\x1a\n"
     assert 'data-chart="share"' in str(
-        bar_chart("share", "Share", ["11-16"], [38.0], "day", Axis("engaged (%)"))
+        chart("share", bar_figure("Share", ["11-16"], [38.0], "day", Axis("engaged (%)")))
     )

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import html
+import re
 from collections.abc import Iterator
-from datetime import UTC, datetime, timedelta
+from datetime import UTC, datetime, time, timedelta
+from zoneinfo import ZoneInfo
 
 import httpx
 import pytest
@@ -397,12 +399,29 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         assert "<html" not in vehicle_live
         assert 'data-field="verdict">cleared</span>' in vehicle_live
         assert vehicle_live.count('class="check-card') == 12
+        assert 'data-live-url="/vehicles/SF-001/history/live"' in vehicle
+        history = client.get("/vehicles/SF-001/history/live").text
+        assert "<html" not in history
+        assert "data-generated-at=" in history
+        for chart in ("vehicle-speed", "vehicle-engagement"):
+            assert f'data-chart="{chart}"' in history
 
         plans = client.get("/plans").text
         for chart in ("plan-lane-1", "plan-lane-4", "plan-heatmap", "tse-heatmap"):
             assert f'data-chart="{chart}"' in plans
         assert 'alt="Target speed of lane 1 along the corridor"' in plans  # axes: test_charts
         assert "kernel_smooth_buffer" in plans
+        assert 'data-live-url="/plans/live?corridor=I-24-WB&amp;lane=1"' in plans
+        plans_live = client.get("/plans/live", params={"corridor": "I-24-WB", "lane": 2}).text
+        assert "<html" not in plans_live
+        assert "data-generated-at=" in plans_live
+        assert 'data-chart="plan-heatmap"' in plans_live
+        assert "Target speed of lane 2, recent plans" in plans_live
+        plan_id = re.search(r"<h2>Plan (\d+) ", plans)
+        assert plan_id is not None
+        one_plan = client.get(f"/plans/{plan_id.group(1)}").text
+        assert "data-live-url" not in one_plan  # a plan run as published does not change
+        assert "the latest plan</a> updates itself" in one_plan
 
         feeds = client.get("/feeds").text
         assert 'data-live-url="/feeds/live"' in feeds
@@ -415,6 +434,11 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         analytics = client.get("/analytics").text
         for chart in ("engagement-share", "pings-hourly", "vehicles-hourly", "edie-speed"):
             assert f'data-chart="{chart}"' in analytics
+        assert 'data-live-url="/analytics/live"' in analytics
+        analytics_live = client.get("/analytics/live").text
+        assert "<html" not in analytics_live
+        assert "data-generated-at=" in analytics_live
+        assert 'data-chart="engagement-share"' in analytics_live
 
         corridor_map = client.get("/map").text
         assert 'data-vehicle="SF-001" data-state="engaged"' in corridor_map
@@ -427,6 +451,30 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         assert '<span class="number" data-field="window-share">100 %</span>' in time_space
         assert "No plan of lane 1" not in time_space
         assert client.get("/timespace", params={"field": "fuel"}).status_code == 400
+
+
+def test_days_are_the_corridors_local_days(site: str, seeded_engine: Engine) -> None:
+    # Yesterday in Nashville (UTC-6 in winter, -5 in summer) from 17:30 to 19:30: the first
+    # hour is engaged, the second not. In UTC the evening spans two days; locally it is one.
+    zone = ZoneInfo(load_settings().dashboard_timezone)
+    yesterday = datetime.now(zone).date() - timedelta(days=1)
+    evening = datetime.combine(yesterday, time(17, 30), zone).astimezone(UTC)
+    assert evening.date() != (evening + timedelta(hours=2)).date()  # two UTC days
+    with httpx.Client(base_url=site, timeout=30) as client:
+        admin = issue(seeded_engine, "admin")
+        for hour, engaged in ((0, True), (1, False)):
+            start = evening + timedelta(hours=hour)
+            post_pings(
+                client,
+                admin,
+                drive("SF-002", start, 1000.0, 0.1, 3600, controller_engaged=engaged),
+            )
+    with logged_in(site, "viewer") as client:
+        history = client.get("/vehicles/SF-002/history/live").text
+    days = re.search(r'data-field="engagement">engaged per day \(([^)]+)\): ([^<]*)</p>', history)
+    assert days is not None, history
+    assert days.group(1) == zone.key
+    assert days.group(2).split(" · ") == [f"{yesterday:%m-%d} 50 %"]
 
 
 def test_the_csrf_token_belongs_to_the_session(site: str) -> None:
