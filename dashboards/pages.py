@@ -13,6 +13,7 @@ import inspect
 import json
 import logging
 import math
+from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -654,6 +655,27 @@ def _speed_chart(entry: FleetEntry, trace: data.Trace, zone: ZoneInfo) -> Any:
     )
 
 
+def _over_time(
+    chart_id: str,
+    title: str,
+    series: Series,
+    x_axis: Axis,
+    y_axis: Axis,
+    zone: ZoneInfo,
+    *,
+    height: int = 240,
+) -> Any:
+    """One quantity over time, drawn as points while there are fewer than three of them (a
+    line through one or two values hides them)."""
+    style: Literal["points", "line"] = "points" if len(series.x) < 3 else "line"
+    return chart(
+        chart_id,
+        line_figure(
+            title, [replace(series, style=style)], x_axis, y_axis, height=height, zone=zone
+        ),
+    )
+
+
 def _engagement_chart(chart_id: str, title: str, rows: Any, zone: ZoneInfo) -> Any:
     """Engagement share per local day, as bars (vehicle and analytics pages)."""
     return chart(
@@ -1057,44 +1079,32 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
     }
     zone = display_zone(_settings(request))
     if snapshots:
-        context["inrix_chart"] = chart(
+        context["inrix_chart"] = _over_time(
             "inrix-latency",
-            line_figure(
-                "INRIX latency per snapshot",
-                [
-                    Series(
-                        "latency",
-                        [row["measured_at"].timestamp() for row in snapshots],
-                        [row["latency_s"] for row in snapshots],
-                        "#9333ea",
-                        style="points" if len(snapshots) < 3 else "line",
-                    )
-                ],
-                Axis("INRIX measurement time", "time"),
-                Axis("latency: received − measured (s)", lower=0.0),
-                height=240,
-                zone=zone,
+            "INRIX latency per snapshot",
+            Series(
+                "latency",
+                [row["measured_at"].timestamp() for row in snapshots],
+                [row["latency_s"] for row in snapshots],
+                "#9333ea",
             ),
+            Axis("INRIX measurement time", "time"),
+            Axis("latency: received − measured (s)", lower=0.0),
+            zone,
         )
     if minutes:
-        context["ping_chart"] = chart(
+        context["ping_chart"] = _over_time(
             "ping-rate",
-            line_figure(
-                "Pings per second, per minute of GPS time",
-                [
-                    Series(
-                        "pings per second",
-                        [row["minute"].timestamp() for row in minutes],
-                        [row["pings"] / 60.0 for row in minutes],
-                        "#2563eb",
-                        style="points" if len(minutes) < 3 else "line",
-                    )
-                ],
-                Axis("time", "time"),
-                Axis("pings per second", lower=0.0),
-                height=240,
-                zone=zone,
+            "Pings per second, per minute of GPS time",
+            Series(
+                "pings per second",
+                [row["minute"].timestamp() for row in minutes],
+                [row["pings"] / 60.0 for row in minutes],
+                "#2563eb",
             ),
+            Axis("time", "time"),
+            Axis("pings per second", lower=0.0),
+            zone,
         )
     return context
 
@@ -1160,37 +1170,23 @@ async def _analytics_context(
         )
     if hourly:
         hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
-        hour_axis = Axis("hour", "time")
-        style: Literal["points", "line"] = "points" if len(hourly) < 3 else "line"
-        charts["pings"] = chart(
+        charts["pings"] = _over_time(
             "pings-hourly",
-            line_figure(
-                "Pings per hour",
-                [Series("pings", hours, [float(r["pings"]) for r in hourly], style=style)],
-                hour_axis,
-                Axis("pings per hour", lower=0.0),
-                height=220,
-                zone=zone,
-            ),
+            "Pings per hour",
+            Series("pings", hours, [float(r["pings"]) for r in hourly], "#2563eb"),
+            Axis("hour", "time"),
+            Axis("pings per hour", lower=0.0),
+            zone,
+            height=220,
         )
-        charts["vehicles"] = chart(
+        charts["vehicles"] = _over_time(
             "vehicles-hourly",
-            line_figure(
-                "Vehicles heard per hour",
-                [
-                    Series(
-                        "vehicles",
-                        hours,
-                        [float(r["vehicles"]) for r in hourly],
-                        "#16a34a",
-                        style=style,
-                    )
-                ],
-                hour_axis,
-                Axis("vehicles", lower=0.0),
-                height=220,
-                zone=zone,
-            ),
+            "Vehicles heard per hour",
+            Series("vehicles", hours, [float(r["vehicles"]) for r in hourly], "#16a34a"),
+            Axis("hour", "time"),
+            Axis("vehicles", lower=0.0),
+            zone,
+            height=220,
         )
     if adherence:
         charts["adherence"] = chart(
