@@ -5,8 +5,10 @@
 - bottleneck: the platoon behind a real high-speed drive through a region whose speed limit
   falls as the density of vehicles inside rises (the paper's weaving area, where on- and
   off-ramps close together force lane changes);
-- shockwave_inrix: the platoon behind a real drive recorded with the INRIX feed of the same
-  minutes, the planner reading the real feed instead of the simulated one.
+- shockwave_inrix: the platoon behind a real stop-and-go drive recorded with the INRIX feed of
+  the same minutes, the planner reading the real feed instead of the simulated one;
+- freeflow_inrix: the same behind the recorded drives that never slow into a wave (the two
+  longer cuts of 2021-03-08), so every drive recorded with INRIX is in some scenario.
 
 A scenario is one function from the available drives (plain, and recorded with INRIX) to its
 cases, registered in `SCENARIOS`: a new scenario is one function and one registry line.
@@ -139,12 +141,24 @@ def shockwave_inrix_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDr
     ]
 
 
+def freeflow_inrix_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
+    """Every recorded all-high-speed drive, with its real INRIX minutes."""
+    return [
+        Case("freeflow_inrix", one.drive, inrix=one.feed)
+        for one in recorded
+        if one.drive.kind == "freeflow"
+    ]
+
+
 SCENARIOS: dict[str, Callable[[Sequence[Drive], Sequence[RecordedDrive]], list[Case]]] = {
     "shockwave": shockwave_cases,
     "freeflow": freeflow_cases,
     "bottleneck": bottleneck_cases,
     "shockwave_inrix": shockwave_inrix_cases,
+    "freeflow_inrix": freeflow_inrix_cases,
 }
+# The scenarios that drive on the recordings with real INRIX (`--inrix-drives`).
+RECORDED_SCENARIOS = frozenset({"shockwave_inrix", "freeflow_inrix"})
 
 
 def scenario_cases(

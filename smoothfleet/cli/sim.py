@@ -50,7 +50,7 @@ from sim.report import (
     write_rows,
     write_time_space,
 )
-from sim.scenarios import SCENARIOS, Case, scenario_cases
+from sim.scenarios import RECORDED_SCENARIOS, SCENARIOS, Case, scenario_cases
 from sim.selection import choose, cross_validate, held_out_summary
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -149,7 +149,8 @@ def _default_folder(name: str) -> Path | None:
     "inrix_dir",
     type=click.Path(path_type=Path),
     default=lambda: _default_folder("trajectories_with_inrix"),
-    help="Folder of drives recorded with their INRIX minutes (scenario shockwave_inrix) "
+    help="Folder of drives recorded with their INRIX minutes (scenarios shockwave_inrix, "
+    "freeflow_inrix) "
     "[default: shared/data/trajectories_with_inrix beside the checkout].",
 )
 @click.option(
@@ -261,7 +262,8 @@ def evaluate_command(
             f"{max(avs)} AVs leave no human in a platoon of {followers}", param_hint="--avs"
         )
     chosen = list(scenarios) or list(DEFAULT_SCENARIOS)
-    if drives_dir is None or (inrix_dir is None and "shockwave_inrix" in chosen):
+    on_recordings = bool(RECORDED_SCENARIOS.intersection(chosen))
+    if drives_dir is None or (inrix_dir is None and on_recordings):
         raise click.ClickException(
             "no shared data found beside the checkout: pass --drives and --inrix-drives, or "
             "set SMOOTHFLEET_SHARED_DATA"
@@ -270,7 +272,7 @@ def evaluate_command(
         drives = load_drives(drives_dir)
         recorded = (
             load_recorded_drives(inrix_dir)
-            if "shockwave_inrix" in chosen and inrix_dir is not None
+            if on_recordings and inrix_dir is not None
             else []
         )
     except DriveError as error:

@@ -56,6 +56,12 @@ def test_the_shared_recordings(shared_dir: Path) -> None:
     assert len(cases) == 7
     assert all(case.inrix is not None for case in cases)
     assert set(FIRST_SHARED) <= {case.drive.name for case in cases}
+    # ...and they have a scenario of their own: every recording is in exactly one
+    freeflow = scenario_cases(["freeflow_inrix"], [], recorded)
+    assert sorted(case.drive.name[:21] for case in freeflow) == ["2021-03-08-22-35-14_2"] * 2
+    assert all(case.inrix is not None for case in freeflow)
+    both = {case.drive.name for case in cases + freeflow}
+    assert both == {one.drive.name for one in recorded}
 
 
 def test_the_planner_reads_the_recorded_minutes(shared_dir: Path) -> None:
