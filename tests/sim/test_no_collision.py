@@ -1,19 +1,42 @@
-"""No registered controller, with any parameters the registry accepts, drives into a stopped
-queue: the issue's crash (a stale plan holding 28 m/s, the queue first seen at 100 m) is handed
-back to the driver, counted as a takeover, and nobody collides."""
+"""No registered controller, with any parameters the registry accepts, collides (issue 12):
+
+- on a stopped queue behind a stale plan (the issue's crash: 28 m/s, the queue first seen at
+  100 m) and behind a leader braking as hard as tyres allow, with the laziest braking each
+  parameter model accepts: handed back to the driver, counted as a takeover, nobody collides;
+- on every drive of every evaluation scenario (the 32 shared drives, the bottleneck on the
+  free-flow ones, and the 9 drives recorded with their real INRIX), every registered controller
+  as `smoothfleet sim evaluate` runs it: zero collisions;
+- on the most dangerous of those drives (the real-INRIX one whose stale plans hand the car back
+  most often), with parameters drawn by hypothesis from each controller's accepted ranges.
+"""
 
 from __future__ import annotations
 
+import math
+from pathlib import Path
 from typing import Any
 
+import annotated_types
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pydantic import BaseModel
 
+from contract.controllers import CONTROLLER_SCHEMAS
 from sim.av import agent_policy
-from sim.drives import drive_from_speeds
+from sim.drives import drive_from_speeds, load_drives
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
+from sim.evaluate import ControllerVariant, default_workers, evaluate, run_case
 from sim.platoon import CutIns, HandBack, platoon_roles, simulate_platoon
+from sim.recommended import (
+    RECOMMENDED_PLANNER,
+    RECOMMENDED_PLANNER_PARAMS,
+    registered_variants,
+)
+from sim.recorded import load_recorded_drives
+from sim.scenarios import SCENARIOS, Case, scenario_cases
 from vehicle_agent.controllers import CONTROLLERS, TargetProfile
 
 # Defaults, and the laziest braking each parameter model accepts.
@@ -100,3 +123,173 @@ def test_a_stopped_queue_behind_a_stale_plan(
     )
     assert run.collisions == 0, run.events
     assert float(np.nanmin(run.gap_m)) > 0.0
+
+
+# --- every registered controller on every drive -------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def every_case(shared_dir: Path) -> list[Case]:
+    """Every case of every scenario on the shared data (what `sim evaluate` runs by default)."""
+    data = shared_dir / "data"
+    return scenario_cases(
+        list(SCENARIOS),
+        load_drives(data / "trajectories"),
+        load_recorded_drives(data / "trajectories_with_inrix"),
+    )
+
+
+def collisions_on(cases: list[Case], variant: ControllerVariant, avs: int) -> list[str]:
+    """`case: collisions` of every run of the variant with `avs` AVs spread through a platoon
+    of 25 followers, under the recommended planner."""
+    found = []
+    for case in cases:
+        result = run_case(
+            case,
+            RECOMMENDED_PLANNER,
+            variant,
+            humans=25 - avs,
+            avs=avs,
+            planner_params=RECOMMENDED_PLANNER_PARAMS,
+        )
+        if result.kpis.collisions:
+            found.append(f"{case.name}: {result.kpis.collisions} collisions")
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("variant", registered_variants(), ids=lambda variant: variant.name)
+def test_every_registered_controller_on_every_drive(
+    variant: ControllerVariant, every_case: list[Case]
+) -> None:
+    # 20 shockwave + 12 freeflow + 12 bottleneck drives, 7 + 2 recorded with their real INRIX
+    counts = {name: sum(case.scenario == name for case in every_case) for name in SCENARIOS}
+    assert counts == {
+        "shockwave": 20,
+        "freeflow": 12,
+        "bottleneck": 12,
+        "shockwave_inrix": 7,
+        "freeflow_inrix": 2,
+    }
+    # as `smoothfleet sim evaluate` runs it: the all-human baseline and 1 AV behind the leader
+    # of 25 followers, under the recommended planner, cases side by side on every core
+    evaluation = evaluate(
+        every_case,
+        [RECOMMENDED_PLANNER],
+        [variant],
+        planner_params=RECOMMENDED_PLANNER_PARAMS,
+        workers=default_workers(),
+    )
+    assert len(evaluation.results) == 2 * len(every_case)
+    collided = [
+        f"{result.case.name} {result.controller}: {result.kpis.collisions}"
+        for result in evaluation.results
+        if result.kpis.collisions
+    ]
+    assert collided == []
+
+
+# --- any parameters the registry accepts, on the most dangerous drive ---------------------------
+
+# A bound the registry leaves open (the slowdown thresholds, the gap dwell, the lane-change
+# detector's) is drawn up to this many times the default's magnitude: far beyond any setting an
+# operator would assign, still a number the controller computes with.
+OPEN_BOUND_FACTOR = 100.0
+
+
+def within_bounds(kind: type, metadata: list[Any], default: float) -> st.SearchStrategy[Any]:
+    """Numbers of `kind` inside the field's declared bounds (open ones at OPEN_BOUND_FACTOR)."""
+    reach = OPEN_BOUND_FACTOR * max(abs(float(default)), 1.0)
+    low, high, open_low, open_high = -reach, reach, False, False
+    for bound in metadata:
+        if isinstance(bound, annotated_types.Gt):
+            low, open_low = float(bound.gt), True  # type: ignore[arg-type]
+        elif isinstance(bound, annotated_types.Ge):
+            low = float(bound.ge)  # type: ignore[arg-type]
+        elif isinstance(bound, annotated_types.Lt):
+            high, open_high = float(bound.lt), True  # type: ignore[arg-type]
+        elif isinstance(bound, annotated_types.Le):
+            high = float(bound.le)  # type: ignore[arg-type]
+    if kind is int:
+        return st.integers(
+            math.floor(low) + 1 if open_low else math.ceil(low),
+            math.ceil(high) - 1 if open_high else math.floor(high),
+        )
+    return st.floats(
+        low, high, exclude_min=open_low, exclude_max=open_high, allow_nan=False
+    )
+
+
+def accepted_params(model: type[BaseModel]) -> st.SearchStrategy[dict[str, Any]]:
+    """Parameters the model accepts: every number and switch drawn within its declared bounds,
+    nested models likewise; anything else (an RL controller's policy file) keeps its default."""
+    fields: dict[str, st.SearchStrategy[Any]] = {}
+    for name, info in model.model_fields.items():
+        kind = info.annotation
+        if isinstance(kind, type) and issubclass(kind, BaseModel):
+            fields[name] = accepted_params(kind)
+        elif kind is bool:
+            fields[name] = st.booleans()
+        elif kind in (int, float):
+            assert isinstance(kind, type)
+            fields[name] = within_bounds(kind, info.metadata, info.default)
+    return st.fixed_dictionaries(fields)
+
+
+def drawable(model: type[BaseModel]) -> bool:
+    """True when `accepted_params` draws at least one of the model's fields."""
+    return any(
+        info.annotation in (int, float, bool)
+        or (isinstance(info.annotation, type) and issubclass(info.annotation, BaseModel))
+        for info in model.model_fields.values()
+    )
+
+
+# Every registered controller with a parameter to draw, on each actuation it drives.
+TUNABLE = [
+    (name, actuation)
+    for name, schema in CONTROLLER_SCHEMAS.items()
+    if drawable(schema.params_model)
+    for actuation in sorted(schema.actuations)
+]
+
+
+# The real-INRIX drive whose stale plans hand the car back most often (docs/simulation.md:
+# 2 takeovers with 1 AV, 17 with 4 under the recommended pair; 16 for rl_acc with 4), cut to
+# its first DANGER_S seconds (which hold 14 of those 17, from 60 s on), with 4 AVs spread
+# through the platoon as `--avs 4` spreads them.
+DANGEROUS_DRIVE = "2021-04-07-12-33-03_2T3MWRFVXLW056972_masterArray_0_11294"
+DANGER_S = 700.0
+DANGER_AVS = 4
+
+
+@pytest.fixture(scope="module")
+def dangerous_case(every_case: list[Case]) -> Case:
+    whole = next(
+        case
+        for case in every_case
+        if case.scenario == "shockwave_inrix" and case.drive.name == DANGEROUS_DRIVE
+    )
+    return Case(whole.scenario, whole.drive.slice(0.0, DANGER_S), inrix=whole.inrix)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("name", "actuation"), TUNABLE)
+def test_any_accepted_parameters_on_the_most_dangerous_drive(
+    name: str, actuation: str, dangerous_case: Case
+) -> None:
+    schema = CONTROLLER_SCHEMAS[name]
+
+    @settings(
+        max_examples=8,
+        deadline=None,
+        derandomize=True,
+        suppress_health_check=[HealthCheck.too_slow],
+    )
+    @given(params=accepted_params(schema.params_model))
+    def no_collision(params: dict[str, Any]) -> None:
+        schema.params_model.model_validate(params)  # the registry accepts them
+        variant = ControllerVariant(name, actuation, params)
+        assert collisions_on([dangerous_case], variant, avs=DANGER_AVS) == []
+
+    no_collision()
