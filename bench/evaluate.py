@@ -1,14 +1,16 @@
-"""How long the candidate evaluation takes: every shared drive x every registered pair.
+"""How long the default candidate evaluation takes: `smoothfleet sim evaluate` with no flags.
 
-    .venv/bin/python -m bench.evaluate [--drives DIR] [--workers N]
+    .venv/bin/python -m bench.evaluate [--workers N]
 
 (as a module: run as a script, this file would shadow the `sim` package)
 
 Figures, measured in one run:
-- the evaluation `smoothfleet sim evaluate` runs by default on the 32 drives of
-  ../shared/data/trajectories (shockwave and freeflow cases, both planners, every registered
-  controller and the recommended variant, 1 AV), wall time and CPU time of all processes;
-- the baseline: the all-human platoons of the same cases alone (the floor any evaluation pays).
+- the baseline: the all-human platoons of every case alone (the floor any evaluation pays);
+- the evaluation exactly as `smoothfleet sim evaluate` runs it without flags (every scenario on
+  the shared data: the 32 drives' shockwave and freeflow cases, the bottleneck on the freeflow
+  ones, the 9 drives recorded with their real INRIX; every planner x every registered controller
+  and the recommended variant, 1 AV; its progress bar, table, CSV and heatmap), wall time and
+  CPU time of all its processes.
 The machine's load average is printed beside them: on a shared machine wall time is not the
 program's alone. Goal (issue 12): the evaluation in under 5 minutes.
 """
@@ -18,14 +20,15 @@ from __future__ import annotations
 import argparse
 import os
 import resource
+import tempfile
 import time
 from pathlib import Path
 
-from planner import ALGORITHMS
 from sim.drives import load_drives, shared_data_dir
 from sim.evaluate import default_workers, evaluate
-from sim.recommended import RECOMMENDED_PLANNER_PARAMS, registered_variants
-from sim.scenarios import scenario_cases
+from sim.recorded import load_recorded_drives
+from sim.scenarios import SCENARIOS, scenario_cases
+from smoothfleet.cli.sim import evaluate_command
 
 
 def cpu_seconds() -> float:
@@ -37,39 +40,38 @@ def cpu_seconds() -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--drives", type=Path, default=None)
     parser.add_argument("--workers", type=int, default=default_workers())
     args = parser.parse_args()
-    drives = load_drives(args.drives or shared_data_dir() / "trajectories")
-    cases = scenario_cases(["shockwave", "freeflow"], drives)
-    variants = registered_variants()
-    planners = ALGORITHMS.names()
+    data = shared_data_dir()
+    cases = scenario_cases(
+        list(SCENARIOS),
+        load_drives(data / "trajectories"),
+        load_recorded_drives(data / "trajectories_with_inrix"),
+    )
     print(
-        f"{len(drives)} drives, {len(cases)} cases, {len(planners)} planners x "
-        f"{len(variants)} controllers, {args.workers} workers, load average "
+        f"{len(cases)} cases ({', '.join(SCENARIOS)}), {args.workers} workers, load average "
         f"{os.getloadavg()[0]:.1f} at start"
     )
 
     start, cpu = time.perf_counter(), cpu_seconds()
-    baseline = evaluate(cases, planners[:1], [], workers=args.workers)
+    baseline = evaluate(cases, [], [], workers=args.workers)
     base_wall, base_cpu = time.perf_counter() - start, cpu_seconds() - cpu
     print(
         f"baseline, all-human runs only : {len(baseline.results):4d} runs in "
         f"{base_wall:7.1f} s wall, {base_cpu:7.1f} s CPU"
     )
 
-    start, cpu = time.perf_counter(), cpu_seconds()
-    full = evaluate(
-        cases,
-        planners,
-        variants,
-        planner_params=RECOMMENDED_PLANNER_PARAMS,
-        workers=args.workers,
-    )
-    wall, used = time.perf_counter() - start, cpu_seconds() - cpu
+    with tempfile.TemporaryDirectory() as out:
+        start, cpu = time.perf_counter(), cpu_seconds()
+        evaluate_command.main(
+            ["--workers", str(args.workers), "--out", out], standalone_mode=False
+        )
+        wall, used = time.perf_counter() - start, cpu_seconds() - cpu
+        with (Path(out) / "evaluation.csv").open() as handle:
+            runs = sum(1 for _ in handle) - 1
     print(
-        f"evaluation, registered pairs   : {len(full.results):4d} runs in {wall:7.1f} s wall, "
-        f"{used:7.1f} s CPU ({1000 * used / len(full.results):.0f} ms CPU a run)"
+        f"`smoothfleet sim evaluate`     : {runs:4d} runs in {wall:7.1f} s wall, "
+        f"{used:7.1f} s CPU ({1000 * used / runs:.0f} ms CPU a run)"
     )
     print(f"load average at the end        : {os.getloadavg()[0]:.1f}")
     print(f"goal: under 300 s wall         : {'met' if wall < 300 else 'NOT met'}")
