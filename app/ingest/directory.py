@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from sqlalchemy import text
 from sqlalchemy.ext.asyncio import AsyncEngine
 
-from contract.corridor import CorridorGeometry
+from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
 
 MIN_RELOAD_INTERVAL_S = 2.0
 REFRESH_AHEAD_SHARE = 0.2
@@ -58,6 +58,17 @@ class CorridorInfo:
             float(x) if on else None
             for x, on in zip(located.x_m.tolist(), located.on_corridor.tolist(), strict=True)
         ]
+
+    def x_m_of_fix(
+        self, lat: float, lon: float, heading_deg: float | None, speed_mps: float
+    ) -> float | None:
+        """`x_m` for one fix in plain floats (a lone ping: numpy's per-call overhead would be
+        most of the cost), its heading trusted as `contract.corridor.trusted_heading` does."""
+        if self.geometry is None:
+            return None
+        trusted = heading_deg if speed_mps >= MIN_SPEED_FOR_HEADING_MPS else None
+        x_m, _, on = self.geometry.locate_fix(lat, lon, trusted)
+        return x_m if on else None
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,8 @@ log = logging.getLogger(__name__)
 # parameters stay a few MB and a statement takes well under the statement timeout.
 MAX_GROUP_ROWS = 20_000
 _LANE = PingRow._fields.index("lane")  # x_m follows lane in the table
+# Up to this many fixes of one corridor in a group are map-matched one by one in plain floats.
+SCALAR_MATCH_FIXES = 16
 # Positions of the REAL (float4) columns in a written row (the row number excluded).
 _FLOAT4 = tuple(n for n, (_, pg_type) in enumerate(PING_COLUMNS) if pg_type == "float4")
 
@@ -330,13 +332,19 @@ def _refusal(error: Exception, rows: Sequence[PingRow]) -> RefusedByDatabase:
 
 
 def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
-    """x_m of each row on its vehicle's corridor (vectorised per corridor)."""
+    """x_m of each row on its vehicle's corridor (vectorised per corridor, but fix by fix for
+    the few fixes of a small group)."""
     x_m: list[float | None] = [None] * len(rows)
     by_corridor: dict[str, list[int]] = {}
     for position, row in enumerate(rows):
         by_corridor.setdefault(row.corridor.corridor_id, []).append(position)
     for positions in by_corridor.values():
         corridor = rows[positions[0]].corridor
+        if len(positions) <= SCALAR_MATCH_FIXES:
+            for p in positions:
+                row = rows[p]
+                x_m[p] = corridor.x_m_of_fix(row.lat, row.lon, row.heading_deg, row.speed_mps)
+            continue
         lat = np.fromiter((rows[p].lat for p in positions), dtype=np.float64, count=len(positions))
         lon = np.fromiter((rows[p].lon for p in positions), dtype=np.float64, count=len(positions))
         heading = trusted_heading(

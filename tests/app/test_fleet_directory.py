@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import asyncio
 
+import numpy as np
 from sqlalchemy import Engine, text
 
 from app.core.db import make_async_engine
 from app.ingest.directory import FleetDirectory, FleetDirectoryCache
+from contract.corridor import trusted_heading
 
 
 class Clock:
@@ -53,3 +55,40 @@ def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
             await engine.dispose()
 
     assert asyncio.run(scenario()) == (True, True, True, True)
+
+
+def test_a_lone_fix_is_placed_where_the_vectorised_match_places_it(
+    seeded_database_url: str,
+) -> None:
+    """The writer places a small group's fixes one by one: same x_m, same off-corridor verdict
+    (too far, outside the corridor's ends, driving against it), same trust in slow headings."""
+
+    async def load() -> FleetDirectory:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            return await FleetDirectoryCache(engine, ttl_s=30).directory()
+        finally:
+            await engine.dispose()
+
+    corridor = asyncio.run(load()).corridor_of("SF-001")
+    assert corridor is not None
+    assert corridor.geometry is not None
+    geometry = corridor.geometry
+    rng = np.random.default_rng(7)
+    x = rng.uniform(-500, geometry.length_m + 500, 400)
+    lat, lon = geometry.position(np.clip(x, 0, geometry.length_m))
+    lat = lat + rng.normal(0, 0.0004, len(x))  # tens of metres: some fixes off the corridor
+    along = geometry.heading_deg(np.clip(x, 0, geometry.length_m))
+    heading = np.where(rng.random(len(x)) < 0.3, (along + 180) % 360, along)
+    speed = rng.choice([0.0, 1.5, 25.0], len(x))
+
+    vectorised = corridor.x_m(lat, lon, trusted_heading(heading, speed))
+    one_by_one = [
+        corridor.x_m_of_fix(float(a), float(o), float(h), float(v))
+        for a, o, h, v in zip(lat, lon, heading, speed, strict=True)
+    ]
+
+    assert [v is None for v in one_by_one] == [v is None for v in vectorised]
+    assert 0 < sum(v is None for v in vectorised) < len(x)
+    placed = [(a, b) for a, b in zip(one_by_one, vectorised, strict=True) if a is not None]
+    assert np.allclose([a for a, _ in placed], [b for _, b in placed], atol=1e-6)
