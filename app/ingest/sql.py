@@ -59,10 +59,16 @@ SMALL_GROUP_ROWS = 64
 
 @functools.cache
 def insert_values(rows: int) -> str:
-    """The one-statement INSERT of `rows` rows (one query text per size, so each is prepared)."""
-    one = "(" + ", ".join(["%s"] * len(PING_COLUMNS)) + ")"
+    """The one-statement INSERT of `rows` rows, with PostgreSQL's own $n placeholders (a raw
+    cursor sends it as it is: psycopg parses, and caches, only short %s queries), one text per
+    size, so each is prepared once."""
+    width = len(PING_COLUMNS)
+    tuples = (
+        "(" + ",".join(f"${row * width + column + 1}" for column in range(width)) + ")"
+        for row in range(rows)
+    )
     return (
-        f"INSERT INTO fact_vehicle_ping ({_NAMES}) VALUES {', '.join([one] * rows)} "
+        f"INSERT INTO fact_vehicle_ping ({_NAMES}) VALUES {','.join(tuples)} "
         "ON CONFLICT (vehicle_id, ts) DO NOTHING RETURNING vehicle_id, ts"
     )
 

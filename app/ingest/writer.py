@@ -270,7 +270,7 @@ async def _insert_small(driver: psycopg.AsyncConnection[Any], values: Sequence[V
             if isinstance(value, float) and value != 0.0 and abs(value) < NEGLIGIBLE:
                 fields[position] = 0.0
         parameters.extend(fields)
-    async with driver.cursor() as cursor:
+    async with psycopg.AsyncRawCursor(driver) as cursor:
         await cursor.execute(insert_values(len(values)), parameters)
         inserted = {(vehicle_id, ts) for vehicle_id, ts in await cursor.fetchall()}
     return {n for n, row in enumerate(values) if (row[0], row[1]) not in inserted}
