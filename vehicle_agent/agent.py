@@ -28,7 +28,7 @@ import can
 from pydantic import BaseModel, ValidationError
 
 from contract.controllers import ControllerConfigError
-from contract.corridor import CorridorGeometry, trusted_heading
+from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
 from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
@@ -313,9 +313,10 @@ class Agent:
         if cached is not None and cached[0] is fix and cached[1] is assignment.corridor:
             x_m, on_corridor = cached[2], cached[3]
         else:  # a new fix: map-match it once (the receiver reports at 1-10 Hz)
+            # The heading only when GPS can tell it (`trusted_heading`, for one fix in floats).
             heading = (
-                float(trusted_heading(fix.heading_deg, fix.speed_mps))
-                if fix.heading_deg is not None and fix.speed_mps is not None
+                fix.heading_deg
+                if fix.speed_mps is not None and fix.speed_mps >= MIN_SPEED_FOR_HEADING_MPS
                 else None
             )
             x_m, _, on_corridor = assignment.corridor.locate_fix(fix.lat, fix.lon, heading)
