@@ -26,6 +26,9 @@ NEGLIGIBLE = 1e-30
 EARLIEST = datetime(1970, 1, 1, tzinfo=UTC)
 LATEST = datetime(2200, 1, 1, tzinfo=UTC)
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+_NUMBERS = (int, float)
+_NOT_NUMBERS = (bool, str)
+_NOT_TEXT = "timestamp must be ISO 8601 text, e.g. 2026-11-30T12:00:00Z"
 
 
 def storable_text(value: str) -> str:
@@ -58,9 +61,12 @@ def real(value: float | None) -> float | None:
 def time_text(value: object) -> object:
     """A timestamp arrives as ISO 8601 text (as documented), never as a number of seconds
     (which pydantic would read as Unix time), neither bare nor quoted."""
-    number = isinstance(value, int | float) and not isinstance(value, bool)
-    if number or (isinstance(value, str) and _NUMBER.fullmatch(value.strip())):
-        raise ValueError("timestamp must be ISO 8601 text, e.g. 2026-11-30T12:00:00Z")
+    if isinstance(value, str):
+        # Text with a colon (every ISO time of day) is no number: most pings end here.
+        if ":" not in value and _NUMBER.fullmatch(value.strip()):
+            raise ValueError(_NOT_TEXT)
+    elif isinstance(value, _NUMBERS) and not isinstance(value, bool):
+        raise ValueError(_NOT_TEXT)
     return value
 
 
@@ -70,20 +76,20 @@ def json_number(value: object) -> object:
     (Float fields say the same natively with JsonFloat; pydantic's strict int would also refuse
     2.0, which JSON Schema's "integer" allows, so integers keep this check.)
     """
-    if isinstance(value, bool | str):
+    if isinstance(value, _NOT_NUMBERS):
         raise ValueError("must be a JSON number")
     return value
 
 
 def plausible_time(value: datetime) -> datetime:
     """A timestamp that exists in UTC and lies between 1970 and 2200."""
+    if EARLIEST <= value < LATEST:  # compared as instants, with no conversion to overflow
+        return value
     try:
-        utc = value.astimezone(UTC)
+        value.astimezone(UTC)
     except OverflowError:
         raise ValueError("timestamp is outside the calendar once converted to UTC") from None
-    if not EARLIEST <= utc < LATEST:
-        raise ValueError("timestamp must lie between 1970 and 2200 (UTC)")
-    return value
+    raise ValueError("timestamp must lie between 1970 and 2200 (UTC)")
 
 
 # A float field takes JSON numbers only (true is not 1, "25" is not 25), checked inside
