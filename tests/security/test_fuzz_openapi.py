@@ -21,7 +21,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
-from sqlalchemy import Engine
+from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
@@ -91,15 +91,33 @@ def cases_passed(report: str) -> int:
     return passed
 
 
+def accepted_on_the_roster_vehicle(engine: Engine) -> tuple[int, int]:
+    """Status reports stored for SF-001, and its config version (bumped by each assignment)."""
+    with engine.connect() as connection:
+        reports = connection.execute(
+            text("SELECT count(*) FROM fact_vehicle_status WHERE vehicle_id = 'SF-001'")
+        ).scalar_one()
+        version = connection.execute(
+            text("SELECT config_version FROM dim_vehicle WHERE vehicle_id = 'SF-001'")
+        ).scalar_one()
+    return int(reports), int(version)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("role", ["vehicle", "operator", "admin"])
 def test_fuzzing_with_a_token_passes_every_default_check(
     api_with_a_plan: str, seeded_engine: Engine, tmp_path: Path, role: str
 ) -> None:
     token = issue(seeded_engine, role, "SF-001" if role == "vehicle" else None)  # type: ignore[arg-type]
+    reports_before, version_before = accepted_on_the_roster_vehicle(seeded_engine)
     result = fuzz(api_with_a_plan, tmp_path, f"Authorization: Bearer {token}")
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
     assert cases_passed(result.stdout) >= 200
+    # Schema-valid reports and assignments reached the validation and were stored, so
+    # positive_data_acceptance judged them on a vehicle that exists, not on 404s.
+    reports, version = accepted_on_the_roster_vehicle(seeded_engine)
+    assert reports > reports_before
+    assert (version > version_before) is (role != "vehicle")  # a vehicle token cannot assign
 
 
 @pytest.mark.slow
