@@ -32,6 +32,7 @@ from app.maintenance import maintain_async
 from app.plans.jobs import schedule_planner
 from app.plans.router import router as plans_router
 from app.plans.service import HeldPlans, PlanDocuments
+from app.policies.router import router as policies_router
 from app.vehicles.router import router as vehicles_router
 
 log = logging.getLogger(__name__)
@@ -143,4 +144,5 @@ def create_api(settings: Settings | None = None) -> FastAPI:
     app.include_router(feeds_router)
     app.include_router(fleet_router)
     app.include_router(plans_router)
+    app.include_router(policies_router)
     return app

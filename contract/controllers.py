@@ -119,13 +119,24 @@ class MicroAccelAccParams(BaseModel):
     gap_dwell_s: float = Field(10.0, ge=0)
 
 
+# A policy is named by the lowercase hex sha256 of its file (docs/interfaces.md, "Policies").
+POLICY_SHA256_PATTERN = r"^[0-9a-f]{64}$"
+RL_CONTROLLERS: dict[str, Actuation] = {"rl_acc": "acc", "rl_accel": "accel"}
+
+
 class RlParams(BaseModel):
-    """An RL controller's policy: a `.npz` file on the car, or None for the one the agent ships
-    (`vehicle_agent/controllers/policies/rl_<actuation>.npz`, manifest beside it)."""
+    """An RL controller's policy.
+
+    `policy_sha256` names a policy the server stores (`POST /api/v1/policies`): the agent
+    downloads it once, checks the digest and keeps it in its state dir. `policy` is a `.npz`
+    already on the car (checked against `policy_sha256` when both are given). Neither: the
+    policy the agent ships (`vehicle_agent/controllers/policies/rl_<actuation>.npz`).
+    """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
     policy: StorableText | None = Field(None, min_length=1)
+    policy_sha256: str | None = Field(None, pattern=POLICY_SHA256_PATTERN)
 
 
 class ControllerConfigError(ValueError):

@@ -9,6 +9,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, field_validator
 
+from contract.controllers import POLICY_SHA256_PATTERN
 from contract.values import JsonFloat, StorableText, Timestamp, json_number, real
 
 VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
@@ -54,6 +55,9 @@ class Ping(BaseModel):
     lead_distance_m: JsonFloat | None = Field(None, ge=0, le=1000)
     lead_rel_speed_mps: JsonFloat | None = Field(None, ge=-90, le=90)
     plan_id: int | None = Field(None, ge=0, le=MAX_JSON_INTEGER)
+    policy_sha256: str | None = Field(
+        None, pattern=POLICY_SHA256_PATTERN, description="the policy the controller runs"
+    )
 
     _integers = field_validator("lane", "acc_gap_setting", "plan_id", mode="before")(json_number)
 
@@ -103,6 +107,9 @@ class VehicleStatusReport(BaseModel):
     server_rtt_ms: JsonFloat | None = Field(None, ge=0, le=1e9)
     config_version: int | None = Field(
         None, ge=1, le=2**31 - 1, description="the vehicle config version the agent runs"
+    )
+    policy_sha256: str | None = Field(
+        None, pattern=POLICY_SHA256_PATTERN, description="the policy the controller runs"
     )
 
     _integers = field_validator(

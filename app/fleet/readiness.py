@@ -112,6 +112,7 @@ class LastPing:
     is_controller_engaged: bool | None
     controller: str | None
     plan_id: int | None
+    policy_sha256: str | None = None
 
 
 @dataclass(frozen=True)
@@ -136,6 +137,7 @@ class LastStatus:
     cpu_temp_c: float | None = None
     is_ups_on_battery: bool | None = None
     server_rtt_ms: float | None = None
+    policy_sha256: str | None = None
 
 
 @dataclass(frozen=True)

@@ -102,6 +102,7 @@ class PingOut(BaseModel):
     controller_engaged: bool | None
     controller: str | None
     plan_id: int | None
+    policy_sha256: str | None = Field(None, description="the policy the controller runs")
 
 
 class StatusOut(BaseModel):
@@ -126,6 +127,7 @@ class StatusOut(BaseModel):
     cpu_temp_c: float | None
     ups_on_battery: bool | None
     server_rtt_ms: float | None
+    policy_sha256: str | None = Field(None, description="the policy the controller runs")
 
 
 class CheckOut(BaseModel):
@@ -217,6 +219,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
             controller_engaged=ping.is_controller_engaged,
             controller=ping.controller,
             plan_id=ping.plan_id,
+            policy_sha256=ping.policy_sha256,
         ),
         last_status=None
         if status is None
@@ -240,6 +243,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
             cpu_temp_c=status.cpu_temp_c,
             ups_on_battery=status.is_ups_on_battery,
             server_rtt_ms=status.server_rtt_ms,
+            policy_sha256=status.policy_sha256,
         ),
         checks=[
             CheckOut(

@@ -26,7 +26,13 @@ from app.fleet.readiness import (
     assess,
 )
 from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
-from contract.controllers import ControllerConfigError, WrongActuation, validate_controller
+from app.policies.service import policy_controller
+from contract.controllers import (
+    ControllerConfigError,
+    RlParams,
+    WrongActuation,
+    validate_controller,
+)
 from contract.units import METRES_PER_MILE
 
 log = logging.getLogger(__name__)
@@ -167,6 +173,7 @@ def _to_last_ping(ping: VehiclePing | None) -> LastPing | None:
         is_controller_engaged=ping.is_controller_engaged,
         controller=ping.controller,
         plan_id=ping.plan_id,
+        policy_sha256=ping.policy_sha256,
     )
 
 
@@ -324,6 +331,22 @@ async def _vehicle_for_update(session: AsyncSession, vehicle_id: str) -> Vehicle
     return vehicle
 
 
+async def _check_policy_held(session: AsyncSession, controller_name: str, sha256: str) -> None:
+    """A policy an assignment names must be on the server, for that controller: the car
+    downloads it from here, and could run nothing else. A well-formed hash the server does not
+    hold is a conflict with the server's state (409), like a lane beyond the corridor."""
+    held = await policy_controller(session, sha256)
+    field = "controller.params.policy_sha256"
+    if held is None:
+        raise AssignmentConflict(
+            field, f"no policy {sha256} on the server (upload it first: smoothfleet policy upload)"
+        )
+    if held != controller_name:
+        raise AssignmentConflict(
+            field, f"policy {sha256[:12]} is a {held} policy, not {controller_name}"
+        )
+
+
 async def change_assignment(
     session: AsyncSession,
     vehicle_id: str,
@@ -345,7 +368,7 @@ async def change_assignment(
         raise AssignmentError("lane", f"lanes are numbered from 1, not {lane}")
     try:
         # the schema the car builds its controller from: a config it cannot run is never saved
-        validate_controller(controller_name, vehicle.actuation, controller_params)
+        params = validate_controller(controller_name, vehicle.actuation, controller_params)
     except WrongActuation as error:
         raise AssignmentConflict(error.field, error.reason) from None
     except ControllerConfigError as error:
@@ -356,6 +379,8 @@ async def change_assignment(
     if lanes is None or lane > lanes:
         reason = f"{vehicle.corridor_id} has lanes 1 to {lanes}, not {lane}"
         raise AssignmentConflict("lane", reason)
+    if isinstance(params, RlParams) and params.policy_sha256 is not None:
+        await _check_policy_held(session, controller_name, params.policy_sha256)
     vehicle.assigned_lane = lane
     vehicle.route = route
     vehicle.controller_name = controller_name

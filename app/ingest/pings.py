@@ -55,6 +55,7 @@ class PingRow(NamedTuple):
     lead_distance_m: float | None
     lead_rel_speed_mps: float | None
     plan_id: int | None
+    policy_sha256: str | None
     corridor: CorridorInfo
 
 
@@ -245,6 +246,7 @@ def check_in_context(
                 ping.lead_distance_m,
                 ping.lead_rel_speed_mps,
                 ping.plan_id,
+                ping.policy_sha256,
                 corridor,
             )
         )

@@ -41,6 +41,7 @@ PING_COLUMNS: tuple[tuple[str, str], ...] = (
     ("lead_distance_m", "float4"),
     ("lead_rel_speed_mps", "float4"),
     ("plan_id", "int8"),
+    ("policy_sha256", "text"),
 )
 _NAMES = ", ".join(name for name, _ in PING_COLUMNS)
 

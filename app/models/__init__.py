@@ -2,7 +2,7 @@
 
 from app.models.access import ApiToken, OpsUser
 from app.models.base import Base
-from app.models.dimensions import Corridor, I24Segment, InrixSegment, Vehicle
+from app.models.dimensions import Corridor, I24Segment, InrixSegment, Policy, Vehicle
 from app.models.facts import (
     InrixEstimate,
     PlanRun,
@@ -21,6 +21,7 @@ __all__ = [
     "InrixSegment",
     "OpsUser",
     "PlanRun",
+    "Policy",
     "SpeedPlan",
     "Vehicle",
     "VehicleObservation",

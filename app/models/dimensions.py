@@ -15,6 +15,7 @@ from sqlalchemy import (
     Float,
     ForeignKey,
     Integer,
+    LargeBinary,
     SmallInteger,
     Text,
     UniqueConstraint,
@@ -136,3 +137,32 @@ class Vehicle(Base):
     updated_at: Mapped[datetime] = mapped_column(
         DateTime(timezone=True), server_default=func.now(), onupdate=func.now()
     )
+
+
+class Policy(Base):
+    """A trained controller policy (the `.npz` a car evaluates), stored by its sha256.
+
+    The bytes live in the database beside their manifest: a policy is tens of kB, so one row
+    holds both, they commit together (never a row without its file, or a file without its
+    row), and every copy of the database (backup, replica, the next server host) carries them;
+    a directory under the data dir would have to be shared by every server host and kept in
+    step by hand. A car's assignment names a policy by `policy_sha256`; its pings and status
+    reports carry the hash it runs.
+    """
+
+    __tablename__ = "dim_policy"
+    __table_args__ = (
+        CheckConstraint("policy_sha256 ~ '^[0-9a-f]{64}$'", name="sha256_format"),
+        CheckConstraint("controller IN ('rl_acc', 'rl_accel')", name="controller_kind"),
+        CheckConstraint("octet_length(content) = size_bytes", name="size_matches"),
+        {"comment": "One row per policy artefact (file bytes + manifest), keyed by its sha256."},
+    )
+
+    policy_sha256: Mapped[str] = mapped_column(Text, primary_key=True)
+    controller: Mapped[str] = mapped_column(Text)
+    manifest: Mapped[dict[str, Any]] = mapped_column(JSONB)
+    # Deferred: listing policies never reads the files.
+    content: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)
+    size_bytes: Mapped[int] = mapped_column(Integer)
+    uploaded_by: Mapped[str] = mapped_column(Text)
+    uploaded_at: Mapped[datetime] = created_at_column()

@@ -71,6 +71,9 @@ class VehiclePing(Base):
     lead_rel_speed_mps: Mapped[float | None] = mapped_column(REAL)
     # The plan being followed; no foreign key so ingest never waits on plan_run locks.
     plan_id: Mapped[int | None] = mapped_column(BigInteger)
+    # The sha256 of the policy the controller ran (RL controllers); no foreign key, so a ping
+    # naming a policy the server does not hold (a car's bundled one) is still stored.
+    policy_sha256: Mapped[str | None] = mapped_column(Text)
 
 
 class VehicleStatus(Base):
@@ -99,6 +102,7 @@ class VehicleStatus(Base):
     is_ups_on_battery: Mapped[bool | None]
     server_rtt_ms: Mapped[float | None] = mapped_column(REAL)
     config_version: Mapped[int | None] = mapped_column(Integer)
+    policy_sha256: Mapped[str | None] = mapped_column(Text)
 
 
 class InrixEstimate(Base):

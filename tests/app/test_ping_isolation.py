@@ -89,7 +89,7 @@ def _row(vehicle_id: str, ts: datetime, controller: str | None) -> PingRow:
     corridor = CorridorInfo("I-24-WB", 4, None)
     return PingRow(
         vehicle_id, ts, ts, 36.0, -86.6, 25.0, None, None, None, None, None, controller,
-        None, None, None, None, None, None, corridor,
+        None, None, None, None, None, None, None, corridor,
     )  # fmt: skip
 
 

@@ -25,6 +25,9 @@ Action, in [-1, 1] per component (PPO's Gaussian, clipped):
 from __future__ import annotations
 
 import hashlib
+import io
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -190,8 +193,16 @@ def load_policy(path: Path, actuation: PolicyActuation) -> PolicyNetwork:
         content = path.read_bytes()
     except OSError as error:
         raise PolicyFileError(f"{path}: {error.strerror or error}") from None
+    return read_policy(content, actuation, str(path))
+
+
+def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> PolicyNetwork:
+    """A policy from the bytes of its `.npz` (`label` names it in errors): the server checks an
+    upload and the agent a download with this before either is kept."""
+    if not zipfile.is_zipfile(io.BytesIO(content)):
+        raise PolicyFileError(f"{label}: not a policy file (not an .npz archive)")
     try:
-        with np.load(path, allow_pickle=False) as archive:
+        with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
             layers = sum(1 for name in archive.files if name.endswith("_weight"))
             weights = tuple(
@@ -200,24 +211,24 @@ def load_policy(path: Path, actuation: PolicyActuation) -> PolicyNetwork:
             biases = tuple(
                 np.asarray(archive[f"layer_{i}_bias"], dtype=np.float64) for i in range(layers)
             )
-    except (OSError, ValueError, KeyError) as error:
-        raise PolicyFileError(f"{path}: not a policy file ({error})") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as error:
+        raise PolicyFileError(f"{label}: not a policy file ({error})") from None
     if stored != actuation:
-        raise PolicyFileError(f"{path}: a policy for actuation {stored}, not {actuation}")
+        raise PolicyFileError(f"{label}: a policy for actuation {stored}, not {actuation}")
     if not weights:
-        raise PolicyFileError(f"{path}: no layers")
+        raise PolicyFileError(f"{label}: no layers")
     inputs = FEATURE_SIZES[actuation]
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         if weight.ndim != 2 or weight.shape[0] != inputs or bias.shape != (weight.shape[1],):
             raise PolicyFileError(
-                f"{path}: layer {index} has shape {weight.shape} and bias {bias.shape}, "
+                f"{label}: layer {index} has shape {weight.shape} and bias {bias.shape}, "
                 f"expected ({inputs}, n) and (n,)"
             )
         if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
-            raise PolicyFileError(f"{path}: layer {index} holds non-finite weights")
+            raise PolicyFileError(f"{label}: layer {index} holds non-finite weights")
         inputs = weight.shape[1]
     if inputs != ACTION_SIZES[actuation]:
         raise PolicyFileError(
-            f"{path}: {inputs} outputs, an {actuation} policy has {ACTION_SIZES[actuation]}"
+            f"{label}: {inputs} outputs, an {actuation} policy has {ACTION_SIZES[actuation]}"
         )
     return PolicyNetwork(actuation, weights, biases, hashlib.sha256(content).hexdigest())

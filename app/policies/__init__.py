@@ -1,0 +1,1 @@
+"""Policies: trained controller policies stored by sha256 with their manifests."""

@@ -1,0 +1,187 @@
+"""Storing and reading policies (no HTTP here: the API and the CLI share it).
+
+A policy is the `.npz` an RL controller evaluates on the car (vehicle_agent/controllers/policy.py)
+and the manifest `smoothfleet sim train` wrote beside it. It is stored once per sha256 of its
+bytes: uploading the same file again changes nothing. Before it is kept it must be what it
+claims to be: the manifest's `sha256` is the file's, and the file loads as a policy of the
+controller its manifest's `actuation` names, the same check the car makes before use.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from sqlalchemy import Insert, Select, select, update
+from sqlalchemy.dialects.postgresql import insert
+from sqlalchemy.ext.asyncio import AsyncSession
+from sqlalchemy.orm import Session
+
+from app.models import Policy, Vehicle
+from contract.controllers import POLICY_SHA256_PATTERN, RL_CONTROLLERS
+from vehicle_agent.controllers.policy import PolicyFileError, read_policy
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
+
+_SHA256 = re.compile(POLICY_SHA256_PATTERN)
+
+
+class PolicyError(ValueError):
+    """An upload that is not a usable policy: `field` (`policy`, `manifest`, `manifest.sha256`,
+    ...) and `reason`; the message says both."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+class ManifestConflict(ValueError):
+    """The same policy bytes are stored already, with another manifest."""
+
+
+@dataclass(frozen=True)
+class CheckedPolicy:
+    """An upload that passed every check, ready to store."""
+
+    sha256: str
+    controller: str
+    manifest: dict[str, Any]
+    content: bytes
+
+
+def check_policy(content: bytes, manifest: object, controller: str | None = None) -> CheckedPolicy:
+    """The upload as a policy of `rl_<manifest actuation>`, or PolicyError naming what is wrong.
+
+    `controller`, when given, must be the one the manifest's actuation implies.
+    """
+    if not isinstance(manifest, Mapping):
+        raise PolicyError("manifest", "must be a JSON object (the manifest sim train wrote)")
+    claimed = manifest.get("sha256")
+    if not isinstance(claimed, str) or not _SHA256.match(claimed):
+        raise PolicyError("manifest.sha256", "must be the file's sha256 as 64 lowercase hex digits")
+    actual = hashlib.sha256(content).hexdigest()
+    if claimed != actual:
+        raise PolicyError(
+            "manifest.sha256", f"the manifest names {claimed}, the file's sha256 is {actual}"
+        )
+    actuation = manifest.get("actuation")
+    named = {actuation_: name for name, actuation_ in RL_CONTROLLERS.items()}
+    if not isinstance(actuation, str) or actuation not in named:
+        raise PolicyError("manifest.actuation", f"must be one of {', '.join(sorted(named))}")
+    implied = named[actuation]
+    if controller is not None and controller != implied:
+        raise PolicyError(
+            "controller", f"the manifest is of an {actuation} policy ({implied}), not {controller}"
+        )
+    try:
+        read_policy(content, RL_CONTROLLERS[implied], "policy")
+    except PolicyFileError as error:
+        raise PolicyError("policy", str(error).removeprefix("policy: ")) from None
+    return CheckedPolicy(actual, implied, dict(manifest), content)
+
+
+def _insert(checked: CheckedPolicy, uploaded_by: str) -> Insert:
+    return (
+        insert(Policy)
+        .values(
+            policy_sha256=checked.sha256,
+            controller=checked.controller,
+            manifest=checked.manifest,
+            content=checked.content,
+            size_bytes=len(checked.content),
+            uploaded_by=uploaded_by,
+        )
+        .on_conflict_do_nothing(index_elements=["policy_sha256"])
+        .returning(Policy.policy_sha256)
+    )
+
+
+def _by_sha256(sha256: str) -> Select[Policy]:
+    return select(Policy).where(Policy.policy_sha256 == sha256)
+
+
+def _same_manifest(checked: CheckedPolicy, stored: Policy) -> None:
+    """An upload of bytes already stored is a no-op only with the manifest stored with them."""
+    if stored.manifest != checked.manifest:
+        raise ManifestConflict(
+            f"policy {checked.sha256} is stored already, with another manifest "
+            f"(uploaded {stored.uploaded_at:%Y-%m-%d %H:%M} UTC by {stored.uploaded_by})"
+        )
+
+
+async def store_policy(
+    session: AsyncSession, checked: CheckedPolicy, uploaded_by: str
+) -> tuple[Policy, bool]:
+    """Store a checked policy; (its row, True when it was new). Idempotent on the bytes."""
+    created = await session.scalar(_insert(checked, uploaded_by)) is not None
+    stored = await session.scalar(_by_sha256(checked.sha256))
+    assert stored is not None, "inserted, or the row the insert met"
+    if not created:
+        _same_manifest(checked, stored)
+    return stored, created
+
+
+def store_policy_sync(
+    session: Session, checked: CheckedPolicy, uploaded_by: str
+) -> tuple[Policy, bool]:
+    """`store_policy` for the command line's synchronous session."""
+    created = session.scalar(_insert(checked, uploaded_by)) is not None
+    stored = session.scalar(_by_sha256(checked.sha256))
+    assert stored is not None, "inserted, or the row the insert met"
+    if not created:
+        _same_manifest(checked, stored)
+    return stored, created
+
+
+async def list_policies(session: AsyncSession) -> Sequence[Policy]:
+    """Every stored policy, newest upload first (without the files)."""
+    return (await session.scalars(select(Policy).order_by(Policy.uploaded_at.desc()))).all()
+
+
+def list_policies_sync(session: Session) -> Sequence[Policy]:
+    """`list_policies` for the command line."""
+    return session.scalars(select(Policy).order_by(Policy.uploaded_at.desc())).all()
+
+
+async def policy_file(session: AsyncSession, sha256: str) -> bytes | None:
+    """The policy's bytes, or None when the server does not hold it."""
+    return await session.scalar(select(Policy.content).where(Policy.policy_sha256 == sha256))
+
+
+async def policy_manifest(session: AsyncSession, sha256: str) -> dict[str, Any] | None:
+    """The policy's manifest, or None when the server does not hold it."""
+    return await session.scalar(select(Policy.manifest).where(Policy.policy_sha256 == sha256))
+
+
+async def policy_controller(session: AsyncSession, sha256: str) -> str | None:
+    """The controller a stored policy is for (`rl_acc` / `rl_accel`), or None if not stored."""
+    return await session.scalar(select(Policy.controller).where(Policy.policy_sha256 == sha256))
+
+
+def assign_shipped_policies(session: Session) -> dict[str, str]:
+    """Store the policies the agent package ships (`vehicle_agent/controllers/policies/`) and
+    assign each to every car of its actuation (`smoothfleet demo --rl`); controller -> sha256.
+
+    Every car is RL-capable: `acc` cars run `rl_acc`, `accel` cars `rl_accel`; their lanes and
+    routes stay as they are, and their config version is bumped like any assignment change.
+    """
+    assigned: dict[str, str] = {}
+    for controller, actuation in RL_CONTROLLERS.items():
+        path = BUNDLED_POLICIES / f"{controller}.npz"
+        manifest = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+        stored, _ = store_policy_sync(session, check_policy(path.read_bytes(), manifest), "demo")
+        session.execute(
+            update(Vehicle)
+            .where(Vehicle.actuation == actuation)
+            .values(
+                controller_name=controller,
+                controller_params={"policy_sha256": stored.policy_sha256},
+                config_version=Vehicle.config_version + 1,
+            )
+        )
+        assigned[controller] = stored.policy_sha256
+    return assigned

@@ -1,0 +1,303 @@
+"""Policies as versioned artefacts on the real server: upload, idempotence, mismatches, download
+by a vehicle, assignments naming a policy (docs/interfaces.md, "Policies")."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+from sqlalchemy import Engine, text
+
+from tests.support.fleet import drive, post_pings
+from tests.support.servers import cli_env, live_server, run_cli
+from tests.support.tokens import bearer, issue
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
+
+ACC_FILE = BUNDLED_POLICIES / "rl_acc.npz"
+ACCEL_FILE = BUNDLED_POLICIES / "rl_accel.npz"
+ACC_SHA256 = hashlib.sha256(ACC_FILE.read_bytes()).hexdigest()
+ACCEL_SHA256 = hashlib.sha256(ACCEL_FILE.read_bytes()).hexdigest()
+
+
+def manifest_of(policy: Path) -> dict[str, Any]:
+    document: dict[str, Any] = json.loads(policy.with_suffix(".json").read_text())
+    return document
+
+
+class Api:
+    """A client on the live server and one token per role."""
+
+    def __init__(self, client: httpx.Client, engine: Engine) -> None:
+        self.client = client
+        self.engine = engine
+        self.tokens = {
+            role: issue(engine, role)  # type: ignore[arg-type]
+            for role in ("viewer", "operator", "admin", "feed")
+        }
+        self.tokens["vehicle"] = issue(engine, "vehicle", "SF-001")
+
+    def upload(
+        self,
+        content: bytes,
+        manifest: dict[str, Any] | bytes,
+        role: str = "operator",
+        **form: str,
+    ) -> httpx.Response:
+        document = manifest if isinstance(manifest, bytes) else json.dumps(manifest).encode()
+        return self.client.post(
+            "/api/v1/policies",
+            files={
+                "policy": ("policy.npz", content, "application/octet-stream"),
+                "manifest": ("policy.json", document, "application/json"),
+            },
+            data=form,
+            headers=bearer(self.tokens[role]),
+        )
+
+    def get(self, path: str, role: str = "viewer") -> httpx.Response:
+        return self.client.get(path, headers=bearer(self.tokens[role]))
+
+    def assign(self, vehicle_id: str, controller: dict[str, Any]) -> httpx.Response:
+        body = {"lane": 2, "route": "A", "controller": controller}
+        return self.client.put(
+            f"/api/v1/vehicles/{vehicle_id}/assignment",
+            json=body,
+            headers=bearer(self.tokens["operator"]),
+        )
+
+
+@pytest.fixture
+def api(seeded_database_url: str, seeded_engine: Engine) -> Iterator[Api]:
+    with live_server(seeded_database_url) as base, httpx.Client(base_url=base, timeout=30) as c:
+        yield Api(c, seeded_engine)
+
+
+def stored_rows(engine: Engine) -> int:
+    with engine.connect() as connection:
+        return int(connection.scalar(text("SELECT count(*) FROM dim_policy")) or 0)
+
+
+def rejected(response: httpx.Response, status: int = 422) -> tuple[list[str], str]:
+    assert response.status_code == status, response.text
+    (error,) = response.json()["detail"]
+    return error["loc"], error["msg"]
+
+
+def test_an_upload_is_stored_by_its_sha256_and_a_vehicle_downloads_the_same_bytes(
+    api: Api,
+) -> None:
+    content = ACC_FILE.read_bytes()
+
+    first = api.upload(content, manifest_of(ACC_FILE))
+
+    assert first.status_code == 201, first.text
+    stored = first.json()
+    assert (stored["sha256"], stored["controller"], stored["created"]) == (
+        ACC_SHA256,
+        "rl_acc",
+        True,
+    )
+    assert stored["size_bytes"] == len(content)
+    assert stored["seed"] == manifest_of(ACC_FILE)["seed"]
+    download = api.get(f"/api/v1/policies/{ACC_SHA256}", role="vehicle")
+    assert download.status_code == 200
+    assert download.content == content
+    assert download.headers["content-type"] == "application/octet-stream"
+    assert download.headers["etag"] == f'"{ACC_SHA256}"'
+    manifest = api.get(f"/api/v1/policies/{ACC_SHA256}/manifest", role="vehicle")
+    assert manifest.json() == manifest_of(ACC_FILE)
+    listed = api.get("/api/v1/policies").json()
+    assert [policy["sha256"] for policy in listed] == [ACC_SHA256]
+
+
+def test_uploading_the_same_file_twice_stores_it_once(api: Api) -> None:
+    content = ACC_FILE.read_bytes()
+    first = api.upload(content, manifest_of(ACC_FILE))
+
+    again = api.upload(content, manifest_of(ACC_FILE), role="admin")
+
+    assert again.status_code == 200, again.text
+    assert again.json()["created"] is False
+    # the first upload's record stands
+    assert again.json()["uploaded_by"] == first.json()["uploaded_by"]
+    assert stored_rows(api.engine) == 1
+
+
+def test_the_same_file_with_another_manifest_is_a_conflict(api: Api) -> None:
+    content = ACC_FILE.read_bytes()
+    assert api.upload(content, manifest_of(ACC_FILE)).status_code == 201
+
+    other = {**manifest_of(ACC_FILE), "seed": 99}
+    response = api.upload(content, other)
+
+    assert response.status_code == 409
+    assert "another manifest" in response.json()["detail"]
+    stored = api.get(f"/api/v1/policies/{ACC_SHA256}/manifest").json()
+    assert stored["seed"] == manifest_of(ACC_FILE)["seed"]
+
+
+def test_a_manifest_naming_another_hash_is_refused(api: Api) -> None:
+    manifest = {**manifest_of(ACC_FILE), "sha256": ACCEL_SHA256}
+
+    loc, msg = rejected(api.upload(ACC_FILE.read_bytes(), manifest))
+
+    assert loc == ["body", "manifest", "sha256"]
+    assert ACCEL_SHA256 in msg
+    assert ACC_SHA256 in msg
+    assert stored_rows(api.engine) == 0
+
+
+def test_a_corrupted_file_is_refused_by_its_hash(api: Api) -> None:
+    content = bytearray(ACC_FILE.read_bytes())
+    content[len(content) // 2] ^= 0xFF
+
+    loc, _ = rejected(api.upload(bytes(content), manifest_of(ACC_FILE)))
+
+    assert loc == ["body", "manifest", "sha256"]
+
+
+def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api) -> None:
+    accel = ACCEL_FILE.read_bytes()
+    # the hash is right, but the manifest calls the accel policy an acc one
+    as_acc = {**manifest_of(ACCEL_FILE), "actuation": "acc"}
+    loc, msg = rejected(api.upload(accel, as_acc))
+    assert loc == ["body", "policy"]
+    assert "actuation accel, not acc" in msg
+
+    garbage = b"not a policy at all"
+    loc, msg = rejected(
+        api.upload(garbage, {"sha256": hashlib.sha256(garbage).hexdigest(), "actuation": "acc"})
+    )
+    assert loc == ["body", "policy"]
+    assert "not a policy file" in msg
+
+    loc, msg = rejected(api.upload(accel, manifest_of(ACCEL_FILE), controller="rl_acc"))
+    assert loc == ["body", "controller"]
+    assert "rl_accel" in msg
+
+    loc, msg = rejected(api.upload(accel, b"{not json"))
+    assert loc == ["body", "manifest"]
+    assert stored_rows(api.engine) == 0
+
+
+def test_who_may_upload_and_download(api: Api) -> None:
+    content = ACC_FILE.read_bytes()
+    assert api.upload(content, manifest_of(ACC_FILE), role="viewer").status_code == 403
+    assert api.upload(content, manifest_of(ACC_FILE), role="vehicle").status_code == 403
+    assert api.upload(content, manifest_of(ACC_FILE)).status_code == 201
+    assert api.get(f"/api/v1/policies/{ACC_SHA256}", role="feed").status_code == 403
+    assert api.client.get(f"/api/v1/policies/{ACC_SHA256}").status_code == 401
+    assert api.get("/api/v1/policies", role="vehicle").status_code == 403
+    missing = api.get(f"/api/v1/policies/{'0' * 64}", role="vehicle")
+    assert missing.status_code == 404
+    assert "no policy" in missing.json()["detail"]
+
+
+def test_an_assignment_names_a_stored_policy_and_the_car_reads_it_in_its_config(
+    api: Api,
+) -> None:
+    assert api.upload(ACC_FILE.read_bytes(), manifest_of(ACC_FILE)).status_code == 201
+
+    response = api.assign("SF-001", {"name": "rl_acc", "params": {"policy_sha256": ACC_SHA256}})
+
+    assert response.status_code == 200, response.text
+    config = api.get("/api/v1/vehicles/SF-001/config", role="vehicle").json()
+    assert config["controller"] == {"name": "rl_acc", "params": {"policy_sha256": ACC_SHA256}}
+
+
+def test_an_assignment_naming_a_policy_the_server_lacks_is_refused(api: Api) -> None:
+    before = api.get("/api/v1/vehicles/SF-001/config", role="vehicle").json()
+
+    # a well-formed hash the server does not hold: the request is valid, the state conflicts
+    loc, msg = rejected(
+        api.assign("SF-001", {"name": "rl_acc", "params": {"policy_sha256": ACC_SHA256}}), 409
+    )
+
+    assert loc == ["body", "controller", "params", "policy_sha256"]
+    assert "no policy" in msg
+    assert "upload it first" in msg
+    assert api.get("/api/v1/vehicles/SF-001/config", role="vehicle").json() == before
+    # a stored policy of the other controller is refused too
+    assert api.upload(ACCEL_FILE.read_bytes(), manifest_of(ACCEL_FILE)).status_code == 201
+    loc, msg = rejected(
+        api.assign("SF-001", {"name": "rl_acc", "params": {"policy_sha256": ACCEL_SHA256}}), 409
+    )
+    assert "is a rl_accel policy, not rl_acc" in msg
+    loc, msg = rejected(
+        api.assign("SF-001", {"name": "rl_acc", "params": {"policy_sha256": "ABC"}})
+    )
+    assert loc == ["body", "controller", "params", "policy_sha256"]
+
+
+def test_the_command_line_uploads_once_and_refuses_a_mismatch(
+    seeded_database_url: str, tmp_path: Path
+) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+
+    first = run_cli("policy", "upload", str(ACC_FILE), env=env)
+    again = run_cli("policy", "upload", str(ACC_FILE), "--controller", "rl_acc", env=env)
+
+    assert first.returncode == 0, first.stderr
+    assert f"rl_acc policy {ACC_SHA256} stored" in first.stdout
+    assert again.returncode == 0, again.stderr
+    assert "already stored" in again.stdout
+    wrong = tmp_path / "wrong.json"
+    wrong.write_text(json.dumps({**manifest_of(ACC_FILE), "sha256": ACCEL_SHA256}))
+    refused = run_cli("policy", "upload", str(ACC_FILE), "--manifest", str(wrong), env=env)
+    assert refused.returncode == 1
+    assert refused.stderr.startswith("smoothfleet: error: policy:")
+    assert "the file's sha256 is" in refused.stderr
+    listed = run_cli("policy", "list", env=env)
+    assert ACC_SHA256 in listed.stdout
+    assert "1 policy(ies)" in listed.stdout
+
+
+def documented_comparison() -> str:
+    """The policy comparison query of docs/analytics.md, as written there."""
+    document = (Path(__file__).resolve().parents[2] / "docs" / "analytics.md").read_text()
+    start = document.index("-- Two policies on two halves of the fleet")
+    return document[start : document.index(";", start)]
+
+
+def test_the_documented_query_compares_two_policies_on_two_halves_of_the_fleet(api: Api) -> None:
+    assert api.upload(ACC_FILE.read_bytes(), manifest_of(ACC_FILE)).status_code == 201
+    other = "e" * 64  # a policy a car carries that was never uploaded
+    now = datetime.now(UTC).replace(microsecond=0)
+    halves = {ACC_SHA256: ["SF-001", "SF-002"], other: ["SF-003", "SF-004"]}
+    for policy, vehicle_ids in halves.items():
+        for vehicle_id in vehicle_ids:
+            pings = drive(vehicle_id, now - timedelta(seconds=10), 2000.0, 25.0, 10)
+            smooth = 0.1 if policy == ACC_SHA256 else 0.5
+            post_pings(
+                api.client,
+                api.tokens["admin"],
+                [
+                    {
+                        **ping,
+                        "policy_sha256": policy,
+                        "accel_mps2": smooth,
+                        "controller_engaged": True,
+                    }
+                    for ping in pings
+                ],
+            )
+    post_pings(api.client, api.tokens["admin"], drive("SF-005", now, 2000.0, 25.0, 3))
+
+    with api.engine.connect() as connection:
+        rows = connection.execute(text(documented_comparison())).mappings().all()
+
+    assert [row["policy_sha256"] for row in rows] == sorted(halves)  # SF-005 ran no policy
+    by_policy = {row["policy_sha256"]: row for row in rows}
+    assert (by_policy[ACC_SHA256]["vehicles"], by_policy[ACC_SHA256]["pings"]) == (2, 20)
+    assert (by_policy[other]["vehicles"], by_policy[other]["pings"]) == (2, 20)
+    assert by_policy[ACC_SHA256]["controller"] == "rl_acc"
+    assert by_policy[other]["controller"] is None
+    assert by_policy[ACC_SHA256]["accel_rms_mps2"] == pytest.approx(0.1, abs=1e-6)
+    assert by_policy[other]["accel_rms_mps2"] == pytest.approx(0.5, abs=1e-6)
+    assert float(by_policy[other]["engaged_pct"]) == 100.0
