@@ -27,7 +27,12 @@ from typing import Any
 import can
 from pydantic import BaseModel, ValidationError
 
-from contract.controllers import ControllerConfigError
+from contract.controllers import (
+    RL_CONTROLLERS,
+    ControllerConfigError,
+    RlParams,
+    validate_controller,
+)
 from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
 from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
@@ -43,8 +48,10 @@ from vehicle_agent.controllers import (
     Observation,
     build_controller,
 )
+from vehicle_agent.controllers.policy import PolicyFileError
 from vehicle_agent.gps import GpsFix, GpsSource
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
+from vehicle_agent.policies import PolicyStore
 from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
@@ -109,6 +116,8 @@ class Snapshot:
     plan_age_s: float | None
     controller: str | None
     accel_mps2: float | None
+    # The sha256 of the trained policy the assigned controller evaluates (RL controllers).
+    policy_sha256: str | None = None
 
 
 @dataclass
@@ -148,6 +157,8 @@ class AgentStats:
     server_errors: Counter[str] = field(default_factory=Counter)
     plans_refused: int = 0
     controller_errors: int = 0
+    policy_downloads: int = 0
+    policies_refused: int = 0
 
 
 class Agent:
@@ -167,6 +178,7 @@ class Agent:
         dbc_cache: Path | None = None,
         engage_policy: engage.EngagePolicy | None = None,
         wave_speed_mps: float = DEFAULT_WAVE_SPEED_MPS,
+        policies: PolicyStore | None = None,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.car = car
@@ -175,6 +187,7 @@ class Agent:
         self.gps = gps
         self.spool = spool
         self.server = server
+        self.policies = policies
         self.engage_policy = engage_policy or engage.EngagePolicy()
         self.wave_speed_mps = wave_speed_mps
         self.codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
@@ -292,6 +305,7 @@ class Agent:
             plan_age_s=None if lane_plan is None else lane_plan.age_s(wall),
             controller=None if assignment is None else assignment.config.controller.name,
             accel_mps2=measured_accel,
+            policy_sha256=None if assignment is None else assignment.controller.policy_sha256,
         )
 
     def _enabled(self, assignment: Assignment | None) -> bool:
@@ -482,6 +496,7 @@ class Agent:
             "lane": fix.lane,
             "controller": snapshot.controller,
             "plan_id": snapshot.plan_id,
+            "policy_sha256": snapshot.policy_sha256,
         }
         if reading is not None:
             optional |= {
@@ -532,6 +547,7 @@ class Agent:
             if self.server and self.server.last_rtt_ms is not None
             else None,
             "config_version": self.config.config_version if self.config else None,
+            "policy_sha256": snapshot.policy_sha256 if snapshot else None,
         }
         status = self._message(
             VehicleStatusReport,
@@ -617,6 +633,17 @@ class Agent:
         self._config_schedule.done(now, CONFIG_REFRESH_S)
         try:
             self.configure(config, corridor)
+        except ServerError as error:
+            # the assigned policy could not be downloaded: no good policy, no controller
+            self._server_failed("policy", error)
+            self.assignment = None
+            self._config_schedule.failed(now, 2.0)
+        except PolicyFileError as error:
+            # a download (or kept file) that is not the policy assigned: never run, retried
+            log.error("vehicle %s: policy refused: %s", self.vehicle_id, error)
+            self.stats.policies_refused += 1
+            self.assignment = None
+            self._config_schedule.failed(now, 2.0)
         except (ControllerConfigError, ValueError) as error:
             log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
             self.stats.server_errors["config"] += 1
@@ -624,7 +651,9 @@ class Agent:
 
     def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:
         """Adopt a config (building its controller); raises ValueError when it cannot apply to
-        this car. A new lane drops the plan held for the old one."""
+        this car (PolicyFileError: the policy it names is not good) and ServerError when the
+        policy it names could not be downloaded. A new lane drops the plan held for the old one.
+        """
         if config.actuation != self.car.actuation:
             raise ValueError(
                 f"config says actuation {config.actuation}, the car ({self.car.key}) is "
@@ -635,13 +664,36 @@ class Agent:
                 f"geometry of {corridor.corridor_id}, config says {config.corridor_id}"
             )
         controller = build_controller(
-            config.controller.name, config.actuation, config.controller.params
+            config.controller.name, config.actuation, self._controller_params(config)
         )
         previous = self.assignment
         self.assignment = Assignment(config, corridor, controller)
         if previous is None or previous.config.assigned_lane != config.assigned_lane:
             self.lane_plan = None
             self._plan_schedule = Schedule()
+
+    def _controller_params(self, config: VehicleConfig) -> dict[str, Any]:
+        """The config's controller params; for a policy named only by sha256, with the file of
+        the policy store that holds it (downloaded once over the API, verified before kept).
+
+        Without a store or a server the params go as they are: the controller then runs the
+        bundled policy only if it is the one named, and refuses otherwise."""
+        params = dict(config.controller.params)
+        if config.controller.name not in RL_CONTROLLERS or self.policies is None:
+            return params
+        model = validate_controller(config.controller.name, config.actuation, params)
+        assert isinstance(model, RlParams)
+        if model.policy_sha256 is None or model.policy is not None or self.server is None:
+            return params
+        server = self.server
+
+        def download(sha256: str) -> bytes:
+            self.stats.policy_downloads += 1
+            return server.policy(sha256)
+
+        actuation = RL_CONTROLLERS[config.controller.name]
+        path = self.policies.fetch(model.policy_sha256, actuation, download)
+        return {**params, "policy": str(path)}
 
     def accept_plan(self, plan: Plan, etag: str | None = None) -> bool:
         """Hold `plan` for the assigned lane; False (and no plan held) when it has no such lane."""

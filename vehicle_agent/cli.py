@@ -29,6 +29,7 @@ from vehicle_agent.clock import SystemClock
 from vehicle_agent.codec import codec_for
 from vehicle_agent.dbc import DbcError
 from vehicle_agent.gps import GpsdSource, GpsFix, GpsSource
+from vehicle_agent.policies import PolicyStore
 from vehicle_agent.ports import GpioButtonBoard, sysfs_gpio_writer
 from vehicle_agent.runner import run_agent
 from vehicle_agent.safety import SafetyLayer
@@ -164,6 +165,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             button_port=board,
             dbc_cache=settings.dbc_cache_dir,
             wave_speed_mps=settings.wave_speed_mps,
+            policies=PolicyStore(settings.policy_dir),
         )
         log.info(
             "agent %s for %s (%s) on %s", AGENT_VERSION, settings.vehicle_id, car.key, settings.can

@@ -197,6 +197,14 @@ class ServerClient:
             raise UnexpectedAnswer(str(error), response.status_code) from None
         return NewPlan(plan, response.headers.get("ETag"))
 
+    def policy(self, sha256: str) -> bytes:
+        """The bytes of the policy file with this sha256 (the caller verifies them before use:
+        `vehicle_agent.policies.PolicyStore`)."""
+        response = self._request("GET", f"/api/v1/policies/{sha256}")
+        if response.status_code != 200:
+            raise self._fail(response, "policy")
+        return response.content
+
     def post_pings(self, pings: Sequence[Mapping[str, Any]]) -> PingAnswer:
         """Upload a batch; the answer comes only after the server committed the accepted rows."""
         response = self._request("POST", "/api/v1/pings", json={"pings": list(pings)})

@@ -40,6 +40,10 @@ class AgentSettings(BaseSettings):
         )
     )
     spool_max_rows: int = Field(100_000, ge=100)
+    # Where downloaded policies are kept, by sha256 (vehicle_agent/policies.py).
+    policy_dir: Path = Field(
+        default_factory=lambda: Path(platformdirs.user_data_dir("smoothfleet-agent")) / "policies"
+    )
     dbc_cache_dir: Path | None = None
     http_timeout_s: float = Field(3.0, gt=0, le=60)
     wave_speed_mps: float = Field(DEFAULT_WAVE_SPEED_MPS, le=0, ge=-20)

@@ -25,6 +25,7 @@ from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.plan import Plan
+from vehicle_agent.policies import PolicyStore
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 
@@ -160,6 +161,7 @@ def rig(
     config_fields: dict[str, Any] | None = None,
     start: datetime | None = None,
     vehicle_id: str = "SF-TEST",
+    policies: PolicyStore | None = None,
 ) -> Iterator[Rig]:
     """An engaged-ready agent and emulated car (the driver has not set ACC yet)."""
     channel = f"agent-rig-{next(_channels)}"
@@ -186,6 +188,7 @@ def rig(
         spool=spool or PingSpool(tmp_path / "spool.sqlite"),
         server=server,
         dbc_cache=dbc_cache,
+        policies=policies,
     )
     if server is None:
         agent.configure(

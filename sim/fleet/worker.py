@@ -43,6 +43,7 @@ from vehicle_agent.cars import car_for
 from vehicle_agent.clock import ManualClock
 from vehicle_agent.engage import Mode
 from vehicle_agent.gps import GpsFix
+from vehicle_agent.policies import PolicyStore
 from vehicle_agent.server import ServerClient, ServerError
 from vehicle_agent.spool import PingSpool
 
@@ -199,6 +200,8 @@ class Fleet:
             spool=PingSpool(spool_dir / f"{vehicle.vehicle_id}.sqlite", power_safe=False),
             server=server,
             dbc_cache=dbc_cache,
+            # each car keeps the policies it downloads, as a car in the field does
+            policies=PolicyStore(spool_dir / "policies" / vehicle.vehicle_id),
         )
         return FleetCar(vehicle, clock, emulator, agent, (car_bus, agent_bus))
 

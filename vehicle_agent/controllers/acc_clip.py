@@ -49,6 +49,11 @@ class AccClip(Controller):
         """Reset the wrapped controller (the speed history stays: it is a measurement)."""
         self.inner.reset()
 
+    @property
+    def policy_sha256(self) -> str | None:
+        """The wrapped controller's policy."""
+        return self.inner.policy_sha256
+
     def step(self, observation: Observation) -> Action:
         """The inner controller's set point with the paper's clip applied."""
         speed = observation.speed_mps

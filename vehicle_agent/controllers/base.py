@@ -99,3 +99,8 @@ class Controller(ABC):
 
     def reset(self) -> None:  # noqa: B027 - stateless controllers keep the default
         """Forget the past (called whenever the agent takes over from the stock ACC)."""
+
+    @property
+    def policy_sha256(self) -> str | None:
+        """The sha256 of the trained policy this controller evaluates; None without one."""
+        return None

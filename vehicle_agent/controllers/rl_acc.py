@@ -20,6 +20,8 @@ from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.base import AccSetPoint, Controller, Observation
 from vehicle_agent.controllers.policy import (
     PLAN_LOOKAHEAD_M,
+    PolicyFileError,
+    PolicyNetwork,
     acc_features,
     load_policy,
     requested_gap_setting,
@@ -37,6 +39,18 @@ def policy_path(params: RlParams, actuation: Actuation) -> Path:
     return BUNDLED_POLICIES / f"rl_{actuation}.npz"
 
 
+def load_assigned_policy(params: RlParams, actuation: Actuation) -> PolicyNetwork:
+    """The policy the params name, refused (PolicyFileError) when its sha256 is not the
+    `policy_sha256` they name: a car never runs a policy other than the one assigned."""
+    path = policy_path(params, actuation)
+    network = load_policy(path, actuation)
+    if params.policy_sha256 is not None and network.sha256 != params.policy_sha256:
+        raise PolicyFileError(
+            f"{path}: sha256 {network.sha256}, the assignment names {params.policy_sha256}"
+        )
+    return network
+
+
 def plan_ahead_mps(observation: Observation) -> float:
     """The plan's target PLAN_LOOKAHEAD_M ahead (the target here when the plan is not held)."""
     if observation.target is None or observation.position_m is None:
@@ -51,8 +65,13 @@ class RlAccController(Controller):
 
     def __init__(self, actuation: Actuation, params: RlParams) -> None:
         super().__init__(actuation)
-        self.network = load_policy(policy_path(params, actuation), "acc")
+        self.network = load_assigned_policy(params, "acc")
         self.speeds_mph: deque[float] = deque(maxlen=CLIP_WINDOW_STEPS)
+
+    @property
+    def policy_sha256(self) -> str:
+        """The sha256 of the policy file evaluated."""
+        return self.network.sha256
 
     def step(self, observation: Observation) -> AccSetPoint:
         """Features -> network -> set point (before the registry's clip)."""

@@ -18,10 +18,9 @@ from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_MAX_MPS2,
     ACCEL_ACTION_MIN_MPS2,
     accel_features,
-    load_policy,
     requested_accel_mps2,
 )
-from vehicle_agent.controllers.rl_acc import plan_ahead_mps, policy_path
+from vehicle_agent.controllers.rl_acc import load_assigned_policy, plan_ahead_mps
 
 # The safety term's gains and limits: MicroAccel's defaults.
 SAFETY = MicroAccelParams()
@@ -58,8 +57,13 @@ class RlAccelController(Controller):
 
     def __init__(self, actuation: Actuation, params: RlParams) -> None:
         super().__init__(actuation)
-        self.network = load_policy(policy_path(params, actuation), "accel")
+        self.network = load_assigned_policy(params, "accel")
         self.lead_accel = LeadAccelEstimator(SAFETY.lead_accel_filter_s)
+
+    @property
+    def policy_sha256(self) -> str:
+        """The sha256 of the policy file evaluated."""
+        return self.network.sha256
 
     def reset(self) -> None:
         """Forget the leader's speed history."""
