@@ -51,6 +51,7 @@ from smoothfleet.cli.common import CliError, console, database, settings
 from smoothfleet.cli.inrix import inrix
 from smoothfleet.cli.motion import motion
 from smoothfleet.cli.planner import planner
+from smoothfleet.cli.policy import policy
 from smoothfleet.cli.sim import fleet_options, sim
 
 
@@ -473,9 +474,20 @@ DEMO_DATABASE = "smoothfleet_demo"
     is_flag=True,
     help="Keep the previous run's demo database (maintenance flags, users, plans, pings).",
 )
+@click.option(
+    "--rl",
+    is_flag=True,
+    help="Run the fleet on the committed RL policies: upload them and assign rl_acc / rl_accel "
+    "by sha256 to every car (each car downloads its policy).",
+)
 @fleet_options
 def demo(
-    host: str | None, port: int | None, keep: bool, duration: float | None, vehicles: int
+    host: str | None,
+    port: int | None,
+    keep: bool,
+    rl: bool,
+    duration: float | None,
+    vehicles: int,
 ) -> None:
     """Everything on one machine: embedded database, migrations, seed, API, dashboard, planner,
     a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent.
@@ -487,7 +499,7 @@ def demo(
     if current.database_url is not None:
         console.print("SMOOTHFLEET_DATABASE_URL is set: the demo uses that database as it is")
         with database(current) as url:
-            _demo_on(url, current, duration, vehicles)
+            _demo_on(url, current, duration, vehicles, rl=rl)
         return
     from app.core.embedded import (
         database_url,
@@ -501,7 +513,7 @@ def demo(
         if not keep:
             drop_database(server_url, DEMO_DATABASE)
         ensure_database(server_url, DEMO_DATABASE)
-        _demo_on(database_url(server_url, DEMO_DATABASE), current, duration, vehicles)
+        _demo_on(database_url(server_url, DEMO_DATABASE), current, duration, vehicles, rl=rl)
 
 
 def _say_whole(line: str) -> None:
@@ -510,8 +522,11 @@ def _say_whole(line: str) -> None:
     console.print(line, soft_wrap=True)
 
 
-def _demo_on(url: str, current: Settings, duration: float | None, vehicles: int) -> None:
+def _demo_on(
+    url: str, current: Settings, duration: float | None, vehicles: int, *, rl: bool
+) -> None:
     from app.migrate import upgrade
+    from app.policies.service import assign_shipped_policies
     from app.seed import seed
     from smoothfleet.cli.demo import DemoError, run_demo
 
@@ -521,10 +536,13 @@ def _demo_on(url: str, current: Settings, duration: float | None, vehicles: int)
     with session_scope(engine) as session:
         counts = seed(session)
         save_user(session, DEMO_ADMIN, "admin", admin_password)
+        policies = assign_shipped_policies(session) if rl else {}
     engine.dispose()
     public = current.public_url or f"http://{current.host}:{current.port}"
     console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
     console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+    for controller, sha256 in policies.items():
+        _say_whole(f"{controller}: policy {sha256[:12]} assigned to every car it can drive")
     console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
     console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
     try:
@@ -548,6 +566,7 @@ cli.add_command(inrix)
 cli.add_command(sim)
 cli.add_command(planner)
 cli.add_command(motion)
+cli.add_command(policy)
 
 
 # --- entry point ---------------------------------------------------------------------------

@@ -480,3 +480,29 @@ def test_days_are_the_corridors_local_days(site: str, seeded_engine: Engine) -> 
 def test_the_csrf_token_belongs_to_the_session(site: str) -> None:
     with logged_in(site, "operator") as first, logged_in(site, "operator") as second:
         assert csrf_of(first.get("/fleet").text) != csrf_of(second.get("/fleet").text)
+
+
+# --- policies -----------------------------------------------------------------------------------
+
+
+def test_the_fleet_and_vehicle_pages_show_the_policy_each_car_runs(
+    site: str, seeded_engine: Engine
+) -> None:
+    first, second = "ab" * 32, "cd" * 32
+    now = datetime.now(UTC).replace(microsecond=0)
+    with httpx.Client(base_url=site, timeout=30) as api:
+        admin = issue(seeded_engine, "admin")
+        for vehicle_id, policy in (("SF-001", first), ("SF-002", second)):
+            pings = drive(vehicle_id, now - timedelta(seconds=5), 3000.0, 25.0, 5)
+            post_pings(api, admin, [{**ping, "policy_sha256": policy} for ping in pings])
+        post_status(
+            api, admin, "SF-001", **healthy_status(now - timedelta(seconds=2)), policy_sha256=first
+        )
+    with logged_in(site, "viewer") as client:
+        fleet = client.get("/fleet").text
+        vehicle = client.get("/vehicles/SF-001").text
+
+    assert f'title="runs policy {first}">{first[:12]}</code>' in fleet
+    assert f'title="runs policy {second}">{second[:12]}</code>' in fleet
+    assert f'data-field="policy" title="{first}">{first[:12]}</code>' in vehicle
+    assert f'<code class="policy" title="{first}">{first[:12]}</code>' in vehicle  # status history

@@ -7,6 +7,7 @@ the plan, and the feed's snapshots are in the warehouse.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 
@@ -16,6 +17,7 @@ from sqlalchemy.orm import Session
 
 from planner.warehouse import replay_plan
 from tests.support.servers import cli_env, free_port, run_cli
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 VEHICLES = 6
 
@@ -30,6 +32,7 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
         "30",
         "--vehicles",
         str(VEHICLES),
+        "--rl",  # the cars run the committed policies, each downloaded by sha256 from the server
         env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url, SMOOTHFLEET_DATA_DIR=str(tmp_path)),
         timeout=400,
     )
@@ -57,12 +60,28 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
         statuses = connection.execute(
             text("SELECT count(DISTINCT vehicle_id) FROM fact_vehicle_status")
         ).scalar_one()
+        policies = dict(
+            connection.execute(
+                text(
+                    "SELECT v.actuation, array_agg(DISTINCT p.policy_sha256) "
+                    "FILTER (WHERE p.controller IS NOT NULL) "
+                    "FROM fact_vehicle_ping AS p JOIN dim_vehicle AS v USING (vehicle_id) "
+                    "GROUP BY v.actuation"
+                )
+            ).all()
+        )
     assert len(pinging) == VEHICLES
     assert all(count >= 10 for _, count in pinging)
     assert plans >= 1
     assert engaged > 0
     assert snapshots >= 15  # the 15-minute backfill and the live minutes
     assert statuses == VEHICLES
+    for actuation, running in policies.items():
+        shipped = BUNDLED_POLICIES / f"rl_{actuation}.npz"
+        assert running == [hashlib.sha256(shipped.read_bytes()).hexdigest()]
+    assert "acc" in policies
+    assert "rl_acc: policy " in result.stdout
+    assert "rl_accel: policy " in result.stdout
     # every agent handed its car back and uploaded its spool before the demo ended
     for spool in tmp_path.glob("demo/*/spools/*.sqlite"):
         assert spool.stat().st_size > 0
