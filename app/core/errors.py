@@ -8,6 +8,7 @@ vehicles then keep their pings spooled and retry.
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -84,6 +85,35 @@ def is_database_outage(error: BaseException) -> bool:
 UNREADABLE_BODY = "There was an error parsing the body"
 
 
+HTTP_METHODS = frozenset({"get", "put", "post", "delete", "options", "head", "patch", "trace"})
+
+
+def _template_pattern(template: str) -> re.Pattern[str]:
+    """A regex for an OpenAPI path template (`/api/v1/policies/{sha256}`)."""
+    parts = re.split(r"(\{[^}/]+\})", template)
+    return re.compile(
+        "".join("[^/]+" if part.startswith("{") else re.escape(part) for part in parts)
+    )
+
+
+def allowed_methods(request: Request, fallback: str) -> str:
+    """Every method the API documents for the request's path, for a 405's Allow header.
+
+    Starlette's 405 names only the methods of the first route on the path, so a path served by
+    one route per method (GET /api/v1/policies to list, POST to upload) would advertise less
+    than it serves. Paths outside the document (the dashboard) keep Starlette's `fallback`.
+    """
+    path = request.scope["path"]
+    methods = {
+        method.upper()
+        for template, operations in request.app.openapi()["paths"].items()
+        if _template_pattern(template).fullmatch(path)
+        for method in operations
+        if method in HTTP_METHODS
+    }
+    return ", ".join(sorted(methods)) if methods else fallback
+
+
 def install_error_handlers(app: FastAPI) -> None:
     """Database outages are 503, undecodable bodies and unstorable values 422, never 500."""
 
@@ -91,6 +121,17 @@ def install_error_handlers(app: FastAPI) -> None:
         assert isinstance(error, StarletteHTTPException)
         if error.status_code == 400 and error.detail == UNREADABLE_BODY:
             return JSONResponse({"detail": "request body is not valid JSON text"}, 422)
+        if error.status_code == 400:
+            # Starlette's answer to a multipart or form body it cannot parse (the reason is
+            # python-multipart's): as unreadable as bad JSON, so the same 422.
+            return JSONResponse({"detail": f"request body cannot be read: {error.detail}"}, 422)
+        if error.status_code == 405:
+            fallback = (error.headers or {}).get("Allow", "")
+            return JSONResponse(
+                {"detail": "Method Not Allowed"},
+                405,
+                headers={"Allow": allowed_methods(request, fallback)},
+            )
         return await http_exception_handler(request, error)
 
     async def on_pool_timeout(request: Request, error: Exception) -> JSONResponse:

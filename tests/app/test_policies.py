@@ -301,3 +301,22 @@ def test_the_documented_query_compares_two_policies_on_two_halves_of_the_fleet(a
     assert by_policy[ACC_SHA256]["accel_rms_mps2"] == pytest.approx(0.1, abs=1e-6)
     assert by_policy[other]["accel_rms_mps2"] == pytest.approx(0.5, abs=1e-6)
     assert float(by_policy[other]["engaged_pct"]) == 100.0
+
+
+def test_a_wrong_method_names_every_method_the_path_serves(api: Api) -> None:
+    response = api.client.put("/api/v1/policies", headers=bearer(api.tokens["operator"]))
+
+    assert response.status_code == 405
+    assert response.headers["allow"] == "GET, POST"
+
+
+def test_an_unreadable_multipart_body_is_a_422_that_says_so(api: Api) -> None:
+    response = api.client.post(
+        "/api/v1/policies",
+        content=b"--x\r\nContent-Disposition: form-data; name=policy\r\n\r\nabc\r\n--x--\r\n",
+        headers={**bearer(api.tokens["operator"]), "Content-Type": "multipart/form-data"},
+    )
+
+    assert response.status_code == 422, response.text
+    detail = response.json()["detail"]
+    assert detail == "request body cannot be read: Missing boundary in multipart."
