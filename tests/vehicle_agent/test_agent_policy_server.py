@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from contextlib import AbstractContextManager
 from pathlib import Path
 
 import httpx
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from sqlalchemy import Engine, text
 
-from sim.emulator.rig import rig
+from sim.emulator.rig import Rig, rig
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 from tests.vehicle_agent.test_agent_server import publish_free_flow_plan
@@ -28,6 +29,28 @@ pytestmark = pytest.mark.slow
 
 ACC_FILE = BUNDLED_POLICIES / "rl_acc.npz"
 ACC_SHA256 = hashlib.sha256(ACC_FILE.read_bytes()).hexdigest()
+
+
+def car_of_sf001(
+    http: httpx.Client,
+    token: str,
+    tmp_path: Path,
+    dbc_cache: Path,
+    store: PolicyStore,
+    spool: PingSpool | None = None,
+) -> AbstractContextManager[Rig]:
+    """SF-001 (a Rogue in lane 1) driven by its agent against the live server."""
+    return rig(
+        "nissan_rogue",
+        tmp_path,
+        dbc_cache,
+        controller="unused",
+        vehicle_id="SF-001",
+        server=ServerClient(http, "SF-001", token),
+        speed_mps=24.0,
+        spool=spool,
+        policies=store,
+    )
 
 
 def upload(http: httpx.Client, token: str, content: bytes, manifest: dict[str, object]) -> None:
@@ -88,16 +111,7 @@ def test_the_car_downloads_its_policy_once_runs_it_and_reports_its_hash(
         manifest = json.loads(ACC_FILE.with_suffix(".json").read_text())
         upload(http, operator, ACC_FILE.read_bytes(), manifest)
         assign(http, operator, ACC_SHA256)
-        with rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(http, "SF-001", token),
-            speed_mps=24.0,
-            policies=PolicyStore(policy_dir),
-        ) as r:
+        with car_of_sf001(http, token, tmp_path, dbc_cache, PolicyStore(policy_dir)) as r:
             r.run(1.0, network=True)
             assert r.agent.assignment is not None
             assert r.agent.assignment.controller.policy_sha256 == ACC_SHA256
@@ -114,15 +128,13 @@ def test_the_car_downloads_its_policy_once_runs_it_and_reports_its_hash(
         assert car["last_ping"]["policy_sha256"] == ACC_SHA256
         assert car["last_status"]["policy_sha256"] == ACC_SHA256
         # restarted, the car finds the policy in its state dir and downloads nothing
-        with rig(
-            "nissan_rogue",
+        with car_of_sf001(
+            http,
+            token,
             tmp_path,
             dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(http, "SF-001", token),
+            PolicyStore(policy_dir),
             spool=PingSpool(tmp_path / "second.sqlite"),
-            policies=PolicyStore(policy_dir),
         ) as again:
             again.run(1.0, network=True)
             assert again.agent.assignment is not None
@@ -171,16 +183,7 @@ def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
         upload(http, operator, ACC_FILE.read_bytes(), manifest)
         upload(http, operator, small, {"sha256": small_sha256, "actuation": "acc"})
         assign(http, operator, ACC_SHA256)
-        with rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(http, "SF-001", token),
-            speed_mps=24.0,
-            policies=store,
-        ) as r:
+        with car_of_sf001(http, token, tmp_path, dbc_cache, store) as r:
             r.run(1.0, network=True)
             r.emulator.driver_engage(set_speed_mph=54)
             r.run(20.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
