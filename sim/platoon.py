@@ -31,6 +31,7 @@ from vehicle_agent.stopping import LEAD_ACCEL_FILTER_S, is_new_leader, required_
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.intp]
 
 # Bumper-to-bumper length of every simulated car (a midsize SUV is 4.6-4.9 m).
 VEHICLE_LENGTH_M = 5.0
@@ -211,6 +212,11 @@ class CutIns:
     min_gap_m: float = 19.0
     seed: int = 0
 
+    def invites_any(self, gap_m: FloatArray, speed_mps: FloatArray) -> bool:
+        """False when no gap has room beyond the accepted time gap, so every hazard is 0 (a
+        cheap test first: on most steps no driver is left room)."""
+        return bool(np.any(gap_m - self.min_gap_m > self.accept_time_gap_s * speed_mps))
+
     def hazard_per_s(self, gap_m: FloatArray, speed_mps: FloatArray) -> FloatArray:
         """The merge rate into each gap now (one per follower)."""
         moving = (speed_mps >= MIN_CUT_IN_SPEED_MPS) & (gap_m >= self.min_gap_m)
@@ -326,32 +332,35 @@ def simulate_platoon(
     for k in range(steps):
         x = position[k, :used]
         v = speed[k, :used]
+        merging: IntArray | tuple[()] = ()
         if cut_ins is not None:
-            ahead_now = lead_of[1:]
-            gaps_now = x[ahead_now] - x[1:] - vehicle_length_m
-            merge_clock[1:] += cut_ins.hazard_per_s(gaps_now, v[1:]) * dt
-            for follower in np.flatnonzero(merge_clock >= merge_threshold):
-                ahead = int(lead_of[follower])
-                gap_now = float(x[ahead] - x[follower]) - vehicle_length_m
-                merge_clock[follower] = 0.0
-                merge_threshold[follower] = rng.exponential()
-                if used == position.shape[1]:
-                    room = np.full((steps + 1, CUT_IN_BLOCK), np.nan)
-                    position = np.hstack([position, room])
-                    speed = np.hstack([speed, room])
-                    gap_history = np.hstack([gap_history, room])
-                new = used
-                used += 1
-                position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
-                speed[k, new] = 0.5 * float(v[ahead] + v[follower])
-                lead_of = np.append(lead_of, ahead)
-                lead_of[follower] = new
-                merge_clock = np.append(merge_clock, 0.0)
-                merge_threshold = np.append(merge_threshold, rng.exponential())
-                in_order = False
-                buffers = np.empty((6, new))
-                x = position[k, :used]
-                v = speed[k, :used]
+            gaps_now = x[lead_of[1:]] - x[1:] - vehicle_length_m
+            # without room anywhere no clock moves, so none can reach its draw this step
+            if cut_ins.invites_any(gaps_now, v[1:]):
+                merge_clock[1:] += cut_ins.hazard_per_s(gaps_now, v[1:]) * dt
+                merging = np.flatnonzero(merge_clock >= merge_threshold)
+        for follower in merging:
+            ahead = int(lead_of[follower])
+            gap_now = float(x[ahead] - x[follower]) - vehicle_length_m
+            merge_clock[follower] = 0.0
+            merge_threshold[follower] = rng.exponential()
+            if used == position.shape[1]:
+                room = np.full((steps + 1, CUT_IN_BLOCK), np.nan)
+                position = np.hstack([position, room])
+                speed = np.hstack([speed, room])
+                gap_history = np.hstack([gap_history, room])
+            new = used
+            used += 1
+            position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
+            speed[k, new] = 0.5 * float(v[ahead] + v[follower])
+            lead_of = np.append(lead_of, ahead)
+            lead_of[follower] = new
+            merge_clock = np.append(merge_clock, 0.0)
+            merge_threshold = np.append(merge_threshold, rng.exponential())
+            in_order = False
+            buffers = np.empty((6, new))
+            x = position[k, :used]
+            v = speed[k, :used]
         gap, v_lead, desired, work, accel, limits_work = buffers
         v_follow = v[1:]
         if in_order:
