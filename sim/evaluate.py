@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -449,15 +449,24 @@ def evaluate(
             if progress is not None:
                 progress(case.name)
     else:
+        # The longest drives go first, so no core is left alone with a long case at the end;
+        # the results keep the cases' order.
+        longest_first = sorted(range(len(cases)), key=lambda index: -cases[index].drive.steps)
+        finished: dict[int, list[RunResult]] = {}
         with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [
-                pool.submit(_run_jobs, case, jobs, followers, planner_params, realism, save_dir)
-                for case in cases
-            ]
-            for case, future in zip(cases, futures, strict=True):
-                results += future.result()
+            futures = {
+                pool.submit(
+                    _run_jobs, cases[index], jobs, followers, planner_params, realism, save_dir
+                ): index
+                for index in longest_first
+            }
+            for future in as_completed(futures):
+                index = futures[future]
+                finished[index] = future.result()
                 if progress is not None:
-                    progress(case.name)
+                    progress(cases[index].name)
+        for index in range(len(cases)):
+            results += finished[index]
     return Evaluation(results)
 
 
