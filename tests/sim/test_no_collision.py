@@ -28,7 +28,14 @@ from sim.av import agent_policy
 from sim.drives import drive_from_speeds, load_drives
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
-from sim.evaluate import ControllerVariant, default_workers, evaluate, run_case
+from sim.evaluate import (
+    BASELINE,
+    ControllerVariant,
+    Evaluation,
+    default_workers,
+    evaluate,
+    run_case,
+)
 from sim.platoon import CutIns, HandBack, platoon_roles, simulate_platoon
 from sim.recommended import (
     RECOMMENDED_PLANNER,
@@ -157,10 +164,22 @@ def collisions_on(cases: list[Case], variant: ControllerVariant, avs: int) -> li
     return found
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("variant", registered_variants(), ids=lambda variant: variant.name)
-def test_every_registered_controller_on_every_drive(
-    variant: ControllerVariant, every_case: list[Case]
+@pytest.fixture(scope="module")
+def every_registered_run(every_case: list[Case]) -> Evaluation:
+    """Every registered controller on every case, as `smoothfleet sim evaluate` runs them: the
+    all-human baseline (once per case) and 1 AV behind the leader of 25 followers, under the
+    recommended planner, cases side by side on every core."""
+    return evaluate(
+        every_case,
+        [RECOMMENDED_PLANNER],
+        registered_variants(),
+        planner_params=RECOMMENDED_PLANNER_PARAMS,
+        workers=default_workers(),
+    )
+
+
+def test_the_sweep_covers_every_drive_of_every_scenario(
+    every_case: list[Case], every_registered_run: Evaluation
 ) -> None:
     # 20 shockwave + 12 freeflow + 12 bottleneck drives, 7 + 2 recorded with their real INRIX
     counts = {name: sum(case.scenario == name for case in every_case) for name in SCENARIOS}
@@ -171,21 +190,21 @@ def test_every_registered_controller_on_every_drive(
         "shockwave_inrix": 7,
         "freeflow_inrix": 2,
     }
-    # as `smoothfleet sim evaluate` runs it: the all-human baseline and 1 AV behind the leader
-    # of 25 followers, under the recommended planner, cases side by side on every core
-    evaluation = evaluate(
-        every_case,
-        [RECOMMENDED_PLANNER],
-        [variant],
-        planner_params=RECOMMENDED_PLANNER_PARAMS,
-        workers=default_workers(),
-    )
-    assert len(evaluation.results) == 2 * len(every_case)
-    collided = [
-        f"{result.case.name} {result.controller}: {result.kpis.collisions}"
-        for result in evaluation.results
-        if result.kpis.collisions
-    ]
+    runs = (1 + len(registered_variants())) * len(every_case)
+    assert len(every_registered_run.results) == runs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "controller",
+    [BASELINE, *(variant.name for variant in registered_variants())],
+)
+def test_every_registered_controller_on_every_drive(
+    controller: str, every_case: list[Case], every_registered_run: Evaluation
+) -> None:
+    runs = [r for r in every_registered_run.results if r.controller == controller]
+    assert len(runs) == len(every_case)
+    collided = [f"{r.case.name}: {r.kpis.collisions}" for r in runs if r.kpis.collisions]
     assert collided == []
 
 
@@ -215,9 +234,7 @@ def within_bounds(kind: type, metadata: list[Any], default: float) -> st.SearchS
             math.floor(low) + 1 if open_low else math.ceil(low),
             math.ceil(high) - 1 if open_high else math.floor(high),
         )
-    return st.floats(
-        low, high, exclude_min=open_low, exclude_max=open_high, allow_nan=False
-    )
+    return st.floats(low, high, exclude_min=open_low, exclude_max=open_high, allow_nan=False)
 
 
 def accepted_params(model: type[BaseModel]) -> st.SearchStrategy[dict[str, Any]]:
