@@ -13,7 +13,7 @@ from pydantic import (
     model_validator,
 )
 
-from contract.controllers import controller_actuations
+from contract.controllers import ControllerConfigError, controller_actuations, validate_controller
 
 # Which controllers can drive which actuation, from the vehicle agent's controller registry (the
 # single source of truth: a controller added there is accepted here).
@@ -59,4 +59,10 @@ class RosterRow(BaseModel):
             raise ValueError(
                 f"controller {self.controller_name!r} cannot drive actuation {self.actuation!r}"
             )
+        try:
+            # the schema the car builds its controller from, as for an assignment
+            validate_controller(self.controller_name, self.actuation, self.controller_params)
+        except ControllerConfigError as error:
+            field = "controller_" + error.field.removeprefix("controller.")
+            raise ValueError(f"{field}: {error.reason}") from None
         return self

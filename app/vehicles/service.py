@@ -11,15 +11,17 @@ from sqlalchemy import select
 from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.orm import Session
 
-from app.models import Corridor, Vehicle
+from app.models import Corridor, Policy, Vehicle
 from app.vehicles.schemas import RosterRow
+from contract.controllers import RL_CONTROLLERS
 
 
 class RosterError(ValueError):
     """A roster row is wrong; the message names the row and the field."""
 
 
-def _first_error(error: ValidationError) -> str:
+def first_error(error: ValidationError) -> str:
+    """The first field error of a validation failure as `field: message`."""
     detail = error.errors()[0]
     field = ".".join(str(part) for part in detail.get("loc", ()))
     message = str(detail.get("msg", "invalid")).removeprefix("Value error, ")
@@ -49,7 +51,7 @@ def parse_roster_csv(path: Path) -> list[RosterRow]:
             try:
                 rows.append(RosterRow.model_validate(record))
             except ValidationError as error:
-                raise RosterError(f"{path.name} row {number}: {_first_error(error)}") from None
+                raise RosterError(f"{path.name} row {number}: {first_error(error)}") from None
     return rows
 
 
@@ -73,6 +75,35 @@ def _check_against_corridors(session: Session, rows: Sequence[RosterRow], label:
             raise RosterError(f"{where}: vin {row.vin} appears twice")
         seen_ids.add(row.vehicle_id)
         seen_vins.add(row.vin)
+    _check_policies_held(session, rows, label)
+
+
+def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str) -> None:
+    """A row naming a policy by sha256 needs that policy on the server, for its controller
+    (the car downloads it from here), as an assignment does."""
+    named = {
+        str(row.controller_params["policy_sha256"])
+        for row in rows
+        if row.controller_name in RL_CONTROLLERS and "policy_sha256" in row.controller_params
+    }
+    if not named:
+        return
+    held = dict(
+        session.execute(
+            select(Policy.policy_sha256, Policy.controller).where(Policy.policy_sha256.in_(named))
+        )
+        .tuples()
+        .all()
+    )
+    for number, row in enumerate(rows, start=2):
+        sha256 = row.controller_params.get("policy_sha256")
+        if row.controller_name not in RL_CONTROLLERS or sha256 is None:
+            continue
+        where = f"{label} row {number}: controller_params.policy_sha256"
+        if sha256 not in held:
+            raise RosterError(f"{where}: no policy {sha256} on the server (upload it first)")
+        if held[sha256] != row.controller_name:
+            raise RosterError(f"{where}: a {held[sha256]} policy, not {row.controller_name}")
 
 
 def upsert_vehicles(

@@ -24,6 +24,7 @@ from typing import NoReturn
 
 import click
 from psycopg.errors import UndefinedTable
+from pydantic import ValidationError
 from rich.table import Table
 from sqlalchemy.exc import IntegrityError, ProgrammingError
 
@@ -46,7 +47,13 @@ from app.users.service import (
     save_user,
 )
 from app.vehicles.schemas import RosterRow
-from app.vehicles.service import RosterError, list_vehicles, parse_roster_csv, upsert_vehicles
+from app.vehicles.service import (
+    RosterError,
+    first_error,
+    list_vehicles,
+    parse_roster_csv,
+    upsert_vehicles,
+)
 from smoothfleet.cli.common import CliError, console, database, settings
 from smoothfleet.cli.inrix import inrix
 from smoothfleet.cli.motion import motion
@@ -189,8 +196,8 @@ def vehicles_add(**fields: object) -> None:
     """Add one vehicle (or update it if the id exists)."""
     try:
         row = RosterRow.model_validate(fields)
-    except ValueError as error:
-        raise CliError(f"vehicle: {error}".splitlines()[0]) from None
+    except ValidationError as error:
+        raise CliError(f"vehicle: {first_error(error)}") from None
     with database(settings()) as url:
         _write_roster(url, [row], label="vehicle")
     console.print(f"vehicle {row.vehicle_id} saved")

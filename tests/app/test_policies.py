@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import subprocess
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -320,3 +321,24 @@ def test_an_unreadable_multipart_body_is_a_422_that_says_so(api: Api) -> None:
     assert response.status_code == 422, response.text
     detail = response.json()["detail"]
     assert detail == "request body cannot be read: Missing boundary in multipart."
+
+
+def test_the_roster_names_only_policies_the_server_holds(seeded_database_url: str) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+
+    def add(params: dict[str, Any]) -> subprocess.CompletedProcess[str]:
+        return run_cli(
+            "vehicles", "add", "--id", "SF-101", "--vin", "JN8BT3BB3PW906499", "--make",
+            "Nissan", "--model", "Rogue", "--year", "2023", "--actuation", "acc", "--route", "A",
+            "--lane", "1", "--controller", "rl_acc", "--params", json.dumps(params), env=env,
+        )  # fmt: skip
+
+    missing = add({"policy_sha256": ACC_SHA256})
+    assert missing.returncode == 1
+    assert f"controller_params.policy_sha256: no policy {ACC_SHA256}" in missing.stderr
+    bogus = add({"policy_sha256": ACC_SHA256, "temperature": 2})
+    assert bogus.returncode == 1
+    assert "controller_params.temperature: Extra inputs are not permitted" in bogus.stderr
+    assert run_cli("policy", "upload", str(ACC_FILE), env=env).returncode == 0
+    added = add({"policy_sha256": ACC_SHA256})
+    assert added.returncode == 0, added.stderr
