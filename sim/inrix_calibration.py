@@ -269,6 +269,18 @@ def side_by_side(label: str, simulated: Sequence[PathErrors], real: Sequence[Pat
     return f"{label:22s} {target.statistics.samples:5d} " + " ".join(cells)
 
 
+def standard_error_line(real: Sequence[PathErrors]) -> str:
+    """The real pooled statistics' own standard errors beside their 20 % bands, `SE (20 %)`:
+    where the SE is the wider, the real value cannot hold the simulated one closer."""
+    target = Target.of(real)
+    values = target.statistics.values()
+    cells = [
+        f"{format_value(name, error)} ({format_value(name, TOLERANCE * abs(value))})".rjust(12)
+        for name, error, value in zip(STATISTICS, target.standard_error, values, strict=True)
+    ]
+    return f"{'  real SE (20 % band)':22s} {'':5s} " + " ".join(cells)
+
+
 def header() -> str:
     """Column names of `side_by_side` lines."""
     short = {
@@ -302,6 +314,7 @@ def compare(
     for drive, path in zip(drives, simulated, strict=True):
         say(side_by_side(drive_label(drive.recorded.drive), [path], [drive.real]))
     say(side_by_side("all drives", simulated, [drive.real for drive in drives]))
+    say(standard_error_line([drive.real for drive in drives]))
     say(LEGEND)
 
 
