@@ -6,7 +6,10 @@ trip that also commits, so the request is answered after one visit to PostgreSQL
 four (COPY start, COPY end, INSERT, COMMIT). The rows it returns are those inserted; a sent row
 not among them was already stored.
 
-A larger group (batch uploads) is written in one transaction on that connection:
+A larger group (batch uploads) is first copied straight into fact_vehicle_ping (binary COPY in
+one transaction: raw COPY's speed). A car's upload holds new rows but when it resends after a
+lost acknowledgement; then the COPY fails on the unique key, nothing of it is kept, and the
+group is written in one transaction through a temporary table, which tells which were new:
 1. binary COPY of the rows (numbered n = 0, 1, ...) into the connection's temporary table
    `ping_incoming` (emptied at every commit); psycopg formats the rows in C;
 2. one INSERT ... SELECT from it into fact_vehicle_ping with ON CONFLICT DO NOTHING, so a resent
@@ -73,6 +76,8 @@ def insert_values(rows: int) -> str:
         "ON CONFLICT (vehicle_id, ts) DO NOTHING RETURNING vehicle_id, ts"
     )
 
+
+COPY_STORED = f"COPY fact_vehicle_ping ({_NAMES}) FROM STDIN (FORMAT BINARY)"
 
 COPY_INCOMING = f"COPY ping_incoming (n, {_NAMES}) FROM STDIN (FORMAT BINARY)"
 

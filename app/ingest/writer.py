@@ -33,6 +33,7 @@ from app.core import metrics
 from app.ingest.pings import PingRow
 from app.ingest.sql import (
     COPY_INCOMING,
+    COPY_STORED,
     COPY_TYPES,
     CREATE_INCOMING,
     INSERT_FROM_INCOMING,
@@ -279,7 +280,16 @@ async def _insert_small(driver: psycopg.AsyncConnection[Any], values: Sequence[V
 async def _copy_large(
     driver: psycopg.AsyncConnection[Any], values: Sequence[Values], info: dict[object, object]
 ) -> set[int]:
-    """Write a large group by COPY in one transaction; the positions already stored."""
+    """Write a large group by COPY; the positions already stored (app.ingest.sql)."""
+    try:
+        async with driver.transaction(), driver.cursor() as cursor:
+            async with cursor.copy(COPY_STORED) as copy:
+                copy.set_types(COPY_TYPES[1:])
+                for row in values:
+                    await copy.write_row(row)
+        return set()
+    except psycopg.errors.UniqueViolation:
+        pass  # some rows were stored before: the temporary table tells which
     async with driver.cursor() as cursor:
         if "ping_incoming" not in info:
             await cursor.execute(CREATE_INCOMING)

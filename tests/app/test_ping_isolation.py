@@ -21,6 +21,7 @@ from sqlalchemy import Engine, text
 from app.core.db import make_async_engine
 from app.ingest.directory import CorridorInfo
 from app.ingest.pings import PingRow
+from app.ingest.sql import SMALL_GROUP_ROWS
 from app.ingest.writer import PingWriter, UnstorableValue, WriteOutcome
 from tests.support.api import ping, serving
 from tests.support.tokens import bearer, issue
@@ -98,13 +99,16 @@ def _row(vehicle_id: str, ts: datetime, controller: str | None) -> PingRow:
     [("a\u0000b", "0x00"), ("a\ud800b", "surrogate")],
     ids=["nul", "lone-surrogate"],
 )
+@pytest.mark.parametrize("bad_rows", [2, SMALL_GROUP_ROWS + 1], ids=["statement", "copy"])
 def test_the_group_writer_fails_only_the_request_holding_an_unstorable_row(
-    seeded_database_url: str, seeded_engine: Engine, poison: str, reason: str
+    seeded_database_url: str, seeded_engine: Engine, poison: str, reason: str, bad_rows: int
 ) -> None:
-    """The writer itself isolates a refused row, whatever the checks before it let through."""
+    """The writer itself isolates a refused row, whatever the checks before it let through,
+    in a group small enough for one statement and in one large enough for COPY."""
     ts = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
     clean = [[_row(f"SF-{n:03d}", ts, "microaccel_acc")] for n in range(2, 9)]
-    bad = [_row("SF-001", ts, "microaccel_acc"), _row("SF-001", ts + timedelta(seconds=1), poison)]
+    bad = [_row("SF-001", ts + timedelta(seconds=k), "microaccel_acc") for k in range(bad_rows)]
+    bad[-1] = bad[-1]._replace(controller=poison)
 
     async def write_all() -> list[WriteOutcome | BaseException]:
         engine = make_async_engine(seeded_database_url)
