@@ -178,6 +178,13 @@ def every_registered_run(every_case: list[Case]) -> Evaluation:
     )
 
 
+# The first test to use the sweep pays for all of it (~2 min on two idle cores, several times
+# that on a busy machine): beyond the suite's 300 s default.
+SWEEP_TIMEOUT_S = 1800
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(SWEEP_TIMEOUT_S)
 def test_the_sweep_covers_every_drive_of_every_scenario(
     every_case: list[Case], every_registered_run: Evaluation
 ) -> None:
@@ -195,6 +202,7 @@ def test_the_sweep_covers_every_drive_of_every_scenario(
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(SWEEP_TIMEOUT_S)
 @pytest.mark.parametrize(
     "controller",
     [BASELINE, *(variant.name for variant in registered_variants())],
