@@ -107,12 +107,18 @@ def throughput_at_vph(
     return float((n - 1) / spread * SECONDS_PER_HOUR)
 
 
+def shares_a_stretch(position_m: FloatArray) -> bool:
+    """Whether the platoon's last vehicle gets, before the run ends, past where its first
+    vehicle started: only then is there a point every vehicle crosses during the run."""
+    return bool(position_m[-1].min() > position_m[0].max())
+
+
 def measurement_points_m(position_m: FloatArray, count: int = THROUGHPUT_POINTS) -> FloatArray:
     """`count` equi-spaced interior points of the stretch every vehicle drives through."""
+    if not shares_a_stretch(position_m):
+        raise ValueError("the vehicles share no stretch of road: the drive is too short")
     first = float(position_m[0].max())
     last = float(position_m[-1].min())
-    if last <= first:
-        raise ValueError("the vehicles share no stretch of road: the drive is too short")
     points: FloatArray = np.linspace(first, last, count + 2)[1:-1]
     return points
 
@@ -155,7 +161,10 @@ def min_time_to_collision_s(
     approaching = closing > 0
     if not approaching.any():
         return float("inf")
-    return float((gap_m[approaching] / closing[approaching]).min())
+    # a closing speed of a few ulps (a car that cannot accelerate, creeping) gives a time
+    # beyond float range: that is an infinite time to collision, not an error
+    with np.errstate(over="ignore"):
+        return float((gap_m[approaching] / closing[approaching]).min())
 
 
 def platoon_kpis(
@@ -165,17 +174,21 @@ def platoon_kpis(
     (columns 1..N-1), throughput over every vehicle, the leader and cars that merged in included.
 
     Throughput is the average over five equi-spaced points, or, given `throughput_point_m`,
-    the flow over that one point (the bottleneck's: just downstream of the region).
+    the flow over that one point (the bottleneck's: just downstream of the region). A platoon
+    whose tail never gets past where its leader started (AVs that stalled and held everyone
+    behind them) carried no platoon past any point within the run: its throughput counts as 0,
+    the only bound the run can prove, so a controller never gains by stranding traffic.
     """
     position = run.position_m[:, 1:]
     speed = run.speed_mps[:, 1:]
     gaps = run.gap_m
     merged = run.cut_in_position_m
-    throughput = (
-        throughput_vph(run.position_m, run.dt_s, merged_m=merged)
-        if throughput_point_m is None
-        else throughput_at_vph(run.position_m, run.dt_s, throughput_point_m, merged)
-    )
+    if not shares_a_stretch(run.position_m):
+        throughput = 0.0
+    elif throughput_point_m is None:
+        throughput = throughput_vph(run.position_m, run.dt_s, merged_m=merged)
+    else:
+        throughput = throughput_at_vph(run.position_m, run.dt_s, throughput_point_m, merged)
     return Kpis(
         fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),
         throughput_vph=throughput,

@@ -82,6 +82,12 @@ def test_time_to_collision_only_when_closing_in() -> None:
     assert min_time_to_collision_s(gaps, leader, follower) == float("inf")
 
 
+def test_time_to_collision_of_a_car_creeping_closer_by_ulps_is_infinite() -> None:
+    # a car that cannot accelerate closes in at 1e-320 m/s: 10 m / 1e-320 m/s overflows
+    gaps = np.array([[10.0]])
+    assert min_time_to_collision_s(gaps, np.array([[1e-320]]), np.array([[0.0]])) == float("inf")
+
+
 def cruising_platoon(leader_ahead_m: float) -> PlatoonRun:
     """Leader, car A and car B at 10 m/s for 9 s; B 15 m behind A, the leader ahead of A."""
     time_s = np.arange(10.0)[:, None]
@@ -115,6 +121,29 @@ def test_a_gap_opened_behind_the_leader_costs_throughput() -> None:
     # the same two cars, but the leader 45 m ahead of car A (4.5 s): crossings at 0, 4.5, 6 s
     # -> 2 intervals over 6 s = 1200 veh/h; without the leader it would still read 2400
     assert platoon_kpis(cruising_platoon(45.0)).throughput_vph == pytest.approx(1200.0)
+
+
+def test_a_platoon_whose_tail_never_passes_the_leaders_start_has_no_throughput() -> None:
+    # car B stalls 100 m behind car A and never moves: after 9 s it is at -100 m, short of
+    # where the leader started (15 m); no point is crossed by all three during the run
+    run = cruising_platoon(15.0)
+    position = run.position_m.copy()
+    position[:, 2] = -100.0
+    speed = run.speed_mps.copy()
+    speed[:, 2] = 0.0
+    stalled = PlatoonRun(
+        drive_name="hand-built",
+        dt_s=1.0,
+        is_av=run.is_av,
+        position_m=position,
+        speed_mps=speed,
+        vehicle_length_m=5.0,
+        gap_violation_m=1.0,
+    )
+    with pytest.raises(ValueError, match="share no stretch"):
+        measurement_points_m(position)
+    assert platoon_kpis(stalled).throughput_vph == 0.0
+    assert platoon_kpis(stalled, throughput_point_m=20.0).throughput_vph == 0.0
 
 
 def test_a_car_that_merged_in_counts_where_it_crossed_in_the_lane() -> None:
