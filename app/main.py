@@ -16,6 +16,7 @@ from fastapi import FastAPI
 from sqlalchemy.ext.asyncio import async_sessionmaker
 from uvicorn.middleware.proxy_headers import ProxyHeadersMiddleware
 
+from app.auth import TokenCache
 from app.core.body_limit import BodySizeLimit
 from app.core.config import Settings, SettingsError, get_settings
 from app.core.db import make_async_engine
@@ -112,6 +113,9 @@ def create_api(settings: Settings | None = None) -> FastAPI:
             scheduler.shutdown(wait=False)
             if stop_planner is not None:
                 stop_planner()
+            token_cache: TokenCache | None = getattr(app.state, "token_cache", None)
+            if token_cache is not None:
+                await token_cache.close()
             await engine.dispose()
             await app.state.database_watch.close()
 

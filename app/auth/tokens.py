@@ -104,6 +104,12 @@ class TokenCache:
             return await asyncio.shield(pending)
         return await self._look_up_and_keep(token_hash, entry)
 
+    async def close(self) -> None:
+        """Let the background look-ups finish (at shutdown, before the engine is disposed:
+        a look-up dropped mid-query would leave its connection to the garbage collector)."""
+        if self._refreshes:
+            await asyncio.wait(set(self._refreshes))
+
     def _refresh_in_background(
         self, token_hash: str, entry: tuple[float, Principal | None]
     ) -> None:

@@ -51,6 +51,10 @@ class DatabaseWatch:
         self._connection: psycopg.AsyncConnection[Any] | None = None
         self._probe: asyncio.Task[bool] | None = None
         self._verdict = (-float("inf"), True)  # (when, answered)
+        # Attempts given up on, and the closing of the connections they answered with late:
+        # the probe owns every connection it opens until it is closed.
+        self._abandoned: set[asyncio.Task[psycopg.AsyncConnection[Any]]] = set()
+        self._closing: set[asyncio.Task[None]] = set()
 
     async def answers(self) -> bool:
         """True when a `SELECT 1` came back within the probe timeout.
@@ -70,18 +74,22 @@ class DatabaseWatch:
         # Not `asyncio.timeout` around the query: cancelling a psycopg query asks the server to
         # cancel it, which waits on the very server that does not answer. The attempt is left
         # to finish (or fail) in the background instead.
-        attempt = asyncio.create_task(self._select_one())
+        attempt = asyncio.create_task(self._select_one(self._connection))
         done, _ = await asyncio.wait({attempt}, timeout=self._timeout_s)
         answered = bool(done) and attempt.exception() is None
-        if not done:
-            attempt.add_done_callback(_drop_late_outcome)
-        if not answered:
-            self._connection = None  # abandoned with its attempt
+        if answered:
+            self._connection = attempt.result()
+        else:
+            self._connection = None  # closed by its attempt, or abandoned with it
+            if not done:
+                self._abandoned.add(attempt)
+                attempt.add_done_callback(self._late_outcome)
         self._verdict = (time.monotonic(), answered)
         return answered
 
-    async def _select_one(self) -> None:
-        connection = self._connection
+    async def _select_one(
+        self, connection: psycopg.AsyncConnection[Any] | None
+    ) -> psycopg.AsyncConnection[Any]:
         if connection is None or connection.closed:
             connection = await psycopg.AsyncConnection.connect(
                 self._url, autocommit=True, connect_timeout=max(2, math.ceil(self._timeout_s))
@@ -91,15 +99,34 @@ class DatabaseWatch:
         except BaseException:
             await connection.close()
             raise
-        self._connection = connection
+        return connection
+
+    def _late_outcome(self, attempt: asyncio.Task[psycopg.AsyncConnection[Any]]) -> None:
+        self._abandoned.discard(attempt)
+        if attempt.cancelled():
+            return
+        if attempt.exception() is not None:
+            log.debug("late outcome of an abandoned probe: %r", attempt.exception())
+            return
+        closing = asyncio.create_task(self._close_quietly(attempt.result()))
+        self._closing.add(closing)
+        closing.add_done_callback(self._closing.discard)
+
+    async def _close_quietly(self, connection: psycopg.AsyncConnection[Any]) -> None:
+        with contextlib.suppress(psycopg.Error, OSError, TimeoutError):
+            async with asyncio.timeout(self._timeout_s):
+                await connection.close()
 
     async def close(self) -> None:
-        """Close the probe's connection (at shutdown)."""
+        """Close every connection the probe opened (at shutdown), giving a late attempt one
+        probe timeout to finish."""
         connection, self._connection = self._connection, None
+        if self._abandoned:
+            await asyncio.wait(set(self._abandoned), timeout=self._timeout_s)
         if connection is not None:
-            with contextlib.suppress(psycopg.Error, OSError, TimeoutError):
-                async with asyncio.timeout(self._timeout_s):
-                    await connection.close()
+            await self._close_quietly(connection)
+        if self._closing:
+            await asyncio.wait(set(self._closing), timeout=self._timeout_s)
 
 
 class RequestDeadline:

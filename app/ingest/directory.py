@@ -114,6 +114,13 @@ class FleetDirectoryCache:
                 return current
         return await self._reload(now)
 
+    async def close(self) -> None:
+        """Let a background reload finish (at shutdown, before the engine is disposed: a
+        reload dropped mid-query would leave its connection to the garbage collector)."""
+        refresh = self._refresh
+        if refresh is not None:
+            await asyncio.wait({refresh})
+
     async def _reload(self, requested_at: float) -> FleetDirectory:
         async with self._lock:
             # Another request may have reloaded while this one waited for the lock.

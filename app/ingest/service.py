@@ -99,3 +99,4 @@ async def ingest_running(
         yield
     finally:
         await writer.stop()
+        await app.state.ingest.directory.close()
