@@ -9,7 +9,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, WithJsonSchema
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictBool, WithJsonSchema
 
 from app.fleet.service import FleetCounts, FleetEntry
 from contract.controllers import controller_choice_schema
@@ -78,7 +78,8 @@ class MaintenanceIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    in_maintenance: bool
+    # strict: the document says boolean, so 0 or "yes" is refused, not read as a guess
+    in_maintenance: StrictBool
     note: StorableText | None = Field(None, max_length=500)
 
 

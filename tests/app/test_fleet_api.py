@@ -241,6 +241,14 @@ def test_an_incomplete_assignment_is_422(api: Api) -> None:
     assert response.status_code == 422
 
 
+@pytest.mark.parametrize("flag", [0, 1, "true", None])
+def test_maintenance_takes_only_a_json_boolean(api: Api, flag: object) -> None:
+    # a 0 read as "back in service" would clear a car its operator meant to hold
+    answer = api.put("/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": flag})
+    assert answer.status_code == 422
+    assert "in_maintenance" in str(answer.json()["detail"])
+
+
 def test_a_car_in_maintenance_is_not_cleared_until_it_is_back(api: Api) -> None:
     report_healthy(api, "SF-001")
     taken = api.put(
