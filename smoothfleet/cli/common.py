@@ -3,9 +3,11 @@ console, and the one-line failure it may end with."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import importlib
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 
+import click
 from rich.console import Console
 
 from app.core.config import Settings, get_settings
@@ -34,3 +36,44 @@ def database(settings: Settings) -> Iterator[str]:
 def settings() -> Settings:
     """The settings of this invocation."""
     return get_settings()
+
+
+class CommandGroup(click.Group):
+    """A command group whose sub-groups are imported when a command line names them.
+
+    `smoothfleet db upgrade` or `smoothfleet serve` should not first import pandas, matplotlib
+    and the simulator for `motion` and `sim`: that was 3 s before every command. `lazy` maps a
+    sub-group's name to `module:attribute`; `--help` still lists them all (importing them).
+    """
+
+    def __init__(self, *args: object, lazy: Mapping[str, str] | None = None, **kwargs: object):
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._lazy = dict(lazy or {})
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted({*super().list_commands(ctx), *self._lazy})
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        where = self._lazy.get(cmd_name)
+        if where is not None and cmd_name not in self.commands:
+            module, attribute = where.split(":")
+            command = getattr(importlib.import_module(module), attribute)
+            assert isinstance(command, click.Command), where
+            self.add_command(command, cmd_name)
+        return super().get_command(ctx, cmd_name)
+
+
+def fleet_options(command: Callable[..., None]) -> Callable[..., None]:
+    """`--duration` and `--vehicles` of a simulated fleet run (`sim fleet`, `demo`)."""
+    command = click.option(
+        "--vehicles",
+        type=click.IntRange(1, 100),
+        default=100,
+        show_default=True,
+        help="How many roster vehicles the simulated fleet drives.",
+    )(command)
+    return click.option(
+        "--duration",
+        type=click.FloatRange(min=1),
+        help="Stop after this many seconds (default: run until Ctrl-C).",
+    )(command)

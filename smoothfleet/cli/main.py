@@ -54,15 +54,27 @@ from app.vehicles.service import (
     parse_roster_csv,
     upsert_vehicles,
 )
-from smoothfleet.cli.common import CliError, console, database, settings
-from smoothfleet.cli.inrix import inrix
-from smoothfleet.cli.motion import motion
-from smoothfleet.cli.planner import planner
-from smoothfleet.cli.policy import policy
-from smoothfleet.cli.sim import fleet_options, sim
+from smoothfleet.cli.common import (
+    CliError,
+    CommandGroup,
+    console,
+    database,
+    fleet_options,
+    settings,
+)
+
+# Command groups imported only when named (their imports are most of the start-up time).
+LAZY_GROUPS = {
+    name: f"smoothfleet.cli.{name}:{name}"
+    for name in ("inrix", "sim", "planner", "motion", "policy")
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(
+    cls=CommandGroup,
+    lazy=LAZY_GROUPS,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
 def cli() -> None:
     """smoothfleet: run a fleet of traffic-smoothing vehicles (server side)."""
 
@@ -567,13 +579,6 @@ def _with_overrides(**overrides: object) -> Settings:
     if not given:
         return settings()
     return load_settings(**given)
-
-
-cli.add_command(inrix)
-cli.add_command(sim)
-cli.add_command(planner)
-cli.add_command(motion)
-cli.add_command(policy)
 
 
 # --- entry point ---------------------------------------------------------------------------

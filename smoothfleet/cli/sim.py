@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import shlex
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +51,7 @@ from sim.report import (
 )
 from sim.scenarios import RECORDED_SCENARIOS, SCENARIOS, Case, scenario_cases
 from sim.selection import choose, cross_validate, held_out_summary
+from smoothfleet.cli.common import fleet_options
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
 console = Console(width=max(Console().width, 160))
@@ -271,9 +271,7 @@ def evaluate_command(
     try:
         drives = load_drives(drives_dir)
         recorded = (
-            load_recorded_drives(inrix_dir)
-            if on_recordings and inrix_dir is not None
-            else []
+            load_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
         )
     except DriveError as error:
         raise click.ClickException(str(error)) from None
@@ -500,22 +498,6 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
         f"{drive.name}: leader + 25 followers (the AV thick, cars merging in dashed)",
     )
     console.print(f"{label}\nwrote {output}")
-
-
-def fleet_options(command: Callable[..., None]) -> Callable[..., None]:
-    """`--duration` and `--vehicles` of a simulated fleet run (`sim fleet`, `demo`)."""
-    command = click.option(
-        "--vehicles",
-        type=click.IntRange(1, 100),
-        default=100,
-        show_default=True,
-        help="How many roster vehicles the simulated fleet drives.",
-    )(command)
-    return click.option(
-        "--duration",
-        type=click.FloatRange(min=1),
-        help="Stop after this many seconds (default: run until Ctrl-C).",
-    )(command)
 
 
 @sim.command("fleet")
