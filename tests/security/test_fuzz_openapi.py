@@ -6,30 +6,42 @@ in its documented shape (errors: `{"detail": ...}`), schema-violating requests r
 schema-valid ones accepted, on every operation. Timestamps are drawn from the last hour, and a
 status report's `ts` outside the server's window is moved to now (schemathesis_hooks.py): the
 API's window around now cannot be said in JSON Schema. Reports and assignments go to a vehicle of
-the seeded roster (schemathesis.toml). The run's seed is fixed so CI is repeatable; run the same
-command without `--seed` for fresh cases (see docs/operations.md).
+the seeded roster (schemathesis.toml). A shipped policy is stored before the run, so its reads
+are 200, and a positive upload sends a shipped policy with its manifest (schemathesis_hooks.py):
+a schema cannot say that a file must hash to its manifest and load. The run's seed is fixed so
+CI is repeatable; run the same command without `--seed` for fresh cases (see docs/operations.md).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import re
 import subprocess
 import sys
+import tomllib
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
 from sqlalchemy import Engine, text
+from sqlalchemy.orm import Session
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
+from app.policies.service import check_policy, store_policy_sync
 from tests.planner.facts import inrix_snapshot, standing_slowdown
+from tests.security.schemathesis_hooks import UNNAMED_CONTROLLER
 from tests.support.servers import live_server
 from tests.support.tokens import issue
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 REPO = Path(__file__).resolve().parents[2]
+CONFIG = Path(__file__).with_name("schemathesis.toml")
+# Stored before the run; schemathesis.toml names it as the policy the reads ask for.
+STORED_POLICY = BUNDLED_POLICIES / "rl_acc.npz"
 SEED = "20261123"
 # Per principal: the coverage phase (every operation's boundaries, ~8 s) runs whole, fuzzing
 # gets the rest. CI's 20-minute budget holds four such runs; docs/operations.md gives the longer
@@ -39,13 +51,17 @@ SECONDS_PER_RUN = "20"
 
 @pytest.fixture
 def api_with_a_plan(seeded_database_url: str, seeded_engine: Engine) -> Iterator[str]:
-    """The live API over a seeded warehouse with a published plan (so plan reads are 200)."""
+    """The live API over a seeded warehouse with a published plan and a stored policy (so plan
+    and policy reads are 200)."""
     now = datetime.now(UTC).replace(microsecond=0)
     for minutes_ago in range(6, 1, -1):
         inrix_snapshot(seeded_engine, now - timedelta(minutes=minutes_ago), standing_slowdown())
     settings = load_settings(database_url=seeded_database_url, plan_valid_for_s=900)
     (outcome,) = run_planner(seeded_engine, settings)
     assert outcome.status == "published", outcome.reason
+    manifest = json.loads(STORED_POLICY.with_suffix(".json").read_text(encoding="utf-8"))
+    with Session(seeded_engine) as session, session.begin():
+        store_policy_sync(session, check_policy(STORED_POLICY.read_bytes(), manifest), "fixture")
     with live_server(
         seeded_database_url,
         planner_enabled=False,
@@ -59,7 +75,7 @@ def fuzz(base: str, workdir: Path, *headers: str) -> subprocess.CompletedProcess
     command = [
         str(Path(sys.executable).parent / "schemathesis"),
         "--config-file",
-        str(Path(__file__).with_name("schemathesis.toml")),
+        str(CONFIG),
         "run",
         f"{base}/openapi.json",
         "--phases",
@@ -106,6 +122,23 @@ def accepted_on_the_roster_vehicle(engine: Engine) -> tuple[int, int]:
     return int(reports), int(version)
 
 
+def stored_controllers(engine: Engine) -> set[str]:
+    with engine.connect() as connection:
+        return set(connection.scalars(text("SELECT controller FROM dim_policy")))
+
+
+def test_the_policy_the_fuzzer_reads_is_the_one_stored_before_the_run() -> None:
+    """schemathesis.toml's sha256 for the policy reads is the stored file's, not a stale one."""
+    config = tomllib.loads(CONFIG.read_text(encoding="utf-8"))
+    (sha256,) = {
+        operation["parameters"]["path.sha256"]
+        for operation in config["operations"]
+        if "path.sha256" in operation.get("parameters", {})
+    }
+    assert sha256 == hashlib.sha256(STORED_POLICY.read_bytes()).hexdigest()
+    assert STORED_POLICY.stem != UNNAMED_CONTROLLER  # so accepted uploads show as a new policy
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("role", ["vehicle", "operator", "admin"])
 def test_fuzzing_with_a_token_passes_every_default_check(
@@ -113,14 +146,21 @@ def test_fuzzing_with_a_token_passes_every_default_check(
 ) -> None:
     token = issue(seeded_engine, role, "SF-001" if role == "vehicle" else None)  # type: ignore[arg-type]
     reports_before, version_before = accepted_on_the_roster_vehicle(seeded_engine)
+    assert stored_controllers(seeded_engine) == {STORED_POLICY.stem}
     result = fuzz(api_with_a_plan, tmp_path, f"Authorization: Bearer {token}")
     assert result.returncode == 0, result.stdout[-6000:] + result.stderr[-2000:]
     assert cases_passed(result.stdout) >= 200
+    # Every operation with a path parameter reads something that exists (the roster vehicle,
+    # the stored policy), so its 200 path was fuzzed too: no "Missing test data" warning.
+    assert "404 responses" not in result.stdout, result.stdout[-3000:]
     # Schema-valid reports and assignments reached the validation and were stored, so
     # positive_data_acceptance judged them on a vehicle that exists, not on 404s.
     reports, version = accepted_on_the_roster_vehicle(seeded_engine)
     assert reports > reports_before
     assert (version > version_before) is (role != "vehicle")  # a vehicle token cannot assign
+    # Schema-valid uploads (a shipped policy, schemathesis_hooks.py) were stored: the one of an
+    # upload naming no controller is not the one stored before the run. A vehicle cannot upload.
+    assert (UNNAMED_CONTROLLER in stored_controllers(seeded_engine)) is (role != "vehicle")
 
 
 @pytest.mark.slow
