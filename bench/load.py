@@ -6,7 +6,11 @@ hides from the percentiles (coordinated omission). Here request i is due at t0 +
 whatever happened before, and its latency runs from when it was due, not from when it could be
 sent: a stall shows in every request it delayed. HTTP/1.1 keep-alive over raw asyncio streams
 (one request at a time per connection, a new connection when all are busy) keeps the
-generator's own cost small next to the server's.
+generator's own cost small next to the server's. The load stands for `rate` cars pinging once a
+second, so it holds at most `rate` connections, one per car: a server slower than the offered
+rate makes requests wait for a connection (their latency still runs from when they were due)
+instead of the generator opening connections without end (it once ran out of file descriptors
+at 20,000 when a server fell behind 2,000 pings/s for 20 s).
 
 `saturate` is the closed loop, for throughput at saturation: `connections` clients back to back.
 """
@@ -89,19 +93,21 @@ async def constant_rate(
     latencies: list[float] = []
     errors = 0
     total = int(rate * duration_s)
+    cars = asyncio.Semaphore(max(1, round(rate)))  # one connection per car
 
     async def one(i: int, due: float) -> None:
         nonlocal errors
-        connection = idle.pop() if idle else await _connect(host, port)
-        try:
-            status = await connection.post(head, body(i))
-        except ConnectionError:  # closed while idle (keep-alive timeout): never read, resend
-            connection = await _connect(host, port)
-            status = await connection.post(head, body(i))
-        latencies.append(time.perf_counter() - due)
-        if status >= 300:
-            errors += 1
-        idle.append(connection)
+        async with cars:
+            connection = idle.pop() if idle else await _connect(host, port)
+            try:
+                status = await connection.post(head, body(i))
+            except ConnectionError:  # closed while idle (keep-alive timeout): never read, resend
+                connection = await _connect(host, port)
+                status = await connection.post(head, body(i))
+            latencies.append(time.perf_counter() - due)
+            if status >= 300:
+                errors += 1
+            idle.append(connection)
 
     started = time.perf_counter()
     tasks = []
