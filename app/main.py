@@ -115,7 +115,7 @@ def create_api(settings: Settings | None = None) -> FastAPI:
                 stop_planner()
             token_cache: TokenCache | None = getattr(app.state, "token_cache", None)
             if token_cache is not None:
-                await token_cache.close()
+                await token_cache.close(settings.db_connect_timeout_s)
             await engine.dispose()
             await app.state.database_watch.close()
 

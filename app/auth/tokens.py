@@ -104,11 +104,12 @@ class TokenCache:
             return await asyncio.shield(pending)
         return await self._look_up_and_keep(token_hash, entry)
 
-    async def close(self) -> None:
-        """Let the background look-ups finish (at shutdown, before the engine is disposed:
-        a look-up dropped mid-query would leave its connection to the garbage collector)."""
+    async def close(self, timeout_s: float) -> None:
+        """Give the background look-ups up to `timeout_s` to finish (at shutdown, before the
+        engine is disposed: a look-up dropped mid-query would leave its connection to the
+        garbage collector). Not longer: a frozen database must not hold the shutdown."""
         if self._refreshes:
-            await asyncio.wait(set(self._refreshes))
+            await asyncio.wait(set(self._refreshes), timeout=timeout_s)
 
     def _refresh_in_background(
         self, token_hash: str, entry: tuple[float, Principal | None]

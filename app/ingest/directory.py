@@ -114,12 +114,13 @@ class FleetDirectoryCache:
                 return current
         return await self._reload(now)
 
-    async def close(self) -> None:
-        """Let a background reload finish (at shutdown, before the engine is disposed: a
-        reload dropped mid-query would leave its connection to the garbage collector)."""
+    async def close(self, timeout_s: float) -> None:
+        """Give a background reload up to `timeout_s` to finish (at shutdown, before the engine
+        is disposed: a reload dropped mid-query would leave its connection to the garbage
+        collector). Not longer: a frozen database must not hold the shutdown."""
         refresh = self._refresh
         if refresh is not None:
-            await asyncio.wait({refresh})
+            await asyncio.wait({refresh}, timeout=timeout_s)
 
     async def _reload(self, requested_at: float) -> FleetDirectory:
         async with self._lock:

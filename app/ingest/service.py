@@ -88,8 +88,9 @@ async def ingest_running(
 ) -> AsyncIterator[None]:
     """Run the ingest machinery for the app's lifetime (app.state.ingest)."""
     writer = PingWriter(engine, concurrency=settings.ingest_write_concurrency)
+    directory = FleetDirectoryCache(engine, settings.roster_cache_ttl_s)
     app.state.ingest = Ingest(
-        directory=FleetDirectoryCache(engine, settings.roster_cache_ttl_s),
+        directory=directory,
         writer=writer,
         retention_days=settings.ping_retention_days,
         max_future_s=settings.ping_max_future_s,
@@ -99,4 +100,4 @@ async def ingest_running(
         yield
     finally:
         await writer.stop()
-        await app.state.ingest.directory.close()
+        await directory.close(settings.db_connect_timeout_s)

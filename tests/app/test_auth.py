@@ -171,3 +171,22 @@ def test_a_token_in_use_is_looked_up_again_before_its_entry_expires_without_a_wa
             await engine.dispose()
 
     assert asyncio.run(scenario()) == (True, True, True)
+
+
+def test_shutdown_waits_for_a_background_look_up_only_so_long(seeded_database_url: str) -> None:
+    """A look-up held by a frozen database must not hold the server's shutdown: close() gives
+    up on it after its timeout, the look-up still pending."""
+
+    async def scenario() -> bool:
+        engine = make_async_engine(seeded_database_url)
+        cache = TokenCache(engine, ttl_s=5)
+        frozen = asyncio.create_task(asyncio.Event().wait())  # a query that never returns
+        cache._refreshes.add(frozen)  # type: ignore[arg-type]
+        try:
+            await cache.close(timeout_s=0.2)
+            return frozen.done()
+        finally:
+            frozen.cancel()
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) is False
