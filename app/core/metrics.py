@@ -28,6 +28,12 @@ PINGS = Counter(
     "Pings received, by outcome (accepted, duplicate, rejected, refused = 403 request).",
     ["outcome"],
 )
+# Each outcome's series, made once: a ping request counts without a label lookup, and every
+# outcome is exported from the start (at 0), so a rate over it never begins with a gap.
+PINGS_ACCEPTED = PINGS.labels("accepted")
+PINGS_DUPLICATE = PINGS.labels("duplicate")
+PINGS_REJECTED = PINGS.labels("rejected")
+PINGS_REFUSED = PINGS.labels("refused")
 STATUS_REPORTS = Counter(
     "smoothfleet_status_reports", "piStatus reports received, by outcome.", ["outcome"]
 )
@@ -76,6 +82,9 @@ class RequestMetrics:
 
     def __init__(self, app: ASGIApp) -> None:
         self.app = app
+        # (method, route template, status) -> its histogram series: the label lookup once per
+        # series instead of once per request (the ping endpoint is nearly every request).
+        self._series: dict[tuple[str, str, int], Histogram] = {}
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -96,6 +105,9 @@ class RequestMetrics:
             # The router stores the matched route in the (shared) scope.
             route = scope.get("route")
             template = getattr(route, "path", None) or UNMATCHED_ROUTE
-            REQUEST_SECONDS.labels(scope["method"], template, str(status)).observe(
-                time.perf_counter() - started
-            )
+            key = (scope["method"], template, status)
+            series = self._series.get(key)
+            if series is None:
+                series = REQUEST_SECONDS.labels(key[0], template, str(status))
+                self._series[key] = series
+            series.observe(time.perf_counter() - started)

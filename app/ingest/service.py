@@ -52,7 +52,7 @@ class Ingest:
         try:
             pings, rejected_fields = read_pings(body, principal)
         except ForeignVehicle as refusal:
-            metrics.PINGS.labels("refused").inc(refusal.pings)
+            metrics.PINGS_REFUSED.inc(refusal.pings)
             raise
         directory = await self.directory.directory({ping.vehicle_id for _, ping in pings})
         window = TimeWindow.around(
@@ -62,7 +62,7 @@ class Ingest:
         try:
             outcome = await self.writer.write(rows)
         except UnstorableValue as error:
-            metrics.PINGS.labels("refused").inc(len(pings))
+            metrics.PINGS_REFUSED.inc(len(pings))
             raise BodyError(
                 f"a value cannot be stored: {error}; nothing of this request was stored"
             ) from None
@@ -76,9 +76,13 @@ class Ingest:
             except RefusedByDatabase as error:
                 raise RowsRefused(f"refused by the database: {error}") from None
         rejected = sorted(rejected_fields + rejected_context, key=lambda r: r.index)
-        metrics.PINGS.labels("accepted").inc(outcome.accepted)
-        metrics.PINGS.labels("duplicate").inc(outcome.duplicates)
-        metrics.PINGS.labels("rejected").inc(len(rejected))
+        # A zero is not counted: in multiprocess mode every increment writes the shared file.
+        if outcome.accepted:
+            metrics.PINGS_ACCEPTED.inc(outcome.accepted)
+        if outcome.duplicates:
+            metrics.PINGS_DUPLICATE.inc(outcome.duplicates)
+        if rejected:
+            metrics.PINGS_REJECTED.inc(len(rejected))
         return IngestResult(outcome.accepted, outcome.duplicates, rejected)
 
 
