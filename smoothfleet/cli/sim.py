@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -567,6 +568,13 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option("--num-envs", type=click.IntRange(1, 256), default=16, show_default=True)
 @click.option(
+    "--gamma",
+    type=click.FloatRange(0.0, 1.0, max_open=True),
+    default=None,
+    help="PPO's discount per 0.1 s step: how far ahead a reward still counts "
+    "[default: PpoSettings', 0.995, about 20 s].",
+)
+@click.option(
     "--humans",
     type=click.IntRange(1, 200),
     default=24,
@@ -590,6 +598,7 @@ def train_command(
     folds: int,
     final: bool,
     num_envs: int,
+    gamma: float | None,
     humans: int,
     episode_s: float,
     out_dir: Path,
@@ -615,6 +624,9 @@ def train_command(
         )
     except (DriveError, ValueError) as error:
         raise click.ClickException(str(error)) from None
+    settings = PpoSettings(num_envs=num_envs)
+    if gamma is not None:
+        settings = replace(settings, gamma=gamma)
     with progress_bar() as progress:
         tasks: dict[str, TaskID] = {}
 
@@ -627,7 +639,7 @@ def train_command(
             result = run_training(
                 drives,
                 config,
-                PpoSettings(num_envs=num_envs),
+                settings,
                 timesteps=timesteps,
                 seed=seed,
                 folds=folds,

@@ -77,6 +77,8 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         "5",
         "--num-envs",
         "4",
+        "--gamma",
+        "0.99",
         "--humans",
         "4",
         "--episode-s",
@@ -92,6 +94,7 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     assert manifest["sha256"] == hashlib.sha256((out / "rl_accel.npz").read_bytes()).hexdigest()
     assert manifest["seed"] == 5
     assert manifest["ppo"]["num_envs"] == 4
+    assert manifest["ppo"]["gamma"] == 0.99
     assert manifest["command"].startswith("smoothfleet sim train --actuation accel")
     assert manifest["environment"]["gap_bounds"] == {
         "min_gap_m": 7.0,
