@@ -78,7 +78,8 @@ def test_a_silent_database_is_answered_503_before_the_handler_has_cleaned_up() -
     sent, answered_after, cleaned_after = asyncio.run(scenario())
     assert sent[0]["status"] == 503
     assert dict(sent[0]["headers"])[b"retry-after"]
-    assert len(sent) == 2 and not sent[1].get("more_body", False)
+    assert len(sent) == 2
+    assert not sent[1].get("more_body", False)
     # deadline + probe + one sweep interval, with room for a busy machine; the cleanup's 1 s
     # is not waited for
     assert answered_after < DEADLINE_S + PROBE_S + DEADLINE_S / 8 + 0.5
