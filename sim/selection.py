@@ -132,3 +132,30 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
             }
         )
     return summary
+
+
+def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
+    """Every candidate on every drive, what each fold chooses from: per candidate the mean KPIs
+    on the shockwave and on the freeflow drives. Context for the held-out result, not a result
+    itself (the figures and any choice made from them share their drives)."""
+    summary = []
+    for candidate in sorted({str(row["candidate"]) for row in rows}):
+        own = [row for row in rows if row["candidate"] == candidate]
+        shock = [row for row in own if row["scenario"] == "shockwave"]
+        free = [row for row in own if row["scenario"] == "freeflow"]
+        summary.append(
+            {
+                "candidate": candidate,
+                "shockwave_fuel_saving_pct": _mean(shock, "fuel_saving_pct"),
+                "shockwave_throughput_change_pct": _mean(shock, "throughput_change_pct"),
+                "shockwave_network_speed_change_pct": _mean(shock, "network_speed_change_pct"),
+                "freeflow_fuel_saving_pct": _mean(free, "fuel_saving_pct"),
+                "freeflow_throughput_change_pct": _mean(free, "throughput_change_pct"),
+                "freeflow_network_speed_change_pct": _mean(free, "network_speed_change_pct"),
+                "collisions": sum(int(row["collisions"]) for row in own),
+                "takeovers": sum(int(row["takeovers"]) for row in own),
+                "within_bounds_share": _mean(own, "within_bounds_share"),
+                "shockwave_distance_lost_m": _mean(shock, "distance_lost_m"),
+            }
+        )
+    return summary

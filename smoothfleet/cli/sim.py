@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shlex
 import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,7 @@ from sim.report import (
     write_time_space,
 )
 from sim.scenarios import RECORDED_SCENARIOS, SCENARIOS, Case, scenario_cases
-from sim.selection import choose, cross_validate, held_out_summary
+from sim.selection import candidate_summary, choose, cross_validate, held_out_summary
 from smoothfleet.cli.common import fleet_options
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -431,17 +432,17 @@ def select_command(
         )
     console.print(table)
     summary = held_out_summary(choices)
-    result = Table(title="Held-out drives only (each scored by the pair chosen without its date)")
-    for column in summary[0]:
-        result.add_column(column)
-    for line in summary:
-        result.add_row(
-            *(
-                f"{value:+.2f}" if isinstance(value, float) else str(value)
-                for value in line.values()
-            )
+    console.print(
+        _summary_table(
+            "Held-out drives only (each scored by the pair chosen without its date)", summary
         )
-    console.print(result)
+    )
+    console.print(
+        _summary_table(
+            "Every candidate on every drive (what the folds choose from: context, not a result)",
+            candidate_summary(rows),
+        )
+    )
     deployed = choose(rows)
     console.print(
         f"chosen on every date (the deployment pair; its score here is not a result): "
@@ -451,6 +452,21 @@ def select_command(
     write_rows(rows, out_dir / "selection.csv")
     write_rows(summary, out_dir / "held_out.csv")
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
+
+
+def _summary_table(title: str, lines: Sequence[Mapping[str, Any]]) -> Table:
+    """Summary rows as a table, one column per key, floats signed to two decimals."""
+    table = Table(title=title)
+    for column in lines[0]:
+        table.add_column(column)
+    for line in lines:
+        table.add_row(
+            *(
+                f"{value:+.2f}" if isinstance(value, float) else str(value)
+                for value in line.values()
+            )
+        )
+    return table
 
 
 @sim.command("time-space")

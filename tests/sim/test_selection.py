@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import csv
+import math
+from pathlib import Path
+
 import pytest
 
-from sim.selection import choose, cross_validate, held_out_summary, standing
+from sim.selection import (
+    candidate_summary,
+    choose,
+    cross_validate,
+    held_out_summary,
+    standing,
+)
+from tests.sim.test_evaluate import short_drives, write_drive
+from tests.support.servers import cli_env, run_cli
 
 
 def row(candidate: str, drive: str, scenario: str = "shockwave", **values: float) -> dict:
@@ -84,3 +96,70 @@ def test_each_fold_is_scored_on_dates_it_did_not_choose_on() -> None:
 def test_folds_need_enough_dates() -> None:
     with pytest.raises(ValueError, match="cannot make 3 folds"):
         cross_validate([row("a", "2021-03-08-a"), row("a", "2021-03-09-a")], folds=3)
+
+
+def test_the_candidate_summary_splits_each_candidate_by_scenario() -> None:
+    rows = [
+        row("b", "2021-03-08-a", fuel_saving_pct=4.0, distance_lost_m=100.0),
+        row("b", "2021-03-09-a", fuel_saving_pct=2.0, distance_lost_m=300.0, takeovers=1),
+        row("b", "2021-03-12-a", "freeflow", fuel_saving_pct=-1.0, within_bounds_share=0.5),
+        row("a", "2021-03-08-a", throughput_change_pct=-3.0, collisions=1),
+    ]
+    a, b = candidate_summary(rows)
+    assert (a["candidate"], b["candidate"]) == ("a", "b")
+    assert b["shockwave_fuel_saving_pct"] == pytest.approx(3.0)
+    assert b["freeflow_fuel_saving_pct"] == pytest.approx(-1.0)
+    assert b["shockwave_distance_lost_m"] == pytest.approx(200.0)
+    # the envelope share and the counts are over all of a candidate's drives
+    assert b["within_bounds_share"] == pytest.approx(2.5 / 3)
+    assert (b["takeovers"], b["collisions"], a["collisions"]) == (1, 0, 1)
+    assert a["shockwave_throughput_change_pct"] == pytest.approx(-3.0)
+    # a candidate without freeflow drives has no freeflow figure
+    assert math.isnan(a["freeflow_fuel_saving_pct"])
+
+
+def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    # a stop-and-go slice of 2021-04-05 and the freeflow drive of 2021-04-07: two dates, two folds
+    for drive in short_drives(shared_dir):
+        write_drive(drive, drives / f"{drive.name[:19]}.csv")
+    out = tmp_path / "out"
+    result = run_cli(
+        "sim",
+        "select",
+        "--drives",
+        str(drives),
+        "--controller",
+        "simple:accel",
+        "--controller",
+        "microaccel:accel",
+        "--window",
+        "1500",
+        "--folds",
+        "2",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=300,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "Every candidate on every drive" in result.stdout
+    assert "chosen on every date" in result.stdout
+    with (out / "selection.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    # 2 candidates x (the slice as shockwave, the fast drive as freeflow)
+    assert len(rows) == 4
+    assert sorted({row["candidate"] for row in rows}) == [
+        "kernel_smooth x microaccel/accel @ 1500 m",
+        "kernel_smooth x simple/accel @ 1500 m",
+    ]
+    with (out / "held_out.csv").open() as handle:
+        held_out = {row["scenario"]: row for row in csv.DictReader(handle)}
+    # each drive held out once: the shockwave slice by one fold, the freeflow drive by the other
+    assert {scenario: row["drives"] for scenario, row in held_out.items()} == {
+        "shockwave": "1",
+        "freeflow": "1",
+    }
