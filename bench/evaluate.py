@@ -63,9 +63,7 @@ def main() -> None:
 
     with tempfile.TemporaryDirectory() as out:
         start, cpu = time.perf_counter(), cpu_seconds()
-        evaluate_command.main(
-            ["--workers", str(args.workers), "--out", out], standalone_mode=False
-        )
+        evaluate_command.main(["--workers", str(args.workers), "--out", out], standalone_mode=False)
         wall, used = time.perf_counter() - start, cpu_seconds() - cpu
         with (Path(out) / "evaluation.csv").open() as handle:
             runs = sum(1 for _ in handle) - 1

@@ -75,8 +75,19 @@ def load() -> str:
 def generate(path: Path) -> None:
     print(f"generating {path} (one hour, 4 lanes; a few minutes) ...", flush=True)
     subprocess.run(
-        [sys.executable, "-m", "smoothfleet.cli", "motion", "generate", "-o", str(path),
-         "--start", START, "--duration", "3600"],
+        [
+            sys.executable,
+            "-m",
+            "smoothfleet.cli",
+            "motion",
+            "generate",
+            "-o",
+            str(path),
+            "--start",
+            START,
+            "--duration",
+            "3600",
+        ],
         check=True,
         cwd=REPO,
     )
@@ -85,7 +96,10 @@ def generate(path: Path) -> None:
 def child_import(path: Path, store: Path) -> dict[str, float]:
     result = subprocess.run(
         [sys.executable, "-c", CHILD_IMPORT, str(path), str(store)],
-        check=True, capture_output=True, text=True, cwd=REPO,
+        check=True,
+        capture_output=True,
+        text=True,
+        cwd=REPO,
     )
     figures: dict[str, float] = json.loads(result.stdout.strip().splitlines()[-1])
     return figures
@@ -129,8 +143,9 @@ def hash_baseline(path: Path) -> float:
 
 def edie_timings(store: Path) -> list[float]:
     since = datetime.fromisoformat(START)
-    window = EdieWindow(since, since + timedelta(hours=1), SECTION_START_M,
-                        SECTION_START_M + 6000.0)
+    window = EdieWindow(
+        since, since + timedelta(hours=1), SECTION_START_M, SECTION_START_M + 6000.0
+    )
     timings = []
     for _ in range(5):
         started = time.perf_counter()
@@ -159,18 +174,20 @@ def warehouse_comparison(store: Path, points: int) -> None:
         buffer = io.BytesIO()
         pa_csv.write_csv(table, buffer, pa_csv.WriteOptions(include_header=False))
         data = buffer.getvalue()
-        with embedded_server(Path(scratch) / "pg", delete_on_exit=True) as url, psycopg.connect(
-            libpq_url(url), autocommit=True
-        ) as connection:
+        with (
+            embedded_server(Path(scratch) / "pg", delete_on_exit=True) as url,
+            psycopg.connect(libpq_url(url), autocommit=True) as connection,
+        ):
             connection.execute(
                 "CREATE TABLE motion_point (trajectory_id bigint, t_s double precision,"
                 " x_m real, lane smallint, speed_mps real, accel_mps2 real, dt_s real,"
                 " dx_m real, fuel_g real)"
             )
             started = time.perf_counter()
-            with connection.cursor() as cursor, cursor.copy(
-                "COPY motion_point FROM STDIN (FORMAT csv)"
-            ) as copy:
+            with (
+                connection.cursor() as cursor,
+                cursor.copy("COPY motion_point FROM STDIN (FORMAT csv)") as copy,
+            ):
                 copy.write(data)
             copy_s = time.perf_counter() - started
             connection.execute("VACUUM ANALYZE motion_point")
@@ -188,10 +205,14 @@ def warehouse_comparison(store: Path, points: int) -> None:
                 started = time.perf_counter()
                 duck.execute(EDIE_SQL).fetchall()
                 duck_query.append(time.perf_counter() - started)
-    print(f"  load:  PostgreSQL COPY {rows / copy_s:>12,.0f} points/s"
-          f"   Parquet (pyarrow) {rows / parquet_s:>12,.0f} points/s")
-    print(f"  Edie:  PostgreSQL      {min(pg_query):>8.2f} s (best of 3)"
-          f"   DuckDB on Parquet {min(duck_query):>8.2f} s")
+    print(
+        f"  load:  PostgreSQL COPY {rows / copy_s:>12,.0f} points/s"
+        f"   Parquet (pyarrow) {rows / parquet_s:>12,.0f} points/s"
+    )
+    print(
+        f"  Edie:  PostgreSQL      {min(pg_query):>8.2f} s (best of 3)"
+        f"   DuckDB on Parquet {min(duck_query):>8.2f} s"
+    )
 
 
 def main() -> None:
@@ -207,25 +228,33 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as scratch:
         store = Path(scratch) / "store"
         first = child_import(args.file, store)
-        print(f"\nimport: {first['documents']:,.0f} trajectories, {first['points']:,.0f} points, "
-              f"{first['bad']:.0f} bad")
+        print(
+            f"\nimport: {first['documents']:,.0f} trajectories, {first['points']:,.0f} points, "
+            f"{first['bad']:.0f} bad"
+        )
         wall_rate = first["points"] / first["wall_s"]
-        print(f"  {wall_rate:>12,.0f} points/s (wall, {first['wall_s']:.1f} s)"
-              f"   {first['points'] / first['cpu_s']:>12,.0f} points per CPU-second"
-              f"   peak memory {first['max_rss_mb']:,.0f} MB")
+        print(
+            f"  {wall_rate:>12,.0f} points/s (wall, {first['wall_s']:.1f} s)"
+            f"   {first['points'] / first['cpu_s']:>12,.0f} points per CPU-second"
+            f"   peak memory {first['max_rss_mb']:,.0f} MB"
+        )
         before = count_rows(store)
         again = child_import(args.file, store)
         after = count_rows(store)
-        print(f"re-import: already imported = {bool(again['already'])}, added "
-              f"{after[0] - before[0]} points and {after[1] - before[1]} trajectories "
-              f"({again['wall_s']:.1f} s)")
+        print(
+            f"re-import: already imported = {bool(again['already'])}, added "
+            f"{after[0] - before[0]} points and {after[1] - before[1]} trajectories "
+            f"({again['wall_s']:.1f} s)"
+        )
         print("\nEdie fields, 1 h x 6 km, 10 s x 200 m boxes:")
         timings = edie_timings(store)
         print(f"  best {min(timings):.2f} s, median {statistics.median(timings):.2f} s")
         print("\nbaselines (same run):")
         wall_rate, cpu_rate, points = ijson_baseline(args.file)
-        print(f"  ijson (yajl2_c, floats), first {BASELINE_BYTES >> 20} MB ({points:,} points): "
-              f"{wall_rate:,.0f} points/s (wall), {cpu_rate:,.0f} per CPU-second")
+        print(
+            f"  ijson (yajl2_c, floats), first {BASELINE_BYTES >> 20} MB ({points:,} points): "
+            f"{wall_rate:,.0f} points/s (wall), {cpu_rate:,.0f} per CPU-second"
+        )
         print(f"  read + SHA-256 of the whole file: {hash_baseline(args.file):,.0f} MB/s")
         if args.warehouse_points:
             warehouse_comparison(store, args.warehouse_points)

@@ -135,9 +135,7 @@ def main() -> None:
     port = free_port()
     base = f"http://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory(prefix="sf-verdicts-") as data_dir:
-        env = {
-            key: value for key, value in os.environ.items() if key != "SMOOTHFLEET_DATABASE_URL"
-        }
+        env = {key: value for key, value in os.environ.items() if key != "SMOOTHFLEET_DATABASE_URL"}
         env["SMOOTHFLEET_DATA_DIR"] = data_dir
         duration = args.settle + 2 * args.window + 60.0
         command = [

@@ -96,9 +96,7 @@ class AgentPolicy:
     def _ping(self, observation: AvObservation) -> None:
         """The agent pings once a second whoever drives."""
         if self._step % PING_EVERY_STEPS == 0:
-            self.plan.record_ping(
-                observation.time_s, observation.position_m, observation.speed_mps
-            )
+            self.plan.record_ping(observation.time_s, observation.position_m, observation.speed_mps)
         self._step += 1
 
     def driver_drives(self, observation: AvObservation) -> None:

@@ -163,4 +163,3 @@ def shared_data_dir(start: Path | None = None) -> Path:
         f"no shared/data/trajectories above {origins[0]} or {origins[1].parent}: "
         f"set {SHARED_DATA_ENV} or pass the folders explicitly"
     )
-

@@ -50,9 +50,7 @@ class GapBounds:
         """Moments the time gap gap / v is below min_time_gap_s (only while moving)."""
         gap = np.asarray(gap_m, dtype=np.float64)
         speed = np.asarray(speed_mps, dtype=np.float64)
-        under: BoolArray = (speed >= MIN_TIME_GAP_SPEED_MPS) & (
-            gap < self.min_time_gap_s * speed
-        )
+        under: BoolArray = (speed >= MIN_TIME_GAP_SPEED_MPS) & (gap < self.min_time_gap_s * speed)
         return under
 
 

@@ -52,9 +52,7 @@ class EdieWindow:
             if moment.tzinfo is None:
                 raise EdieWindowError(f"{moment.isoformat()} has no time zone (give UTC)")
         if not self.h_t_s > 0 or not self.h_x_m > 0:
-            raise EdieWindowError(
-                f"box size must be positive, got {self.h_t_s} s x {self.h_x_m} m"
-            )
+            raise EdieWindowError(f"box size must be positive, got {self.h_t_s} s x {self.h_x_m} m")
         if self.until <= self.since:
             raise EdieWindowError(f"until ({self.until}) must be after since ({self.since})")
         if not self.x_to_m > self.x_from_m:

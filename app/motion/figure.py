@@ -61,20 +61,29 @@ def window_figure(
     )
 
 
-def bulk_fuel_figure(
-    psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str
-) -> bytes:
+def bulk_fuel_figure(psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str) -> bytes:
     """The two panels as a PNG: psi (g/km) and u (m/s) over time and corridor position."""
     figure, axes = plt.subplots(2, 1, figsize=(12, 8), sharex=True, constrained_layout=True)
     panels = (
-        (axes[0], psi, psi.values * G_PER_KM_PER_G_PER_M, "magma", PSI_RANGE_G_PER_KM,
-         "bulk fuel consumption ψ = f/q [g/km]"),
+        (
+            axes[0],
+            psi,
+            psi.values * G_PER_KM_PER_G_PER_M,
+            "magma",
+            PSI_RANGE_G_PER_KM,
+            "bulk fuel consumption ψ = f/q [g/km]",
+        ),
         (axes[1], speed, speed.values, "RdYlGn", SPEED_RANGE_MPS, "bulk velocity u = q/ρ [m/s]"),
     )
     for axis, grid, values, colours, (low, high), label in panels:
         mesh = axis.pcolormesh(
-            grid.t_edges_s, grid.x_edges_m / 1000.0, np.ma.masked_invalid(values),
-            cmap=colours, vmin=low, vmax=high, shading="flat",
+            grid.t_edges_s,
+            grid.x_edges_m / 1000.0,
+            np.ma.masked_invalid(values),
+            cmap=colours,
+            vmin=low,
+            vmax=high,
+            shading="flat",
         )
         figure.colorbar(mesh, ax=axis, label=label)
         axis.set_facecolor("0.85")

@@ -150,8 +150,9 @@ def _import_batch(
     """Check a batch's documents, then write the good ones' points, cells and trajectories."""
     table, indices = parse_batch(batch, scratch)
     report.bad.extend(batch.bad)
-    accepted = _accept(table, indices, dict(zip(batch.indices, batch.offsets, strict=True)),
-                       frame, known, report)
+    accepted = _accept(
+        table, indices, dict(zip(batch.indices, batch.offsets, strict=True)), frame, known, report
+    )
     if accepted is None:
         return
     tables, days, lengths, first_points = _tables(accepted, frame, report.sha256)

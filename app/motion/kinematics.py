@@ -47,6 +47,7 @@ FUEL_MODEL_BY_CLASS: dict[int, FuelModel] = {
 }
 DEFAULT_FUEL_MODEL = RAV4_2019
 
+
 def fuel_model_name(vehicle_class: int) -> str:
     """The energy model used for a MOTION coarse vehicle class."""
     return FUEL_MODEL_BY_CLASS.get(vehicle_class, DEFAULT_FUEL_MODEL).name

@@ -191,8 +191,14 @@ EDIE_MACRO = _edie_macro(
 # The same sums regrouped from `cells`, for boxes of whole cells (h_t a multiple of 10 s, h_x of
 # 200 m).
 EDIE_CELLS_MACRO = _edie_macro(
-    "motion_edie_cells", "motion_cells", "t_cell_s", "x_cell_m", "time_s", "distance_m",
-    "fuel_g", "sum(points)",
+    "motion_edie_cells",
+    "motion_cells",
+    "t_cell_s",
+    "x_cell_m",
+    "time_s",
+    "distance_m",
+    "fuel_g",
+    "sum(points)",
 )
 
 

@@ -190,9 +190,7 @@ def simulate_motion_run(
         leaders = road.leader[alive]
         lead_index = np.maximum(leaders, 0)
         has_leader = (leaders >= 0) & is_alive[lead_index]
-        gap = np.where(
-            has_leader, road.x_m[lead_index] - road.length_m[lead_index] - x, np.inf
-        )
+        gap = np.where(has_leader, road.x_m[lead_index] - road.length_m[lead_index] - x, np.inf)
         lead_speed = np.where(has_leader, road.speed_mps[lead_index], v)
         accel = idm_accel(driver, gap, v, lead_speed)
         downstream = boundary[min(step, len(boundary) - 1)]

@@ -105,9 +105,7 @@ def test_a_ping_driving_against_the_corridor_is_stored_off_it(
     # Westbound I-24 runs north-west here (about 323 degrees); the other carriageway south-east.
     along, against = ping(heading_deg=323.0), ping(heading_deg=143.0)
     slow_against = ping(heading_deg=143.0, speed_mps=0.5)  # a stopped car's heading is noise
-    answer = api.post(
-        "/api/v1/pings", json={"pings": [along, against, slow_against]}, headers=car
-    )
+    answer = api.post("/api/v1/pings", json={"pings": [along, against, slow_against]}, headers=car)
 
     assert answer.json()["accepted"] == 3
     by_ts = {row["ts"].isoformat(): row["x_m"] for row in stored(seeded_engine)}

@@ -109,7 +109,8 @@ def test_one_fix_at_a_time_gives_the_vectorised_answer(seed_corridor: CorridorGe
         if np.isfinite(located.x_m[k]):
             assert x_m == pytest.approx(located.x_m[k], abs=1e-6)
             assert offset_m == pytest.approx(located.offset_m[k], abs=1e-6)
-        assert seed_corridor.locate_fix(float(lat[k]), float(lon[k]))[2] == (
-            seed_corridor.locate(lat[k], lon[k]).on_corridor[0]
+        assert (
+            seed_corridor.locate_fix(float(lat[k]), float(lon[k]))[2]
+            == (seed_corridor.locate(lat[k], lon[k]).on_corridor[0])
         )
     assert 0.1 < located.on_corridor.mean() < 0.9

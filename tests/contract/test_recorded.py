@@ -13,9 +13,7 @@ from contract.recorded import RecordingError, read_inrix_minutes, read_trajector
 def test_a_drive_is_read_in_si_with_its_gps(tmp_path: Path) -> None:
     path = tmp_path / "drive.csv"
     path.write_text(
-        ",Time,Velocity,LongitudeGPS,LatitudeGPS\n"
-        "0,100.0,36,-86.6,36.06\n"
-        "1,100.1,90,,\n"
+        ",Time,Velocity,LongitudeGPS,LatitudeGPS\n0,100.0,36,-86.6,36.06\n1,100.1,90,,\n"
     )
     drive = read_trajectory(path)
     assert drive.name == "drive"

@@ -57,10 +57,20 @@ def test_the_motion_page_draws_the_day_with_the_fleet_on_top(
     ):
         token = issue(seeded_engine, "admin")
         # 60 engaged pings and 40 not: the day's share is 60 %.
-        post_pings(client, token, drive("SF-001", start + timedelta(seconds=5), 6600.0, 25.0,
-                                        60, controller_engaged=True))
-        post_pings(client, token, drive("SF-002", start + timedelta(seconds=10), 6550.0, 24.0,
-                                        40, controller_engaged=False))
+        post_pings(
+            client,
+            token,
+            drive(
+                "SF-001", start + timedelta(seconds=5), 6600.0, 25.0, 60, controller_engaged=True
+            ),
+        )
+        post_pings(
+            client,
+            token,
+            drive(
+                "SF-002", start + timedelta(seconds=10), 6550.0, 24.0, 40, controller_engaged=False
+            ),
+        )
         log_in(page, base, "viewer", "/analytics/motion")
         day = start.date().isoformat()
         expect(page.get_by_role("link", name=day)).to_have_attribute("aria-current", "page")

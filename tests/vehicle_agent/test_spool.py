@@ -71,4 +71,3 @@ def test_the_backlog_matches_the_file_through_drops_removals_and_a_restart(
     assert smaller.backlog() == 1
     assert [ping["n"] for _, ping in smaller.oldest(10)] == [7]
     assert smaller.counter("dropped") == 5
-

@@ -44,8 +44,10 @@ def test_braces_quotes_and_backslashes_inside_strings_do_not_count() -> None:
             st.text(max_size=5),
             st.recursive(
                 st.none() | st.booleans() | st.floats(allow_nan=False) | st.text(max_size=8),
-                lambda inner: st.lists(inner, max_size=3)
-                | st.dictionaries(st.text(max_size=3), inner, max_size=3),
+                lambda inner: (
+                    st.lists(inner, max_size=3)
+                    | st.dictionaries(st.text(max_size=3), inner, max_size=3)
+                ),
                 max_leaves=8,
             ),
             max_size=4,

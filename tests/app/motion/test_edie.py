@@ -91,7 +91,11 @@ def test_an_empty_store_has_no_boxes(tmp_path: Path) -> None:
 )
 def test_windows_that_cannot_make_a_field_say_why(changes: dict[str, object], message: str) -> None:
     arguments: dict[str, object] = {
-        "since": SINCE, "until": UNTIL, "x_from_m": 0.0, "x_to_m": 200.0, **changes
+        "since": SINCE,
+        "until": UNTIL,
+        "x_from_m": 0.0,
+        "x_to_m": 200.0,
+        **changes,
     }
     with pytest.raises(EdieWindowError, match=message):
         EdieWindow(**arguments)  # type: ignore[arg-type]

@@ -21,22 +21,38 @@ def pings(rows: list[tuple[str, float, float, bool]]) -> pd.DataFrame:
 
 def test_segments_join_a_cars_consecutive_pings_coloured_by_the_first() -> None:
     lines = fleet_lines(
-        pings([("A", 0, 1000, True), ("A", 1, 1025, False), ("A", 2, 1050, False),
-               ("B", 0, 2000, False), ("B", 1, 2020, False)])
+        pings(
+            [
+                ("A", 0, 1000, True),
+                ("A", 1, 1025, False),
+                ("A", 2, 1050, False),
+                ("B", 0, 2000, False),
+                ("B", 1, 2020, False),
+            ]
+        )
     )
     segments = lines.get_segments()
     assert len(segments) == 3  # A: 2, B: 1; never A to B
     start = T0.timestamp()
     assert np.allclose(segments[0], [[start, 1.0], [start + 1, 1.025]])
     assert [tuple(colour) for colour in lines.get_colors()] == [
-        (1.0, 0.0, 0.0, 1.0), (1.0, 1.0, 1.0, 1.0), (1.0, 1.0, 1.0, 1.0)
+        (1.0, 0.0, 0.0, 1.0),
+        (1.0, 1.0, 1.0, 1.0),
+        (1.0, 1.0, 1.0, 1.0),
     ]
 
 
 def test_silences_and_jumps_break_the_line() -> None:
     # 10 s without pings, then a loop back from 14 km to the start: neither is drawn.
     lines = fleet_lines(
-        pings([("A", 0, 13900, True), ("A", 1, 13925, True), ("A", 11, 14170, True),
-               ("A", 12, 14195, True), ("A", 13, 20, True)])
+        pings(
+            [
+                ("A", 0, 13900, True),
+                ("A", 1, 13925, True),
+                ("A", 11, 14170, True),
+                ("A", 12, 14195, True),
+                ("A", 13, 20, True),
+            ]
+        )
     )
     assert len(lines.get_segments()) == 2

@@ -72,8 +72,9 @@ def test_bad_documents_are_counted_with_their_reason_and_the_rest_imported(
     tmp_path: Path,
 ) -> None:
     good = document("good", [0.0, 1.0, 2.0], [0.0, 20.0, 40.0])
-    no_x = {key: value for key, value in document("no-x", [0.0], [0.0]).items()
-            if key != "x_position"}
+    no_x = {
+        key: value for key, value in document("no-x", [0.0], [0.0]).items() if key != "x_position"
+    }
     short = document("short", [0.0, 1.0], [0.0, 1.0]) | {"y_position": [1.0]}
     text_x = document("text", [0.0, 1.0], [0.0, 1.0]) | {"x_position": [0.0, "far"]}
     backwards = document("back", [1.0, 0.5], [0.0, 1.0])

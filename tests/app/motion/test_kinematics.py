@@ -19,8 +19,9 @@ def test_constant_speed_steps_time_distance_and_fuel() -> None:
     assert steps.speed_mps.tolist() == [20.0, 20.0, 20.0, 10.0, 10.0]
     assert steps.accel_mps2.tolist() == [0.0] * 5
     # f(20, 0) = 0.60936 g/s and f(10, 0) = 0.29554 g/s (docs/analytics.md).
-    assert steps.fuel_g == pytest.approx([0.5 * 0.60936, 0.5 * 0.60936, 0.0, 0.29554, 0.0],
-                                         abs=1e-5)
+    assert steps.fuel_g == pytest.approx(
+        [0.5 * 0.60936, 0.5 * 0.60936, 0.0, 0.29554, 0.0], abs=1e-5
+    )
 
 
 def test_acceleration_is_the_speed_change_over_about_a_second() -> None:
@@ -41,5 +42,7 @@ def test_acceleration_is_the_speed_change_over_about_a_second() -> None:
 def test_a_single_point_trajectory_stands_for_nothing() -> None:
     steps = trajectory_steps(np.array([5.0]), np.array([1.0]), np.array([0]), np.array([0]))
     assert (steps.dt_s.tolist(), steps.dx_m.tolist(), steps.fuel_g.tolist()) == (
-        [0.0], [0.0], [0.0]
+        [0.0],
+        [0.0],
+        [0.0],
     )

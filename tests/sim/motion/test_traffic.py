@@ -50,9 +50,7 @@ def test_every_vehicle_drives_forward_in_its_lane_inside_the_section() -> None:
 def test_followers_never_overlap_their_leader() -> None:
     trajectories = _run(5.0)  # traffic crawls downstream: a queue forms in the section
     for lane in (1, 2):
-        in_lane = sorted(
-            (t for t in trajectories if t.lane == lane), key=lambda t: t.first_unix_s
-        )
+        in_lane = sorted((t for t in trajectories if t.lane == lane), key=lambda t: t.first_unix_s)
         for leader, follower in zip(in_lane, in_lane[1:], strict=False):
             common_start = max(leader.first_unix_s, follower.first_unix_s)
             lead_at = int(round((common_start - leader.first_unix_s) / MOTION_STEP_S))
