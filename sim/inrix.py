@@ -90,16 +90,18 @@ class FeedModel:
             )
 
 
-# Found by `python -m sim.inrix_calibration --calibrate` on the nine real-INRIX drives.
+# Found by `python -m sim.inrix_calibration --calibrate` on the nine real-INRIX drives: the
+# method of simulated moments (each drive's random parts drawn REPLICAS times), coordinate
+# descent on the grid, then Nelder-Mead off it (docs/simulation.md, "Simulated INRIX").
 CALIBRATED = FeedModel(
-    field_wave_speed_mps=2.0,
-    lag_s=100.0,
-    window_s=30.0,
-    reference_speed_mps=18.0,
-    shrink=0.7,
-    drive_bias_mps=1.5,
-    noise_mps=3.5,
-    noise_correlation=0.5,
+    field_wave_speed_mps=1.0,
+    lag_s=128.2,
+    window_s=15.0,
+    reference_speed_mps=14.795,
+    shrink=0.822,
+    drive_bias_mps=1.405,
+    noise_mps=3.865,
+    noise_correlation=0.065,
 )
 
 
@@ -158,9 +160,12 @@ class FeedDraws:
     innovations: FloatArray
 
     @classmethod
-    def for_drive(cls, name: str, shape: tuple[int, int]) -> FeedDraws:
-        """The draws of the generator seeded by the drive's name."""
-        generator = np.random.default_rng(drive_seed(name))
+    def for_drive(cls, name: str, shape: tuple[int, int], replica: int = 0) -> FeedDraws:
+        """The draws of the generator seeded by the drive's name: replica 0 is the feed the
+        simulator gives the planner; the calibration averages statistics over more replicas."""
+        generator = np.random.default_rng(
+            drive_seed(name) if replica == 0 else [drive_seed(name), replica]
+        )
         offset = float(generator.standard_normal())
         return cls(offset, generator.standard_normal(shape))
 
