@@ -7,7 +7,10 @@ which fade with distance d (length L) and count `other_lane_weight` times for th
     v(lane, x) = prior(x) + sum_k w_k r_k / (1 + sum_k w_k),   w_k = exp(-d_k / L) [* lane weight]
 
 The prior counts as one observation of zero residual, so a single distant observation moves an
-unobserved cell only a little, and L = 0 is pure precedence.
+unobserved cell only a little, and L = 0 is pure precedence. A residual is measured against its
+own cell's prior, so next to a slow prior a stopped car's large negative residual could take a
+cell below standstill: the corrected estimate is floored at 0 m/s (a lane's traffic does not
+reverse, and the buffer design sizes queues from these speeds).
 """
 
 from __future__ import annotations
@@ -42,5 +45,6 @@ def fuse_precedence(
         lane_weight = np.where(source_lane == lane, 1.0, params.other_lane_weight)
         weights = decay * lane_weight[None, :]
         tse[lane] += (weights @ residual) / (1.0 + weights.sum(axis=1))
+    np.maximum(tse, 0.0, out=tse)
     tse[observed] = mean[observed]
     return tse

@@ -54,3 +54,17 @@ def test_an_observation_corrects_its_neighbours_fading_with_distance() -> None:
     assert tse[0, 3] == pytest.approx(30.0 - 7.0 * near / (1 + near))
     assert tse[0, 0] == pytest.approx(30.0 - 7.0 * far / (1 + far))
     assert tse[0, 2] == 23.0
+
+
+def test_a_stopped_car_next_to_a_slow_prior_never_makes_traffic_reverse() -> None:
+    # the car stands (0 m/s) where INRIX says 25: r = -25, which at 100 m, next to a prior of
+    # 2 m/s, would give 2 - 25 e^-1 / (1 + e^-1) = -4.7 m/s
+    grid = uniform_grid(5)
+    prior = np.array([2.0, 2.0, 25.0, 30.0, 30.0])
+    params = PlannerParams(correction_length_m=100.0)
+    tse = FUSERS.get("precedence")(prior, observed(1, 2, (0.0, 60)), grid, params)
+    assert tse[0, 1] == 0.0
+    assert tse[0, 2] == 0.0
+    near = math.exp(-1.0)
+    assert tse[0, 3] == pytest.approx(30.0 - 25.0 * near / (1 + near))
+    assert np.all(tse >= 0.0)
