@@ -280,7 +280,7 @@ TUNABLE = [
 
 
 # The real-INRIX drive whose stale plans hand the car back most often (docs/simulation.md:
-# 2 takeovers with 1 AV, 17 with 4 under the recommended pair; 16 for rl_acc with 4), cut to
+# 2 takeovers with 1 AV, 17 with 4 for microaccel_acc; 5 for rl_acc with 4), cut to
 # its first DANGER_S seconds (which hold 14 of those 17, from 60 s on), with 4 AVs spread
 # through the platoon as `--avs 4` spreads them.
 DANGEROUS_DRIVE = "2021-04-07-12-33-03_2T3MWRFVXLW056972_masterArray_0_11294"
