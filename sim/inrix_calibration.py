@@ -17,9 +17,10 @@ within the real one's own standard error, and
 (2-minute blocks of a drive, 200 resamples, seed 0): a statistic near zero (a bias, a
 correlation) cannot be held to 20 % of itself when the real feed's own value is that uncertain.
 
-`--calibrate` fits the feed model by coordinate descent on a grid, minimising the squared
-distance, in tolerances, of the pooled statistics and of the MAE at several shifts of the feed
-(the shape of the curve the lag is the minimum of) to the real ones. It keeps a whole date out at
+`--calibrate` fits the feed model by coordinate descent on a grid, then Nelder-Mead off it
+(`refine`), minimising the squared distance, in tolerances, of the pooled statistics and of the
+MAE at several shifts of the feed (the shape of the curve the lag is the minimum of) to the real
+ones, with a heavy penalty beyond +/-AIM of each. It keeps a whole date out at
 a time (two drives of one date saw the same traffic), fits on the other dates and reports the
 statistics of the held-out date; then it fits on every drive: those parameters are
 `sim.inrix.CALIBRATED`.
@@ -257,13 +258,19 @@ def simulate_all(
     return [path for drive in drives for path in drive.simulated(model, replicas)]
 
 
-def fit(drives: Sequence[CalibrationDrive], start: FeedModel = START) -> FeedModel:
-    """Coordinate descent over GRID from `start` until no single parameter improves the loss."""
+def loss_on(drives: Sequence[CalibrationDrive]) -> Callable[[FeedModel], float]:
+    """The fit's loss of a model on `drives`: every replica simulated, against their real feed."""
     target = Target.of([drive.real for drive in drives])
 
     def cost(model: FeedModel) -> float:
         return target.loss(simulate_all(drives, model))
 
+    return cost
+
+
+def fit(drives: Sequence[CalibrationDrive], start: FeedModel = START) -> FeedModel:
+    """Coordinate descent over GRID from `start` until no single parameter improves the loss."""
+    cost = loss_on(drives)
     best, best_cost = start, cost(start)
     improved = True
     while improved:
@@ -313,11 +320,7 @@ def refine(cost: Callable[[FeedModel], float], start: FeedModel) -> FeedModel:
 
 def fit_from_every_wave_speed(drives: Sequence[CalibrationDrive]) -> FeedModel:
     """The best of the descents started at each of START_WAVE_SPEEDS_MPS, refined off the grid."""
-    target = Target.of([drive.real for drive in drives])
-
-    def cost(model: FeedModel) -> float:
-        return target.loss(simulate_all(drives, model))
-
+    cost = loss_on(drives)
     fits = [
         fit(drives, replace(START, field_wave_speed_mps=float(speed)))
         for speed in START_WAVE_SPEEDS_MPS
