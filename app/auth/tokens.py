@@ -18,6 +18,7 @@ is never used past its life, so revocation still takes effect within the TTL.
 from __future__ import annotations
 
 import asyncio
+import functools
 import hmac
 import time
 from collections.abc import Callable
@@ -102,7 +103,7 @@ class TokenCache:
         pending = self._pending.get(token_hash)
         if pending is not None:
             return await asyncio.shield(pending)
-        return await self._look_up_and_keep(token_hash, entry)
+        return await self._look_up_and_keep(token_hash, entry, self._claim(token_hash))
 
     async def close(self, timeout_s: float) -> None:
         """Give the background look-ups up to `timeout_s` to finish (at shutdown, before the
@@ -111,27 +112,51 @@ class TokenCache:
         if self._refreshes:
             await asyncio.wait(set(self._refreshes), timeout=timeout_s)
 
+    def _claim(self, token_hash: str) -> asyncio.Future[Principal | None]:
+        """The answer of the one lookup of this token now starting, registered at once.
+
+        Registered by whoever decides to look up, before the lookup's task first runs: two
+        requests meeting the refresh window in one tick would otherwise both start a lookup,
+        and the first to finish would unregister the second's answer, leaving whoever waited
+        on it waiting for good."""
+        future: asyncio.Future[Principal | None] = asyncio.get_running_loop().create_future()
+        self._pending[token_hash] = future
+        return future
+
     def _refresh_in_background(
         self, token_hash: str, entry: tuple[float, Principal | None]
     ) -> None:
         if token_hash in self._pending:
             return
-        task = asyncio.create_task(self._look_up_and_keep(token_hash, entry))
+        future = self._claim(token_hash)
+        task = asyncio.create_task(self._look_up_and_keep(token_hash, entry, future))
         self._refreshes.add(task)
-        task.add_done_callback(self._refresh_done)
+        task.add_done_callback(functools.partial(self._refresh_done, token_hash, future))
 
-    def _refresh_done(self, task: asyncio.Task[Principal | None]) -> None:
+    def _refresh_done(
+        self,
+        token_hash: str,
+        future: asyncio.Future[Principal | None],
+        task: asyncio.Task[Principal | None],
+    ) -> None:
         self._refreshes.discard(task)
+        if not future.done():
+            # Cancelled before it began (the loop shutting down): its claim is released, and
+            # whoever waits on it learns the lookup was abandoned.
+            del self._pending[token_hash]
+            future.set_exception(LookupAbandoned("the token lookup was abandoned unanswered"))
+            future.exception()
         if not task.cancelled():
             # A failed refresh changes nothing: the entry lives out its TTL, and the first
             # request after that looks the token up itself (and meets the error).
             task.exception()
 
     async def _look_up_and_keep(
-        self, token_hash: str, entry: tuple[float, Principal | None] | None
+        self,
+        token_hash: str,
+        entry: tuple[float, Principal | None] | None,
+        future: asyncio.Future[Principal | None],
     ) -> Principal | None:
-        future: asyncio.Future[Principal | None] = asyncio.get_running_loop().create_future()
-        self._pending[token_hash] = future
         try:
             found = await self._lookup(token_hash)
         except asyncio.CancelledError:

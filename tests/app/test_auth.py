@@ -9,6 +9,7 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.auth import Principal, TokenCache
+from app.auth.tokens import LookupAbandoned
 from app.core.db import make_async_engine
 from tests.support.api import ping, serving
 from tests.support.tokens import bearer, issue
@@ -174,6 +175,82 @@ def test_a_token_in_use_is_looked_up_again_before_its_entry_expires_without_a_wa
             await engine.dispose()
 
     assert asyncio.run(scenario()) == (True, True, True)
+
+
+def test_requests_in_the_refresh_window_in_one_tick_start_one_look_up_that_all_share(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Two requests of one token meeting the refresh window before the background lookup has
+    begun must not start a second one. Two concurrent lookups of a token each registered their
+    own pending answer, the first to finish removed the other's, and the second then failed
+    before answering: a request waiting on that answer hung for good (seen as a server that
+    never shut down after a frozen database, two dashboard readers sharing one token)."""
+    token = issue(seeded_engine, "operator")
+    clock = Clock()
+
+    async def scenario() -> tuple[int, bool]:
+        engine = make_async_engine(seeded_database_url)
+        release = asyncio.Event()
+        lookups = 0
+        try:
+            cache = TokenCache(engine, ttl_s=5, clock=clock)
+            original = cache._lookup
+            await cache.principal(token)  # entry until t = 5
+
+            async def held(token_hash: str) -> Principal | None:
+                nonlocal lookups
+                lookups += 1
+                await release.wait()
+                return await original(token_hash)
+
+            cache._lookup = held  # type: ignore[method-assign]
+            clock.now = 4.0  # in the refresh window: both answered from the entry at once
+            await cache.principal(token)
+            await cache.principal(token)
+            await asyncio.sleep(0)  # the background lookup(s) begin and wait on the database
+            clock.now = 6.0  # the entry has expired: this request waits on the lookup
+            waiting = asyncio.create_task(cache.principal(token))
+            await asyncio.sleep(0)
+            release.set()
+            answered = await asyncio.wait_for(waiting, 5) is not None
+            return lookups, answered
+        finally:
+            await cache.close(timeout_s=1)
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) == (1, True)
+
+
+def test_a_background_look_up_cancelled_before_it_began_releases_its_waiters(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """A refresh cancelled before its first step (the loop shutting down) never runs its own
+    cleanup: its claim is released for it, and a request waiting on it learns it was
+    abandoned (a 503 for that request) instead of waiting for good."""
+    token = issue(seeded_engine, "operator")
+    clock = Clock()
+
+    async def scenario() -> tuple[str, bool]:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            cache = TokenCache(engine, ttl_s=5, clock=clock)
+            await cache.principal(token)
+            clock.now = 4.0
+            await cache.principal(token)  # claims the refresh; its task has not begun
+            (refresh,) = cache._refreshes
+            refresh.cancel()
+            clock.now = 6.0
+            try:
+                await asyncio.wait_for(cache.principal(token), 5)
+            except LookupAbandoned as error:
+                outcome = type(error).__name__
+            else:
+                outcome = "answered"
+            return outcome, bool(cache._pending)
+        finally:
+            await engine.dispose()
+
+    assert asyncio.run(scenario()) == ("LookupAbandoned", False)
 
 
 def test_shutdown_waits_for_a_background_look_up_only_so_long(seeded_database_url: str) -> None:

@@ -10,7 +10,13 @@ import pytest
 from sqlalchemy import Engine
 
 from tests.support.api import ping
-from tests.support.servers import cli_env, free_port, smoothfleet_command, wait_until_ready
+from tests.support.servers import (
+    cli_env,
+    free_port,
+    smoothfleet_command,
+    stop_gracefully,
+    wait_until_ready,
+)
 from tests.support.tokens import bearer, issue
 
 
@@ -47,6 +53,5 @@ def test_two_workers_report_one_sum(
             assert answer.json()["accepted"] == 1
         scrapes = [accepted(httpx.get(f"{base}/metrics", timeout=30).text) for _ in range(6)]
     finally:
-        server.terminate()
-        server.wait(timeout=60)
+        stop_gracefully(server, log)
     assert scrapes == [40.0] * 6

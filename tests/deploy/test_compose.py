@@ -29,7 +29,14 @@ from tests.deploy.compose import ComposeError, load, service_environment
 from tests.planner.facts import INRIX_CODES, standing_slowdown
 from tests.support.databases import admin_execute
 from tests.support.fleet import drive
-from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
+from tests.support.servers import (
+    cli_env,
+    free_port,
+    run_cli,
+    smoothfleet_command,
+    stop_gracefully,
+    wait_until_ready,
+)
 from tests.support.tokens import bearer, issue
 
 SECRETS = {"POSTGRES_PASSWORD": "compose-test-password", "SMOOTHFLEET_SECRET_KEY": "x" * 48}
@@ -161,8 +168,7 @@ def seeded_api(compose: dict[str, Any], empty_database: str, tmp_path: Path) -> 
         assert seeded.returncode == 0, seeded.stderr
         yield base
     finally:
-        api.terminate()
-        api.wait(timeout=60)
+        stop_gracefully(api, tmp_path / "api.log")
 
 
 @pytest.mark.slow
@@ -200,8 +206,7 @@ def test_the_services_work_together(
         engine.dispose()
     finally:
         if planner is not None:
-            planner.terminate()
-            planner.wait(timeout=60)
+            stop_gracefully(planner, tmp_path / "planner.log")
 
 
 @pytest.mark.slow

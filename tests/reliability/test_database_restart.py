@@ -22,7 +22,13 @@ from sqlalchemy import text
 from app.core.db import make_sync_engine
 from tests.reliability.conftest import Cluster
 from tests.support.api import ping
-from tests.support.servers import cli_env, free_port, smoothfleet_command, wait_until_ready
+from tests.support.servers import (
+    cli_env,
+    free_port,
+    smoothfleet_command,
+    stop_gracefully,
+    wait_until_ready,
+)
 from tests.support.tokens import bearer, issue
 
 CARS = 8
@@ -111,8 +117,7 @@ def test_a_database_restart_under_load_is_503_then_recovers_without_loss(
             car.join(timeout=60)
     finally:
         stop.set()
-        server.terminate()
-        server.wait(timeout=60)
+        stop_gracefully(server, tmp_path / "serve.log")
 
     server_log = (tmp_path / "serve.log").read_text()
     assert not stream.errors, stream.errors[:3]

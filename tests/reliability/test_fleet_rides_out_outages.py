@@ -36,7 +36,13 @@ from app.plans.jobs import run_planner
 from sim.emulator.rig import Rig, rig
 from tests.planner.facts import INRIX_CODES, inrix_snapshot
 from tests.reliability.conftest import Cluster
-from tests.support.servers import cli_env, free_port, smoothfleet_command, wait_until_ready
+from tests.support.servers import (
+    cli_env,
+    free_port,
+    smoothfleet_command,
+    stop_gracefully,
+    wait_until_ready,
+)
 from tests.support.tokens import issue
 from vehicle_agent.engage import Mode
 from vehicle_agent.server import ServerClient
@@ -123,12 +129,6 @@ def start_server(database_url: str, port: int, log: Path) -> subprocess.Popen[by
     return server
 
 
-def stop_server(server: subprocess.Popen[bytes]) -> None:
-    if server.poll() is None:
-        server.terminate()
-        server.wait(timeout=60)
-
-
 @contextlib.contextmanager
 def fleet_on(base: str, engine: Engine, tmp_path: Path, dbc_cache: Path) -> Iterator[Fleet]:
     """The five cars, their ACC set by their drivers, talking to the server at `base`."""
@@ -209,7 +209,7 @@ def test_a_server_kill_leaves_every_car_on_its_plan_until_valid_until(
             fleet.drive(60.0, until=fleet.drained)
             assert fleet.drained()
     finally:
-        stop_server(server)
+        stop_gracefully(server, log)
     stored = stored_pings(seeded_engine)
     for vehicle_id, car in fleet.cars.items():
         # every ping spooled is stored once: those sent before the kill, and the outage's
@@ -248,7 +248,7 @@ def test_a_database_outage_disengages_no_car(
                 fleet.drive(60.0, until=fleet.drained)
                 assert fleet.drained()
         finally:
-            stop_server(server)
+            stop_gracefully(server, tmp_path / "serve.log")
         stored = stored_pings(engine)
         for vehicle_id, car in fleet.cars.items():
             assert len(stored[vehicle_id]) == car.agent.stats.pings_spooled, vehicle_id

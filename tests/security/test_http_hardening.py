@@ -18,6 +18,7 @@ from tests.support.servers import (
     free_port,
     live_server,
     smoothfleet_command,
+    stop_gracefully,
     wait_until_ready,
 )
 from tests.support.tokens import bearer, issue
@@ -152,8 +153,7 @@ def test_secrets_never_reach_the_logs(
             log_in(client, "operator", "a wrong " + secrets["password"])
             log_in(client, "operator", secrets["password"])
     finally:
-        server.terminate()
-        server.wait(timeout=60)
+        stop_gracefully(server, log_file)
     logged = log_file.read_text()
     assert "Uvicorn running" in logged  # the log was captured
     for name, secret in secrets.items():

@@ -19,6 +19,10 @@ import uvicorn
 from app.core.config import load_settings
 from smoothfleet.server import create_app
 
+# How long a server may take to exit after SIGTERM (docker stop waits 10 s by default; this
+# is the bound on a loaded 2-core CI machine, not the expectation).
+SHUTDOWN_WITHIN_S = 60
+
 
 def free_port() -> int:
     """A TCP port nobody listens on right now."""
@@ -82,6 +86,26 @@ def run_cli(
         text=True,
         timeout=timeout,
     )
+
+
+def stop_gracefully(process: subprocess.Popen[Any], log: Path | None = None) -> None:
+    """SIGTERM, as a service manager stops it, and wait for the process to exit by itself.
+
+    One that is still running after `SHUTDOWN_WITHIN_S` fails its test, naming its log's tail,
+    and is killed first: a hung shutdown is the test's finding, not the next test's
+    leftover process."""
+    if process.poll() is not None:
+        return
+    process.terminate()
+    try:
+        process.wait(timeout=SHUTDOWN_WITHIN_S)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+        tail = log.read_text(errors="replace")[-3000:] if log is not None else ""
+        raise AssertionError(
+            f"{process.args} still running {SHUTDOWN_WITHIN_S} s after SIGTERM\n{tail}"
+        ) from None
 
 
 def wait_until_ready(base_url: str, timeout_s: float = 60) -> None:
