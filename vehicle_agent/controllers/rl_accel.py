@@ -22,8 +22,11 @@ from vehicle_agent.controllers.policy import (
 )
 from vehicle_agent.controllers.rl_acc import load_assigned_policy, plan_ahead_mps
 
-# The safety term's gains and limits: MicroAccel's defaults.
-SAFETY = MicroAccelParams()
+# The safety term's gains and limits: MicroAccel's defaults but the standstill distance. Its
+# default 5 m lets a policy riding the bound close to 7 m at 5 m/s and below it when slower,
+# outside the gap envelope the AV is judged against (`sim.gaps.GapBounds`: 7 m minimum); 8 m,
+# the envelope's minimum and 1 m of margin, keeps the bound's gap above 7 m at every speed.
+SAFETY = MicroAccelParams(standstill_gap_m=8.0)
 
 
 def bounded_request(
