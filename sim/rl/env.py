@@ -281,8 +281,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         # acc: v_action -> the paper's clip -> buttons (gap first) -> the stock ACC
         for env in range(self.num_envs):
             self.recent_mph[env].append(mps_to_mph(float(speed[env])))
-        mean_mph = np.array([np.mean(list(recent)) for recent in self.recent_mph])
-        requested = requested_speed_mph(actions[:, 0], mean_mph)
+        requested = requested_speed_mph(actions[:, 0], self.target_here / MPS_PER_MPH)
         bars = requested_gap_setting(actions[:, 1])
         set_speed = np.empty(self.num_envs)
         time_gap = np.empty(self.num_envs)

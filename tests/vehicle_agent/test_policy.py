@@ -39,11 +39,12 @@ def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed(
     np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
 
 
-def test_acc_action_spans_the_papers_clip_window_around_the_mean_speed() -> None:
-    # mean 60 mph: -1 -> 45 mph (mean - 15), 0 -> 60, +1 -> 65 (mean + 5), beyond is clipped
+def test_acc_action_is_a_setting_around_the_plans_target() -> None:
+    # plan 60 mph: -1 -> 40 mph, 0 -> 60 (the plan), +1 -> 80 (the clip bounds it later);
+    # beyond [-1, 1] is clipped
     np.testing.assert_allclose(
         requested_speed_mph(np.array([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 3.0]), 60.0),
-        [45.0, 45.0, 52.5, 60.0, 62.5, 65.0, 65.0],
+        [40.0, 40.0, 50.0, 60.0, 70.0, 80.0, 80.0],
     )
     np.testing.assert_array_equal(
         requested_gap_setting(np.array([-1.0, -0.34, -0.33, 0.33, 0.34, 1.0])), [1, 1, 2, 2, 3, 3]
@@ -103,13 +104,40 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
         load_policy(narrow, "accel")
 
 
-def test_rl_acc_requests_the_networks_setting_around_the_last_second(tmp_path: Path) -> None:
+def test_rl_acc_requests_the_networks_setting_around_the_plans_target(tmp_path: Path) -> None:
     controller = RlAccController("acc", RlParams(policy=str(two_layer_policy(tmp_path, "acc", 2))))
-    # v = 15 m/s -> feature 0.5 -> action (0, 0): the mean speed and the middle gap
+    # v = 15 m/s -> feature 0.5 -> action (0, 0): the plan's 20 m/s (44.74 mph), the middle gap
     action = controller.step(Observation(time_s=0.0, speed_mps=15.0, target_speed_mps=20.0))
     assert isinstance(action, AccSetPoint)
-    assert action.requested_speed_mph == pytest.approx(15.0 / 0.44704)
-    assert (action.speed_setting_mph, action.gap_setting) == (34, 2)
+    assert action.requested_speed_mph == pytest.approx(20.0 / 0.44704)
+    assert (action.speed_setting_mph, action.gap_setting) == (45, 2)
+
+
+def test_an_acc_policy_of_the_earlier_speed_action_is_refused(tmp_path: Path) -> None:
+    """A file without `speed_action` was trained to read its output as a change from the last
+    second's mean speed: run under the setting-around-the-plan action it would ask for
+    something else, so it is refused, saying why."""
+    earlier = tmp_path / "earlier.npz"
+    with earlier.open("wb") as handle:
+        np.savez(
+            handle,
+            actuation=np.array("acc"),
+            layer_0_weight=np.zeros((6, 2)),
+            layer_0_bias=np.zeros(2),
+        )
+    with pytest.raises(PolicyFileError, match="change from the last second's mean speed"):
+        load_policy(earlier, "acc")
+    other = tmp_path / "other.npz"
+    with other.open("wb") as handle:
+        np.savez(
+            handle,
+            actuation=np.array("acc"),
+            speed_action=np.array("absolute"),
+            layer_0_weight=np.zeros((6, 2)),
+            layer_0_bias=np.zeros(2),
+        )
+    with pytest.raises(PolicyFileError, match="speed action 'absolute'"):
+        load_policy(other, "acc")
 
 
 def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:

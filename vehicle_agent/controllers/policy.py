@@ -14,10 +14,12 @@ Added on `accel` cars only (the RAV4 measures them, paper Table 2): the space ga
 relative speed.
 
 Action, in [-1, 1] per component (PPO's Gaussian, clipped):
-- `acc`: component 0 is the requested speed setting, spread over the paper's clip window around
-  the last second's mean speed, [mean - 15 mph, mean + 5 mph] (0: the mean), so every value the
-  network can output survives the clip; component 1 picks the gap bars (thirds of [-1, 1] ->
-  1, 2, 3).
+- `acc`: component 0 is the requested speed setting itself, around the plan's target at the
+  car: v_s + 20 mph x a (0 asks for the plan's speed), which the paper's clip then bounds like
+  every `acc` request; component 1 picks the gap bars (thirds of [-1, 1] -> 1, 2, 3). (Policies
+  trained before 2026-12-01 read component 0 as a change from the last second's mean speed;
+  that made every output a drift to be held at exactly 0, and exploration asked for less speed
+  on average. Their files carry no `speed_action` and are refused.)
 - `accel`: an acceleration request, 3 m/s^2 of braking at -1 and 1.5 m/s^2 at +1 (the agent's
   AccelLimiter bounds), 0 at 0.
 """
@@ -36,7 +38,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from contract.units import MPS_PER_MPH
-from vehicle_agent.controllers.acc_clip import ABOVE_MEAN_MPH, BELOW_MEAN_MPH
 
 FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
@@ -53,6 +54,11 @@ REL_SPEED_SCALE_MPS = 10.0
 # `accel` action bounds (m/s^2): the agent's AccelLimiter range.
 ACCEL_ACTION_MIN_MPS2 = -3.0
 ACCEL_ACTION_MAX_MPS2 = 1.5
+
+# `acc` speed action: the requested setting is the plan's target plus this much times the output
+# (mph), and the name acc policy files record it under (`speed_action`).
+SPEED_AROUND_PLAN_MPH = 20.0
+ACC_SPEED_ACTION = "around_plan"
 
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
@@ -118,14 +124,16 @@ def accel_features(
     return features
 
 
-def requested_speed_mph(action: ArrayLike, mean_speed_mph: ArrayLike) -> FloatArray:
-    """v_action from action component 0: -1 -> mean - 15 mph, 0 -> mean, +1 -> mean + 5 mph.
+def requested_speed_mph(action: ArrayLike, plan_target_mph: ArrayLike) -> FloatArray:
+    """v_action from action component 0: the plan's target v_s + SPEED_AROUND_PLAN_MPH x a.
 
-    Piecewise linear over the paper's clip window, so 0 holds the speed of the last second.
+    A setting, not a change of speed: a network's bias is a fixed offset from the plan rather
+    than a drift that integrates every step. The paper's clip bounds it afterwards.
     """
     value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-    offset = np.where(value < 0.0, BELOW_MEAN_MPH * value, ABOVE_MEAN_MPH * value)
-    requested: FloatArray = np.asarray(mean_speed_mph, dtype=np.float64) + offset
+    requested: FloatArray = (
+        np.asarray(plan_target_mph, dtype=np.float64) + SPEED_AROUND_PLAN_MPH * value
+    )
     return requested
 
 
@@ -176,8 +184,11 @@ def save_policy(
     weights: list[FloatArray],
     biases: list[FloatArray],
 ) -> str:
-    """Write a policy `.npz` (layer_i_weight / layer_i_bias and the actuation); its sha256."""
+    """Write a policy `.npz` (layer_i_weight / layer_i_bias, the actuation and, for `acc`, the
+    speed action it was trained with); its sha256."""
     arrays: dict[str, FloatArray | NDArray[np.str_]] = {"actuation": np.array(actuation)}
+    if actuation == "acc":
+        arrays["speed_action"] = np.array(ACC_SPEED_ACTION)
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         arrays[f"layer_{index}_weight"] = np.asarray(weight, dtype=np.float64)
         arrays[f"layer_{index}_bias"] = np.asarray(bias, dtype=np.float64)
@@ -204,6 +215,9 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     try:
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
+            speed_action = (
+                str(archive["speed_action"]) if "speed_action" in archive.files else None
+            )
             layers = sum(1 for name in archive.files if name.endswith("_weight"))
             weights = tuple(
                 np.asarray(archive[f"layer_{i}_weight"], dtype=np.float64) for i in range(layers)
@@ -215,6 +229,17 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         raise PolicyFileError(f"{label}: not a policy file ({error})") from None
     if stored != actuation:
         raise PolicyFileError(f"{label}: a policy for actuation {stored}, not {actuation}")
+    if actuation == "acc" and speed_action != ACC_SPEED_ACTION:
+        trained_for = (
+            "a change from the last second's mean speed (before 2026-12-01)"
+            if speed_action is None
+            else repr(speed_action)
+        )
+        raise PolicyFileError(
+            f"{label}: an acc policy trained for the speed action {trained_for}, which this "
+            f"agent does not read ({ACC_SPEED_ACTION!r}, the plan's target +/- "
+            f"{SPEED_AROUND_PLAN_MPH:.0f} mph): retrain it"
+        )
     if not weights:
         raise PolicyFileError(f"{label}: no layers")
     inputs = FEATURE_SIZES[actuation]

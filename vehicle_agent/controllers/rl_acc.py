@@ -1,22 +1,21 @@
 """RL-ACC: the PPO-trained policy that sets the stock ACC (paper section "ACC-Based Controller").
 
 Each control period the policy reads v, v_s (and the plan ahead), the minicar flag l and the ACC's
-speed and gap settings s and g (`policy.acc_features`) and outputs a requested speed setting and
-gap bars (`policy.requested_speed_mph`, `policy.requested_gap_setting`). The registry wraps it in
+speed and gap settings s and g (`policy.acc_features`) and outputs a requested speed setting
+around the plan's target and gap bars (`policy.requested_speed_mph`,
+`policy.requested_gap_setting`). The registry wraps it in
 the paper's clip (`AccClip`) like every `acc` controller; the agent's button sequencer realises the
 set point (gap first), behind the safety layer: the output is only a request.
 """
 
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 
 import numpy as np
 
 from contract.controllers import Actuation, RlParams
 from contract.units import mps_to_mph
-from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.base import AccSetPoint, Controller, Observation
 from vehicle_agent.controllers.policy import (
     PLAN_LOOKAHEAD_M,
@@ -66,7 +65,6 @@ class RlAccController(Controller):
     def __init__(self, actuation: Actuation, params: RlParams) -> None:
         super().__init__(actuation)
         self.network = load_assigned_policy(params, "acc")
-        self.speeds_mph: deque[float] = deque(maxlen=CLIP_WINDOW_STEPS)
 
     @property
     def policy_sha256(self) -> str:
@@ -76,7 +74,6 @@ class RlAccController(Controller):
     def step(self, observation: Observation) -> AccSetPoint:
         """Features -> network -> set point (before the registry's clip)."""
         speed_mph = mps_to_mph(observation.speed_mps)
-        self.speeds_mph.append(speed_mph)
         setting = observation.acc_speed_setting_mph
         gap = observation.acc_gap_setting
         features = acc_features(
@@ -88,8 +85,9 @@ class RlAccController(Controller):
             3 if gap is None else gap,
         )
         action = self.network.action(features)
-        mean_mph = sum(self.speeds_mph) / len(self.speeds_mph)
-        requested = float(requested_speed_mph(action[0], mean_mph))
+        requested = float(
+            requested_speed_mph(action[0], mps_to_mph(observation.target_speed_mps))
+        )
         bars = int(requested_gap_setting(action[1]))
         if not np.isfinite(requested):
             raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite speed")
