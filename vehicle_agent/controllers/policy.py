@@ -215,9 +215,7 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     try:
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
-            speed_action = (
-                str(archive["speed_action"]) if "speed_action" in archive.files else None
-            )
+            speed_action = str(archive["speed_action"]) if "speed_action" in archive.files else None
             layers = sum(1 for name in archive.files if name.endswith("_weight"))
             weights = tuple(
                 np.asarray(archive[f"layer_{i}_weight"], dtype=np.float64) for i in range(layers)

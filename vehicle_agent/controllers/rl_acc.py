@@ -85,9 +85,7 @@ class RlAccController(Controller):
             3 if gap is None else gap,
         )
         action = self.network.action(features)
-        requested = float(
-            requested_speed_mph(action[0], mps_to_mph(observation.target_speed_mps))
-        )
+        requested = float(requested_speed_mph(action[0], mps_to_mph(observation.target_speed_mps)))
         bars = int(requested_gap_setting(action[1]))
         if not np.isfinite(requested):
             raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite speed")
