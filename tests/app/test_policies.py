@@ -4,6 +4,7 @@ by a vehicle, assignments naming a policy (docs/interfaces.md, "Policies")."""
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import subprocess
 from collections.abc import Iterator
@@ -12,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 from sqlalchemy import Engine, text
 
@@ -184,6 +186,22 @@ def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api
 
     loc, msg = rejected(api.upload(accel, b"{not json"))
     assert loc == ["body", "manifest"]
+
+    # an acc policy of the speed action before 2026-12-01 (no `speed_action`): the cars would
+    # read its outputs wrongly
+    earlier = io.BytesIO()
+    np.savez(
+        earlier,
+        actuation=np.array("acc"),
+        layer_0_weight=np.zeros((6, 2)),
+        layer_0_bias=np.zeros(2),
+    )
+    content = earlier.getvalue()
+    loc, msg = rejected(
+        api.upload(content, {"sha256": hashlib.sha256(content).hexdigest(), "actuation": "acc"})
+    )
+    assert loc == ["body", "policy"]
+    assert "change from the last second's mean speed" in msg
     assert stored_rows(api.engine) == 0
 
 
