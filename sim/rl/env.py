@@ -281,7 +281,8 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         # acc: v_action -> the paper's clip -> buttons (gap first) -> the stock ACC
         for env in range(self.num_envs):
             self.recent_mph[env].append(mps_to_mph(float(speed[env])))
-        requested = requested_speed_mph(actions[:, 0], self.target_here / MPS_PER_MPH)
+        lead_present = gap <= RADAR_RANGE_M
+        requested = requested_speed_mph(actions[:, 0], self.target_here / MPS_PER_MPH, lead_present)
         bars = requested_gap_setting(actions[:, 1])
         set_speed = np.empty(self.num_envs)
         time_gap = np.empty(self.num_envs)
@@ -295,13 +296,12 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             )
             set_speed[env] = (car.acc.set_speed_mph or 0.0) * MPS_PER_MPH
             time_gap[env] = car.acc.params.time_gaps_s[car.acc.gap_setting - 1]
-        in_range = gap <= RADAR_RANGE_M
         return stock_acc_accel(
             speed,
             set_speed,
             time_gap,
-            np.where(in_range, gap, np.nan),
-            np.where(in_range, lead_speed, np.nan),
+            np.where(lead_present, gap, np.nan),
+            np.where(lead_present, lead_speed, np.nan),
             self.cars[0].acc.params,
         )
 

@@ -4,7 +4,6 @@ by a vehicle, assignments naming a policy (docs/interfaces.md, "Policies")."""
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import subprocess
 from collections.abc import Iterator
@@ -13,11 +12,11 @@ from pathlib import Path
 from typing import Any
 
 import httpx
-import numpy as np
 import pytest
 from sqlalchemy import Engine, text
 
 from tests.support.fleet import drive, post_pings
+from tests.support.policies import acc_policy_bytes
 from tests.support.servers import cli_env, live_server, run_cli
 from tests.support.tokens import bearer, issue
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
@@ -187,21 +186,17 @@ def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api
     loc, msg = rejected(api.upload(accel, b"{not json"))
     assert loc == ["body", "manifest"]
 
-    # an acc policy of the speed action before 2026-12-01 (no `speed_action`): the cars would
-    # read its outputs wrongly
-    earlier = io.BytesIO()
-    np.savez(
-        earlier,
-        actuation=np.array("acc"),
-        layer_0_weight=np.zeros((6, 2)),
-        layer_0_bias=np.zeros(2),
-    )
-    content = earlier.getvalue()
-    loc, msg = rejected(
-        api.upload(content, {"sha256": hashlib.sha256(content).hexdigest(), "actuation": "acc"})
-    )
-    assert loc == ["body", "policy"]
-    assert "change from the last second's mean speed" in msg
+    # acc policies of earlier speed actions: the cars would read their outputs wrongly
+    for speed_action, why in (
+        (None, "change from the last second's mean speed"),
+        ("around_plan", "speed action 'around_plan', which"),
+    ):
+        content = acc_policy_bytes(speed_action)
+        loc, msg = rejected(
+            api.upload(content, {"sha256": hashlib.sha256(content).hexdigest(), "actuation": "acc"})
+        )
+        assert loc == ["body", "policy"]
+        assert why in msg
     assert stored_rows(api.engine) == 0
 
 

@@ -11,6 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from contract.controllers import RlParams
+from tests.support.policies import acc_policy_bytes
 from vehicle_agent.controllers import AccelCommand, AccSetPoint, Observation, TargetProfile
 from vehicle_agent.controllers.policy import (
     PolicyFileError,
@@ -39,12 +40,17 @@ def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed(
     np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
 
 
-def test_acc_action_is_a_setting_around_the_plans_target() -> None:
+def test_acc_action_is_a_setting_around_the_plans_target_while_a_leader_is_seen() -> None:
     # plan 60 mph: -1 -> 40 mph, 0 -> 60 (the plan), +1 -> 80 (the clip bounds it later);
     # beyond [-1, 1] is clipped
     np.testing.assert_allclose(
-        requested_speed_mph(np.array([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 3.0]), 60.0),
+        requested_speed_mph(np.array([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 3.0]), 60.0, True),
         [40.0, 40.0, 50.0, 60.0, 70.0, 80.0, 80.0],
+    )
+    # no leader detected: the clip's ceiling, whatever the network asks
+    np.testing.assert_allclose(
+        requested_speed_mph(np.array([-1.0, 0.0, 1.0]), 60.0, np.array([False, True, False])),
+        [73.0, 60.0, 73.0],
     )
     np.testing.assert_array_equal(
         requested_gap_setting(np.array([-1.0, -0.34, -0.33, 0.33, 0.34, 1.0])), [1, 1, 2, 2, 3, 3]
@@ -107,37 +113,29 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
 def test_rl_acc_requests_the_networks_setting_around_the_plans_target(tmp_path: Path) -> None:
     controller = RlAccController("acc", RlParams(policy=str(two_layer_policy(tmp_path, "acc", 2))))
     # v = 15 m/s -> feature 0.5 -> action (0, 0): the plan's 20 m/s (44.74 mph), the middle gap
-    action = controller.step(Observation(time_s=0.0, speed_mps=15.0, target_speed_mps=20.0))
+    seen = Observation(time_s=0.0, speed_mps=15.0, target_speed_mps=20.0, lead_present=True)
+    action = controller.step(seen)
     assert isinstance(action, AccSetPoint)
     assert action.requested_speed_mph == pytest.approx(20.0 / 0.44704)
     assert (action.speed_setting_mph, action.gap_setting) == (45, 2)
+    # the leader lost: the clip's ceiling (which the clip then bounds to mean + 5 mph)
+    lost = controller.step(Observation(time_s=0.1, speed_mps=15.0, target_speed_mps=20.0))
+    assert isinstance(lost, AccSetPoint)
+    assert (lost.speed_setting_mph, lost.gap_setting) == (73, 2)
 
 
-def test_an_acc_policy_of_the_earlier_speed_action_is_refused(tmp_path: Path) -> None:
+def test_an_acc_policy_of_an_earlier_speed_action_is_refused(tmp_path: Path) -> None:
     """A file without `speed_action` was trained to read its output as a change from the last
-    second's mean speed: run under the setting-around-the-plan action it would ask for
-    something else, so it is refused, saying why."""
+    second's mean speed, an `around_plan` file to fall back out of radar range at will: run under
+    today's action either would meet what it was not trained for, so it is refused, saying why."""
     earlier = tmp_path / "earlier.npz"
-    with earlier.open("wb") as handle:
-        np.savez(
-            handle,
-            actuation=np.array("acc"),
-            layer_0_weight=np.zeros((6, 2)),
-            layer_0_bias=np.zeros(2),
-        )
+    earlier.write_bytes(acc_policy_bytes(None))
     with pytest.raises(PolicyFileError, match="change from the last second's mean speed"):
         load_policy(earlier, "acc")
-    other = tmp_path / "other.npz"
-    with other.open("wb") as handle:
-        np.savez(
-            handle,
-            actuation=np.array("acc"),
-            speed_action=np.array("absolute"),
-            layer_0_weight=np.zeros((6, 2)),
-            layer_0_bias=np.zeros(2),
-        )
-    with pytest.raises(PolicyFileError, match="speed action 'absolute'"):
-        load_policy(other, "acc")
+    around_plan = tmp_path / "around_plan.npz"
+    around_plan.write_bytes(acc_policy_bytes("around_plan"))
+    with pytest.raises(PolicyFileError, match="speed action 'around_plan', which"):
+        load_policy(around_plan, "acc")
 
 
 def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:

@@ -16,10 +16,12 @@ relative speed.
 Action, in [-1, 1] per component (PPO's Gaussian, clipped):
 - `acc`: component 0 is the requested speed setting itself, around the plan's target at the
   car: v_s + 20 mph x a (0 asks for the plan's speed), which the paper's clip then bounds like
-  every `acc` request; component 1 picks the gap bars (thirds of [-1, 1] -> 1, 2, 3). (Policies
-  trained before 2026-12-01 read component 0 as a change from the last second's mean speed;
-  that made every output a drift to be held at exactly 0, and exploration asked for less speed
-  on average. Their files carry no `speed_action` and are refused.)
+  every `acc` request; while no leader is detected (l off) the request is the clip's ceiling
+  instead, so the ACC closes up to the leader it lost; component 1 picks the gap bars (thirds of
+  [-1, 1] -> 1, 2, 3). Policy files record the speed action they were trained for, and a file
+  trained for another is refused: those without `speed_action` (before 2026-12-01) read
+  component 0 as a change from the last second's mean speed, and `around_plan` files were trained
+  free to fall back out of radar range, which the rule now forbids.
 - `accel`: an acceleration request, 3 m/s^2 of braking at -1 and 1.5 m/s^2 at +1 (the agent's
   AccelLimiter bounds), 0 at 0.
 """
@@ -38,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from contract.units import MPS_PER_MPH
+from vehicle_agent.controllers.acc_clip import MAX_SETTING_MPH
 
 FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
@@ -56,9 +59,10 @@ ACCEL_ACTION_MIN_MPS2 = -3.0
 ACCEL_ACTION_MAX_MPS2 = 1.5
 
 # `acc` speed action: the requested setting is the plan's target plus this much times the output
-# (mph), and the name acc policy files record it under (`speed_action`).
+# (mph) while a leader is detected, the clip's ceiling while none is; the name acc policy files
+# record it under (`speed_action`).
 SPEED_AROUND_PLAN_MPH = 20.0
-ACC_SPEED_ACTION = "around_plan"
+ACC_SPEED_ACTION = "around_plan_closing_lost_lead"
 
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
@@ -124,15 +128,23 @@ def accel_features(
     return features
 
 
-def requested_speed_mph(action: ArrayLike, plan_target_mph: ArrayLike) -> FloatArray:
-    """v_action from action component 0: the plan's target v_s + SPEED_AROUND_PLAN_MPH x a.
+def requested_speed_mph(
+    action: ArrayLike, plan_target_mph: ArrayLike, lead_present: ArrayLike
+) -> FloatArray:
+    """v_action from action component 0: the plan's target v_s + SPEED_AROUND_PLAN_MPH x a
+    while the minicar flag l is on; the clip's ceiling (73 mph) while it is off.
 
     A setting, not a change of speed: a network's bias is a fixed offset from the plan rather
-    than a drift that integrates every step. The paper's clip bounds it afterwards.
+    than a drift that integrates every step. The paper's clip bounds it afterwards, so with no
+    leader detected the setting rises to the last second's mean speed + 5 mph and the stock ACC
+    closes up to the leader it lost: the AV cannot fall back beyond its radar's range (80-100 m,
+    paper Table 2), which is inside the gap envelope's 120 m, whatever the network asks. The car
+    senses l on every make, so the rule uses nothing the road could not tell it.
     """
     value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-    requested: FloatArray = (
-        np.asarray(plan_target_mph, dtype=np.float64) + SPEED_AROUND_PLAN_MPH * value
+    around_plan = np.asarray(plan_target_mph, dtype=np.float64) + SPEED_AROUND_PLAN_MPH * value
+    requested: FloatArray = np.where(
+        np.asarray(lead_present, dtype=bool), around_plan, MAX_SETTING_MPH
     )
     return requested
 
@@ -235,8 +247,9 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         )
         raise PolicyFileError(
             f"{label}: an acc policy trained for the speed action {trained_for}, which this "
-            f"agent does not read ({ACC_SPEED_ACTION!r}, the plan's target +/- "
-            f"{SPEED_AROUND_PLAN_MPH:.0f} mph): retrain it"
+            f"agent does not read ({ACC_SPEED_ACTION!r}: the plan's target +/- "
+            f"{SPEED_AROUND_PLAN_MPH:.0f} mph, the clip's ceiling with no leader detected): "
+            "retrain it"
         )
     if not weights:
         raise PolicyFileError(f"{label}: no layers")

@@ -2,8 +2,9 @@
 
 Each control period the policy reads v, v_s (and the plan ahead), the minicar flag l and the ACC's
 speed and gap settings s and g (`policy.acc_features`) and outputs a requested speed setting
-around the plan's target and gap bars (`policy.requested_speed_mph`,
-`policy.requested_gap_setting`). The registry wraps it in
+around the plan's target (the clip's ceiling while no leader is detected, so the ACC closes up to
+a leader it lost) and gap bars (`policy.requested_speed_mph`, `policy.requested_gap_setting`).
+The registry wraps it in
 the paper's clip (`AccClip`) like every `acc` controller; the agent's button sequencer realises the
 set point (gap first), behind the safety layer: the output is only a request.
 """
@@ -85,7 +86,11 @@ class RlAccController(Controller):
             3 if gap is None else gap,
         )
         action = self.network.action(features)
-        requested = float(requested_speed_mph(action[0], mps_to_mph(observation.target_speed_mps)))
+        requested = float(
+            requested_speed_mph(
+                action[0], mps_to_mph(observation.target_speed_mps), observation.lead_present
+            )
+        )
         bars = int(requested_gap_setting(action[1]))
         if not np.isfinite(requested):
             raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite speed")
