@@ -16,11 +16,10 @@ MDP (paper, "ACC-Based Controller"): observation and action as in `policy`; rewa
     r_t = 1 - c1 a_t^2 - c2 (v_t - v_sp,t)^2 - c3 (1/n) sum_i E_t^i - c4 1[gap out of bounds]
 
 with a_t the AV's acceleration, v_sp the plan's target at the AV, E^i the fuel rate (g/s) of the
-AV and every vehicle behind it, and the gap bounds of `EnvConfig.envelope` (space gap within
-[h_min, h_max], h_max the radar range on `acc`, and time gap at least its minimum). An AV that
-touches its leader ends the episode with `collision` taken once more for every step the episode
-had left (so crashing never pays off against the gap penalty). The coefficients are in
-`RewardWeights`, with why.
+AV and every vehicle behind it, and the gap bounds of `sim.gaps.GapBounds` (space gap within
+[h_min, h_max] and time gap at least its minimum). An AV that touches its leader ends the
+episode with `collision` taken once more for every step the episode had left (so crashing never
+pays off against the gap penalty). The coefficients are in `RewardWeights`, with why.
 """
 
 from __future__ import annotations
@@ -102,8 +101,7 @@ class EnvConfig:
     planner: str = "kernel_smooth"
     planner_params: Mapping[str, Any] = field(default_factory=lambda: dict(DEFAULT_PLANNER_PARAMS))
     reward: RewardWeights = RewardWeights()
-    # The envelope whose steps pay c4; None: the actuation's (`envelope`).
-    gap_bounds: GapBounds | None = None
+    gap_bounds: GapBounds = GapBounds()
     idm: IdmParams = I24_IDM
 
     def __post_init__(self) -> None:
@@ -115,22 +113,6 @@ class EnvConfig:
             )
         if self.episode_s <= 0:
             raise ValueError(f"episode_s must be positive, got {self.episode_s}")
-
-    @property
-    def envelope(self) -> GapBounds:
-        """The gap bounds whose steps pay the intervention penalty c4.
-
-        `sim.gaps.GapBounds` (7-120 m, >= 1 s), but on `acc` the ceiling is the radar's range:
-        an `acc` car senses only the minicar flag, and while it is off the closing rule
-        (`policy.requested_speed_mph`) overrides the policy. The paper's penalty goes with its
-        intervention, so the policy learns that losing its leader costs, not only a gap beyond
-        120 m that the rule makes rare. Scoring keeps the 120 m envelope.
-        """
-        if self.gap_bounds is not None:
-            return self.gap_bounds
-        if self.actuation == "acc":
-            return GapBounds(max_gap_m=RADAR_RANGE_M)
-        return GapBounds()
 
 
 @dataclass
@@ -350,7 +332,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
 
         fuel = RAV4_2019.fuel_rate_gps(follower_speed, accel).mean(axis=1)
         av_gap = self.position[:, 0] - self.position[:, 1] - VEHICLE_LENGTH_M
-        bounds = self.config.envelope
+        bounds = self.config.gap_bounds
         outside = bounds.outside_space_bounds(av_gap) | bounds.under_time_gap(
             av_gap, self.speed[:, 1]
         )

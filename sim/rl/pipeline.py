@@ -214,8 +214,8 @@ def _config_record(config: EnvConfig) -> Mapping[str, Any]:
         "planner_params": dict(config.planner_params),
         "reward": asdict(config.reward),
         "gap_bounds": {
-            "min_gap_m": config.envelope.min_gap_m,
-            "max_gap_m": config.envelope.max_gap_m,
-            "min_time_gap_s": config.envelope.min_time_gap_s,
+            "min_gap_m": config.gap_bounds.min_gap_m,
+            "max_gap_m": config.gap_bounds.max_gap_m,
+            "min_time_gap_s": config.gap_bounds.min_time_gap_s,
         },
     }
