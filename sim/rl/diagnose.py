@@ -1,0 +1,111 @@
+"""Where an `acc` policy leaves the gap envelope, read only on one fold's training dates.
+
+`python -m sim.rl.diagnose POLICY.npz [--fold 0]`: the policy (behind the paper's clip) as the
+one AV of a 24-human platoon on every drive of fold `--fold`'s training dates (`sim.folds`, two
+folds), `kernel_smooth` with the training set-up's planner. Per drive: the share of time within
+the envelope and why not (gap under its minimum, over its maximum, time gap under its minimum),
+the mean gap, the AV's and its leader's mean speed, how often the leader was lost (beyond the
+radar's range) and the AV's acceleration RMS beside the human driving in its place. A shipped
+policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at: a diagnosis
+that shapes the next change must not be read on the drives that change is scored on.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.av import RADAR_RANGE_M, AgentPolicy
+from sim.drives import load_drives, shared_data_dir
+from sim.emulator.acc import SimulatedAccCar
+from sim.energy import RAV4_2019
+from sim.folds import date_folds
+from sim.gaps import GapBounds
+from sim.plans import SimulatedPlanner
+from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
+from sim.rl.env import DEFAULT_PLANNER_PARAMS
+from sim.rl.scores import ControllerUnderTest
+
+HUMANS = 24
+
+
+@dataclass(frozen=True)
+class GapDiagnosis:
+    """The first follower's (the AV's) time against the envelope, as shares of the run."""
+
+    under_min_gap: float
+    over_max_gap: float
+    under_time_gap: float  # and not already under the minimum gap
+    leader_lost: float  # gap beyond the radar's range
+    leader_lost_episodes: int
+    mean_gap_m: float
+    accel_rms_mps2: float
+
+    @property
+    def within(self) -> float:
+        """Share of time inside the envelope."""
+        return 1.0 - self.under_min_gap - self.over_max_gap - self.under_time_gap
+
+
+def diagnose_first_follower(run: PlatoonRun, bounds: GapBounds) -> GapDiagnosis:
+    """Why vehicle 1 (right behind the leader) was outside `bounds`, and how it drove."""
+    gap = run.position_m[:, 0] - run.position_m[:, 1] - run.vehicle_length_m
+    speed = run.speed_mps[:, 1]
+    below = gap < bounds.min_gap_m
+    lost = gap > RADAR_RANGE_M
+    accel = np.diff(speed) / run.dt_s
+    return GapDiagnosis(
+        under_min_gap=float(below.mean()),
+        over_max_gap=float((gap > bounds.max_gap_m).mean()),
+        under_time_gap=float((bounds.under_time_gap(gap, speed) & ~below).mean()),
+        leader_lost=float(lost.mean()),
+        leader_lost_episodes=int(np.count_nonzero(lost[1:] & ~lost[:-1])),
+        mean_gap_m=float(gap.mean()),
+        accel_rms_mps2=float(np.sqrt(np.mean(accel**2))),
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Print one line per training-date drive."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("policy", type=Path)
+    parser.add_argument("--fold", type=int, default=0)
+    args = parser.parse_args(argv)
+    drives = load_drives(shared_data_dir() / "trajectories")
+    fold = date_folds(drives, 2)[args.fold]
+    entry = ControllerUnderTest.policy_file("rl_acc", "acc", args.policy)
+    bounds = GapBounds()
+    say = print  # noqa: T201 (a command-line report)
+    say(f"fold {args.fold}'s training dates: {', '.join(fold.train_dates)}")
+    for drive in fold.train:
+        schedule = SimulatedPlanner.for_drive(drive, "kernel_smooth", DEFAULT_PLANNER_PARAMS)
+        policy = AgentPolicy(
+            entry.build(), schedule, senses_lead_state=False, stock_acc=SimulatedAccCar()
+        )
+        run = simulate_platoon(
+            drive,
+            platoon_roles(HUMANS, 1),
+            [policy],
+            av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+        )
+        av = diagnose_first_follower(run, bounds)
+        human = diagnose_first_follower(
+            simulate_platoon(drive, platoon_roles(HUMANS + 1, 0)), bounds
+        )
+        say(
+            f"{drive.name[:19]} {drive.kind:9s} within {av.within:.2f}"
+            f" | <{bounds.min_gap_m:g} m {av.under_min_gap:.2f}"
+            f" >{bounds.max_gap_m:g} m {av.over_max_gap:.2f} time gap {av.under_time_gap:.2f}"
+            f" | mean gap {av.mean_gap_m:.0f} m, AV {run.speed_mps[:, 1].mean():.1f} m/s,"
+            f" leader {run.speed_mps[:, 0].mean():.1f} m/s"
+            f" | leader lost {av.leader_lost:.2f} in {av.leader_lost_episodes} episodes"
+            f" | accel RMS {av.accel_rms_mps2:.2f} (human in its place {human.accel_rms_mps2:.2f})"
+        )
+
+
+if __name__ == "__main__":
+    main()
