@@ -70,7 +70,7 @@ def diagnose_first_follower(run: PlatoonRun, bounds: GapBounds) -> GapDiagnosis:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    """Print one line per training-date drive."""
+    """Print one line per training-date drive, then the shares over all their time."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("policy", type=Path)
     parser.add_argument("--fold", type=int, default=0)
@@ -81,6 +81,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     bounds = GapBounds()
     say = print  # noqa: T201 (a command-line report)
     say(f"fold {args.fold}'s training dates: {', '.join(fold.train_dates)}")
+    rows = 0
+    outside = np.zeros(3)  # under the minimum gap, over the maximum, under the time gap (rows)
     for drive in fold.train:
         schedule = SimulatedPlanner.for_drive(drive, "kernel_smooth", DEFAULT_PLANNER_PARAMS)
         policy = AgentPolicy(
@@ -93,6 +95,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
         )
         av = diagnose_first_follower(run, bounds)
+        steps = run.position_m.shape[0]
+        rows += steps
+        outside += steps * np.array([av.under_min_gap, av.over_max_gap, av.under_time_gap])
         human = diagnose_first_follower(
             simulate_platoon(drive, platoon_roles(HUMANS + 1, 0)), bounds
         )
@@ -105,6 +110,11 @@ def main(argv: Sequence[str] | None = None) -> None:
             f" | leader lost {av.leader_lost:.2f} in {av.leader_lost_episodes} episodes"
             f" | accel RMS {av.accel_rms_mps2:.2f} (human in its place {human.accel_rms_mps2:.2f})"
         )
+    under, over, short = outside / rows
+    say(
+        f"every drive's time: outside {under + over + short:.3f} = under {under:.3f}"
+        f" + over {over:.3f} + time gap {short:.4f}"
+    )
 
 
 if __name__ == "__main__":
