@@ -18,11 +18,11 @@ Stages (one interface and one registry each; a variant is one module plus one li
 here that knows about the database; the stages never import `app`).
 """
 
-from planner.algorithms import ALGORITHMS
+from planner.algorithms import ALGORITHMS, plan_speeds
 from planner.buffers import Buffer
 from planner.inputs import CorridorGrid, InrixHistory, LaneObservations
 from planner.params import InvalidParams, PlannerParams
-from planner.pipeline import Plan, PlannerInputs, plan_speeds
+from planner.pipeline import Plan, PlannerInputs
 from planner.predict import NoInrixEstimate
 from planner.registry import UnknownVariant
 

@@ -7,8 +7,9 @@
     5 buffer design                    -> planner.buffers
     6 publish                          -> planner.warehouse (the database edge)
 
-`plan_speeds` runs a registered algorithm (planner.algorithms) on `PlannerInputs` and returns a
-`Plan`; the simulator calls it with simulated traffic, the warehouse with the database's.
+The algorithms (planner.algorithms) compose these stages; `planner.algorithms.plan_speeds` runs
+a registered one on `PlannerInputs` and returns a `Plan`; the simulator calls it with simulated
+traffic, the warehouse with the database's.
 """
 
 from __future__ import annotations
@@ -95,14 +96,3 @@ def clip_to_legal_range(
     ceiling = grid.speed_limit_mps + params.speed_limit_allowance_mps
     clipped: FloatArray = np.clip(target_mps, grid.min_target_speed_mps, ceiling)
     return clipped
-
-
-def plan_speeds(
-    inputs: PlannerInputs,
-    algorithm: str = "kernel_smooth_buffer",
-    params: PlannerParams | None = None,
-) -> Plan:
-    """Run a registered algorithm; raises NoInrixEstimate when INRIX is missing or stale."""
-    from planner.algorithms import ALGORITHMS
-
-    return ALGORITHMS.get(algorithm)(inputs, params or PlannerParams())

@@ -28,6 +28,7 @@ import numpy as np
 from sqlalchemy import Row, text
 from sqlalchemy.orm import Session
 
+from planner.algorithms import plan_speeds
 from planner.inputs import (
     CorridorGrid,
     FloatArray,
@@ -36,7 +37,7 @@ from planner.inputs import (
     clean_inrix_speeds,
 )
 from planner.params import PlannerParams
-from planner.pipeline import Plan, PlannerInputs, plan_speeds
+from planner.pipeline import Plan, PlannerInputs
 from planner.predict import NoInrixEstimate
 
 # First key of the planner's advisory locks (the second is the corridor's hash): "SP".

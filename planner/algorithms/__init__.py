@@ -1,4 +1,6 @@
-"""The registered Speed Planner algorithms (the name is stored with every plan)."""
+"""The registered Speed Planner algorithms (the name is stored with every plan), and the call
+that runs one. It lives beside the registry, above the stages the algorithms compose
+(`planner.pipeline`), so the stages never import what is built from them."""
 
 from collections.abc import Callable
 
@@ -14,4 +16,14 @@ ALGORITHMS: Registry[Algorithm] = Registry("algorithm")
 ALGORITHMS.register("kernel_smooth", kernel_smooth)
 ALGORITHMS.register("kernel_smooth_buffer", kernel_smooth_buffer)
 
-__all__ = ["ALGORITHMS", "Algorithm"]
+
+def plan_speeds(
+    inputs: PlannerInputs,
+    algorithm: str = "kernel_smooth_buffer",
+    params: PlannerParams | None = None,
+) -> Plan:
+    """Run a registered algorithm; raises NoInrixEstimate when INRIX is missing or stale."""
+    return ALGORITHMS.get(algorithm)(inputs, params or PlannerParams())
+
+
+__all__ = ["ALGORITHMS", "Algorithm", "plan_speeds"]
