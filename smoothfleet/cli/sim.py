@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import shlex
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -137,15 +137,20 @@ def _default_folder(name: str) -> Path | None:
         return None
 
 
+def _drives_option(what: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """`--drives`: the folder of real drives a command reads, the shared data's by default."""
+    return click.option(
+        "--drives",
+        "drives_dir",
+        type=click.Path(path_type=Path),
+        default=lambda: _default_folder("trajectories"),
+        help=f"{what} [default: shared/data/trajectories beside the checkout, or "
+        "$SMOOTHFLEET_SHARED_DATA].",
+    )
+
+
 @sim.command("evaluate")
-@click.option(
-    "--drives",
-    "drives_dir",
-    type=click.Path(path_type=Path),
-    default=lambda: _default_folder("trajectories"),
-    help="Folder of real drive CSVs (10 Hz) [default: shared/data/trajectories beside the "
-    "checkout, or $SMOOTHFLEET_SHARED_DATA].",
-)
+@_drives_option("Folder of real drive CSVs (10 Hz)")
 @click.option(
     "--inrix-drives",
     "inrix_dir",
@@ -336,13 +341,7 @@ SELECTION_VARIANTS = (
 
 
 @sim.command("select")
-@click.option(
-    "--drives",
-    "drives_dir",
-    type=click.Path(path_type=Path),
-    default=lambda: _default_folder("trajectories"),
-    help="Folder of real drive CSVs [default: shared/data/trajectories beside the checkout].",
-)
+@_drives_option("Folder of real drive CSVs (10 Hz)")
 @click.option(
     "--window",
     "windows",
@@ -559,14 +558,7 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     required=True,
     help="acc: ACC speed setting and gap bars (Rogue, XT5); accel: acceleration (RAV4).",
 )
-@click.option(
-    "--drives",
-    "drives_dir",
-    type=click.Path(path_type=Path),
-    default=lambda: _default_folder("trajectories"),
-    help="Folder of real drive CSVs (10 Hz) to train and cross-validate on [default: "
-    "shared/data/trajectories beside the checkout].",
-)
+@_drives_option("Folder of real drive CSVs (10 Hz) to train and cross-validate on")
 @click.option("--timesteps", type=click.IntRange(min=1), default=300_000, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option(
@@ -681,14 +673,7 @@ def train_command(
 
 
 @sim.command("optimum")
-@click.option(
-    "--drives",
-    "drives_dir",
-    type=click.Path(path_type=Path),
-    default=lambda: _default_folder("trajectories"),
-    help="Folder of real drive CSVs (10 Hz) [default: shared/data/trajectories beside the "
-    "checkout, or $SMOOTHFLEET_SHARED_DATA].",
-)
+@_drives_option("Folder of real drive CSVs (10 Hz)")
 @click.option(
     "--drive",
     "names",
