@@ -150,6 +150,24 @@ def test_the_same_seed_starts_the_same_windows() -> None:
     np.testing.assert_array_equal(first.road_index, second.road_index)
 
 
+def test_an_acc_av_that_lost_its_leader_closes_up_whatever_the_policy_asks() -> None:
+    """The closing rule in training: beyond the radar's range the request is the clip's
+    ceiling, so even a policy asking for the least speed sees its setting rise."""
+    lost = steady_env("acc", ONLY_GAP, envs=1)
+    place_av(lost, 150.0)
+    seen = steady_env("acc", ONLY_GAP, envs=1)
+    place_av(seen, 50.0)
+    for _ in range(20):
+        lost.step(np.array([[-1.0, 0.0]]))
+        seen.step(np.array([[-1.0, 0.0]]))
+    # 20 m/s = 45 mph at the start; the clip lets the lost car's setting rise 5 mph over its
+    # last second's mean, while the car that sees its leader is asked for plan - 20 mph
+    assert lost.cars[0].acc.set_speed_mph is not None
+    assert seen.cars[0].acc.set_speed_mph is not None
+    assert lost.cars[0].acc.set_speed_mph > 45
+    assert seen.cars[0].acc.set_speed_mph < 45
+
+
 def test_configuration_errors_say_what_is_wrong() -> None:
     with pytest.raises(ValueError, match="at least one human"):
         EnvConfig("acc", humans=0)
