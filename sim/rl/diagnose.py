@@ -19,18 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.av import RADAR_RANGE_M, AgentPolicy
+from sim.av import RADAR_RANGE_M
 from sim.drives import load_drives, shared_data_dir
-from sim.emulator.acc import SimulatedAccCar
-from sim.energy import RAV4_2019
 from sim.folds import date_folds
 from sim.gaps import GapBounds
-from sim.plans import SimulatedPlanner
 from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
-from sim.rl.scores import ControllerUnderTest
+from sim.rl.scores import ControllerUnderTest, simulate_one_av
 
-HUMANS = 24
+HUMANS = 24  # behind the AV: 4 % penetration, as in training and the held-out scores
 
 
 @dataclass(frozen=True)
@@ -53,7 +50,7 @@ class GapDiagnosis:
 
 def diagnose_first_follower(run: PlatoonRun, bounds: GapBounds) -> GapDiagnosis:
     """Why vehicle 1 (right behind the leader) was outside `bounds`, and how it drove."""
-    gap = run.position_m[:, 0] - run.position_m[:, 1] - run.vehicle_length_m
+    gap = run.gap_m[:, 0]
     speed = run.speed_mps[:, 1]
     below = gap < bounds.min_gap_m
     lost = gap > RADAR_RANGE_M
@@ -84,15 +81,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     rows = 0
     outside = np.zeros(3)  # under the minimum gap, over the maximum, under the time gap (rows)
     for drive in fold.train:
-        schedule = SimulatedPlanner.for_drive(drive, "kernel_smooth", DEFAULT_PLANNER_PARAMS)
-        policy = AgentPolicy(
-            entry.build(), schedule, senses_lead_state=False, stock_acc=SimulatedAccCar()
-        )
-        run = simulate_platoon(
+        run = simulate_one_av(
             drive,
-            platoon_roles(HUMANS, 1),
-            [policy],
-            av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+            entry,
+            planner="kernel_smooth",
+            planner_params=DEFAULT_PLANNER_PARAMS,
+            humans=HUMANS,
         )
         av = diagnose_first_follower(run, bounds)
         steps = run.position_m.shape[0]

@@ -26,7 +26,7 @@ from sim.folds import drive_date
 from sim.gaps import GapBounds, gap_kpis
 from sim.kpi import Kpis, platoon_kpis
 from sim.plans import SimulatedPlanner
-from sim.platoon import platoon_roles, simulate_platoon
+from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import AccClip, Controller, build_controller
 from vehicle_agent.controllers.rl_acc import RlAccController
 from vehicle_agent.controllers.rl_accel import RlAccelController
@@ -93,6 +93,31 @@ def _change_pct(value: float, base: float) -> float:
     return float(100.0 * (value / base - 1.0))
 
 
+def simulate_one_av(
+    drive: Drive,
+    entry: ControllerUnderTest,
+    *,
+    planner: str,
+    planner_params: Mapping[str, Any],
+    humans: int = 24,
+) -> PlatoonRun:
+    """The drive with one AV right behind the leader, run by `entry` with the real planner in
+    the loop (its ACC car on `acc`), and `humans` I-24 IDM drivers behind it."""
+    schedule = SimulatedPlanner.for_drive(drive, planner, planner_params)
+    policy = AgentPolicy(
+        entry.build(),
+        schedule,
+        senses_lead_state=entry.actuation == "accel",
+        stock_acc=SimulatedAccCar() if entry.actuation == "acc" else None,
+    )
+    return simulate_platoon(
+        drive,
+        platoon_roles(humans, 1),
+        [policy],
+        av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+    )
+
+
 def score_drives(
     drives: Sequence[Drive],
     controllers: Sequence[ControllerUnderTest],
@@ -109,18 +134,8 @@ def score_drives(
     for drive in drives:
         base = platoon_kpis(simulate_platoon(drive, platoon_roles(humans + 1, 0)))
         for entry in controllers:
-            schedule = SimulatedPlanner.for_drive(drive, planner, planner_params)
-            policy = AgentPolicy(
-                entry.build(),
-                schedule,
-                senses_lead_state=entry.actuation == "accel",
-                stock_acc=SimulatedAccCar() if entry.actuation == "acc" else None,
-            )
-            run = simulate_platoon(
-                drive,
-                platoon_roles(humans, 1),
-                [policy],
-                av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+            run = simulate_one_av(
+                drive, entry, planner=planner, planner_params=planner_params, humans=humans
             )
             kpis = platoon_kpis(run)
             av = np.flatnonzero(run.is_av[1:])

@@ -18,7 +18,7 @@ def test_each_moment_outside_is_counted_once_under_its_cause() -> None:
     run = PlatoonRun(
         drive_name="hand",
         dt_s=0.1,
-        is_av=np.array([True]),
+        is_av=np.array([False, True]),
         position_m=np.column_stack([leader, leader - 5.0 - gaps]),
         speed_mps=np.column_stack([np.full(10, 20.0), speeds]),
         vehicle_length_m=5.0,
