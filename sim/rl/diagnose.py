@@ -6,8 +6,9 @@ folds), `kernel_smooth` with the training set-up's planner. Per drive: the share
 the envelope and why not (gap under its minimum, over its maximum, time gap under its minimum),
 the mean gap, the AV's and its leader's mean speed, how often the leader was lost (beyond the
 radar's range) and the AV's acceleration RMS beside the human driving in its place. A shipped
-policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at: a diagnosis
-that shapes the next change must not be read on the drives that change is scored on.
+policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at. They are
+also fold 1's training dates, so after a change this diagnosis shaped, fold 0's held-out dates
+are the only ones it has not read: report them apart from the all-drive figures.
 """
 
 from __future__ import annotations
