@@ -6,7 +6,9 @@ folds' dates and is scored only on its own held-out dates, beside the reference 
 the same actuation on the same drives, so every figure in the manifest is held out. The shipped
 policy is then trained the same way on every date (or, with `final=False`, fold 0's policy is
 shipped and its manifest says so). Nothing is tuned on the held-out drives: the hyperparameters
-(`PpoSettings`) and the reward (`RewardWeights`) are fixed before any run.
+(`PpoSettings`) are fixed before any run, and the reward (`RewardWeights`) is either fixed too or,
+given candidates, chosen inside each fold on its training dates alone (`sim.rl.reward_selection`),
+so a fold's held-out scores are of weights chosen without them.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import platform
 import shutil
 import subprocess
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -28,9 +30,10 @@ import torch
 
 from sim.drives import Drive
 from sim.folds import Fold, date_folds, drive_date
-from sim.rl.env import EnvConfig
+from sim.rl.env import EnvConfig, RewardWeights
+from sim.rl.reward_selection import select_reward
 from sim.rl.scores import ControllerUnderTest, DriveScore, score_drives, summarise
-from sim.rl.train import PpoSettings, export_policy, train_policy
+from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
 
 # What each RL controller is scored beside: the hand-designed controller of the same actuation
 # with the gain docs/simulation.md's evaluation found best.
@@ -79,13 +82,16 @@ def run_training(
     folds: int,
     out_dir: Path,
     final: bool = True,
+    reward_candidates: Sequence[RewardWeights] = (),
     command: str = "",
     progress: Callable[[str, int, int], None] | None = None,
 ) -> TrainingRun:
     """Cross-validate, train the shipped policy, write `rl_<actuation>.npz` and `.json`.
 
-    `command` is recorded in the manifest (how to reproduce it); `progress(stage, done, total)`
-    hears the timesteps of each training and each scored drive.
+    With `reward_candidates` (the first is the fallback), every fold, and the final policy,
+    trains with the weights `select_reward` chooses on its own training dates; without, with
+    `config.reward`. `command` is recorded in the manifest (how to reproduce it);
+    `progress(stage, done, total)` hears the timesteps of each training and each scored drive.
     """
     commit = source_commit()  # now: the code that trains, whatever changes meanwhile
     actuation = config.actuation
@@ -93,21 +99,51 @@ def run_training(
     splits = date_folds(drives, folds)
     scores: list[DriveScore] = []
     fold_records = []
+
+    def chosen_reward(stage: str, dates: Sequence[Drive]) -> tuple[EnvConfig, dict[str, Any]]:
+        """`config` with the reward chosen on `dates` and the selection's record, or as is."""
+        if not reward_candidates:
+            return config, {}
+        selection = select_reward(
+            dates,
+            config,
+            reward_candidates,
+            settings,
+            timesteps=timesteps,
+            seed=seed,
+            out_dir=out_dir / "reward_selection" / stage.replace(" ", ""),
+            stage=stage,
+            progress=progress,
+        )
+        return replace(config, reward=selection.chosen), selection.as_dict()
+
+    fold_configs = []
     for fold in splits:
+        fold_config, selection_record = chosen_reward(f"fold {fold.index}", fold.train)
         fold_scores, record = _cross_validate(
-            fold, config, settings, timesteps, seed, out_dir, progress
+            fold, fold_config, settings, timesteps, seed, out_dir, progress
         )
         scores.extend(fold_scores)
+        if selection_record:
+            record["reward_selection"] = selection_record
         fold_records.append(record)
+        fold_configs.append(fold_config)
     policy_path = out_dir / f"{name}.npz"
     if final:
+        shipped_config, final_selection = chosen_reward("final", drives)
         model = train_policy(
-            drives, config, settings, timesteps, seed, _steps(progress, "final", timesteps)
+            drives,
+            shipped_config,
+            settings,
+            timesteps,
+            seed,
+            stage_progress(progress, "final", timesteps),
         )
-        digest = export_policy(model, policy_path, config)
+        digest = export_policy(model, policy_path, shipped_config)
         shipped_dates = sorted({drive_date(drive) for drive in drives})
         shipped = "trained on every date"
     else:
+        shipped_config, final_selection = fold_configs[0], {}
         shutil.copyfile(_fold_path(out_dir, name, 0), policy_path)
         digest = hashlib.sha256(policy_path.read_bytes()).hexdigest()
         shipped_dates = splits[0].train_dates
@@ -123,7 +159,7 @@ def run_training(
         "timesteps": timesteps,
         "folds": folds,
         "ppo": settings.as_dict(),
-        "environment": _config_record(config),
+        "environment": _config_record(shipped_config),
         "source_commit": commit,
         "command": command,
         "trained_at": datetime.now(UTC).isoformat(timespec="seconds"),
@@ -139,6 +175,12 @@ def run_training(
             "drives": [score.as_dict() for score in scores],
         },
     }
+    if reward_candidates:
+        manifest["reward_selection"] = {
+            "candidates": [asdict(weights) for weights in reward_candidates],
+            "note": "each fold chose on its training dates alone (inner folds by date)",
+            **({"final": final_selection} if final_selection else {}),
+        }
     manifest_path = out_dir / f"{name}.json"
     manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
     return TrainingRun(policy_path, manifest_path, digest, summary)
@@ -163,7 +205,7 @@ def _cross_validate(
     stage = f"fold {fold.index}"
     path = _fold_path(out_dir, name, fold.index)
     model = train_policy(
-        fold.train, config, settings, timesteps, seed, _steps(progress, stage, timesteps)
+        fold.train, config, settings, timesteps, seed, stage_progress(progress, stage, timesteps)
     )
     digest = export_policy(model, path, config)
     tested = [
@@ -192,18 +234,6 @@ def _cross_validate(
         "held_out": summarise(scores),
     }
     return scores, record
-
-
-def _steps(
-    progress: Callable[[str, int, int], None] | None, stage: str, total: int
-) -> Callable[[int], None] | None:
-    if progress is None:
-        return None
-
-    def report(done: int) -> None:
-        progress(stage, min(done, total), total)
-
-    return report
 
 
 def _config_record(config: EnvConfig) -> Mapping[str, Any]:

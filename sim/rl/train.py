@@ -124,6 +124,19 @@ class _Progress(BaseCallback):
         self.report(self.num_timesteps)
 
 
+def stage_progress(
+    progress: Callable[[str, int, int], None] | None, stage: str, total: int
+) -> Callable[[int], None] | None:
+    """`train_policy`'s step counter reported as `progress(stage, done, total)`."""
+    if progress is None:
+        return None
+
+    def report(done: int) -> None:
+        progress(stage, min(done, total), total)
+
+    return report
+
+
 def train_policy(
     drives: Sequence[Drive],
     config: EnvConfig,

@@ -591,6 +591,13 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option("--episode-s", type=click.FloatRange(min=1.0), default=300.0, show_default=True)
 @click.option(
+    "--reward-candidates",
+    default=None,
+    help='JSON list of reward weight changes, e.g. \'[{"fuel": 0.6}, {"accel": 0.3}]\': '
+    "each fold chooses between the defaults and these on its own training dates "
+    "(sim.rl.reward_selection) [default: the defaults, no selection].",
+)
+@click.option(
     "--out",
     "out_dir",
     type=click.Path(path_type=Path),
@@ -609,6 +616,7 @@ def train_command(
     gamma: float | None,
     humans: int,
     episode_s: float,
+    reward_candidates: str | None,
     out_dir: Path,
 ) -> None:
     """Train the RL controller with PPO (paper, ACC-Based Controller), cross-validated by date.
@@ -620,6 +628,7 @@ def train_command(
     try:
         from sim.rl.env import EnvConfig
         from sim.rl.pipeline import run_training
+        from sim.rl.reward_selection import RewardCandidateError, parse_reward_candidates
         from sim.rl.train import PpoSettings
     except ImportError as error:
         raise click.ClickException(
@@ -632,6 +641,10 @@ def train_command(
         )
     except (DriveError, ValueError) as error:
         raise click.ClickException(str(error)) from None
+    try:
+        candidates = parse_reward_candidates(reward_candidates) if reward_candidates else []
+    except RewardCandidateError as error:
+        raise click.BadParameter(str(error), param_hint="--reward-candidates") from None
     settings = PpoSettings(num_envs=num_envs)
     if gamma is not None:
         settings = replace(settings, gamma=gamma)
@@ -653,6 +666,7 @@ def train_command(
                 folds=folds,
                 out_dir=out_dir,
                 final=final,
+                reward_candidates=candidates,
                 command=shlex.join(["smoothfleet", *sys.argv[1:]]),
                 progress=advance,
             )

@@ -1,0 +1,180 @@
+"""Choosing the reward weights inside a fold: the candidates, the bounds, the choice, the run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from sim.drives import load_drive
+from sim.rl.env import RewardWeights
+from sim.rl.reward_selection import (
+    RewardCandidateError,
+    admissibility,
+    choose,
+    parse_reward_candidates,
+)
+from sim.rl.scores import DriveScore
+from tests.sim.rl.test_train import FREEFLOW
+from tests.sim.test_evaluate import write_drive
+from tests.support.servers import cli_env, run_cli
+
+
+def score(
+    kind: str,
+    fuel: float,
+    *,
+    throughput: float = 0.0,
+    speed: float = 0.0,
+    collisions: int = 0,
+    within: float = 1.0,
+    stop_and_go: bool = False,
+) -> DriveScore:
+    return DriveScore(
+        drive=f"2021-04-05-{kind}",
+        date="2021-04-05",
+        kind=kind,
+        stop_and_go=stop_and_go,
+        controller="rl_accel",
+        fuel_saving_pct=fuel,
+        throughput_change_pct=throughput,
+        network_speed_change_pct=speed,
+        accel_rms_change_pct=0.0,
+        collisions=collisions,
+        gap_within_share=within,
+    )
+
+
+def test_candidates_start_with_the_defaults_and_change_one_weight_each() -> None:
+    candidates = parse_reward_candidates('[{"fuel": 0.6}, {"accel": 0.3, "speed": 0}]')
+    assert candidates[0] == RewardWeights()
+    assert candidates[1] == RewardWeights(fuel=0.6)
+    assert candidates[2] == RewardWeights(accel=0.3, speed=0.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        ("[{fuel: 1}]", "not JSON"),
+        ("{}", "non-empty JSON list"),
+        ("[]", "non-empty JSON list"),
+        ('[{"fule": 0.6}]', "names fule: the weights are accel, collision, fuel, gap, speed"),
+        ('[{"fuel": -1}]', "fuel must be finite and >= 0, got -1"),
+        ('[{"fuel": "high"}]', "fuel must be a number, got 'high'"),
+        ('[{"fuel": 0.2}]', "repeats an earlier one"),
+        ("[1]", "must be an object of weights"),
+    ],
+)
+def test_a_bad_candidate_says_what_is_wrong(text: str, says: str) -> None:
+    with pytest.raises(RewardCandidateError, match=says):
+        parse_reward_candidates(text)
+
+
+def test_admissibility_names_every_broken_bound() -> None:
+    assert admissibility([score("shockwave", 3.0), score("freeflow", 0.0)]) == []
+    broken = admissibility(
+        [
+            score("shockwave", 3.0, throughput=-2.5, collisions=1),
+            score("freeflow", 0.0, speed=-1.5, within=0.97),
+        ]
+    )
+    assert broken == [
+        "shockwave throughput -2.50 % < -2 %",
+        "freeflow network speed -1.50 % < -1 %",
+        "1 collision(s)",
+        "within the envelope 98.5 % < 99 %",
+    ]
+    # the stop-and-go drives are a group of their own (a -2 % floor), freeflow's is -1 %
+    assert admissibility([score("shockwave", 3.0, speed=-1.5, stop_and_go=True)]) == []
+
+
+def test_the_admissible_candidate_saving_most_on_shockwave_drives_is_chosen() -> None:
+    defaults = [score("shockwave", 1.0), score("freeflow", 0.0)]
+    saves_more = [score("shockwave", 2.0), score("freeflow", -0.5)]
+    saves_most_by_falling_back = [score("shockwave", 9.0, throughput=-4.0), score("freeflow", 0.0)]
+    assert choose([defaults, saves_more, saves_most_by_falling_back]) == 1
+    # none admissible, or a tie: the first candidate (the defaults) stays
+    assert choose([saves_most_by_falling_back, saves_most_by_falling_back]) == 0
+    assert choose([defaults, list(defaults)]) == 0
+
+
+@pytest.mark.slow
+def test_cli_train_chooses_the_reward_inside_each_fold(shared_dir: Path, tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    fast = load_drive(shared_dir / FREEFLOW)
+    # four dates: each outer fold trains on two, which the selection splits one against one
+    for index, name in enumerate(("2021-03-09-a", "2021-03-15-a", "2021-04-05-a", "2021-04-19-a")):
+        write_drive(fast.slice(110.0 * index, 120.0), drives / f"{name}.csv")
+    out = tmp_path / "out"
+    result = run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "accel",
+        "--drives",
+        str(drives),
+        "--timesteps",
+        "512",
+        "--seed",
+        "5",
+        "--num-envs",
+        "4",
+        "--humans",
+        "4",
+        "--episode-s",
+        "60",
+        "--reward-candidates",
+        '[{"fuel": 0.6}]',
+        "--no-final",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=400,
+    )
+    assert result.returncode == 0, result.stderr
+    manifest = json.loads((out / "rl_accel.json").read_text())
+    assert manifest["reward_selection"]["candidates"] == [
+        {"accel": 0.1, "speed": 0.005, "fuel": 0.2, "gap": 1.0, "collision": 1.0},
+        {"accel": 0.1, "speed": 0.005, "fuel": 0.6, "gap": 1.0, "collision": 1.0},
+    ]
+    for fold in manifest["cross_validation"]["folds"]:
+        selection = fold["reward_selection"]
+        inner_dates = set()
+        for inner in selection["inner_folds"]:
+            assert not set(inner["train_dates"]) & set(inner["held_out_dates"])
+            inner_dates |= set(inner["train_dates"]) | set(inner["held_out_dates"])
+        # the selection read the fold's training dates and nothing of its held-out ones
+        assert inner_dates == set(fold["train_dates"])
+        for candidate in selection["candidates"]:
+            assert {row["date"] for row in candidate["drives"]} == inner_dates
+            assert candidate["admissible"] == (not candidate["broken"])
+    shipped = manifest["cross_validation"]["folds"][0]["reward_selection"]["chosen"]
+    assert manifest["environment"]["reward"] == shipped
+
+
+def test_cli_train_refuses_a_bad_candidate_before_training(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    write_drive(load_drive(shared_dir / FREEFLOW).slice(0.0, 120.0), drives / "2021-03-09-a.csv")
+    refused = run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "accel",
+        "--drives",
+        str(drives),
+        "--reward-candidates",
+        '[{"fule": 0.6}]',
+        "--out",
+        str(tmp_path / "out"),
+        env=cli_env(),
+    )
+    assert refused.returncode != 0
+    assert "--reward-candidates" in refused.stderr
+    assert "names fule" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    assert not (tmp_path / "out").exists()
