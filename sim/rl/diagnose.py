@@ -1,14 +1,16 @@
-"""Where an `acc` policy leaves the gap envelope, read only on one fold's training dates.
+"""Where an RL policy leaves the gap envelope and what sets its command, on training dates only.
 
-`python -m sim.rl.diagnose POLICY.npz [--fold 0]`: the policy (behind the paper's clip) as the
-one AV of a 24-human platoon on every drive of fold `--fold`'s training dates (`sim.folds`, two
-folds), `kernel_smooth` with the training set-up's planner. Per drive: the share of time within
-the envelope and why not (gap under its minimum, over its maximum, time gap under its minimum),
-the mean gap, the AV's and its leader's mean speed, how often the leader was lost (beyond the
-radar's range) and the AV's acceleration RMS beside the human driving in its place. A shipped
-policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at. They are
-also fold 1's training dates, so after a change this diagnosis shaped, fold 0's held-out dates
-are the only ones it has not read: report them apart from the all-drive figures.
+`python -m sim.rl.diagnose POLICY.npz [--actuation acc|accel] [--fold 0]`: the policy (behind
+the paper's clip on `acc`, under a_safe on `accel`) as the one AV of a 24-human platoon on every
+drive of fold `--fold`'s training dates (`sim.folds`, two folds), `kernel_smooth` with the
+training set-up's planner. Per drive: the share of time within the envelope and why not (gap
+under its minimum, over its maximum, time gap under its minimum), the mean gap, the AV's and its
+leader's mean speed, how often the leader was lost (beyond the radar's range) and the AV's
+acceleration RMS beside the human driving in its place. On `accel`, also how often the safety
+bound a_safe, not the network, set the command, and the network's requests (`SafetyBoundShare`).
+A shipped policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at.
+They are also fold 1's training dates, so after a change this diagnosis shaped, fold 0's
+held-out dates are the only ones it has not read: report them apart from the all-drive figures.
 """
 
 from __future__ import annotations
@@ -27,8 +29,11 @@ from sim.gaps import GapBounds
 from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, simulate_one_av
+from vehicle_agent.controllers import AccelCommand, Action, Controller, Observation
 
 HUMANS = 24  # behind the AV: 4 % penetration, as in training and the held-out scores
+# A command this far below the request was lowered by the bound, not rounded.
+BOUND_TOLERANCE_MPS2 = 1e-9
 
 
 @dataclass(frozen=True)
@@ -67,15 +72,70 @@ def diagnose_first_follower(run: PlatoonRun, bounds: GapBounds) -> GapDiagnosis:
     )
 
 
+@dataclass(frozen=True)
+class SafetyBoundShare:
+    """An `accel` policy's commands against its requests: how often a_safe decided."""
+
+    bound_share: float  # the command was below the network's request
+    request_mean_mps2: float
+    request_p5_mps2: float
+    request_p95_mps2: float
+
+
+def safety_bound_share(commands: Sequence[AccelCommand]) -> SafetyBoundShare:
+    """Share of commands a_safe lowered below the request, and the requests' spread."""
+    request = np.array([command.requested_accel_mps2 for command in commands])
+    given = np.array([command.accel_mps2 for command in commands])
+    if not np.all(np.isfinite(request)):
+        raise ValueError("every command must carry the policy's request")
+    p5, p95 = np.percentile(request, [5.0, 95.0])
+    return SafetyBoundShare(
+        bound_share=float(np.mean(given < request - BOUND_TOLERANCE_MPS2)),
+        request_mean_mps2=float(request.mean()),
+        request_p5_mps2=float(p5),
+        request_p95_mps2=float(p95),
+    )
+
+
+class RecordingController(Controller):
+    """Runs another controller unchanged and keeps every action it gave."""
+
+    name = "recording"
+
+    def __init__(self, inner: Controller) -> None:
+        super().__init__(inner.actuation)
+        self.inner = inner
+        self.actions: list[Action] = []
+
+    def step(self, observation: Observation) -> Action:
+        """The inner controller's action, recorded."""
+        action = self.inner.step(observation)
+        self.actions.append(action)
+        return action
+
+    def reset(self) -> None:
+        """The inner controller forgets its past."""
+        self.inner.reset()
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Print one line per training-date drive, then the shares over all their time."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("policy", type=Path)
+    parser.add_argument("--actuation", choices=("acc", "accel"), default="acc")
     parser.add_argument("--fold", type=int, default=0)
     args = parser.parse_args(argv)
     drives = load_drives(shared_data_dir() / "trajectories")
     fold = date_folds(drives, 2)[args.fold]
-    entry = ControllerUnderTest.policy_file("rl_acc", "acc", args.policy)
+    policy = ControllerUnderTest.policy_file(f"rl_{args.actuation}", args.actuation, args.policy)
+    recorder: list[RecordingController] = []
+
+    def recording() -> Controller:
+        recorder.append(RecordingController(policy.build()))
+        return recorder[-1]
+
+    entry = ControllerUnderTest(policy.label, policy.actuation, recording)
+    commands: list[AccelCommand] = []
     bounds = GapBounds()
     say = print  # noqa: T201 (a command-line report)
     say(f"fold {args.fold}'s training dates: {', '.join(fold.train_dates)}")
@@ -104,11 +164,26 @@ def main(argv: Sequence[str] | None = None) -> None:
             f" leader {run.speed_mps[:, 0].mean():.1f} m/s"
             f" | leader lost {av.leader_lost:.2f} in {av.leader_lost_episodes} episodes"
             f" | accel RMS {av.accel_rms_mps2:.2f} (human in its place {human.accel_rms_mps2:.2f})"
+            + _bound_text(recorder[-1].actions, commands)
         )
     under, over, short = outside / rows
     say(
         f"every drive's time: outside {under + over + short:.3f} = under {under:.3f}"
-        f" + over {over:.3f} + time gap {short:.4f}"
+        f" + over {over:.3f} + time gap {short:.4f}" + _bound_text(commands, [])
+    )
+
+
+def _bound_text(actions: Sequence[Action], kept: list[AccelCommand]) -> str:
+    """` | a_safe set ...` for acceleration commands (and keep them), else nothing."""
+    accel = [action for action in actions if isinstance(action, AccelCommand)]
+    if not accel:
+        return ""
+    kept.extend(accel)
+    seen = safety_bound_share(accel)
+    return (
+        f" | a_safe set the command {seen.bound_share:.3f} of the time; requests mean"
+        f" {seen.request_mean_mps2:+.2f} m/s^2 (5-95 %: {seen.request_p5_mps2:+.2f}"
+        f" to {seen.request_p95_mps2:+.2f})"
     )
 
 

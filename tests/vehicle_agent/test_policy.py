@@ -158,6 +158,9 @@ def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:
     )
     assert isinstance(close, AccelCommand)
     assert close.accel_mps2 == -3.0  # a_safe far below: the limiter's floor
+    # the network's own request is kept beside the command, for the diagnosis of the bound
+    assert free.requested_accel_mps2 == pytest.approx(1.5 * math.tanh(1.0))
+    assert close.requested_accel_mps2 > close.accel_mps2
 
 
 @given(

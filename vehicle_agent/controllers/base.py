@@ -70,6 +70,8 @@ class AccelCommand:
     """An acceleration request (actuation `accel`)."""
 
     accel_mps2: float
+    # What a trained policy asked for before its safety bound, kept for diagnosis and tests.
+    requested_accel_mps2: float = field(default=math.nan, compare=False)
 
 
 @dataclass(frozen=True, slots=True)

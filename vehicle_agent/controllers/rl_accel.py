@@ -95,4 +95,4 @@ class RlAccelController(Controller):
         command = bounded_request(request, observation.speed_mps, gap, rel, lead_accel)
         if not math.isfinite(command):
             raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite request")
-        return AccelCommand(command)
+        return AccelCommand(command, requested_accel_mps2=request)

@@ -1,13 +1,16 @@
-"""The envelope diagnosis of the first follower, on a run worked by hand."""
+"""The diagnosis of an RL policy: the envelope on a run worked by hand, the safety bound's share."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from contract.controllers import SimpleParams
 from sim.gaps import GapBounds
 from sim.platoon import PlatoonRun
-from sim.rl.diagnose import diagnose_first_follower
+from sim.rl.diagnose import RecordingController, diagnose_first_follower, safety_bound_share
+from vehicle_agent.controllers import AccelCommand, Observation
+from vehicle_agent.controllers.simple import SimpleController
 
 
 def test_each_moment_outside_is_counted_once_under_its_cause() -> None:
@@ -35,3 +38,29 @@ def test_each_moment_outside_is_counted_once_under_its_cause() -> None:
     assert seen.mean_gap_m == pytest.approx(63.0)
     # one change of 1 m/s in 0.1 s over 9 differences: sqrt(100 / 9)
     assert seen.accel_rms_mps2 == pytest.approx(np.sqrt(100.0 / 9.0))
+
+
+def test_the_safety_bound_share_counts_the_commands_a_safe_lowered() -> None:
+    commands = [
+        AccelCommand(-0.5, requested_accel_mps2=0.6),  # a_safe lowered it
+        AccelCommand(0.2, requested_accel_mps2=0.6),  # lowered
+        AccelCommand(0.6, requested_accel_mps2=0.6),  # the network's own
+        AccelCommand(-1.0, requested_accel_mps2=-1.0),  # the network's own braking
+    ]
+    seen = safety_bound_share(commands)
+    assert seen.bound_share == pytest.approx(0.5)
+    assert seen.request_mean_mps2 == pytest.approx(0.2)
+    assert seen.request_p5_mps2 == pytest.approx(np.percentile([0.6, 0.6, 0.6, -1.0], 5.0))
+    assert seen.request_p95_mps2 == pytest.approx(0.6)
+    with pytest.raises(ValueError, match="must carry the policy's request"):
+        safety_bound_share([AccelCommand(0.1)])
+
+
+def test_the_recording_controller_passes_actions_through_and_keeps_them() -> None:
+    inner = SimpleController("accel", SimpleParams())
+    recording = RecordingController(inner)
+    observation = Observation(time_s=0.0, speed_mps=20.0, target_speed_mps=22.0)
+    action = recording.step(observation)
+    assert action == inner.step(observation)
+    assert recording.actions == [action]
+    assert recording.actuation == "accel"
