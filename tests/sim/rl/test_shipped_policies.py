@@ -41,6 +41,24 @@ def test_the_manifest_describes_the_shipped_file(actuation: str) -> None:
     assert set(manifest["training_dates"]) < every_date
 
 
+def test_the_acc_policy_s_reward_was_chosen_inside_its_fold() -> None:
+    """rl_acc's manifest comes from `sim train --reward-candidates`: each fold chose its weights
+    on inner folds of its own training dates, and the shipped (fold 0's) policy trained with
+    fold 0's choice."""
+    manifest = json.loads((BUNDLED_POLICIES / "rl_acc.json").read_text())
+    assert "--reward-candidates" in manifest["command"]
+    assert manifest["shipped"] == "fold 0's policy"
+    for fold in manifest["cross_validation"]["folds"]:
+        selection = fold["reward_selection"]
+        read = set()
+        for inner in selection["inner_folds"]:
+            read |= set(inner["train_dates"]) | set(inner["held_out_dates"])
+        assert read == set(fold["train_dates"])
+        assert len(selection["candidates"]) == len(manifest["reward_selection"]["candidates"])
+    chosen = manifest["cross_validation"]["folds"][0]["reward_selection"]["chosen"]
+    assert manifest["environment"]["reward"] == chosen
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     ("actuation", "within_bounds"),
