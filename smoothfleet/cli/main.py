@@ -545,18 +545,25 @@ def _demo_on(
     url: str, current: Settings, duration: float | None, vehicles: int, *, rl: bool
 ) -> None:
     from app.migrate import upgrade
-    from app.policies.service import assign_shipped_policies
+    from app.policies.service import ManifestConflict, assign_shipped_policies
     from app.seed import seed
     from smoothfleet.cli.demo import DemoError, run_demo
 
     engine = make_sync_engine(url)
     upgrade(engine)
     admin_password = new_password()
-    with session_scope(engine) as session:
-        counts = seed(session)
-        save_user(session, DEMO_ADMIN, "admin", admin_password)
-        policies = assign_shipped_policies(session) if rl else {}
-    engine.dispose()
+    try:
+        with session_scope(engine) as session:
+            counts = seed(session)
+            save_user(session, DEMO_ADMIN, "admin", admin_password)
+            policies = assign_shipped_policies(session) if rl else {}
+    except ManifestConflict as error:
+        raise CliError(
+            f"demo --rl: {error}; the kept database holds it as an earlier run stored it, and a "
+            "stored policy's manifest never changes: run the demo without --keep"
+        ) from None
+    finally:
+        engine.dispose()
     public = current.public_url or f"http://{current.host}:{current.port}"
     console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
     console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")

@@ -15,6 +15,12 @@ import httpx
 import pytest
 from sqlalchemy import Engine, text
 
+from app.core.config import Settings
+from app.core.db import session_scope
+from app.policies.service import ManifestConflict, assign_shipped_policies
+from app.seed import seed
+from smoothfleet.cli.common import CliError
+from smoothfleet.cli.main import _demo_on
 from tests.support.fleet import drive, post_pings
 from tests.support.policies import acc_policy_bytes
 from tests.support.servers import cli_env, live_server, run_cli
@@ -355,3 +361,31 @@ def test_the_roster_names_only_policies_the_server_holds(seeded_database_url: st
     assert run_cli("policy", "upload", str(ACC_FILE), env=env).returncode == 0
     added = add({"policy_sha256": ACC_SHA256})
     assert added.returncode == 0, added.stderr
+
+
+def test_the_demo_refuses_to_store_a_shipped_policy_again_under_another_manifest(
+    database_url: str, engine: Engine
+) -> None:
+    """`smoothfleet demo --rl --keep` on a database that stored the shipped file with an earlier
+    manifest (the same bytes, another command) stops before the demo, saying what to do."""
+    with session_scope(engine) as session:
+        seed(session)
+        first = assign_shipped_policies(session)
+    with session_scope(engine) as session:
+        assert assign_shipped_policies(session) == first  # the same manifest: a no-op
+    earlier = manifest_of(ACC_FILE) | {"command": "smoothfleet sim train --actuation acc (earlier)"}
+    with engine.begin() as connection:
+        connection.execute(
+            text(
+                "UPDATE dim_policy SET manifest = CAST(:manifest AS jsonb)"
+                " WHERE policy_sha256 = :sha"
+            ),
+            {"manifest": json.dumps(earlier), "sha": ACC_SHA256},
+        )
+    with (
+        session_scope(engine) as session,
+        pytest.raises(ManifestConflict, match="another manifest"),
+    ):
+        assign_shipped_policies(session)
+    with pytest.raises(CliError, match="run the demo without --keep"):
+        _demo_on(database_url, Settings(), 1.0, 1, rl=True)
