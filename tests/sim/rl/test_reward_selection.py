@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -19,6 +20,23 @@ from sim.rl.scores import DriveScore
 from tests.sim.rl.test_train import FREEFLOW
 from tests.sim.test_evaluate import write_drive
 from tests.support.servers import cli_env, run_cli
+
+
+def train_accel(drives: Path, out: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    """`smoothfleet sim train --actuation accel` on the drives in `drives`, writing to `out`."""
+    return run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "accel",
+        "--drives",
+        str(drives),
+        "--out",
+        str(out),
+        *options,
+        env=cli_env(),
+        timeout=400,
+    )
 
 
 def score(
@@ -108,13 +126,9 @@ def test_cli_train_chooses_the_reward_inside_each_fold(shared_dir: Path, tmp_pat
     for index, name in enumerate(("2021-03-09-a", "2021-03-15-a", "2021-04-05-a", "2021-04-19-a")):
         write_drive(fast.slice(110.0 * index, 120.0), drives / f"{name}.csv")
     out = tmp_path / "out"
-    result = run_cli(
-        "sim",
-        "train",
-        "--actuation",
-        "accel",
-        "--drives",
-        str(drives),
+    result = train_accel(
+        drives,
+        out,
         "--timesteps",
         "512",
         "--seed",
@@ -128,10 +142,6 @@ def test_cli_train_chooses_the_reward_inside_each_fold(shared_dir: Path, tmp_pat
         "--reward-candidates",
         '[{"fuel": 0.6}]',
         "--no-final",
-        "--out",
-        str(out),
-        env=cli_env(),
-        timeout=400,
     )
     assert result.returncode == 0, result.stderr
     manifest = json.loads((out / "rl_accel.json").read_text())
@@ -160,19 +170,7 @@ def test_cli_train_refuses_a_bad_candidate_before_training(
     drives = tmp_path / "drives"
     drives.mkdir()
     write_drive(load_drive(shared_dir / FREEFLOW).slice(0.0, 120.0), drives / "2021-03-09-a.csv")
-    refused = run_cli(
-        "sim",
-        "train",
-        "--actuation",
-        "accel",
-        "--drives",
-        str(drives),
-        "--reward-candidates",
-        '[{"fule": 0.6}]',
-        "--out",
-        str(tmp_path / "out"),
-        env=cli_env(),
-    )
+    refused = train_accel(drives, tmp_path / "out", "--reward-candidates", '[{"fule": 0.6}]')
     assert refused.returncode != 0
     assert "--reward-candidates" in refused.stderr
     assert "names fule" in refused.stderr
