@@ -141,7 +141,6 @@ def test_cli_train_chooses_the_reward_inside_each_fold(shared_dir: Path, tmp_pat
         "60",
         "--reward-candidates",
         '[{"fuel": 0.6}]',
-        "--no-final",
     )
     assert result.returncode == 0, result.stderr
     manifest = json.loads((out / "rl_accel.json").read_text())
@@ -160,8 +159,16 @@ def test_cli_train_chooses_the_reward_inside_each_fold(shared_dir: Path, tmp_pat
         for candidate in selection["candidates"]:
             assert {row["date"] for row in candidate["drives"]} == inner_dates
             assert candidate["admissible"] == (not candidate["broken"])
-    shipped = manifest["cross_validation"]["folds"][0]["reward_selection"]["chosen"]
-    assert manifest["environment"]["reward"] == shipped
+    # the shipped policy trained on every date, with the weights chosen across all of them
+    final = manifest["reward_selection"]["final"]
+    assert {date for inner in final["inner_folds"] for date in inner["held_out_dates"]} == {
+        "2021-03-09",
+        "2021-03-15",
+        "2021-04-05",
+        "2021-04-19",
+    }
+    assert manifest["shipped"] == "trained on every date"
+    assert manifest["environment"]["reward"] == final["chosen"]
 
 
 def test_cli_train_refuses_a_bad_candidate_before_training(
