@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from sim.drives import Drive
-from sim.folds import date_folds
+from sim.folds import date_folds, drive_date
 from sim.rl.env import EnvConfig, RewardWeights
 from sim.rl.scores import GROUPS, ControllerUnderTest, DriveScore, score_drives
 from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
@@ -177,6 +177,12 @@ def select_reward(
     """
     if not candidates:
         raise ValueError("the selection needs at least one reward candidate")
+    dates = sorted({drive_date(drive) for drive in drives})
+    if len(dates) < INNER_FOLDS:
+        raise ValueError(
+            f"the reward selection of {stage} splits its training dates in {INNER_FOLDS} by date,"
+            f" but it trains on {len(dates)} ({', '.join(dates)}): give more dates or fewer folds"
+        )
     inner = date_folds(drives, INNER_FOLDS)
     name = f"rl_{config.actuation}"
     pooled: list[list[DriveScore]] = []

@@ -183,3 +183,18 @@ def test_cli_train_refuses_a_bad_candidate_before_training(
     assert "names fule" in refused.stderr
     assert "Traceback" not in refused.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_a_fold_with_one_training_date_cannot_choose(shared_dir: Path, tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    fast = load_drive(shared_dir / FREEFLOW)
+    for index, name in enumerate(("2021-03-09-a", "2021-04-05-a")):
+        write_drive(fast.slice(110.0 * index, 120.0), drives / f"{name}.csv")
+    refused = train_accel(drives, tmp_path / "out", "--reward-candidates", '[{"fuel": 0.6}]')
+    assert refused.returncode != 0
+    assert "the reward selection of fold 0 splits its training dates in 2 by date" in (
+        refused.stderr
+    )
+    assert "it trains on 1 (2021-04-05)" in refused.stderr
+    assert "Traceback" not in refused.stderr
