@@ -181,7 +181,7 @@ def select_reward(
     if len(dates) < INNER_FOLDS:
         raise ValueError(
             f"the reward selection of {stage} splits its training dates in {INNER_FOLDS} by date,"
-            f" but it trains on {len(dates)} ({', '.join(dates)}): give more dates or fewer folds"
+            f" but it trains on {len(dates)} ({', '.join(dates)}): it needs drives of more dates"
         )
     inner = date_folds(drives, INNER_FOLDS)
     name = f"rl_{config.actuation}"
