@@ -156,6 +156,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         human = diagnose_first_follower(
             simulate_platoon(drive, platoon_roles(HUMANS + 1, 0)), bounds
         )
+        accel = [action for action in recorder[-1].actions if isinstance(action, AccelCommand)]
+        commands.extend(accel)
         say(
             f"{drive.name[:19]} {drive.kind:9s} within {av.within:.2f}"
             f" | <{bounds.min_gap_m:g} m {av.under_min_gap:.2f}"
@@ -164,22 +166,20 @@ def main(argv: Sequence[str] | None = None) -> None:
             f" leader {run.speed_mps[:, 0].mean():.1f} m/s"
             f" | leader lost {av.leader_lost:.2f} in {av.leader_lost_episodes} episodes"
             f" | accel RMS {av.accel_rms_mps2:.2f} (human in its place {human.accel_rms_mps2:.2f})"
-            + _bound_text(recorder[-1].actions, commands)
+            + _bound_text(accel)
         )
     under, over, short = outside / rows
     say(
         f"every drive's time: outside {under + over + short:.3f} = under {under:.3f}"
-        f" + over {over:.3f} + time gap {short:.4f}" + _bound_text(commands, [])
+        f" + over {over:.3f} + time gap {short:.4f}" + _bound_text(commands)
     )
 
 
-def _bound_text(actions: Sequence[Action], kept: list[AccelCommand]) -> str:
-    """` | a_safe set ...` for acceleration commands (and keep them), else nothing."""
-    accel = [action for action in actions if isinstance(action, AccelCommand)]
-    if not accel:
+def _bound_text(commands: Sequence[AccelCommand]) -> str:
+    """` | a_safe set ...` for acceleration commands; nothing without any (an `acc` policy)."""
+    if not commands:
         return ""
-    kept.extend(accel)
-    seen = safety_bound_share(accel)
+    seen = safety_bound_share(commands)
     return (
         f" | a_safe set the command {seen.bound_share:.3f} of the time; requests mean"
         f" {seen.request_mean_mps2:+.2f} m/s^2 (5-95 %: {seen.request_p5_mps2:+.2f}"
