@@ -14,7 +14,6 @@ so a fold's held-out scores are of weights chosen without them.
 from __future__ import annotations
 
 import hashlib
-import itertools
 import json
 import platform
 import shutil
@@ -32,7 +31,13 @@ from sim.drives import Drive
 from sim.folds import Fold, date_folds, drive_date
 from sim.rl.env import EnvConfig, RewardWeights
 from sim.rl.reward_selection import select_reward
-from sim.rl.scores import ControllerUnderTest, DriveScore, score_drives, summarise
+from sim.rl.scores import (
+    ControllerUnderTest,
+    DriveScore,
+    score_drives,
+    scoring_progress,
+    summarise,
+)
 from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
 
 # What each RL controller is scored beside: the hand-designed controller of the same actuation
@@ -212,19 +217,12 @@ def _cross_validate(
         ControllerUnderTest.policy_file(name, actuation, path),
         REFERENCES[actuation],
     ]
-    total = len(fold.held_out) * len(tested)
-    counter = itertools.count(1)
-
-    def scored(label: str) -> None:
-        if progress is not None:
-            progress(f"{stage} held-out", next(counter), total)
-
     scores = score_drives(
         fold.held_out,
         tested,
         planner=config.planner,
         planner_params=config.planner_params,
-        progress=scored,
+        progress=scoring_progress(progress, f"{stage} held-out", len(fold.held_out) * len(tested)),
     )
     record = {
         "fold": fold.index,

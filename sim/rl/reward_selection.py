@@ -18,7 +18,6 @@ candidate (the weights used until the data shows better ones).
 
 from __future__ import annotations
 
-import itertools
 import json
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -30,7 +29,7 @@ import numpy as np
 from sim.drives import Drive
 from sim.folds import date_folds, drive_date
 from sim.rl.env import EnvConfig, RewardWeights
-from sim.rl.scores import GROUPS, ControllerUnderTest, DriveScore, score_drives
+from sim.rl.scores import GROUPS, ControllerUnderTest, DriveScore, score_drives, scoring_progress
 from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
 
 INNER_FOLDS = 2
@@ -196,7 +195,6 @@ def select_reward(
             )
             path = out_dir / f"{name}_reward{index}_inner{fold.index}.npz"
             export_policy(model, path, config)
-            counter = itertools.count(1)
             scores.extend(
                 score_drives(
                     fold.held_out,
@@ -204,39 +202,26 @@ def select_reward(
                     planner=config.planner,
                     planner_params=config.planner_params,
                     bounds=config.gap_bounds,
-                    progress=_counted(progress, f"{label} held-out", counter, len(fold.held_out)),
+                    progress=scoring_progress(progress, f"{label} held-out", len(fold.held_out)),
                 )
             )
         pooled.append(scores)
     chosen = choose(pooled)
-    records = [
-        {
-            "weights": asdict(weights),
-            "admissible": not admissibility(scores),
-            "broken": admissibility(scores),
-            f"{CHOSEN_BY}_fuel_saving_pct": ranking_fuel_saving_pct(scores),
-            "mean_within_share": float(np.mean([score.gap_within_share for score in scores])),
-            "drives": [score.as_dict() for score in scores],
-        }
-        for weights, scores in zip(candidates, pooled, strict=True)
-    ]
+    records = []
+    for weights, scores in zip(candidates, pooled, strict=True):
+        broken = admissibility(scores)
+        records.append(
+            {
+                "weights": asdict(weights),
+                "admissible": not broken,
+                "broken": broken,
+                f"{CHOSEN_BY}_fuel_saving_pct": ranking_fuel_saving_pct(scores),
+                "mean_within_share": float(np.mean([score.gap_within_share for score in scores])),
+                "drives": [score.as_dict() for score in scores],
+            }
+        )
     folds = [
         {"fold": fold.index, "train_dates": fold.train_dates, "held_out_dates": fold.held_out_dates}
         for fold in inner
     ]
     return RewardSelection(candidates[chosen], chosen, folds, records)
-
-
-def _counted(
-    progress: Callable[[str, int, int], None] | None,
-    stage: str,
-    counter: itertools.count[int],
-    total: int,
-) -> Callable[[str], None] | None:
-    if progress is None:
-        return None
-
-    def scored(label: str) -> None:
-        progress(stage, next(counter), total)
-
-    return scored

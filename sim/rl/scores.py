@@ -10,6 +10,7 @@ keeps the gap envelope (`sim.gaps`). Groups: the stop-and-go drives (2nd speed p
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -116,6 +117,20 @@ def simulate_one_av(
         [policy],
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
     )
+
+
+def scoring_progress(
+    progress: Callable[[str, int, int], None] | None, stage: str, total: int
+) -> Callable[[str], None] | None:
+    """`score_drives`' per-run callback reported as `progress(stage, runs done, total)`."""
+    if progress is None:
+        return None
+    counter = itertools.count(1)
+
+    def scored(label: str) -> None:
+        progress(stage, next(counter), total)
+
+    return scored
 
 
 def score_drives(
