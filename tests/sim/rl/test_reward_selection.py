@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
 from pathlib import Path
 
 import pytest
@@ -17,26 +16,8 @@ from sim.rl.reward_selection import (
     parse_reward_candidates,
 )
 from sim.rl.scores import DriveScore
-from tests.sim.rl.test_train import FREEFLOW
+from tests.sim.rl.test_train import FREEFLOW, train_accel
 from tests.sim.test_evaluate import write_drive
-from tests.support.servers import cli_env, run_cli
-
-
-def train_accel(drives: Path, out: Path, *options: str) -> subprocess.CompletedProcess[str]:
-    """`smoothfleet sim train --actuation accel` on the drives in `drives`, writing to `out`."""
-    return run_cli(
-        "sim",
-        "train",
-        "--actuation",
-        "accel",
-        "--drives",
-        str(drives),
-        "--out",
-        str(out),
-        *options,
-        env=cli_env(),
-        timeout=400,
-    )
 
 
 def score(

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,23 @@ from vehicle_agent.controllers.policy import load_policy
 STOP_AND_GO = "data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
 FREEFLOW = "data/trajectories/2021-03-09-13-35-04_masterArray_0_4633.csv"
 TINY = PpoSettings(num_envs=4, n_steps=128, batch_size=256, n_epochs=2)
+
+
+def train_accel(drives: Path, out: Path, *options: str) -> subprocess.CompletedProcess[str]:
+    """`smoothfleet sim train --actuation accel` on the drives in `drives`, writing to `out`."""
+    return run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "accel",
+        "--drives",
+        str(drives),
+        "--out",
+        str(out),
+        *options,
+        env=cli_env(),
+        timeout=400,
+    )
 
 
 def stop_and_go(shared_dir: Path) -> Drive:
@@ -64,13 +82,9 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     ):
         write_drive(drive, drives / f"{name}.csv")
     out = tmp_path / "out"
-    result = run_cli(
-        "sim",
-        "train",
-        "--actuation",
-        "accel",
-        "--drives",
-        str(drives),
+    result = train_accel(
+        drives,
+        out,
         "--timesteps",
         "1024",
         "--seed",
@@ -84,10 +98,6 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         "--episode-s",
         "60",
         "--no-final",
-        "--out",
-        str(out),
-        env=cli_env(),
-        timeout=280,
     )
     assert result.returncode == 0, result.stderr
     manifest = json.loads((out / "rl_accel.json").read_text())
