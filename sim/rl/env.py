@@ -49,15 +49,19 @@ from vehicle_agent.controllers import clip_speed_setting
 from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 from vehicle_agent.controllers.policy import (
+    ACCEL_ACTION_SIZES,
     ACTION_SIZES,
     FEATURE_SIZES,
     PLAN_LOOKAHEAD_M,
+    AccelAction,
     PolicyActuation,
     acc_features,
     accel_features,
+    action_size,
     requested_accel_mps2,
     requested_gap_setting,
     requested_speed_mph,
+    requested_time_margin_s,
 )
 from vehicle_agent.controllers.rl_accel import SAFETY, bounded_request
 
@@ -93,9 +97,11 @@ class RewardWeights:
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """One training set-up: actuation, platoon, episode window, planner, reward, gap bounds."""
+    """One training set-up: actuation (and how an `accel` action is read), platoon, episode
+    window, planner, reward, gap bounds."""
 
     actuation: PolicyActuation
+    accel_action: AccelAction = "request"
     humans: int = 10
     episode_s: float = 300.0
     planner: str = "kernel_smooth"
@@ -107,6 +113,14 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if self.actuation not in ACTION_SIZES:
             raise ValueError(f"actuation {self.actuation!r} is not one of acc, accel")
+        if self.accel_action not in ACCEL_ACTION_SIZES:
+            raise ValueError(
+                f"accel action {self.accel_action!r} is not one of {', '.join(ACCEL_ACTION_SIZES)}"
+            )
+        if self.actuation == "acc" and self.accel_action != "request":
+            raise ValueError(
+                f"the accel action {self.accel_action!r} is for accel policies, not acc"
+            )
         if self.humans < 1:
             raise ValueError(
                 f"the platoon needs at least one human behind the AV, got {self.humans}"
@@ -151,7 +165,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.planner_params = PlannerParams.parse(dict(config.planner_params))
         size = FEATURE_SIZES[config.actuation]
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float64)
-        self.action_size = ACTION_SIZES[config.actuation]
+        self.action_size = action_size(config.actuation, config.accel_action)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.action_size,), np.float64)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
@@ -259,6 +273,11 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         lead_speed = self.speed[:, 0]
         if self.config.actuation == "accel":
             request = requested_accel_mps2(actions[:, 0])
+            margin = (
+                requested_time_margin_s(actions[:, 1])
+                if self.config.accel_action == "request_time_margin"
+                else np.zeros(self.num_envs)
+            )
             accel = np.empty(self.num_envs)
             for env in range(self.num_envs):
                 measured = bool(gap[env] <= RADAR_RANGE_M)
@@ -276,6 +295,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                     float(gap[env]) if measured else None,
                     rel if measured else None,
                     lead_accel,
+                    float(margin[env]),
                 )
             return accel
         # acc: v_action -> the paper's clip -> buttons (gap first) -> the stock ACC

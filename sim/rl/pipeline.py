@@ -235,7 +235,9 @@ def _cross_validate(
 
 
 def _config_record(config: EnvConfig) -> Mapping[str, Any]:
+    action = {"accel_action": config.accel_action} if config.actuation == "accel" else {}
     return {
+        **action,
         "humans": config.humans,
         "episode_s": config.episode_s,
         "planner": config.planner,

@@ -576,6 +576,14 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option("--num-envs", type=click.IntRange(1, 256), default=16, show_default=True)
 @click.option(
+    "--accel-action",
+    type=click.Choice(["request", "request_time_margin"]),
+    default="request",
+    show_default=True,
+    help="accel policies: an acceleration request under a_safe, or a request and a time "
+    "margin (0-1.5 s) a_safe adds to its gap.",
+)
+@click.option(
     "--gamma",
     type=click.FloatRange(0.0, 1.0, max_open=True),
     default=None,
@@ -613,6 +621,7 @@ def train_command(
     folds: int,
     final: bool,
     num_envs: int,
+    accel_action: str,
     gamma: float | None,
     humans: int,
     episode_s: float,
@@ -637,7 +646,10 @@ def train_command(
     try:
         drives = load_drives(drives_dir)
         config = EnvConfig(
-            "acc" if actuation == "acc" else "accel", humans=humans, episode_s=episode_s
+            "acc" if actuation == "acc" else "accel",
+            "request_time_margin" if accel_action == "request_time_margin" else "request",
+            humans=humans,
+            episode_s=episode_s,
         )
     except (DriveError, ValueError) as error:
         raise click.ClickException(str(error)) from None

@@ -92,7 +92,7 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
     with pytest.raises(PolicyFileError, match="a policy for actuation acc, not accel"):
         load_policy(acc, "accel")
     wrong_outputs = two_layer_policy(tmp_path, "accel", 2)
-    with pytest.raises(PolicyFileError, match="2 outputs, an accel policy has 1"):
+    with pytest.raises(PolicyFileError, match="2 outputs, an accel policy with the .request. action has 1"):
         load_policy(wrong_outputs, "accel")
     with pytest.raises(PolicyFileError, match="No such file"):
         load_policy(tmp_path / "missing.npz", "acc")

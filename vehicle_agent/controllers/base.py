@@ -72,6 +72,8 @@ class AccelCommand:
     accel_mps2: float
     # What a trained policy asked for before its safety bound, kept for diagnosis and tests.
     requested_accel_mps2: float = field(default=math.nan, compare=False)
+    # The time margin (s) such a policy added to its safety bound's gap; 0 for a plain request.
+    time_margin_s: float = field(default=0.0, compare=False)
 
 
 @dataclass(frozen=True, slots=True)

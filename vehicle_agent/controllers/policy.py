@@ -22,8 +22,12 @@ Action, in [-1, 1] per component (PPO's Gaussian, clipped):
   trained for another is refused: those without `speed_action` (before 2026-12-01) read
   component 0 as a change from the last second's mean speed, and `around_plan` files were trained
   free to fall back out of radar range, which the rule now forbids.
-- `accel`: an acceleration request, 3 m/s^2 of braking at -1 and 1.5 m/s^2 at +1 (the agent's
-  AccelLimiter bounds), 0 at 0.
+- `accel`: component 0 is an acceleration request, 3 m/s^2 of braking at -1 and 1.5 m/s^2 at +1
+  (the agent's AccelLimiter bounds), 0 at 0. Files that record `accel_action` =
+  `request_time_margin` have a component 1 too: a time margin h = 0.75 (1 + a) s, in [0, 1.5] s,
+  that the safety bound a_safe adds to the gap it keeps (`rl_accel.bounded_request`), so the
+  network can move the bound it would otherwise only ride; files without `accel_action` (the
+  `request` action) have component 0 alone. The car reads both.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ from vehicle_agent.controllers.acc_clip import MAX_SETTING_MPH
 
 FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
+AccelAction = Literal["request", "request_time_margin"]
 
 # Speeds enter the network divided by this (m/s; the 73 mph ceiling is 32.6 m/s).
 SPEED_SCALE_MPS = 30.0
@@ -64,9 +69,15 @@ ACCEL_ACTION_MAX_MPS2 = 1.5
 SPEED_AROUND_PLAN_MPH = 20.0
 ACC_SPEED_ACTION = "around_plan_closing_lost_lead"
 
+# `accel` time margin (s) at action component 1 = -1 and +1: 0 keeps a_safe's own gap.
+TIME_MARGIN_MIN_S = 0.0
+TIME_MARGIN_MAX_S = 1.5
+
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
 ACTION_SIZES: dict[PolicyActuation, int] = {"acc": 2, "accel": 1}
+# Outputs of an `accel` policy for each of its actions; `request` is the one of ACTION_SIZES.
+ACCEL_ACTION_SIZES: dict[AccelAction, int] = {"request": 1, "request_time_margin": 2}
 FEATURE_SIZES: dict[PolicyActuation, int] = {"acc": ACC_FEATURES, "accel": ACCEL_FEATURES}
 
 
@@ -165,18 +176,36 @@ def requested_accel_mps2(action: ArrayLike) -> FloatArray:
     return accel
 
 
+def requested_time_margin_s(action: ArrayLike) -> FloatArray:
+    """The time margin a_safe adds to its gap: -1 -> 0 s, 0 -> 0.75 s, +1 -> 1.5 s."""
+    value = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    margin: FloatArray = TIME_MARGIN_MIN_S + 0.5 * (value + 1.0) * (
+        TIME_MARGIN_MAX_S - TIME_MARGIN_MIN_S
+    )
+    return margin
+
+
+def action_size(actuation: PolicyActuation, accel_action: AccelAction) -> int:
+    """How many outputs a policy of `actuation` (and, for `accel`, `accel_action`) has."""
+    if actuation == "accel":
+        return ACCEL_ACTION_SIZES[accel_action]
+    return ACTION_SIZES[actuation]
+
+
 @dataclass(frozen=True)
 class PolicyNetwork:
     """A tanh MLP's deterministic action: mean = W_k(... tanh(W_1 x + b_1) ...) + b_k, clipped.
 
     `weights[i]` has shape (inputs, outputs), so a batch of observations (rows) multiplies on
-    the left. `sha256` is the file's digest: what the car reports it runs.
+    the left. `sha256` is the file's digest: what the car reports it runs. `accel_action` says
+    how an `accel` policy's outputs are read (`request` for `acc` policies, which have one way).
     """
 
     actuation: PolicyActuation
     weights: tuple[FloatArray, ...]
     biases: tuple[FloatArray, ...]
     sha256: str
+    accel_action: AccelAction = "request"
 
     def action(self, features: FloatArray) -> FloatArray:
         """The mean action for one observation (1-D) or a batch (rows), clipped to [-1, 1]."""
@@ -195,12 +224,18 @@ def save_policy(
     actuation: PolicyActuation,
     weights: list[FloatArray],
     biases: list[FloatArray],
+    accel_action: AccelAction = "request",
 ) -> str:
     """Write a policy `.npz` (layer_i_weight / layer_i_bias, the actuation and, for `acc`, the
-    speed action it was trained with); its sha256."""
+    speed action it was trained with, for `accel` any action but the plain request); its sha256.
+
+    A `request` file records no `accel_action`, so it has the bytes (and sha256) it had before
+    the time margin existed."""
     arrays: dict[str, FloatArray | NDArray[np.str_]] = {"actuation": np.array(actuation)}
     if actuation == "acc":
         arrays["speed_action"] = np.array(ACC_SPEED_ACTION)
+    elif accel_action != "request":
+        arrays["accel_action"] = np.array(accel_action)
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         arrays[f"layer_{index}_weight"] = np.asarray(weight, dtype=np.float64)
         arrays[f"layer_{index}_bias"] = np.asarray(bias, dtype=np.float64)
@@ -228,6 +263,9 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
             speed_action = str(archive["speed_action"]) if "speed_action" in archive.files else None
+            stored_accel_action = (
+                str(archive["accel_action"]) if "accel_action" in archive.files else "request"
+            )
             layers = sum(1 for name in archive.files if name.endswith("_weight"))
             weights = tuple(
                 np.asarray(archive[f"layer_{i}_weight"], dtype=np.float64) for i in range(layers)
@@ -251,6 +289,17 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             f"{SPEED_AROUND_PLAN_MPH:.0f} mph, the clip's ceiling with no leader detected): "
             "retrain it"
         )
+    accel_action: AccelAction
+    if stored_accel_action == "request":
+        accel_action = "request"
+    elif actuation == "accel" and stored_accel_action == "request_time_margin":
+        accel_action = "request_time_margin"
+    else:
+        raise PolicyFileError(
+            f"{label}: an {actuation} policy trained for the accel action "
+            f"{stored_accel_action!r}, which this agent does not read "
+            f"(accel policies: one of {', '.join(ACCEL_ACTION_SIZES)}; acc policies: none)"
+        )
     if not weights:
         raise PolicyFileError(f"{label}: no layers")
     inputs = FEATURE_SIZES[actuation]
@@ -263,8 +312,12 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
             raise PolicyFileError(f"{label}: layer {index} holds non-finite weights")
         inputs = weight.shape[1]
-    if inputs != ACTION_SIZES[actuation]:
+    outputs = action_size(actuation, accel_action)
+    if inputs != outputs:
         raise PolicyFileError(
-            f"{label}: {inputs} outputs, an {actuation} policy has {ACTION_SIZES[actuation]}"
+            f"{label}: {inputs} outputs, an {actuation} policy with the {accel_action!r} action "
+            f"has {outputs}"
         )
-    return PolicyNetwork(actuation, weights, biases, hashlib.sha256(content).hexdigest())
+    return PolicyNetwork(
+        actuation, weights, biases, hashlib.sha256(content).hexdigest(), accel_action
+    )

@@ -5,6 +5,9 @@ The policy reads v, v_s (and the plan ahead), the minicar flag and, as the RAV4 
 request is bounded by MicroAccel's safety term a_safe (paper eq. a_safe: never faster than the
 speed from which braking at a_min stops behind a leader braking at a_l,min), the same bound the
 training environment applies, then by the agent's limiter and safety layer like every request.
+A policy trained with the `request_time_margin` action also sets a time margin the bound adds
+to its gap (`policy.requested_time_margin_s`): the network moves the bound, not only its
+request under it, and the bound with no margin still caps the command.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_MIN_MPS2,
     accel_features,
     requested_accel_mps2,
+    requested_time_margin_s,
 )
 from vehicle_agent.controllers.rl_acc import load_assigned_policy, plan_ahead_mps
 
@@ -29,27 +33,42 @@ from vehicle_agent.controllers.rl_acc import load_assigned_policy, plan_ahead_mp
 SAFETY = MicroAccelParams(standstill_gap_m=8.0)
 
 
+def _safe_accel(speed_mps: float, gap_m: float, rel_speed_mps: float, lead_accel: float) -> float:
+    return safety_term(
+        speed_mps,
+        gap_m,
+        rel_speed_mps,
+        lead_accel,
+        k=SAFETY.k,
+        standstill_gap_m=SAFETY.standstill_gap_m,
+        min_accel_mps2=SAFETY.min_accel_mps2,
+        lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
+    )
+
+
 def bounded_request(
     request_mps2: float,
     speed_mps: float,
     gap_m: float | None,
     rel_speed_mps: float | None,
     lead_accel_mps2: float,
+    time_margin_s: float = 0.0,
 ) -> float:
-    """min(request, a_safe) within the action bounds; without a measured leader, the request."""
+    """min(request, a_safe(gap - h v), a_safe(gap)) within the action bounds, h the time margin;
+    without a measured leader, the request.
+
+    The margin's term is a_safe seen from h v further back: the speed it allows falls as the
+    margin grows, and the unmargined term keeps the command under the bound a policy without a
+    margin has, whatever the margin's bound does in its rate term.
+    """
     command = request_mps2
     if gap_m is not None and rel_speed_mps is not None:
-        safe = safety_term(
-            speed_mps,
-            gap_m,
-            rel_speed_mps,
-            lead_accel_mps2,
-            k=SAFETY.k,
-            standstill_gap_m=SAFETY.standstill_gap_m,
-            min_accel_mps2=SAFETY.min_accel_mps2,
-            lead_min_accel_mps2=SAFETY.lead_min_accel_mps2,
-        )
-        command = min(command, safe)
+        command = min(command, _safe_accel(speed_mps, gap_m, rel_speed_mps, lead_accel_mps2))
+        if time_margin_s > 0.0:
+            margined_gap = gap_m - time_margin_s * speed_mps
+            command = min(
+                command, _safe_accel(speed_mps, margined_gap, rel_speed_mps, lead_accel_mps2)
+            )
     return min(max(command, ACCEL_ACTION_MIN_MPS2), ACCEL_ACTION_MAX_MPS2)
 
 
@@ -73,7 +92,7 @@ class RlAccelController(Controller):
         self.lead_accel.reset()
 
     def step(self, observation: Observation) -> AccelCommand:
-        """Features -> network -> request -> min with a_safe."""
+        """Features -> network -> request (and margin) -> min with a_safe."""
         gap: float | None = None
         rel: float | None = None
         lead_accel = 0.0
@@ -91,8 +110,12 @@ class RlAccelController(Controller):
             math.inf if gap is None else gap,
             0.0 if rel is None else rel,
         )
-        request = float(requested_accel_mps2(self.network.action(features)[0]))
-        command = bounded_request(request, observation.speed_mps, gap, rel, lead_accel)
+        action = self.network.action(features)
+        request = float(requested_accel_mps2(action[0]))
+        margin = 0.0
+        if self.network.accel_action == "request_time_margin":
+            margin = float(requested_time_margin_s(action[1]))
+        command = bounded_request(request, observation.speed_mps, gap, rel, lead_accel, margin)
         if not math.isfinite(command):
             raise ValueError(f"policy {self.network.sha256[:12]} gave a non-finite request")
-        return AccelCommand(command, requested_accel_mps2=request)
+        return AccelCommand(command, requested_accel_mps2=request, time_margin_s=margin)
