@@ -21,6 +21,7 @@ from vehicle_agent.controllers.policy import (
     requested_accel_mps2,
     requested_gap_setting,
     requested_speed_mph,
+    requested_time_margin_s,
     save_policy,
 )
 from vehicle_agent.controllers.rl_acc import RlAccController
@@ -64,16 +65,26 @@ def test_accel_action_maps_to_the_limiter_range_with_zero_at_zero() -> None:
     )
 
 
-def two_layer_policy(tmp_path: Path, actuation: str, outputs: int) -> Path:
+def test_time_margin_maps_minus_one_to_none_and_plus_one_to_one_and_a_half_seconds() -> None:
+    np.testing.assert_allclose(
+        requested_time_margin_s(np.array([-3.0, -1.0, 0.0, 0.5, 1.0, 4.0])),
+        [0.0, 0.0, 0.75, 1.125, 1.5, 1.5],
+    )
+
+
+def two_layer_policy(
+    tmp_path: Path, actuation: str, outputs: int, accel_action: str = "request"
+) -> Path:
     """Hidden layer: 1 unit reading v only (weight 2); head: `outputs` copies of it."""
     hidden_weight = np.zeros((6, 1))
     hidden_weight[0, 0] = 2.0
-    path = tmp_path / f"{actuation}.npz"
+    path = tmp_path / f"{actuation}-{accel_action}.npz"
     save_policy(
         path,
         "acc" if actuation == "acc" else "accel",
         [hidden_weight, np.ones((1, outputs))],
         [np.array([-1.0]), np.zeros(outputs)],
+        "request_time_margin" if accel_action == "request_time_margin" else "request",
     )
     return path
 
@@ -92,7 +103,9 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
     with pytest.raises(PolicyFileError, match="a policy for actuation acc, not accel"):
         load_policy(acc, "accel")
     wrong_outputs = two_layer_policy(tmp_path, "accel", 2)
-    with pytest.raises(PolicyFileError, match="2 outputs, an accel policy with the .request. action has 1"):
+    with pytest.raises(
+        PolicyFileError, match="2 outputs, an accel policy with the .request. action has 1"
+    ):
         load_policy(wrong_outputs, "accel")
     with pytest.raises(PolicyFileError, match="No such file"):
         load_policy(tmp_path / "missing.npz", "acc")
@@ -108,6 +121,29 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
     save_policy(narrow, "accel", [np.zeros((5, 1))], [np.zeros(1)])
     with pytest.raises(PolicyFileError, match=r"layer 0 has shape \(5, 1\)"):
         load_policy(narrow, "accel")
+
+
+def test_accel_files_say_which_action_they_were_trained_for(tmp_path: Path) -> None:
+    """A plain request file records no action, so its bytes are those written before the time
+    margin existed; a margin file records it and needs its second output; an action this agent
+    does not know, or one recorded on an acc file, is refused, saying which."""
+    plain = two_layer_policy(tmp_path, "accel", 1)
+    with np.load(plain) as archive:
+        assert "accel_action" not in archive.files
+    assert load_policy(plain, "accel").accel_action == "request"
+    margin = two_layer_policy(tmp_path, "accel", 2, "request_time_margin")
+    assert load_policy(margin, "accel").accel_action == "request_time_margin"
+    short = tmp_path / "short.npz"
+    save_policy(short, "accel", [np.zeros((6, 1))], [np.zeros(1)], "request_time_margin")
+    with pytest.raises(PolicyFileError, match="1 outputs, .* 'request_time_margin' action has 2"):
+        load_policy(short, "accel")
+    for actuation, action in (("accel", "time_gap_only"), ("acc", "request_time_margin")):
+        arrays = dict(np.load(two_layer_policy(tmp_path, actuation, 2)))
+        arrays["accel_action"] = np.array(action)
+        odd = tmp_path / f"odd-{actuation}.npz"
+        np.savez(odd, **arrays)
+        with pytest.raises(PolicyFileError, match=f"accel action '{action}', which this agent"):
+            load_policy(odd, actuation)  # type: ignore[arg-type]
 
 
 def test_rl_acc_requests_the_networks_setting_around_the_plans_target(tmp_path: Path) -> None:
@@ -163,6 +199,42 @@ def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:
     assert close.requested_accel_mps2 > close.accel_mps2
 
 
+def test_a_time_margin_bounds_the_request_by_a_safe_from_further_back() -> None:
+    """v = 20 m/s behind a leader at the same speed 60 m ahead (lead accel 0): room = 60 - 8 +
+    20^2 / (2 x 5) = 92 m, v_safe = sqrt(2 x 3 x 92) = 23.49 m/s, a_safe = 0.5 (23.49 - 20) =
+    +1.75 m/s^2, above a +1 request. A 1 s margin reads the gap as 40 m: room 72 m, v_safe =
+    sqrt(432) = 20.78 m/s, a_safe = 0.5 x 0.78 = +0.39 m/s^2, which the command becomes."""
+    assert bounded_request(1.0, 20.0, 60.0, 0.0, 0.0) == pytest.approx(1.0)
+    assert bounded_request(1.0, 20.0, 60.0, 0.0, 0.0, 0.0) == pytest.approx(1.0)
+    expected = 0.5 * (math.sqrt(432.0) - 20.0)
+    assert bounded_request(1.0, 20.0, 60.0, 0.0, 0.0, 1.0) == pytest.approx(expected)
+    assert expected == pytest.approx(0.392, abs=1e-3)
+    # no leader measured: nothing to keep a margin from
+    assert bounded_request(1.0, 20.0, None, None, 0.0, 1.5) == 1.0
+
+
+def test_rl_accel_with_a_time_margin_policy_adds_its_margin_to_the_bound(tmp_path: Path) -> None:
+    path = two_layer_policy(tmp_path, "accel", 2, "request_time_margin")
+    controller = RlAccelController("accel", RlParams(policy=str(path)))
+    # v = 15 m/s -> feature 0.5 -> both outputs 0: request 0 m/s^2, margin 0.75 s (11.25 m)
+    seen = Observation(
+        time_s=0.0,
+        speed_mps=15.0,
+        target_speed_mps=15.0,
+        position_m=0.0,
+        target=TargetProfile(np.array([0.0, 1000.0]), np.array([15.0, 15.0])),
+        lead_present=True,
+        lead_distance_m=20.0,
+        lead_rel_speed_mps=0.0,
+    )
+    command = controller.step(seen)
+    assert isinstance(command, AccelCommand)
+    assert command.time_margin_s == pytest.approx(0.75)
+    assert command.requested_accel_mps2 == pytest.approx(0.0)
+    assert command.accel_mps2 == pytest.approx(bounded_request(0.0, 15.0, 20.0, 0.0, 0.0, 0.75))
+    assert command.accel_mps2 < bounded_request(0.0, 15.0, 20.0, 0.0, 0.0) - 0.1
+
+
 @given(
     request=st.floats(-10, 10),
     speed=st.floats(0, 40),
@@ -175,3 +247,18 @@ def test_bounded_request_stays_within_the_limiter_range(
     command = bounded_request(request, speed, gap, rel, 0.0)
     assert -3.0 <= command <= 1.5
     assert command <= max(request, -3.0)
+
+
+@given(
+    request=st.floats(-3, 1.5),
+    speed=st.floats(0, 40),
+    gap=st.floats(0, 200),
+    rel=st.floats(-20, 20),
+    margin=st.floats(0, 1.5),
+)
+def test_a_time_margin_never_loosens_the_bound(
+    request: float, speed: float, gap: float, rel: float, margin: float
+) -> None:
+    assert bounded_request(request, speed, gap, rel, 0.0, margin) <= bounded_request(
+        request, speed, gap, rel, 0.0
+    )

@@ -168,9 +168,24 @@ def test_an_acc_av_that_lost_its_leader_closes_up_whatever_the_policy_asks() -> 
     assert seen.cars[0].acc.set_speed_mph < 45
 
 
+def test_a_time_margin_action_holds_the_av_further_back() -> None:
+    """Two outputs for the margin action; at 20 m/s 40 m behind a steady leader, a_safe alone
+    lets a +1.5 m/s^2 request close in, the 1.5 s margin (30 m) brakes."""
+    config = EnvConfig("accel", "request_time_margin", humans=3, episode_s=60.0, reward=ONLY_GAP)
+    env = PlatoonVecEnv([STEADY], 2, config)
+    env.reset(seed=1)
+    assert env.action_space.shape == (2, 2)
+    place_av(env, 40.0)
+    env.step(np.array([[1.0, -1.0], [1.0, 1.0]]))
+    assert env.speed[0, 1] > 20.0
+    assert env.speed[1, 1] < 20.0
+
+
 def test_configuration_errors_say_what_is_wrong() -> None:
     with pytest.raises(ValueError, match="at least one human"):
         EnvConfig("acc", humans=0)
+    with pytest.raises(ValueError, match="for accel policies, not acc"):
+        EnvConfig("acc", "request_time_margin")
     with pytest.raises(ValueError, match="no drive is longer than an episode"):
         PlatoonVecEnv([STEADY], 2, EnvConfig("acc", episode_s=1000.0))
     with pytest.raises(ValueError, match="non-finite action"):
