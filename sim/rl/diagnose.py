@@ -7,7 +7,8 @@ training set-up's planner. Per drive: the share of time within the envelope and 
 under its minimum, over its maximum, time gap under its minimum), the mean gap, the AV's and its
 leader's mean speed, how often the leader was lost (beyond the radar's range) and the AV's
 acceleration RMS beside the human driving in its place. On `accel`, also how often the safety
-bound a_safe, not the network, set the command, and the network's requests (`SafetyBoundShare`).
+bound a_safe, not the network, set the command, and the network's requests (`SafetyBoundShare`),
+with the time margins it added to a_safe's gap when its action has them.
 A shipped policy is fold 0's, so its held-out dates (fold 0's other dates) are not looked at.
 They are also fold 1's training dates, so after a change this diagnosis shaped, fold 0's
 held-out dates are the only ones it has not read: report them apart from the all-drive figures.
@@ -80,20 +81,29 @@ class SafetyBoundShare:
     request_mean_mps2: float
     request_p5_mps2: float
     request_p95_mps2: float
+    margin_mean_s: float  # the time margin added to a_safe's gap (0 without the margin action)
+    margin_p5_s: float
+    margin_p95_s: float
 
 
 def safety_bound_share(commands: Sequence[AccelCommand]) -> SafetyBoundShare:
-    """Share of commands a_safe lowered below the request, and the requests' spread."""
+    """Share of commands a_safe (with any margin) lowered below the request; the spread of the
+    requests and of the margins."""
     request = np.array([command.requested_accel_mps2 for command in commands])
     given = np.array([command.accel_mps2 for command in commands])
+    margin = np.array([command.time_margin_s for command in commands])
     if not np.all(np.isfinite(request)):
         raise ValueError("every command must carry the policy's request")
     p5, p95 = np.percentile(request, [5.0, 95.0])
+    margin_p5, margin_p95 = np.percentile(margin, [5.0, 95.0])
     return SafetyBoundShare(
         bound_share=float(np.mean(given < request - BOUND_TOLERANCE_MPS2)),
         request_mean_mps2=float(request.mean()),
         request_p5_mps2=float(p5),
         request_p95_mps2=float(p95),
+        margin_mean_s=float(margin.mean()),
+        margin_p5_s=float(margin_p5),
+        margin_p95_s=float(margin_p95),
     )
 
 
@@ -180,10 +190,16 @@ def _bound_text(commands: Sequence[AccelCommand]) -> str:
     if not commands:
         return ""
     seen = safety_bound_share(commands)
+    margins = (
+        f"; time margin mean {seen.margin_mean_s:.2f} s (5-95 %: {seen.margin_p5_s:.2f}"
+        f" to {seen.margin_p95_s:.2f})"
+        if seen.margin_p95_s > 0.0
+        else ""
+    )
     return (
         f" | a_safe set the command {seen.bound_share:.3f} of the time; requests mean"
         f" {seen.request_mean_mps2:+.2f} m/s^2 (5-95 %: {seen.request_p5_mps2:+.2f}"
-        f" to {seen.request_p95_mps2:+.2f})"
+        f" to {seen.request_p95_mps2:+.2f})" + margins
     )
 
 

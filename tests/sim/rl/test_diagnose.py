@@ -52,6 +52,9 @@ def test_the_safety_bound_share_counts_the_commands_a_safe_lowered() -> None:
     assert seen.request_mean_mps2 == pytest.approx(0.2)
     assert seen.request_p5_mps2 == pytest.approx(np.percentile([0.6, 0.6, 0.6, -1.0], 5.0))
     assert seen.request_p95_mps2 == pytest.approx(0.6)
+    assert (seen.margin_mean_s, seen.margin_p95_s) == (0.0, 0.0)  # a plain request's
+    margins = [AccelCommand(0.0, requested_accel_mps2=0.0, time_margin_s=h) for h in (0.5, 1.5)]
+    assert safety_bound_share(margins).margin_mean_s == pytest.approx(1.0)
     with pytest.raises(ValueError, match="must carry the policy's request"):
         safety_bound_share([AccelCommand(0.1)])
 
