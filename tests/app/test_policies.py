@@ -22,7 +22,7 @@ from app.seed import seed
 from smoothfleet.cli.common import CliError
 from smoothfleet.cli.main import _demo_on
 from tests.support.fleet import drive, post_pings
-from tests.support.policies import acc_policy_bytes
+from tests.support.policies import acc_policy_bytes, accel_policy_bytes
 from tests.support.servers import cli_env, live_server, run_cli
 from tests.support.tokens import bearer, issue
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
@@ -203,6 +203,13 @@ def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api
         )
         assert loc == ["body", "policy"]
         assert why in msg
+    # an accel action this agent does not know
+    content = accel_policy_bytes("time_gap_only")
+    loc, msg = rejected(
+        api.upload(content, {"sha256": hashlib.sha256(content).hexdigest(), "actuation": "accel"})
+    )
+    assert loc == ["body", "policy"]
+    assert "accel action 'time_gap_only'" in msg
     assert stored_rows(api.engine) == 0
 
 
