@@ -1,0 +1,167 @@
+"""Hand-built `accel` followers, scored as the pipeline scores, on fold 0's training dates only.
+
+    .venv/bin/python -m sim.rl.hand_probes margin
+    .venv/bin/python -m sim.rl.hand_probes leader-average
+
+What an action space or a simple causal law can express, before asking PPO to find it: one AV
+behind the leader and 24 humans, `kernel_smooth` as in training (`sim.rl.scores`), fold 0's
+training dates (`sim.folds`, two folds), so the shipped policy's held-out dates stay unread.
+A diagnostic, not a result: nothing here is chosen, and nothing shipped comes from it.
+
+- `margin`: one-layer policy files of the `request_time_margin` action. The request is a
+  constant +0.58 m/s^2 (the shipped rl_accel's mean request), the margin fixed at 0, 0.75 or
+  1.5 s, or 0.75 s + 0.25 (or 0.125) s per m/s of the leader's relative speed, so it shrinks as
+  the leader closes in and grows as it pulls away.
+- `leader-average`: `LeaderAverageFollower`, the simplest causal smoother: it drives toward its
+  leader's trailing mean speed over a window, pulled weakly toward a reference gap, under a_safe
+  like rl_accel (`rl_accel.bounded_request`), and closes up to a leader it lost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from sim.drives import load_drives, shared_data_dir
+from sim.folds import date_folds
+from sim.rl.env import DEFAULT_PLANNER_PARAMS
+from sim.rl.scores import ControllerUnderTest, score_drives, summarise
+from vehicle_agent.controllers import AccelCommand, Controller, Observation
+from vehicle_agent.controllers.microaccel import LeadAccelEstimator
+from vehicle_agent.controllers.policy import (
+    ACCEL_ACTION_MAX_MPS2,
+    ACCEL_FEATURES,
+    REL_SPEED_SCALE_MPS,
+    TIME_MARGIN_MAX_S,
+    save_policy,
+)
+from vehicle_agent.controllers.rl_accel import SAFETY, bounded_request
+
+# The shipped rl_accel's mean request on fold 0's training dates (sim.rl.diagnose).
+CONSTANT_REQUEST_MPS2 = 0.58
+# With no leader measured, a leader-average follower asks this much above its speed (m/s).
+CLOSING_MPS = 2.0
+REL_SPEED_FEATURE = 5  # index of lead - ego speed in `accel_features`
+# (label, margin at zero relative speed in s, margin change per m/s of relative speed in s)
+MARGINS: tuple[tuple[str, float, float], ...] = (
+    ("margin 0 s", 0.0, 0.0),
+    ("margin 0.75 s", 0.75, 0.0),
+    ("margin 1.5 s", 1.5, 0.0),
+    ("margin 0.75 s + 0.25 s/(m/s)", 0.75, 0.25),
+    ("margin 0.75 s + 0.125 s/(m/s)", 0.75, 0.125),
+)
+# (window s, speed gain 1/s, gap gain 1/s^2, reference time gap s)
+LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
+    (20.0, 0.2, 0.01, 1.5),
+    (60.0, 0.2, 0.01, 1.5),
+    (40.0, 0.2, 0.03, 2.0),
+    (60.0, 0.2, 0.0, 1.5),
+    (120.0, 0.1, 0.0, 1.5),
+    (60.0, 0.2, 0.02, 3.0),
+)
+
+
+class LeaderAverageFollower(Controller):
+    """Toward the leader's mean speed over the last `window_s`, plus `gap_gain` x (gap - the
+    reference gap, `headway_s` x v within 20-100 m), under a_safe; with no leader measured, it
+    closes up (toward CLOSING_MPS above its speed, or the plan's target if faster), as the
+    `acc` rule closes up to a lost leader: otherwise it saves fuel by falling back."""
+
+    name = "leader_average"
+
+    def __init__(
+        self, window_s: float, speed_gain: float, gap_gain: float, headway_s: float
+    ) -> None:
+        super().__init__("accel")
+        self.lead_speeds: deque[float] = deque(maxlen=int(round(window_s * 10)))
+        self.speed_gain = speed_gain
+        self.gap_gain = gap_gain
+        self.headway_s = headway_s
+        self.lead_accel = LeadAccelEstimator(SAFETY.lead_accel_filter_s)
+
+    def reset(self) -> None:
+        """Forget the leader."""
+        self.lead_speeds.clear()
+        self.lead_accel.reset()
+
+    def step(self, observation: Observation) -> AccelCommand:
+        """The smoother's request, bounded as rl_accel's."""
+        speed = observation.speed_mps
+        if not observation.has_lead_state:
+            self.reset()
+            closing = max(observation.target_speed_mps, speed + CLOSING_MPS)
+            request = self.speed_gain * (closing - speed)
+            return AccelCommand(bounded_request(request, speed, None, None, 0.0))
+        gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
+        rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
+        self.lead_speeds.append(speed + rel)
+        lead_accel = self.lead_accel.update(observation.time_s, speed + rel)
+        reference_gap = min(max(self.headway_s * speed, 20.0), 100.0)
+        request = self.speed_gain * (float(np.mean(self.lead_speeds)) - speed) + self.gap_gain * (
+            gap - reference_gap
+        )
+        return AccelCommand(bounded_request(request, speed, gap, rel, lead_accel))
+
+
+def margin_policies(folder: Path) -> list[ControllerUnderTest]:
+    """One one-layer `request_time_margin` policy file per entry of MARGINS, in `folder`."""
+    entries = []
+    for index, (label, margin_s, per_rel_s) in enumerate(MARGINS):
+        # margin = 0.75 (1 + a1) s: a1 = margin / 0.75 - 1 + (per_rel / 0.75) x rel
+        half = TIME_MARGIN_MAX_S / 2.0
+        weights = np.zeros((ACCEL_FEATURES, 2))
+        weights[REL_SPEED_FEATURE, 1] = per_rel_s / half * REL_SPEED_SCALE_MPS
+        biases = np.array([CONSTANT_REQUEST_MPS2 / ACCEL_ACTION_MAX_MPS2, margin_s / half - 1.0])
+        path = folder / f"margin_{index}.npz"
+        save_policy(path, "accel", [weights], [biases], "request_time_margin")
+        entries.append(ControllerUnderTest.policy_file(label, "accel", path))
+    return entries
+
+
+def leader_averages() -> list[ControllerUnderTest]:
+    """One `LeaderAverageFollower` per entry of LEADER_AVERAGES."""
+    entries = []
+    for window_s, speed_gain, gap_gain, headway_s in LEADER_AVERAGES:
+        label = f"mean over {window_s:g} s, k {speed_gain:g}, gap {gap_gain:g} at {headway_s:g} s"
+
+        def build(
+            window_s: float = window_s,
+            speed_gain: float = speed_gain,
+            gap_gain: float = gap_gain,
+            headway_s: float = headway_s,
+        ) -> Controller:
+            return LeaderAverageFollower(window_s, speed_gain, gap_gain, headway_s)
+
+        entries.append(ControllerUnderTest(label, "accel", build))
+    return entries
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Score one family on fold 0's training dates; one line per follower and group."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("family", choices=("margin", "leader-average"))
+    args = parser.parse_args(argv)
+    train = date_folds(load_drives(shared_data_dir() / "trajectories"), 2)[0].train
+    say = print  # noqa: T201 (a command-line report)
+    with tempfile.TemporaryDirectory() as folder:
+        entries = margin_policies(Path(folder)) if args.family == "margin" else leader_averages()
+        scores = score_drives(
+            train, entries, planner="kernel_smooth", planner_params=DEFAULT_PLANNER_PARAMS
+        )
+    for row in summarise(scores):
+        say(
+            f"{row['controller']:>45} {row['group']:>11}: fuel {row['fuel_saving_pct']:+.2f} %,"
+            f" throughput {row['throughput_change_pct']:+.2f} %"
+            f" (worst {row['worst_throughput_change_pct']:+.2f}), network speed"
+            f" {row['network_speed_change_pct']:+.2f} %, collisions {row['collisions']},"
+            f" within >= {row['min_gap_within_share']:.3f}"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""The hand-built followers of `sim.rl.hand_probes` are what their labels say."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.rl.hand_probes import MARGINS, LeaderAverageFollower, margin_policies
+from vehicle_agent.controllers import AccelCommand, Observation
+from vehicle_agent.controllers.policy import (
+    accel_features,
+    load_policy,
+    requested_accel_mps2,
+    requested_time_margin_s,
+)
+
+
+def test_margin_policies_ask_a_constant_request_and_the_labelled_margin(tmp_path: Path) -> None:
+    entries = margin_policies(tmp_path)
+    assert [entry.label for entry in entries] == [label for label, _, _ in MARGINS]
+    for index, (_, margin_s, per_rel_s) in enumerate(MARGINS):
+        network = load_policy(tmp_path / f"margin_{index}.npz", "accel")
+        for rel in (-2.0, 0.0, 1.0):
+            action = network.action(accel_features(25.0, 25.0, 25.0, True, 50.0, rel))
+            assert requested_accel_mps2(action[0]) == pytest.approx(0.58)
+            expected = float(np.clip(margin_s + per_rel_s * rel, 0.0, 1.5))
+            assert requested_time_margin_s(action[1]) == pytest.approx(expected)
+
+
+def lead_seen(time_s: float, speed: float, gap: float, rel: float) -> Observation:
+    return Observation(
+        time_s=time_s,
+        speed_mps=speed,
+        target_speed_mps=20.0,
+        lead_present=True,
+        lead_distance_m=gap,
+        lead_rel_speed_mps=rel,
+    )
+
+
+def test_the_leader_average_follower_drives_the_leaders_mean_and_closes_when_it_is_lost() -> None:
+    follower = LeaderAverageFollower(window_s=2.0, speed_gain=0.2, gap_gain=0.01, headway_s=1.5)
+    # 90 m behind a leader at its own 25 m/s, the reference gap 1.5 x 25 = 37.5 m: the pull
+    # 0.01 x (90 - 37.5) = +0.525 m/s^2 is the command (a_safe allows more that far back)
+    command = follower.step(lead_seen(0.0, 25.0, 90.0, 0.0))
+    assert isinstance(command, AccelCommand)
+    assert command.accel_mps2 == pytest.approx(0.525)
+    # the leader at 27 m/s for the next step: the mean over the window is 26 m/s
+    command = follower.step(lead_seen(0.1, 25.0, 90.0, 2.0))
+    assert command.accel_mps2 == pytest.approx(0.2 * 1.0 + 0.525)
+    # leader lost: 2 m/s above its own speed (the plan's 20 m/s is slower), 0.2 x 2
+    lost = follower.step(Observation(time_s=0.2, speed_mps=25.0, target_speed_mps=20.0))
+    assert lost.accel_mps2 == pytest.approx(0.4)
+    assert not follower.lead_speeds
