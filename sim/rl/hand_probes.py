@@ -2,6 +2,7 @@
 
     .venv/bin/python -m sim.rl.hand_probes margin
     .venv/bin/python -m sim.rl.hand_probes leader-average
+    .venv/bin/python -m sim.rl.hand_probes stock-acc
 
 What an action space or a simple causal law can express, before asking PPO to find it: one AV
 behind the leader and 24 humans, `kernel_smooth` as in training (`sim.rl.scores`), fold 0's
@@ -15,6 +16,9 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
 - `leader-average`: `LeaderAverageFollower`, the simplest causal smoother: it drives toward its
   leader's trailing mean speed over a window, pulled weakly toward a reference gap, under a_safe
   like rl_accel (`rl_accel.bounded_request`), and closes up to a leader it lost.
+- `stock-acc`: one-layer `acc` policy files that always ask for the clip's ceiling (the plan's
+  target + 20 mph, which the clip bounds to the last second's mean + 5 mph) with 1 or 3 gap
+  bars: the car's own ACC following its leader, what any `acc` policy drives through.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from sim.rl.scores import ControllerUnderTest, score_drives, summarise
 from vehicle_agent.controllers import AccelCommand, Controller, Observation
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 from vehicle_agent.controllers.policy import (
+    ACC_FEATURES,
     ACCEL_ACTION_MAX_MPS2,
     ACCEL_FEATURES,
     REL_SPEED_SCALE_MPS,
@@ -54,6 +59,11 @@ MARGINS: tuple[tuple[str, float, float], ...] = (
     ("margin 1.5 s", 1.5, 0.0),
     ("margin 0.75 s + 0.25 s/(m/s)", 0.75, 0.25),
     ("margin 0.75 s + 0.125 s/(m/s)", 0.75, 0.125),
+)
+# (label, speed action component, gap action component) of the constant `acc` files
+STOCK_ACC: tuple[tuple[str, float, float], ...] = (
+    ("stock ACC at the ceiling, 1 bar", 1.0, -1.0),
+    ("stock ACC at the ceiling, 3 bars", 1.0, 1.0),
 )
 # (window s, speed gain 1/s, gap gain 1/s^2, reference time gap s)
 LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
@@ -123,6 +133,18 @@ def margin_policies(folder: Path) -> list[ControllerUnderTest]:
     return entries
 
 
+def stock_acc_policies(folder: Path) -> list[ControllerUnderTest]:
+    """One one-layer constant `acc` policy file per entry of STOCK_ACC, in `folder`."""
+    entries = []
+    for index, (label, speed_action, gap_action) in enumerate(STOCK_ACC):
+        path = folder / f"stock_acc_{index}.npz"
+        save_policy(
+            path, "acc", [np.zeros((ACC_FEATURES, 2))], [np.array([speed_action, gap_action])]
+        )
+        entries.append(ControllerUnderTest.policy_file(label, "acc", path))
+    return entries
+
+
 def leader_averages() -> list[ControllerUnderTest]:
     """One `LeaderAverageFollower` per entry of LEADER_AVERAGES."""
     entries = []
@@ -144,12 +166,17 @@ def leader_averages() -> list[ControllerUnderTest]:
 def main(argv: Sequence[str] | None = None) -> None:
     """Score one family on fold 0's training dates; one line per follower and group."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("family", choices=("margin", "leader-average"))
+    parser.add_argument("family", choices=("margin", "leader-average", "stock-acc"))
     args = parser.parse_args(argv)
     train = date_folds(load_drives(shared_data_dir() / "trajectories"), 2)[0].train
     say = print  # noqa: T201 (a command-line report)
     with tempfile.TemporaryDirectory() as folder:
-        entries = margin_policies(Path(folder)) if args.family == "margin" else leader_averages()
+        if args.family == "margin":
+            entries = margin_policies(Path(folder))
+        elif args.family == "stock-acc":
+            entries = stock_acc_policies(Path(folder))
+        else:
+            entries = leader_averages()
         scores = score_drives(
             train, entries, planner="kernel_smooth", planner_params=DEFAULT_PLANNER_PARAMS
         )
@@ -161,6 +188,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             f" {row['network_speed_change_pct']:+.2f} %, collisions {row['collisions']},"
             f" within >= {row['min_gap_within_share']:.3f}"
         )
+    for entry in entries:
+        within = [score.gap_within_share for score in scores if score.controller == entry.label]
+        say(f"{entry.label:>45}: within the envelope {np.mean(within):.3f} of the time (mean)")
 
 
 if __name__ == "__main__":

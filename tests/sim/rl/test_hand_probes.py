@@ -7,12 +7,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.rl.hand_probes import MARGINS, LeaderAverageFollower, margin_policies
+from sim.rl.hand_probes import (
+    MARGINS,
+    STOCK_ACC,
+    LeaderAverageFollower,
+    margin_policies,
+    stock_acc_policies,
+)
 from vehicle_agent.controllers import AccelCommand, Observation
 from vehicle_agent.controllers.policy import (
+    acc_features,
     accel_features,
     load_policy,
     requested_accel_mps2,
+    requested_gap_setting,
+    requested_speed_mph,
     requested_time_margin_s,
 )
 
@@ -54,3 +63,16 @@ def test_the_leader_average_follower_drives_the_leaders_mean_and_closes_when_it_
     lost = follower.step(Observation(time_s=0.2, speed_mps=25.0, target_speed_mps=20.0))
     assert lost.accel_mps2 == pytest.approx(0.4)
     assert not follower.lead_speeds
+
+
+def test_stock_acc_policies_ask_the_ceiling_with_their_gap_bars(tmp_path: Path) -> None:
+    entries = stock_acc_policies(tmp_path)
+    assert [entry.label for entry in entries] == [label for label, _, _ in STOCK_ACC]
+    for index, bars in enumerate((1, 3)):
+        network = load_policy(tmp_path / f"stock_acc_{index}.npz", "acc")
+        action = network.action(acc_features(20.0, 20.0, 20.0, True, 45.0, 2))
+        # the plan's 20 m/s (44.7 mph) + 20 mph: the clip then bounds it to mean + 5 mph
+        assert requested_speed_mph(action[0], 20.0 / 0.44704, True) == pytest.approx(
+            20.0 / 0.44704 + 20.0
+        )
+        assert requested_gap_setting(action[1]) == bars
