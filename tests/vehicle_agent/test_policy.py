@@ -174,24 +174,27 @@ def test_an_acc_policy_of_an_earlier_speed_action_is_refused(tmp_path: Path) -> 
         load_policy(around_plan, "acc")
 
 
+def lead_measured(time_s: float, speed: float, gap: float, rel: float) -> Observation:
+    """A RAV4's observation: a leader `gap` m ahead at `rel` m/s, a flat plan at `speed`."""
+    return Observation(
+        time_s=time_s,
+        speed_mps=speed,
+        target_speed_mps=speed,
+        position_m=0.0,
+        target=TargetProfile(np.array([0.0, 1000.0]), np.array([speed, speed])),
+        lead_present=True,
+        lead_distance_m=gap,
+        lead_rel_speed_mps=rel,
+    )
+
+
 def test_rl_accel_request_never_exceeds_the_safety_term(tmp_path: Path) -> None:
     path = two_layer_policy(tmp_path, "accel", 1)
     controller = RlAccelController("accel", RlParams(policy=str(path)))
     free = controller.step(Observation(time_s=0.0, speed_mps=30.0, target_speed_mps=30.0))
     # v feature 1 -> tanh(1) = 0.76 -> 1.14 m/s^2 with no leader measured
     assert free == AccelCommand(pytest.approx(1.5 * math.tanh(1.0)))
-    close = controller.step(
-        Observation(
-            time_s=0.1,
-            speed_mps=30.0,
-            target_speed_mps=30.0,
-            position_m=0.0,
-            target=TargetProfile(np.array([0.0, 1000.0]), np.array([30.0, 30.0])),
-            lead_present=True,
-            lead_distance_m=10.0,
-            lead_rel_speed_mps=-5.0,
-        )
-    )
+    close = controller.step(lead_measured(0.1, 30.0, 10.0, -5.0))
     assert isinstance(close, AccelCommand)
     assert close.accel_mps2 == -3.0  # a_safe far below: the limiter's floor
     # the network's own request is kept beside the command, for the diagnosis of the bound
@@ -217,17 +220,7 @@ def test_rl_accel_with_a_time_margin_policy_adds_its_margin_to_the_bound(tmp_pat
     path = two_layer_policy(tmp_path, "accel", 2, "request_time_margin")
     controller = RlAccelController("accel", RlParams(policy=str(path)))
     # v = 15 m/s -> feature 0.5 -> both outputs 0: request 0 m/s^2, margin 0.75 s (11.25 m)
-    seen = Observation(
-        time_s=0.0,
-        speed_mps=15.0,
-        target_speed_mps=15.0,
-        position_m=0.0,
-        target=TargetProfile(np.array([0.0, 1000.0]), np.array([15.0, 15.0])),
-        lead_present=True,
-        lead_distance_m=20.0,
-        lead_rel_speed_mps=0.0,
-    )
-    command = controller.step(seen)
+    command = controller.step(lead_measured(0.0, 15.0, 20.0, 0.0))
     assert isinstance(command, AccelCommand)
     assert command.time_margin_s == pytest.approx(0.75)
     assert command.requested_accel_mps2 == pytest.approx(0.0)
