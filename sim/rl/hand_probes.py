@@ -1,6 +1,7 @@
 """Hand-built `accel` followers, scored as the pipeline scores, on fold 0's training dates only.
 
     .venv/bin/python -m sim.rl.hand_probes margin
+    .venv/bin/python -m sim.rl.hand_probes plan-ahead
     .venv/bin/python -m sim.rl.hand_probes leader-average
     .venv/bin/python -m sim.rl.hand_probes stock-acc
 
@@ -13,6 +14,8 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
   constant +0.58 m/s^2 (the shipped rl_accel's mean request), the margin fixed at 0, 0.75 or
   1.5 s, or 0.75 s + 0.25 (or 0.125) s per m/s of the leader's relative speed, so it shrinks as
   the leader closes in and grows as it pulls away.
+- `plan-ahead`: the same files with a margin that grows with how much faster the AV drives
+  than the plan's target 500 m ahead: the plan's foresight, the only foresight the car has.
 - `leader-average`: `LeaderAverageFollower`, the simplest causal smoother: it drives toward its
   leader's trailing mean speed over a window, pulled weakly toward a reference gap, under a_safe
   like rl_accel (`rl_accel.bounded_request`), and closes up to a leader it lost.
@@ -27,6 +30,7 @@ import argparse
 import tempfile
 from collections import deque
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +46,7 @@ from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_MAX_MPS2,
     ACCEL_FEATURES,
     REL_SPEED_SCALE_MPS,
+    SPEED_SCALE_MPS,
     TIME_MARGIN_MAX_S,
     save_policy,
 )
@@ -51,14 +56,37 @@ from vehicle_agent.controllers.rl_accel import SAFETY, bounded_request
 CONSTANT_REQUEST_MPS2 = 0.58
 # With no leader measured, a leader-average follower asks this much above its speed (m/s).
 CLOSING_MPS = 2.0
-REL_SPEED_FEATURE = 5  # index of lead - ego speed in `accel_features`
-# (label, margin at zero relative speed in s, margin change per m/s of relative speed in s)
-MARGINS: tuple[tuple[str, float, float], ...] = (
-    ("margin 0 s", 0.0, 0.0),
-    ("margin 0.75 s", 0.75, 0.0),
-    ("margin 1.5 s", 1.5, 0.0),
-    ("margin 0.75 s + 0.25 s/(m/s)", 0.75, 0.25),
-    ("margin 0.75 s + 0.125 s/(m/s)", 0.75, 0.125),
+# Indices in `accel_features` (each divided by its scale): ego speed, the plan's target 500 m
+# ahead, lead - ego speed.
+SPEED_FEATURE = 0
+PLAN_AHEAD_FEATURE = 2
+REL_SPEED_FEATURE = 5
+
+
+@dataclass(frozen=True)
+class MarginProbe:
+    """A margin policy: h = base_s + per_rel_s x (lead - ego speed) + per_plan_ahead_s x
+    (ego speed - the plan's target 500 m ahead), in s and s per m/s, clipped to 0-1.5 s."""
+
+    label: str
+    base_s: float
+    per_rel_s: float = 0.0
+    per_plan_ahead_s: float = 0.0
+
+
+MARGINS: tuple[MarginProbe, ...] = (
+    MarginProbe("margin 0 s", 0.0),
+    MarginProbe("margin 0.75 s", 0.75),
+    MarginProbe("margin 1.5 s", 1.5),
+    MarginProbe("margin 0.75 s + 0.25 s/(m/s)", 0.75, per_rel_s=0.25),
+    MarginProbe("margin 0.75 s + 0.125 s/(m/s)", 0.75, per_rel_s=0.125),
+)
+# Margins opened by the plan's foresight: the faster the AV drives than the plan 500 m ahead
+# asks, the more room it keeps for the slowdown the plan sees coming.
+PLAN_AHEAD_MARGINS: tuple[MarginProbe, ...] = (
+    MarginProbe("0.1 s per m/s over the plan ahead", 0.0, per_plan_ahead_s=0.1),
+    MarginProbe("0.25 s per m/s over the plan ahead", 0.0, per_plan_ahead_s=0.25),
+    MarginProbe("0.4 s + 0.1 s per m/s over the plan ahead", 0.4, per_plan_ahead_s=0.1),
 )
 # (label, speed action component, gap action component) of the constant `acc` files
 STOCK_ACC: tuple[tuple[str, float, float], ...] = (
@@ -118,18 +146,19 @@ class LeaderAverageFollower(Controller):
         return AccelCommand(bounded_request(request, speed, gap, rel, lead_accel))
 
 
-def margin_policies(folder: Path) -> list[ControllerUnderTest]:
-    """One one-layer `request_time_margin` policy file per entry of MARGINS, in `folder`."""
+def margin_policies(folder: Path, probes: Sequence[MarginProbe]) -> list[ControllerUnderTest]:
+    """One one-layer `request_time_margin` policy file per probe, in `folder`."""
     entries = []
-    for index, (label, margin_s, per_rel_s) in enumerate(MARGINS):
-        # margin = 0.75 (1 + a1) s: a1 = margin / 0.75 - 1 + (per_rel / 0.75) x rel
-        half = TIME_MARGIN_MAX_S / 2.0
+    half = TIME_MARGIN_MAX_S / 2.0  # h = half x (1 + a1)
+    for index, probe in enumerate(probes):
         weights = np.zeros((ACCEL_FEATURES, 2))
-        weights[REL_SPEED_FEATURE, 1] = per_rel_s / half * REL_SPEED_SCALE_MPS
-        biases = np.array([CONSTANT_REQUEST_MPS2 / ACCEL_ACTION_MAX_MPS2, margin_s / half - 1.0])
+        weights[REL_SPEED_FEATURE, 1] = probe.per_rel_s / half * REL_SPEED_SCALE_MPS
+        weights[SPEED_FEATURE, 1] = probe.per_plan_ahead_s / half * SPEED_SCALE_MPS
+        weights[PLAN_AHEAD_FEATURE, 1] = -probe.per_plan_ahead_s / half * SPEED_SCALE_MPS
+        biases = np.array([CONSTANT_REQUEST_MPS2 / ACCEL_ACTION_MAX_MPS2, probe.base_s / half - 1])
         path = folder / f"margin_{index}.npz"
         save_policy(path, "accel", [weights], [biases], "request_time_margin")
-        entries.append(ControllerUnderTest.policy_file(label, "accel", path))
+        entries.append(ControllerUnderTest.policy_file(probe.label, "accel", path))
     return entries
 
 
@@ -166,13 +195,15 @@ def leader_averages() -> list[ControllerUnderTest]:
 def main(argv: Sequence[str] | None = None) -> None:
     """Score one family on fold 0's training dates; one line per follower and group."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("family", choices=("margin", "leader-average", "stock-acc"))
+    parser.add_argument("family", choices=("margin", "plan-ahead", "leader-average", "stock-acc"))
     args = parser.parse_args(argv)
     train = date_folds(load_drives(shared_data_dir() / "trajectories"), 2)[0].train
     say = print  # noqa: T201 (a command-line report)
     with tempfile.TemporaryDirectory() as folder:
         if args.family == "margin":
-            entries = margin_policies(Path(folder))
+            entries = margin_policies(Path(folder), MARGINS)
+        elif args.family == "plan-ahead":
+            entries = margin_policies(Path(folder), PLAN_AHEAD_MARGINS)
         elif args.family == "stock-acc":
             entries = stock_acc_policies(Path(folder))
         else:

@@ -9,6 +9,7 @@ import pytest
 
 from sim.rl.hand_probes import (
     MARGINS,
+    PLAN_AHEAD_MARGINS,
     STOCK_ACC,
     LeaderAverageFollower,
     margin_policies,
@@ -27,14 +28,19 @@ from vehicle_agent.controllers.policy import (
 
 
 def test_margin_policies_ask_a_constant_request_and_the_labelled_margin(tmp_path: Path) -> None:
-    entries = margin_policies(tmp_path)
-    assert [entry.label for entry in entries] == [label for label, _, _ in MARGINS]
-    for index, (_, margin_s, per_rel_s) in enumerate(MARGINS):
+    probes = (*MARGINS, *PLAN_AHEAD_MARGINS)
+    entries = margin_policies(tmp_path, probes)
+    assert [entry.label for entry in entries] == [probe.label for probe in probes]
+    for index, probe in enumerate(probes):
         network = load_policy(tmp_path / f"margin_{index}.npz", "accel")
-        for rel in (-2.0, 0.0, 1.0):
-            action = network.action(accel_features(25.0, 25.0, 25.0, True, 50.0, rel))
+        for rel, plan_ahead in ((-2.0, 25.0), (0.0, 21.0), (1.0, 15.0)):
+            features = accel_features(25.0, 25.0, plan_ahead, True, 50.0, rel)
+            action = network.action(features)
             assert requested_accel_mps2(action[0]) == pytest.approx(0.58)
-            expected = float(np.clip(margin_s + per_rel_s * rel, 0.0, 1.5))
+            wanted = (
+                probe.base_s + probe.per_rel_s * rel + probe.per_plan_ahead_s * (25.0 - plan_ahead)
+            )
+            expected = float(np.clip(wanted, 0.0, 1.5))
             assert requested_time_margin_s(action[1]) == pytest.approx(expected)
 
 
