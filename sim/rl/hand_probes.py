@@ -3,7 +3,7 @@
     .venv/bin/python -m sim.rl.hand_probes margin
     .venv/bin/python -m sim.rl.hand_probes plan-ahead
     .venv/bin/python -m sim.rl.hand_probes leader-average
-    .venv/bin/python -m sim.rl.hand_probes stock-acc
+    .venv/bin/python -m sim.rl.hand_probes stock-acc [--files DIR]
 
 What an action space or a simple causal law can express, before asking PPO to find it: one AV
 behind the leader and 24 humans, `kernel_smooth` as in training (`sim.rl.scores`), fold 0's
@@ -196,16 +196,24 @@ def main(argv: Sequence[str] | None = None) -> None:
     """Score one family on fold 0's training dates; one line per follower and group."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("family", choices=("margin", "plan-ahead", "leader-average", "stock-acc"))
+    parser.add_argument(
+        "--files",
+        type=Path,
+        default=None,
+        help="keep the family's policy files in this folder (for `sim evaluate`)",
+    )
     args = parser.parse_args(argv)
     train = date_folds(load_drives(shared_data_dir() / "trajectories"), 2)[0].train
     say = print  # noqa: T201 (a command-line report)
-    with tempfile.TemporaryDirectory() as folder:
+    with tempfile.TemporaryDirectory() as scratch:
+        folder = args.files or Path(scratch)
+        folder.mkdir(parents=True, exist_ok=True)
         if args.family == "margin":
-            entries = margin_policies(Path(folder), MARGINS)
+            entries = margin_policies(folder, MARGINS)
         elif args.family == "plan-ahead":
-            entries = margin_policies(Path(folder), PLAN_AHEAD_MARGINS)
+            entries = margin_policies(folder, PLAN_AHEAD_MARGINS)
         elif args.family == "stock-acc":
-            entries = stock_acc_policies(Path(folder))
+            entries = stock_acc_policies(folder)
         else:
             entries = leader_averages()
         scores = score_drives(
