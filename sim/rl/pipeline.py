@@ -235,7 +235,9 @@ def _cross_validate(
 
 
 def _config_record(config: EnvConfig) -> Mapping[str, Any]:
-    action = {"accel_action": config.accel_action} if config.actuation == "accel" else {}
+    # Recorded only when not the plain request, as in the policy file: the manifests of
+    # policies trained before the margin action existed reproduce unchanged.
+    action = {"accel_action": config.accel_action} if config.accel_action != "request" else {}
     return {
         **action,
         "humans": config.humans,
