@@ -107,6 +107,9 @@ def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:
         PolicyFileError, match="2 outputs, an accel policy with the .request. action has 1"
     ):
         load_policy(wrong_outputs, "accel")
+    one_output_acc = two_layer_policy(tmp_path, "acc", 1)
+    with pytest.raises(PolicyFileError, match="1 outputs, an acc policy has 2"):
+        load_policy(one_output_acc, "acc")
     with pytest.raises(PolicyFileError, match="No such file"):
         load_policy(tmp_path / "missing.npz", "acc")
     garbage = tmp_path / "garbage.npz"

@@ -314,10 +314,12 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         inputs = weight.shape[1]
     outputs = action_size(actuation, accel_action)
     if inputs != outputs:
-        raise PolicyFileError(
-            f"{label}: {inputs} outputs, an {actuation} policy with the {accel_action!r} action "
-            f"has {outputs}"
+        kind = (
+            f"an accel policy with the {accel_action!r} action"
+            if actuation == "accel"
+            else "an acc policy"
         )
+        raise PolicyFileError(f"{label}: {inputs} outputs, {kind} has {outputs}")
     return PolicyNetwork(
         actuation, weights, biases, hashlib.sha256(content).hexdigest(), accel_action
     )
