@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.drives import load_drives, shared_data_dir
+from sim.drives import STEP_S, load_drives, shared_data_dir
 from sim.folds import date_folds
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, score_drives, summarise
@@ -105,7 +105,8 @@ LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
 
 
 class LeaderAverageFollower(Controller):
-    """Toward the leader's mean speed over the last `window_s`, plus `gap_gain` x (gap - the
+    """Toward the leader's mean speed over the last `window_s` (one sample per simulator step),
+    plus `gap_gain` x (gap - the
     reference gap, `headway_s` x v within 20-100 m), under a_safe; with no leader measured, it
     closes up (toward CLOSING_MPS above its speed, or the plan's target if faster), as the
     `acc` rule closes up to a lost leader: otherwise it saves fuel by falling back."""
@@ -116,7 +117,7 @@ class LeaderAverageFollower(Controller):
         self, window_s: float, speed_gain: float, gap_gain: float, headway_s: float
     ) -> None:
         super().__init__("accel")
-        self.lead_speeds: deque[float] = deque(maxlen=int(round(window_s * 10)))
+        self.lead_speeds: deque[float] = deque(maxlen=int(round(window_s / STEP_S)))
         self.speed_gain = speed_gain
         self.gap_gain = gap_gain
         self.headway_s = headway_s
