@@ -56,6 +56,9 @@ from vehicle_agent.controllers.rl_accel import SAFETY, bounded_request
 CONSTANT_REQUEST_MPS2 = 0.58
 # With no leader measured, a leader-average follower asks this much above its speed (m/s).
 CLOSING_MPS = 2.0
+# Its reference gap, headway x v, stays within these (m): inside the envelope's 7-120 m.
+REFERENCE_GAP_MIN_M = 20.0
+REFERENCE_GAP_MAX_M = 100.0
 # Indices in `accel_features` (each divided by its scale): ego speed, the plan's target 500 m
 # ahead, lead - ego speed.
 SPEED_FEATURE = 0
@@ -107,7 +110,7 @@ LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
 class LeaderAverageFollower(Controller):
     """Toward the leader's mean speed over the last `window_s` (one sample per simulator step),
     plus `gap_gain` x (gap - the
-    reference gap, `headway_s` x v within 20-100 m), under a_safe; with no leader measured, it
+    reference gap, `headway_s` x v within REFERENCE_GAP_MIN_M-MAX_M), under a_safe; with no leader measured, it
     closes up (toward CLOSING_MPS above its speed, or the plan's target if faster), as the
     `acc` rule closes up to a lost leader: otherwise it saves fuel by falling back."""
 
@@ -140,7 +143,7 @@ class LeaderAverageFollower(Controller):
         rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
         self.lead_speeds.append(speed + rel)
         lead_accel = self.lead_accel.update(observation.time_s, speed + rel)
-        reference_gap = min(max(self.headway_s * speed, 20.0), 100.0)
+        reference_gap = min(max(self.headway_s * speed, REFERENCE_GAP_MIN_M), REFERENCE_GAP_MAX_M)
         request = self.speed_gain * (float(np.mean(self.lead_speeds)) - speed) + self.gap_gain * (
             gap - reference_gap
         )
