@@ -109,10 +109,10 @@ LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
 
 class LeaderAverageFollower(Controller):
     """Toward the leader's mean speed over the last `window_s` (one sample per simulator step),
-    plus `gap_gain` x (gap - the
-    reference gap, `headway_s` x v within REFERENCE_GAP_MIN_M-MAX_M), under a_safe; with no leader measured, it
-    closes up (toward CLOSING_MPS above its speed, or the plan's target if faster), as the
-    `acc` rule closes up to a lost leader: otherwise it saves fuel by falling back."""
+    plus `gap_gain` x (gap - the reference gap, `headway_s` x v within REFERENCE_GAP_MIN_M to
+    REFERENCE_GAP_MAX_M), under a_safe. With no leader measured it closes up (toward
+    CLOSING_MPS above its speed, or the plan's target if faster), as the `acc` rule closes up
+    to a lost leader: otherwise it would save fuel by falling back."""
 
     name = "leader_average"
 
