@@ -51,3 +51,11 @@ def test_the_envelope_leaves_120_m_less_the_gap_a_safe_keeps() -> None:
 def test_a_steady_leader_leaves_nothing_to_save_by_cruising() -> None:
     drive = drive_from_speeds("2021-01-01-steady", np.full(3001, 25.0))
     assert cruise_saving_pct(drive) == pytest.approx(0.0, abs=0.05)
+
+
+def test_a_wavy_leader_leaves_fuel_that_cruising_would_save() -> None:
+    """+/-5 m/s waves at 20 m/s: the followers burn fuel accelerating out of every wave, which
+    cruising at their mean speed does not, so the saving is positive."""
+    t = np.arange(0.0, 300.01, DT_S)
+    drive = drive_from_speeds("2021-01-01-wave", 20.0 + 5.0 * np.sin(2.0 * math.pi * t / 60.0))
+    assert cruise_saving_pct(drive) > 0.0
