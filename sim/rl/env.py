@@ -50,7 +50,6 @@ from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_SIZES,
-    ACTION_SIZES,
     FEATURE_SIZES,
     PLAN_LOOKAHEAD_M,
     AccelAction,
@@ -111,7 +110,7 @@ class EnvConfig:
     idm: IdmParams = I24_IDM
 
     def __post_init__(self) -> None:
-        if self.actuation not in ACTION_SIZES:
+        if self.actuation not in FEATURE_SIZES:
             raise ValueError(f"actuation {self.actuation!r} is not one of acc, accel")
         if self.accel_action not in ACCEL_ACTION_SIZES:
             raise ValueError(

@@ -75,8 +75,8 @@ TIME_MARGIN_MAX_S = 1.5
 
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
-ACTION_SIZES: dict[PolicyActuation, int] = {"acc": 2, "accel": 1}
-# Outputs of an `accel` policy for each of its actions; `request` is the one of ACTION_SIZES.
+# Outputs of an `acc` policy (speed setting, gap bars), and of an `accel` one per action.
+ACC_ACTION_SIZE = 2
 ACCEL_ACTION_SIZES: dict[AccelAction, int] = {"request": 1, "request_time_margin": 2}
 FEATURE_SIZES: dict[PolicyActuation, int] = {"acc": ACC_FEATURES, "accel": ACCEL_FEATURES}
 
@@ -189,7 +189,7 @@ def action_size(actuation: PolicyActuation, accel_action: AccelAction) -> int:
     """How many outputs a policy of `actuation` (and, for `accel`, `accel_action`) has."""
     if actuation == "accel":
         return ACCEL_ACTION_SIZES[accel_action]
-    return ACTION_SIZES[actuation]
+    return ACC_ACTION_SIZE
 
 
 @dataclass(frozen=True)
