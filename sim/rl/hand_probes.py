@@ -4,6 +4,7 @@
     .venv/bin/python -m sim.rl.hand_probes plan-ahead
     .venv/bin/python -m sim.rl.hand_probes leader-average
     .venv/bin/python -m sim.rl.hand_probes stock-acc [--files DIR]
+    .venv/bin/python -m sim.rl.hand_probes foresight
 
 What an action space or a simple causal law can express, before asking PPO to find it: one AV
 behind the leader and 24 humans, `kernel_smooth` as in training (`sim.rl.scores`), fold 0's
@@ -22,6 +23,11 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
 - `stock-acc`: one-layer `acc` policy files that always ask for the clip's ceiling (the plan's
   target + 20 mph, which the clip bounds to the last second's mean + 5 mph) with 1 or 3 gap
   bars: the car's own ACC following its leader, what any `acc` policy drives through.
+- `foresight`: `ForesightFollower`, the leader-average follower told its leader's speeds to
+  come (an oracle no car has): it drives the leader's mean over a window that ends now, is
+  centred on now, or starts now. Measures how much of the optimal bound perfect foresight of
+  the leader gives a simple smoother inside the envelope, so how much the missing foresight
+  is worth to a causal one.
 """
 
 from __future__ import annotations
@@ -34,8 +40,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
-from sim.drives import STEP_S, load_drives, shared_data_dir
+from sim.drives import STEP_S, Drive, load_drives, shared_data_dir
 from sim.folds import date_folds
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, score_drives, summarise
@@ -51,6 +58,8 @@ from vehicle_agent.controllers.policy import (
     save_policy,
 )
 from vehicle_agent.controllers.rl_accel import SAFETY, bounded_request
+
+FloatArray = NDArray[np.float64]
 
 # The shipped rl_accel's mean request on fold 0's training dates (sim.rl.diagnose).
 CONSTANT_REQUEST_MPS2 = 0.58
@@ -141,13 +150,68 @@ class LeaderAverageFollower(Controller):
             return AccelCommand(bounded_request(request, speed, None, None, 0.0))
         gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
         rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
-        self.lead_speeds.append(speed + rel)
         lead_accel = self.lead_accel.update(observation.time_s, speed + rel)
         reference_gap = min(max(self.headway_s * speed, REFERENCE_GAP_MIN_M), REFERENCE_GAP_MAX_M)
-        request = self.speed_gain * (float(np.mean(self.lead_speeds)) - speed) + self.gap_gain * (
-            gap - reference_gap
-        )
+        request = self.speed_gain * (
+            self.reference_speed(observation.time_s, speed + rel) - speed
+        ) + self.gap_gain * (gap - reference_gap)
         return AccelCommand(bounded_request(request, speed, gap, rel, lead_accel))
+
+    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+        """The speed to drive: the leader's mean over the last `window_s` (this sample included)."""
+        self.lead_speeds.append(lead_speed_mps)
+        return float(np.mean(self.lead_speeds))
+
+
+class ForesightFollower(LeaderAverageFollower):
+    """A leader-average follower that knows its leader's whole drive (`lead_speed_mps`, one
+    sample per simulator step from time 0): the mean it drives spans `window_s`, of which
+    `ahead_share` lies in the leader's future (0: the causal trailing mean, 0.5: centred on
+    now, 1: the next `window_s`), cut at the drive's ends. An oracle for diagnosis only: it is
+    right only for the AV directly behind the replayed leader, with no cut-ins."""
+
+    name = "foresight"
+
+    def __init__(
+        self,
+        lead_speed_mps: FloatArray,
+        ahead_share: float,
+        window_s: float,
+        speed_gain: float,
+        gap_gain: float,
+        headway_s: float,
+    ) -> None:
+        super().__init__(window_s, speed_gain, gap_gain, headway_s)
+        if not 0.0 <= ahead_share <= 1.0:
+            raise ValueError(f"ahead_share is a share of the window, got {ahead_share}")
+        # running sums, so each mean is two look-ups
+        self.cumulative = np.concatenate([[0.0], np.cumsum(lead_speed_mps)])
+        window = int(round(window_s / STEP_S))
+        self.ahead_steps = int(round(ahead_share * window))
+        self.behind_steps = window - self.ahead_steps
+
+    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+        """The leader's mean from `behind_steps` before this step to `ahead_steps` after it."""
+        step = int(round(time_s / STEP_S))
+        last = len(self.cumulative) - 1
+        first = min(max(step - self.behind_steps + 1, 0), last - 1)
+        end = max(min(step + self.ahead_steps + 1, last), first + 1)
+        return float((self.cumulative[end] - self.cumulative[first]) / (end - first))
+
+
+# (share of the window ahead of now, window s); foresight of share x window. The first is the
+# causal trailing mean; all drive with the gains of the best one of LEADER_AVERAGES (k 0.2 /s,
+# pulled by 0.01 /s^2 toward 1.5 s of gap).
+FORESIGHTS: tuple[tuple[float, float], ...] = (
+    (0.0, 60.0),
+    (0.5, 20.0),
+    (1.0, 20.0),
+    (0.5, 60.0),
+    (1.0, 60.0),
+    (0.5, 120.0),
+    (1.0, 120.0),
+)
+FORESIGHT_GAINS = (0.2, 0.01, 1.5)
 
 
 def margin_policies(folder: Path, probes: Sequence[MarginProbe]) -> list[ControllerUnderTest]:
@@ -196,10 +260,28 @@ def leader_averages() -> list[ControllerUnderTest]:
     return entries
 
 
+def foresights(drive: Drive) -> list[ControllerUnderTest]:
+    """One `ForesightFollower` per entry of FORESIGHTS, told `drive`'s leader."""
+    speed_gain, gap_gain, headway_s = FORESIGHT_GAINS
+    entries = []
+    for ahead_share, window_s in FORESIGHTS:
+        label = f"leader's mean over {window_s:g} s, {100 * ahead_share:.0f} % of it ahead"
+
+        def build(ahead_share: float = ahead_share, window_s: float = window_s) -> Controller:
+            return ForesightFollower(
+                drive.speed_mps, ahead_share, window_s, speed_gain, gap_gain, headway_s
+            )
+
+        entries.append(ControllerUnderTest(label, "accel", build))
+    return entries
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Score one family on fold 0's training dates; one line per follower and group."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("family", choices=("margin", "plan-ahead", "leader-average", "stock-acc"))
+    parser.add_argument(
+        "family", choices=("margin", "plan-ahead", "leader-average", "stock-acc", "foresight")
+    )
     parser.add_argument(
         "--files",
         type=Path,
@@ -212,17 +294,25 @@ def main(argv: Sequence[str] | None = None) -> None:
     with tempfile.TemporaryDirectory() as scratch:
         folder = args.files or Path(scratch)
         folder.mkdir(parents=True, exist_ok=True)
-        if args.family == "margin":
-            entries = margin_policies(folder, MARGINS)
+        # (drives, the followers run on them): foresight followers know one drive's leader each
+        batches: list[tuple[Sequence[Drive], list[ControllerUnderTest]]]
+        if args.family == "foresight":
+            batches = [([drive], foresights(drive)) for drive in train]
+        elif args.family == "margin":
+            batches = [(train, margin_policies(folder, MARGINS))]
         elif args.family == "plan-ahead":
-            entries = margin_policies(folder, PLAN_AHEAD_MARGINS)
+            batches = [(train, margin_policies(folder, PLAN_AHEAD_MARGINS))]
         elif args.family == "stock-acc":
-            entries = stock_acc_policies(folder)
+            batches = [(train, stock_acc_policies(folder))]
         else:
-            entries = leader_averages()
-        scores = score_drives(
-            train, entries, planner="kernel_smooth", planner_params=DEFAULT_PLANNER_PARAMS
-        )
+            batches = [(train, leader_averages())]
+        scores = [
+            score
+            for drives, entries in batches
+            for score in score_drives(
+                drives, entries, planner="kernel_smooth", planner_params=DEFAULT_PLANNER_PARAMS
+            )
+        ]
     for row in summarise(scores):
         say(
             f"{row['controller']:>45} {row['group']:>11}: fuel {row['fuel_saving_pct']:+.2f} %,"
@@ -231,9 +321,9 @@ def main(argv: Sequence[str] | None = None) -> None:
             f" {row['network_speed_change_pct']:+.2f} %, collisions {row['collisions']},"
             f" within >= {row['min_gap_within_share']:.3f}"
         )
-    for entry in entries:
-        within = [score.gap_within_share for score in scores if score.controller == entry.label]
-        say(f"{entry.label:>45}: within the envelope {np.mean(within):.3f} of the time (mean)")
+    for label in dict.fromkeys(score.controller for score in scores):
+        within = [score.gap_within_share for score in scores if score.controller == label]
+        say(f"{label:>45}: within the envelope {np.mean(within):.3f} of the time (mean)")
 
 
 if __name__ == "__main__":

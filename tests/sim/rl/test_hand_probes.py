@@ -11,6 +11,7 @@ from sim.rl.hand_probes import (
     MARGINS,
     PLAN_AHEAD_MARGINS,
     STOCK_ACC,
+    ForesightFollower,
     LeaderAverageFollower,
     margin_policies,
     stock_acc_policies,
@@ -69,6 +70,26 @@ def test_the_leader_average_follower_drives_the_leaders_mean_and_closes_when_it_
     lost = follower.step(Observation(time_s=0.2, speed_mps=25.0, target_speed_mps=20.0))
     assert lost.accel_mps2 == pytest.approx(0.4)
     assert not follower.lead_speeds
+
+
+def test_the_foresight_follower_drives_the_leaders_mean_over_past_present_or_future() -> None:
+    # the leader: 20 m/s for 0.3 s, then 30 m/s (a sample per 0.1 s step)
+    leader = np.array([20.0, 20.0, 20.0, 30.0, 30.0, 30.0])
+    trailing = ForesightFollower(leader, 0.0, 0.2, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    centred = ForesightFollower(leader, 0.5, 0.4, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    ahead = ForesightFollower(leader, 1.0, 0.2, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    # at step 2 (t = 0.2 s), driving 20 m/s: the trailing mean of steps 1-2 is 20 (no request),
+    # the centred one of steps 1-4 is 25, the one ahead of steps 3-4 is 30: 0.1 x (mean - 20)
+    for follower, expected in ((trailing, 0.0), (centred, 0.5), (ahead, 1.0)):
+        command = follower.step(lead_seen(0.2, 20.0, 90.0, 0.0))
+        assert command.accel_mps2 == pytest.approx(expected)
+    # at the drive's end the window is cut: the last step ahead is the last sample
+    assert ahead.step(lead_seen(0.5, 20.0, 90.0, 10.0)).accel_mps2 == pytest.approx(1.0)
+    # a_safe still bounds it: 10 m behind a leader 10 m/s slower, it brakes whatever lies ahead
+    closing = ForesightFollower(leader, 1.0, 0.2, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    assert closing.step(lead_seen(0.2, 30.0, 10.0, -10.0)).accel_mps2 == pytest.approx(-3.0)
+    with pytest.raises(ValueError, match="share of the window"):
+        ForesightFollower(leader, 1.5, 0.2, speed_gain=0.2, gap_gain=0.0, headway_s=1.5)
 
 
 def test_stock_acc_policies_ask_the_ceiling_with_their_gap_bars(tmp_path: Path) -> None:
