@@ -5,6 +5,7 @@
     .venv/bin/python -m sim.rl.hand_probes leader-average
     .venv/bin/python -m sim.rl.hand_probes stock-acc [--files DIR]
     .venv/bin/python -m sim.rl.hand_probes foresight
+    .venv/bin/python -m sim.rl.hand_probes forecast
 
 What an action space or a simple causal law can express, before asking PPO to find it: one AV
 behind the leader and 24 humans, `kernel_smooth` as in training (`sim.rl.scores`), fold 0's
@@ -28,6 +29,11 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
   centred on now, or starts now. Measures how much of the optimal bound perfect foresight of
   the leader gives a simple smoother inside the envelope, so how much the missing foresight
   is worth to a causal one.
+- `forecast`: `ForecastFollower`, the same smoother driving a causal forecast of that mean over
+  the next 20 s, from the leader's last 60 s as its radar saw them (`sim.leader_forecast`'s
+  ridge). The forecast is fitted on half of fold 0's training dates and run on the other half,
+  and the other way round (the dates dealt as `sim.folds` deals them), so no drive is scored
+  by a forecast fitted on its own date.
 """
 
 from __future__ import annotations
@@ -44,6 +50,13 @@ from numpy.typing import NDArray
 
 from sim.drives import STEP_S, Drive, load_drives, shared_data_dir
 from sim.folds import date_folds
+from sim.leader_forecast import (
+    FORECAST_S,
+    LeaderForecast,
+    drive_rows,
+    fit_forecast,
+    lag_steps,
+)
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, score_drives, summarise
 from vehicle_agent.controllers import AccelCommand, Controller, Observation
@@ -199,6 +212,25 @@ class ForesightFollower(LeaderAverageFollower):
         return float((self.cumulative[end] - self.cumulative[first]) / (end - first))
 
 
+class ForecastFollower(LeaderAverageFollower):
+    """A leader-average follower that drives `forecast`'s mean of its leader's speed over the
+    window ahead, from the leader's speeds its radar measured since it last saw none."""
+
+    name = "forecast"
+
+    def __init__(
+        self, forecast: LeaderForecast, speed_gain: float, gap_gain: float, headway_s: float
+    ) -> None:
+        history_s = (int(forecast.lags[-1]) + 1) * STEP_S
+        super().__init__(history_s, speed_gain, gap_gain, headway_s)
+        self.forecast = forecast
+
+    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+        """The forecast mean ahead from the history, this sample included."""
+        self.lead_speeds.append(lead_speed_mps)
+        return self.forecast.mean_ahead(np.fromiter(self.lead_speeds, dtype=np.float64))
+
+
 # (share of the window ahead of now, window s); foresight of share x window. The first is the
 # causal trailing mean; all drive with the gains of the best one of LEADER_AVERAGES (k 0.2 /s,
 # pulled by 0.01 /s^2 toward 1.5 s of gap).
@@ -276,11 +308,26 @@ def foresights(drive: Drive) -> list[ControllerUnderTest]:
     return entries
 
 
+def forecasts(fitted_on: Sequence[Drive]) -> list[ControllerUnderTest]:
+    """A `ForecastFollower` whose forecast is fitted on `fitted_on`, with the foresight
+    followers' gains."""
+    lags = lag_steps()
+    forecast = fit_forecast(*drive_rows(fitted_on, lags), lags)
+    speed_gain, gap_gain, headway_s = FORESIGHT_GAINS
+    label = f"forecast mean over the next {FORECAST_S:g} s"
+    return [
+        ControllerUnderTest(
+            label, "accel", lambda: ForecastFollower(forecast, speed_gain, gap_gain, headway_s)
+        )
+    ]
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     """Score one family on fold 0's training dates; one line per follower and group."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "family", choices=("margin", "plan-ahead", "leader-average", "stock-acc", "foresight")
+        "family",
+        choices=("margin", "plan-ahead", "leader-average", "stock-acc", "foresight", "forecast"),
     )
     parser.add_argument(
         "--files",
@@ -298,6 +345,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         batches: list[tuple[Sequence[Drive], list[ControllerUnderTest]]]
         if args.family == "foresight":
             batches = [([drive], foresights(drive)) for drive in train]
+        elif args.family == "forecast":
+            # each half of the training dates is run by the forecast fitted on the other
+            batches = [(half.held_out, forecasts(half.train)) for half in date_folds(train, 2)]
         elif args.family == "margin":
             batches = [(train, margin_policies(folder, MARGINS))]
         elif args.family == "plan-ahead":
