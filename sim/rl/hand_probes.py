@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import tempfile
+from abc import abstractmethod
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -129,20 +130,16 @@ LEADER_AVERAGES: tuple[tuple[float, float, float, float], ...] = (
 )
 
 
-class LeaderAverageFollower(Controller):
-    """Toward the leader's mean speed over the last `window_s` (one sample per simulator step),
-    plus `gap_gain` x (gap - the reference gap, `headway_s` x v within REFERENCE_GAP_MIN_M to
-    REFERENCE_GAP_MAX_M), under a_safe. With no leader measured it closes up (toward
-    CLOSING_MPS above its speed, or the plan's target if faster), as the `acc` rule closes up
-    to a lost leader: otherwise it would save fuel by falling back."""
+class SmoothingFollower(Controller):
+    """Toward a reference speed taken from the leader (`reference_speed`, each subclass its
+    own), plus `gap_gain` x (gap - the reference gap, `headway_s` x v within
+    REFERENCE_GAP_MIN_M to REFERENCE_GAP_MAX_M), under a_safe like rl_accel. With no leader
+    measured it closes up (toward CLOSING_MPS above its speed, or the plan's target if
+    faster), as the `acc` rule closes up to a lost leader: otherwise it would save fuel by
+    falling back."""
 
-    name = "leader_average"
-
-    def __init__(
-        self, window_s: float, speed_gain: float, gap_gain: float, headway_s: float
-    ) -> None:
+    def __init__(self, speed_gain: float, gap_gain: float, headway_s: float) -> None:
         super().__init__("accel")
-        self.lead_speeds: deque[float] = deque(maxlen=int(round(window_s / STEP_S)))
         self.speed_gain = speed_gain
         self.gap_gain = gap_gain
         self.headway_s = headway_s
@@ -150,7 +147,6 @@ class LeaderAverageFollower(Controller):
 
     def reset(self) -> None:
         """Forget the leader."""
-        self.lead_speeds.clear()
         self.lead_accel.reset()
 
     def step(self, observation: Observation) -> AccelCommand:
@@ -170,18 +166,40 @@ class LeaderAverageFollower(Controller):
         ) + self.gap_gain * (gap - reference_gap)
         return AccelCommand(bounded_request(request, speed, gap, rel, lead_accel))
 
+    @abstractmethod
     def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
-        """The speed to drive: the leader's mean over the last `window_s` (this sample included)."""
+        """The speed to drive, given the leader's speed measured now."""
+
+
+class LeaderAverageFollower(SmoothingFollower):
+    """A smoother driving the leader's mean speed over the last `window_s` (one sample per
+    simulator step, since the leader was last lost)."""
+
+    name = "leader_average"
+
+    def __init__(
+        self, window_s: float, speed_gain: float, gap_gain: float, headway_s: float
+    ) -> None:
+        super().__init__(speed_gain, gap_gain, headway_s)
+        self.lead_speeds: deque[float] = deque(maxlen=int(round(window_s / STEP_S)))
+
+    def reset(self) -> None:
+        """Forget the leader and its speeds."""
+        super().reset()
+        self.lead_speeds.clear()
+
+    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+        """The leader's mean over the last `window_s` (this sample included)."""
         self.lead_speeds.append(lead_speed_mps)
         return float(np.mean(self.lead_speeds))
 
 
-class ForesightFollower(LeaderAverageFollower):
-    """A leader-average follower that knows its leader's whole drive (`lead_speed_mps`, one
-    sample per simulator step from time 0): the mean it drives spans `window_s`, of which
-    `ahead_share` lies in the leader's future (0: the causal trailing mean, 0.5: centred on
-    now, 1: the next `window_s`), cut at the drive's ends. An oracle for diagnosis only: it is
-    right only for the AV directly behind the replayed leader, with no cut-ins."""
+class ForesightFollower(SmoothingFollower):
+    """A smoother that knows its leader's whole drive (`lead_speed_mps`, one sample per
+    simulator step from time 0): the mean it drives spans `window_s`, of which `ahead_share`
+    lies in the leader's future (0: the causal trailing mean, 0.5: centred on now, 1: the next
+    `window_s`), cut at the drive's ends. An oracle for diagnosis only: it is right only for
+    the AV directly behind the replayed leader, with no cut-ins."""
 
     name = "foresight"
 
@@ -194,7 +212,7 @@ class ForesightFollower(LeaderAverageFollower):
         gap_gain: float,
         headway_s: float,
     ) -> None:
-        super().__init__(window_s, speed_gain, gap_gain, headway_s)
+        super().__init__(speed_gain, gap_gain, headway_s)
         if not 0.0 <= ahead_share <= 1.0:
             raise ValueError(f"ahead_share is a share of the window, got {ahead_share}")
         # running sums, so each mean is two look-ups
@@ -213,8 +231,9 @@ class ForesightFollower(LeaderAverageFollower):
 
 
 class ForecastFollower(LeaderAverageFollower):
-    """A leader-average follower that drives `forecast`'s mean of its leader's speed over the
-    window ahead, from the leader's speeds its radar measured since it last saw none."""
+    """A smoother driving `forecast`'s mean of its leader's speed over the window ahead, from
+    the leader's speeds its radar measured since it last saw none (the trailing window's
+    history, `forecast`'s reach long)."""
 
     name = "forecast"
 
