@@ -7,10 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim.leader_forecast import LeaderForecast
 from sim.rl.hand_probes import (
     MARGINS,
     PLAN_AHEAD_MARGINS,
     STOCK_ACC,
+    ForecastFollower,
     ForesightFollower,
     LeaderAverageFollower,
     margin_policies,
@@ -90,6 +92,21 @@ def test_the_foresight_follower_drives_the_leaders_mean_over_past_present_or_fut
     assert closing.step(lead_seen(0.2, 30.0, 10.0, -10.0)).accel_mps2 == pytest.approx(-3.0)
     with pytest.raises(ValueError, match="share of the window"):
         ForesightFollower(leader, 1.5, 0.2, speed_gain=0.2, gap_gain=0.0, headway_s=1.5)
+
+
+def test_the_forecast_follower_drives_the_forecast_from_the_history_its_radar_saw() -> None:
+    # lags 0 and 2 steps; weights on (2 steps back - now, 1, now): the leader's mean ahead is
+    # forecast as now + 1 + 0.5 x (2 steps back - now)
+    forecast = LeaderForecast(np.array([0.5, 1.0, 0.0]), np.array([0, 2]))
+    follower = ForecastFollower(forecast, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    assert follower.lead_speeds.maxlen == 3
+    # one sample: the history is padded with it, so the forecast is 22 + 1 = 23 m/s
+    assert follower.step(lead_seen(0.0, 20.0, 90.0, 2.0)).accel_mps2 == pytest.approx(0.3)
+    # leader at 22 then 24: 2 steps back it was 22, the forecast 24 + 1 - 1 = 24 m/s
+    follower.step(lead_seen(0.1, 20.0, 90.0, 2.0))
+    assert follower.step(lead_seen(0.2, 20.0, 90.0, 4.0)).accel_mps2 == pytest.approx(0.4)
+    follower.step(Observation(time_s=0.3, speed_mps=20.0, target_speed_mps=20.0))
+    assert not follower.lead_speeds
 
 
 def test_stock_acc_policies_ask_the_ceiling_with_their_gap_bars(tmp_path: Path) -> None:
