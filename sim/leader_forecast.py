@@ -13,6 +13,13 @@ scored on its held-out dates against persistence (forecast: no change), the fore
 follower that drives its leader's speed makes, and against the trailing mean the causal
 smoother drives. The skill is the share of persistence's squared error the ridge removes.
 The leader here is the replayed real drive, the AV's leader in every evaluation.
+
+A second ridge adds what the car holds of the road ahead: the recommended planner's targets
+(`sim.recommended`, the plan the fleet gets) at the leader's place and `PLAN_OFFSETS_M` ahead
+of it, each less the leader's speed now, from plans made in the loop as `sim.plans` makes them
+(simulated INRIX, once a minute) with a car at the leader's place pinging once a second (the
+AV right behind it pings nearly the same). What it adds over the history is what today's
+plans carry of the forecast.
 """
 
 from __future__ import annotations
@@ -25,8 +32,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.av import PING_EVERY_STEPS
 from sim.drives import STEP_S, Drive, load_drives, shared_data_dir
 from sim.folds import date_folds
+from sim.plans import SimulatedPlanner
+from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.rl.scores import is_stop_and_go
 
 FloatArray = NDArray[np.float64]
@@ -38,6 +48,8 @@ LAG_EVERY_S = 2.0
 SAMPLE_EVERY_S = 1.0
 # Ridge penalty on the weights ((m/s)^2 per unit weight^2), against lags that move together.
 RIDGE = 10.0
+# Where the plan is read, ahead of the leader (m).
+PLAN_OFFSETS_M = (0.0, 250.0, 500.0, 1000.0)
 # The trailing mean the causal smoother drives (the best of `hand_probes.LEADER_AVERAGES`),
 # here from the history's samples (every LAG_EVERY_S, now included).
 TRAILING_S = 60.0
@@ -64,14 +76,21 @@ def history_features(past_speeds: FloatArray, lags: NDArray[np.int64]) -> FloatA
     return features
 
 
+def forecast_steps(
+    samples: int, lags: NDArray[np.int64], ahead_steps: int, every_steps: int
+) -> NDArray[np.int64]:
+    """Every `every_steps`-th step of a drive of `samples` with a full history behind it and a
+    full window ahead."""
+    return np.arange(int(lags[-1]), samples - ahead_steps, every_steps)
+
+
 def forecast_rows(
     speed_mps: FloatArray, lags: NDArray[np.int64], ahead_steps: int, every_steps: int
 ) -> tuple[FloatArray, FloatArray]:
-    """(features, change to the mean over the next `ahead_steps`) at every `every_steps`-th step
-    with a full history behind it and a full window ahead."""
+    """(features, change to the mean over the next `ahead_steps`) at `forecast_steps`."""
     speed = np.asarray(speed_mps, dtype=np.float64)
     oldest = int(lags[-1])
-    steps = np.arange(oldest, len(speed) - ahead_steps, every_steps)
+    steps = forecast_steps(len(speed), lags, ahead_steps, every_steps)
     if len(steps) == 0:
         return np.empty((0, len(lags) + 1)), np.empty(0)
     running = np.concatenate(([0.0], np.cumsum(speed)))
@@ -82,44 +101,93 @@ def forecast_rows(
 
 @dataclass(frozen=True)
 class LeaderForecast:
-    """Ridge weights on `history_features`; `predict` gives the change to the future mean."""
+    """Ridge weights on `history_features` rows, then, where `plan_offsets_m` is not empty, the
+    plan's targets at the leader's place and those offsets ahead, less the leader's speed now;
+    `predict` gives the change to the mean over the window ahead."""
 
     weights: FloatArray
     lags: NDArray[np.int64]
+    plan_offsets_m: tuple[float, ...] = ()
 
     def predict(self, features: FloatArray) -> FloatArray:
         """Forecast change (m/s) to the leader's mean speed over the window ahead."""
         change: FloatArray = features @ self.weights
         return change
 
-    def mean_ahead(self, past_speeds: FloatArray) -> float:
+    def mean_ahead(self, past_speeds: FloatArray, plan_targets_mps: Sequence[float] = ()) -> float:
         """The forecast mean speed ahead from one history (oldest first, now last; a shorter
-        one is padded with its oldest speed, as if the leader had held it)."""
+        one is padded with its oldest speed, as if the leader had held it) and, for a forecast
+        with the plan, the plan's targets at its offsets from the leader."""
+        if len(plan_targets_mps) != len(self.plan_offsets_m):
+            raise ValueError(
+                f"the forecast reads the plan at {len(self.plan_offsets_m)} places,"
+                f" got {len(plan_targets_mps)} targets"
+            )
         needed = int(self.lags[-1]) + 1
         history = np.asarray(past_speeds, dtype=np.float64)
         if len(history) < needed:
             history = np.concatenate((np.full(needed - len(history), history[0]), history))
-        features = history_features(history[None, -needed:], self.lags)
-        return float(history[-1] + self.predict(features)[0])
+        now = history[-1]
+        features = np.concatenate(
+            (
+                history_features(history[None, -needed:], self.lags)[0],
+                np.asarray(plan_targets_mps, dtype=np.float64) - now,
+            )
+        )
+        return float(now + self.predict(features[None, :])[0])
 
 
 def fit_forecast(
-    features: FloatArray, change: FloatArray, lags: NDArray[np.int64], ridge: float = RIDGE
+    features: FloatArray,
+    change: FloatArray,
+    lags: NDArray[np.int64],
+    ridge: float = RIDGE,
+    plan_offsets_m: Sequence[float] = (),
 ) -> LeaderForecast:
     """Least squares with a ridge penalty on every weight (closed form)."""
     if len(change) <= features.shape[1]:
         raise ValueError(f"{len(change)} forecasts cannot fit {features.shape[1]} weights")
     gram = features.T @ features + ridge * np.eye(features.shape[1])
     weights = np.linalg.solve(gram, features.T @ change).astype(np.float64)
-    return LeaderForecast(weights, lags)
+    return LeaderForecast(weights, lags, tuple(plan_offsets_m))
 
 
-def drive_rows(drives: Sequence[Drive], lags: NDArray[np.int64]) -> tuple[FloatArray, FloatArray]:
-    """`forecast_rows` of every drive, stacked."""
+def plan_ahead(drive: Drive, steps: NDArray[np.int64], offsets_m: Sequence[float]) -> FloatArray:
+    """At each of `steps` (ascending), the recommended plan's target at the leader's position
+    plus each offset, less the leader's speed then: the plans made as in the loop (`sim.av`
+    pings, then reads its plan), with a car at the leader's place pinging once a second."""
+    schedule = SimulatedPlanner.for_drive(drive, RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS)
+    position, speed = drive.position_m, drive.speed_mps
+    ahead = np.empty((len(steps), len(offsets_m)))
+    next_ping = 0
+    for row, step in enumerate(steps):
+        while next_ping <= step:
+            # as in the loop: the ping, then the plan read at the same second, so every plan
+            # is made when it is due (from the first second on) with the pings it would have
+            schedule.record_ping(next_ping * STEP_S, position[next_ping], speed[next_ping])
+            schedule.profile(next_ping * STEP_S)
+            next_ping += PING_EVERY_STEPS
+        profile = schedule.profile(float(step) * STEP_S)
+        ahead[row] = [profile.at(position[step] + offset) - speed[step] for offset in offsets_m]
+    return ahead
+
+
+def drive_rows(
+    drives: Sequence[Drive], lags: NDArray[np.int64], *, with_plan: bool = False
+) -> tuple[FloatArray, FloatArray]:
+    """`forecast_rows` of every drive, stacked; with `with_plan`, `plan_ahead` at
+    PLAN_OFFSETS_M appended to each row."""
     ahead = int(round(FORECAST_S / STEP_S))
     every = int(round(SAMPLE_EVERY_S / STEP_S))
-    rows = [forecast_rows(drive.speed_mps, lags, ahead, every) for drive in drives]
-    return np.vstack([x for x, _ in rows]), np.concatenate([y for _, y in rows])
+    features, changes = [], []
+    for drive in drives:
+        rows, change = forecast_rows(drive.speed_mps, lags, ahead, every)
+        if with_plan:
+            steps = forecast_steps(len(drive.speed_mps), lags, ahead, every)
+            rows = np.hstack([rows, plan_ahead(drive, steps, PLAN_OFFSETS_M)])
+        features.append(rows)
+        changes.append(change)
+    return np.vstack(features), np.concatenate(changes)
 
 
 @dataclass(frozen=True)
@@ -132,42 +200,70 @@ class ForecastSkill:
     persistence_rmse: float
     trailing_mean_rmse: float
     ridge_rmse: float
+    plan_ridge_rmse: float
+
+    def skill_of(self, rmse: float) -> float:
+        """Share of persistence's squared error a forecast of this RMSE removes."""
+        return 1.0 - (rmse / self.persistence_rmse) ** 2
 
     @property
     def skill(self) -> float:
-        """Share of persistence's squared error the ridge removes (1 - MSE / MSE_persistence)."""
-        return 1.0 - (self.ridge_rmse / self.persistence_rmse) ** 2
+        """The history ridge's skill."""
+        return self.skill_of(self.ridge_rmse)
+
+    @property
+    def plan_skill(self) -> float:
+        """The skill of the ridge on the history and the plan."""
+        return self.skill_of(self.plan_ridge_rmse)
 
 
 def held_out_skill(
     drives: Sequence[Drive], folds: int = 2, ridge: float = RIDGE
 ) -> list[ForecastSkill]:
-    """Per date fold and group of its held-out drives: the ridge fitted on the fold's training
-    dates, persistence, and the trailing mean, scored on the held-out dates."""
+    """Per date fold and group of its held-out drives: the ridges (history; history and plan)
+    fitted on the fold's training dates, persistence, and the trailing mean, scored on the
+    held-out dates."""
     lags = lag_steps()
+    history_columns = len(lags) + 1
     # the samples of the trailing mean (now and the lags within TRAILING_S; history first)
     trailing_samples = int(np.sum(lags <= int(round(TRAILING_S / STEP_S))))
+    rows = {drive.name: drive_rows([drive], lags, with_plan=True) for drive in drives}
+
+    def stacked(chosen: Sequence[Drive]) -> tuple[FloatArray, FloatArray]:
+        return (
+            np.vstack([rows[drive.name][0] for drive in chosen]),
+            np.concatenate([rows[drive.name][1] for drive in chosen]),
+        )
+
     found = []
     for fold in date_folds(drives, folds):
-        forecast = fit_forecast(*drive_rows(fold.train, lags), lags, ridge)
+        features, change = stacked(fold.train)
+        history = fit_forecast(features[:, :history_columns], change, lags, ridge)
+        with_plan = fit_forecast(features, change, lags, ridge, PLAN_OFFSETS_M)
         for group, member in DRIVE_GROUPS.items():
             chosen = [drive for drive in fold.held_out if member(drive)]
             if not chosen:
                 continue
-            features, change = drive_rows(chosen, lags)
+            features, change = stacked(chosen)
             # its change from now: the mean of (lagged - now), now's term being 0
             trailing = features[:, : trailing_samples - 1].sum(axis=1) / trailing_samples
+            history_error = change - history.predict(features[:, :history_columns])
             found.append(
                 ForecastSkill(
                     fold=fold.index,
                     group=group,
                     forecasts=len(change),
-                    persistence_rmse=float(np.sqrt(np.mean(change**2))),
-                    trailing_mean_rmse=float(np.sqrt(np.mean((change - trailing) ** 2))),
-                    ridge_rmse=float(np.sqrt(np.mean((change - forecast.predict(features)) ** 2))),
+                    persistence_rmse=_rmse(change),
+                    trailing_mean_rmse=_rmse(change - trailing),
+                    ridge_rmse=_rmse(history_error),
+                    plan_ridge_rmse=_rmse(change - with_plan.predict(features)),
                 )
             )
     return found
+
+
+def _rmse(error: FloatArray) -> float:
+    return float(np.sqrt(np.mean(error**2)))
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -185,7 +281,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         say(
             f"fold {row.fold} {row.group:>11} ({row.forecasts:5d} forecasts): persistence"
             f" {row.persistence_rmse:.2f}, trailing {TRAILING_S:g} s mean"
-            f" {row.trailing_mean_rmse:.2f}, ridge {row.ridge_rmse:.2f} (skill {row.skill:+.2f})"
+            f" {row.trailing_mean_rmse:.2f}, ridge {row.ridge_rmse:.2f} (skill {row.skill:+.2f}),"
+            f" with the plan {row.plan_ridge_rmse:.2f} (skill {row.plan_skill:+.2f})"
         )
 
 

@@ -30,10 +30,11 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
   the leader gives a simple smoother inside the envelope, so how much the missing foresight
   is worth to a causal one.
 - `forecast`: `ForecastFollower`, the same smoother driving a causal forecast of that mean over
-  the next 20 s, from the leader's last 60 s as its radar saw them (`sim.leader_forecast`'s
-  ridge). The forecast is fitted on half of fold 0's training dates and run on the other half,
-  and the other way round (the dates dealt as `sim.folds` deals them), so no drive is scored
-  by a forecast fitted on its own date.
+  the next 20 s, from the leader's last 60 s as its radar saw them, and from that and the plan
+  ahead of the leader (`sim.leader_forecast`'s two ridges). Each forecast is fitted on half
+  of fold 0's training dates and run on the other half, and the other way round (the dates
+  dealt as `sim.folds` deals them), so no drive is scored by a forecast fitted on its own
+  date.
 """
 
 from __future__ import annotations
@@ -53,11 +54,13 @@ from sim.drives import STEP_S, Drive, load_drives, shared_data_dir
 from sim.folds import date_folds
 from sim.leader_forecast import (
     FORECAST_S,
+    PLAN_OFFSETS_M,
     LeaderForecast,
     drive_rows,
     fit_forecast,
     lag_steps,
 )
+from sim.platoon import VEHICLE_LENGTH_M
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, score_drives, summarise
 from vehicle_agent.controllers import AccelCommand, Controller, Observation
@@ -162,12 +165,12 @@ class SmoothingFollower(Controller):
         lead_accel = self.lead_accel.update(observation.time_s, speed + rel)
         reference_gap = min(max(self.headway_s * speed, REFERENCE_GAP_MIN_M), REFERENCE_GAP_MAX_M)
         request = self.speed_gain * (
-            self.reference_speed(observation.time_s, speed + rel) - speed
+            self.reference_speed(observation, speed + rel) - speed
         ) + self.gap_gain * (gap - reference_gap)
         return AccelCommand(bounded_request(request, speed, gap, rel, lead_accel))
 
     @abstractmethod
-    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+    def reference_speed(self, observation: Observation, lead_speed_mps: float) -> float:
         """The speed to drive, given the leader's speed measured now."""
 
 
@@ -188,7 +191,7 @@ class LeaderAverageFollower(SmoothingFollower):
         super().reset()
         self.lead_speeds.clear()
 
-    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+    def reference_speed(self, observation: Observation, lead_speed_mps: float) -> float:
         """The leader's mean over the last `window_s` (this sample included)."""
         self.lead_speeds.append(lead_speed_mps)
         return float(np.mean(self.lead_speeds))
@@ -221,9 +224,9 @@ class ForesightFollower(SmoothingFollower):
         self.ahead_steps = int(round(ahead_share * window))
         self.behind_steps = window - self.ahead_steps
 
-    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
+    def reference_speed(self, observation: Observation, lead_speed_mps: float) -> float:
         """The leader's mean from `behind_steps` before this step to `ahead_steps` after it."""
-        step = int(round(time_s / STEP_S))
+        step = int(round(observation.time_s / STEP_S))
         last = len(self.cumulative) - 1
         first = min(max(step - self.behind_steps + 1, 0), last - 1)
         end = max(min(step + self.ahead_steps + 1, last), first + 1)
@@ -233,7 +236,8 @@ class ForesightFollower(SmoothingFollower):
 class ForecastFollower(LeaderAverageFollower):
     """A smoother driving `forecast`'s mean of its leader's speed over the window ahead, from
     the leader's speeds its radar measured since it last saw none (the trailing window's
-    history, `forecast`'s reach long)."""
+    history, `forecast`'s reach long) and, for a forecast with the plan, the plan's targets at
+    the leader's place (its gap and a car's length ahead) and the forecast's offsets beyond."""
 
     name = "forecast"
 
@@ -244,10 +248,20 @@ class ForecastFollower(LeaderAverageFollower):
         super().__init__(history_s, speed_gain, gap_gain, headway_s)
         self.forecast = forecast
 
-    def reference_speed(self, time_s: float, lead_speed_mps: float) -> float:
-        """The forecast mean ahead from the history, this sample included."""
+    def reference_speed(self, observation: Observation, lead_speed_mps: float) -> float:
+        """The forecast mean ahead from the history, this sample included (and the plan)."""
         self.lead_speeds.append(lead_speed_mps)
-        return self.forecast.mean_ahead(np.fromiter(self.lead_speeds, dtype=np.float64))
+        targets: list[float] = []
+        if self.forecast.plan_offsets_m:
+            plan, position = observation.target, observation.position_m
+            if plan is None or position is None or observation.lead_distance_m is None:
+                raise ValueError(
+                    "a forecast with the plan needs the plan, the car's position and its gap"
+                )
+            leader_m = position + observation.lead_distance_m + VEHICLE_LENGTH_M
+            targets = [plan.at(leader_m + offset) for offset in self.forecast.plan_offsets_m]
+        history = np.fromiter(self.lead_speeds, dtype=np.float64)
+        return self.forecast.mean_ahead(history, targets)
 
 
 # (share of the window ahead of now, window s); foresight of share x window. The first is the
@@ -328,17 +342,24 @@ def foresights(drive: Drive) -> list[ControllerUnderTest]:
 
 
 def forecasts(fitted_on: Sequence[Drive]) -> list[ControllerUnderTest]:
-    """A `ForecastFollower` whose forecast is fitted on `fitted_on`, with the foresight
-    followers' gains."""
+    """Two `ForecastFollower`s, the forecasts (the leader's history; it and the plan) fitted
+    on `fitted_on`, with the foresight followers' gains."""
     lags = lag_steps()
-    forecast = fit_forecast(*drive_rows(fitted_on, lags), lags)
+    features, change = drive_rows(fitted_on, lags, with_plan=True)
+    history_only = fit_forecast(features[:, : len(lags) + 1], change, lags)
+    with_plan = fit_forecast(features, change, lags, plan_offsets_m=PLAN_OFFSETS_M)
     speed_gain, gap_gain, headway_s = FORESIGHT_GAINS
-    label = f"forecast mean over the next {FORECAST_S:g} s"
-    return [
-        ControllerUnderTest(
-            label, "accel", lambda: ForecastFollower(forecast, speed_gain, gap_gain, headway_s)
-        )
-    ]
+    entries = []
+    for label, forecast in (
+        (f"forecast of the next {FORECAST_S:g} s, history", history_only),
+        (f"forecast of the next {FORECAST_S:g} s, history and plan", with_plan),
+    ):
+
+        def build(forecast: LeaderForecast = forecast) -> Controller:
+            return ForecastFollower(forecast, speed_gain, gap_gain, headway_s)
+
+        entries.append(ControllerUnderTest(label, "accel", build))
+    return entries
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -7,14 +7,19 @@ import math
 import numpy as np
 import pytest
 
-from sim.drives import drive_from_speeds
+from sim.drives import STEP_S, drive_from_speeds, load_drive, shared_data_dir
 from sim.leader_forecast import (
+    PLAN_OFFSETS_M,
+    drive_rows,
     fit_forecast,
     forecast_rows,
+    forecast_steps,
     held_out_skill,
     history_features,
     lag_steps,
 )
+from sim.plans import SimulatedPlanner
+from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 
 
 def test_lags_reach_a_minute_back_every_two_seconds() -> None:
@@ -66,3 +71,29 @@ def test_a_regular_wave_is_forecast_far_better_than_persistence_on_another_date(
         assert row.trailing_mean_rmse > 2.0
         assert row.ridge_rmse < 0.2
         assert row.skill > 0.99
+
+
+def test_the_plan_columns_are_the_loops_plan_at_the_leader_and_ahead_of_it() -> None:
+    """On the first 8 minutes of a real drive: the history columns are the history-only rows,
+    and the plan columns are what a planner fed the leader's pings once a second gives at the
+    same step (read here at one step, 5 minutes in, past several plans)."""
+    path = next(iter(sorted((shared_data_dir() / "trajectories").glob("*.csv"))))
+    drive = load_drive(path).slice(0.0, 480.0)
+    lags = lag_steps()
+    with_plan, change = drive_rows([drive], lags, with_plan=True)
+    history, same_change = drive_rows([drive], lags)
+    assert with_plan.shape == (len(history), len(lags) + 1 + len(PLAN_OFFSETS_M))
+    np.testing.assert_array_equal(with_plan[:, : len(lags) + 1], history)
+    np.testing.assert_array_equal(change, same_change)
+    steps = forecast_steps(drive.steps + 1, lags, int(round(20.0 / STEP_S)), 10)
+    row = int(np.searchsorted(steps, 3000))
+    planner = SimulatedPlanner.for_drive(drive, RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS)
+    for ping in range(0, int(steps[row]) + 1, 10):
+        planner.record_ping(ping * STEP_S, drive.position_m[ping], drive.speed_mps[ping])
+        planner.profile(ping * STEP_S)
+    profile = planner.profile(float(steps[row]) * STEP_S)
+    here = drive.position_m[steps[row]]
+    expected = [
+        profile.at(here + offset) - drive.speed_mps[steps[row]] for offset in PLAN_OFFSETS_M
+    ]
+    np.testing.assert_allclose(with_plan[row, len(lags) + 1 :], expected)

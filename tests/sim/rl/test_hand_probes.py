@@ -18,7 +18,7 @@ from sim.rl.hand_probes import (
     margin_policies,
     stock_acc_policies,
 )
-from vehicle_agent.controllers import AccelCommand, Observation
+from vehicle_agent.controllers import AccelCommand, Observation, TargetProfile
 from vehicle_agent.controllers.policy import (
     acc_features,
     accel_features,
@@ -107,6 +107,36 @@ def test_the_forecast_follower_drives_the_forecast_from_the_history_its_radar_sa
     assert follower.step(lead_seen(0.2, 20.0, 90.0, 4.0)).accel_mps2 == pytest.approx(0.4)
     follower.step(Observation(time_s=0.3, speed_mps=20.0, target_speed_mps=20.0))
     assert not follower.lead_speeds
+
+
+def test_a_forecast_with_the_plan_reads_it_at_the_leaders_place() -> None:
+    # weights on (2 steps back - now, 1, now, plan at the leader - now, plan 100 m on - now):
+    # the forecast is the plan's mean over the two places
+    forecast = LeaderForecast(
+        np.array([0.0, 0.0, 0.0, 0.5, 0.5]), np.array([0, 2]), plan_offsets_m=(0.0, 100.0)
+    )
+    follower = ForecastFollower(forecast, speed_gain=0.1, gap_gain=0.0, headway_s=1.5)
+    # the AV at 1000 m, its leader 90 m + a car's length (5 m) ahead at 1095 m; the plan
+    # 18 m/s up to 1100 m, 22 m/s from 1150 m: 18 at the leader, 22 100 m on, so the forecast
+    # is 20 m/s and the command 0.1 x (20 - 16)
+    plan = TargetProfile(
+        np.array([0.0, 1100.0, 1150.0, 5000.0]), np.array([18.0, 18.0, 22.0, 22.0])
+    )
+    seen = Observation(
+        time_s=0.0,
+        speed_mps=16.0,
+        target_speed_mps=18.0,
+        position_m=1000.0,
+        target=plan,
+        lead_present=True,
+        lead_distance_m=90.0,
+        lead_rel_speed_mps=0.0,
+    )
+    assert follower.step(seen).accel_mps2 == pytest.approx(0.4)
+    with pytest.raises(ValueError, match="needs the plan"):
+        follower.step(lead_seen(0.1, 16.0, 90.0, 0.0))
+    with pytest.raises(ValueError, match="reads the plan at 2 places, got 1"):
+        forecast.mean_ahead(np.array([20.0]), [18.0])
 
 
 def test_stock_acc_policies_ask_the_ceiling_with_their_gap_bars(tmp_path: Path) -> None:
