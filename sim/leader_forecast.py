@@ -25,9 +25,10 @@ plans carry of the forecast.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -152,11 +153,17 @@ def fit_forecast(
     return LeaderForecast(weights, lags, tuple(plan_offsets_m))
 
 
-def plan_ahead(drive: Drive, steps: NDArray[np.int64], offsets_m: Sequence[float]) -> FloatArray:
-    """At each of `steps` (ascending), the recommended plan's target at the leader's position
-    plus each offset, less the leader's speed then: the plans made as in the loop (`sim.av`
-    pings, then reads its plan), with a car at the leader's place pinging once a second."""
-    schedule = SimulatedPlanner.for_drive(drive, RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS)
+def plan_ahead(
+    drive: Drive,
+    steps: NDArray[np.int64],
+    offsets_m: Sequence[float],
+    planner_params: Mapping[str, Any],
+) -> FloatArray:
+    """At each of `steps` (ascending), the target of the recommended planner (with
+    `planner_params`) at the leader's position plus each offset, less the leader's speed then:
+    the plans made as in the loop (`sim.av` pings, then reads its plan), with a car at the
+    leader's place pinging once a second."""
+    schedule = SimulatedPlanner.for_drive(drive, RECOMMENDED_PLANNER, planner_params)
     position, speed = drive.position_m, drive.speed_mps
     ahead = np.empty((len(steps), len(offsets_m)))
     next_ping = 0
@@ -173,10 +180,15 @@ def plan_ahead(drive: Drive, steps: NDArray[np.int64], offsets_m: Sequence[float
 
 
 def drive_rows(
-    drives: Sequence[Drive], lags: NDArray[np.int64], *, with_plan: bool = False
+    drives: Sequence[Drive],
+    lags: NDArray[np.int64],
+    *,
+    with_plan: bool = False,
+    planner_params: Mapping[str, Any] = RECOMMENDED_PLANNER_PARAMS,
 ) -> tuple[FloatArray, FloatArray]:
     """`forecast_rows` of every drive, stacked; with `with_plan`, `plan_ahead` at
-    PLAN_OFFSETS_M appended to each row."""
+    PLAN_OFFSETS_M appended to each row (the plans of `planner_params`, by default the
+    fleet's)."""
     ahead = int(round(FORECAST_S / STEP_S))
     every = int(round(SAMPLE_EVERY_S / STEP_S))
     features, changes = [], []
@@ -184,7 +196,8 @@ def drive_rows(
         rows, change = forecast_rows(drive.speed_mps, lags, ahead, every)
         if with_plan:
             steps = forecast_steps(len(drive.speed_mps), lags, ahead, every)
-            rows = np.hstack([rows, plan_ahead(drive, steps, PLAN_OFFSETS_M)])
+            plan = plan_ahead(drive, steps, PLAN_OFFSETS_M, planner_params)
+            rows = np.hstack([rows, plan])
         features.append(rows)
         changes.append(change)
     return np.vstack(features), np.concatenate(changes)

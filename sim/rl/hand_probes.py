@@ -31,10 +31,10 @@ A diagnostic, not a result: nothing here is chosen, and nothing shipped comes fr
   is worth to a causal one.
 - `forecast`: `ForecastFollower`, the same smoother driving a causal forecast of that mean over
   the next 20 s, from the leader's last 60 s as its radar saw them, and from that and the plan
-  ahead of the leader (`sim.leader_forecast`'s two ridges). Each forecast is fitted on half
-  of fold 0's training dates and run on the other half, and the other way round (the dates
-  dealt as `sim.folds` deals them), so no drive is scored by a forecast fitted on its own
-  date.
+  ahead of the leader (`sim.leader_forecast`'s two ridges, on the plans these runs hold).
+  Each forecast is fitted on half of fold 0's training dates and run on the other half, and
+  the other way round (the dates dealt as `sim.folds` deals them), so no drive is scored by a
+  forecast fitted on its own date.
 """
 
 from __future__ import annotations
@@ -345,7 +345,10 @@ def forecasts(fitted_on: Sequence[Drive]) -> list[ControllerUnderTest]:
     """Two `ForecastFollower`s, the forecasts (the leader's history; it and the plan) fitted
     on `fitted_on`, with the foresight followers' gains."""
     lags = lag_steps()
-    features, change = drive_rows(fitted_on, lags, with_plan=True)
+    # the plans the probes' runs hold (the RL training setting), not the fleet's
+    features, change = drive_rows(
+        fitted_on, lags, with_plan=True, planner_params=DEFAULT_PLANNER_PARAMS
+    )
     history_only = fit_forecast(features[:, : len(lags) + 1], change, lags)
     with_plan = fit_forecast(features, change, lags, plan_offsets_m=PLAN_OFFSETS_M)
     speed_gain, gap_gain, headway_s = FORESIGHT_GAINS
