@@ -1,18 +1,18 @@
-"""How well a car can forecast its leader's next seconds from what its radar has seen.
+"""How well a car can forecast its leader's next seconds from its radar's history and its plan.
 
     .venv/bin/python -m sim.leader_forecast [--drives DIR]
 
 The foresight probe (`sim.rl.hand_probes foresight`) shows that a smoother told its leader's
-mean speed over the next `FORECAST_S` (20 s) saves 60 % of the optimal bound, against a fifth
-of it for the same smoother driving its leader's trailing mean. A causal controller can only
-drive a forecast of that mean. This measures the forecast the leader's own past allows: the
-change from the leader's speed now to its mean over the next 20 s, regressed (ridge) on its
-speeds over the last `HISTORY_S` (60 s, one every `LAG_EVERY_S`), each relative to its speed
-now, and on that speed. Fitted on each date fold's training dates (`sim.folds`, two folds),
-scored on its held-out dates against persistence (forecast: no change), the forecast a
-follower that drives its leader's speed makes, and against the trailing mean the causal
-smoother drives. The skill is the share of persistence's squared error the ridge removes.
-The leader here is the replayed real drive, the AV's leader in every evaluation.
+mean speed over the next `FORECAST_S` (20 s, the best of its windows) saves 60 % of the optimal
+bound, against a fifth of it for the same smoother driving its leader's trailing mean. A causal
+controller can only drive a forecast of that mean. This measures the forecast the leader's own
+past allows: the change from the leader's speed now to its mean over the next 20 s, regressed
+(ridge) on its speeds over the last `HISTORY_S` (60 s, one every `LAG_EVERY_S`), each relative
+to its speed now, and on that speed. Fitted on each date fold's training dates (`sim.folds`, two
+folds), scored on its held-out dates against persistence (forecast: no change), the forecast a
+follower that drives its leader's speed makes, and against the trailing mean the causal smoother
+drives. The skill is the share of persistence's squared error the ridge removes. The leader here
+is the replayed real drive, the AV's leader in every evaluation.
 
 A second ridge adds what the car holds of the road ahead: the recommended planner's targets
 (`sim.recommended`, the plan the fleet gets) at the leader's place and `PLAN_OFFSETS_M` ahead
