@@ -215,7 +215,7 @@ class CutIns:
     def invites_any(self, gap_m: FloatArray, speed_mps: FloatArray) -> bool:
         """False when no gap has room beyond the accepted time gap, so every hazard is 0 (a
         cheap test first: on most steps no driver is left room)."""
-        return bool(np.any(gap_m - self.min_gap_m > self.accept_time_gap_s * speed_mps))
+        return bool((gap_m - self.min_gap_m > self.accept_time_gap_s * speed_mps).any())
 
     def hazard_per_s(self, gap_m: FloatArray, speed_mps: FloatArray) -> FloatArray:
         """The merge rate into each gap now (one per follower)."""
@@ -332,45 +332,38 @@ def simulate_platoon(
     for k in range(steps):
         x = position[k, :used]
         v = speed[k, :used]
-        merging: IntArray | tuple[()] = ()
-        if cut_ins is not None:
-            gaps_now = x[lead_of[1:]] - x[1:] - vehicle_length_m
-            # without room anywhere no clock moves, so none can reach its draw this step
-            if cut_ins.invites_any(gaps_now, v[1:]):
-                merge_clock[1:] += cut_ins.hazard_per_s(gaps_now, v[1:]) * dt
-                merging = np.flatnonzero(merge_clock >= merge_threshold)
-        for follower in merging:
-            ahead = int(lead_of[follower])
-            gap_now = float(x[ahead] - x[follower]) - vehicle_length_m
-            merge_clock[follower] = 0.0
-            merge_threshold[follower] = rng.exponential()
-            if used == position.shape[1]:
-                room = np.full((steps + 1, CUT_IN_BLOCK), np.nan)
-                position = np.hstack([position, room])
-                speed = np.hstack([speed, room])
-                gap_history = np.hstack([gap_history, room])
-            new = used
-            used += 1
-            position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
-            speed[k, new] = 0.5 * float(v[ahead] + v[follower])
-            lead_of = np.append(lead_of, ahead)
-            lead_of[follower] = new
-            merge_clock = np.append(merge_clock, 0.0)
-            merge_threshold = np.append(merge_threshold, rng.exponential())
-            in_order = False
-            buffers = np.empty((6, new))
-            x = position[k, :used]
-            v = speed[k, :used]
         gap, v_lead, desired, work, accel, limits_work = buffers
+        _gaps_into(gap, v_lead, x, v, lead_of, in_order, vehicle_length_m)
+        # without room anywhere no clock moves, so none can reach its draw this step
+        if cut_ins is not None and cut_ins.invites_any(gap, v[1:]):
+            merge_clock[1:] += cut_ins.hazard_per_s(gap, v[1:]) * dt
+            merging = np.flatnonzero(merge_clock >= merge_threshold)
+            for follower in merging:
+                ahead = int(lead_of[follower])
+                gap_now = float(x[ahead] - x[follower]) - vehicle_length_m
+                merge_clock[follower] = 0.0
+                merge_threshold[follower] = rng.exponential()
+                if used == position.shape[1]:
+                    room = np.full((steps + 1, CUT_IN_BLOCK), np.nan)
+                    position = np.hstack([position, room])
+                    speed = np.hstack([speed, room])
+                    gap_history = np.hstack([gap_history, room])
+                new = used
+                used += 1
+                position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
+                speed[k, new] = 0.5 * float(v[ahead] + v[follower])
+                lead_of = np.append(lead_of, ahead)
+                lead_of[follower] = new
+                merge_clock = np.append(merge_clock, 0.0)
+                merge_threshold = np.append(merge_threshold, rng.exponential())
+                in_order = False
+                buffers = np.empty((6, new))
+                x = position[k, :used]
+                v = speed[k, :used]
+            if merging.size:
+                gap, v_lead, desired, work, accel, limits_work = buffers
+                _gaps_into(gap, v_lead, x, v, lead_of, in_order, vehicle_length_m)
         v_follow = v[1:]
-        if in_order:
-            np.subtract(x[:-1], x[1:], out=gap)
-            v_lead[:] = v[:-1]
-        else:
-            ahead_of = lead_of[1:]
-            np.subtract(x[ahead_of], x[1:], out=gap)
-            np.take(v, ahead_of, out=v_lead)
-        gap -= vehicle_length_m
         gap_history[k, 1:used] = gap
         # s* = s0 + v T + max(0, v dv) / (2 sqrt(ab))
         np.subtract(v_follow, v_lead, out=desired)
@@ -461,6 +454,28 @@ def simulate_platoon(
     )
     run.events.extend(gap_events(run.gap_m, dt, gap_violation_m))
     return run
+
+
+def _gaps_into(
+    gap: FloatArray,
+    lead_speed: FloatArray,
+    position: FloatArray,
+    speed: FloatArray,
+    lead_of: IntArray,
+    in_order: bool,
+    vehicle_length_m: float,
+) -> None:
+    """Each follower's bumper-to-bumper gap and its leader's speed, into the step's buffers
+    (plain slices while the platoon keeps its order, the cheap case of every step without a
+    cut-in)."""
+    if in_order:
+        np.subtract(position[:-1], position[1:], out=gap)
+        lead_speed[:] = speed[:-1]
+    else:
+        ahead_of = lead_of[1:]
+        np.subtract(position[ahead_of], position[1:], out=gap)
+        np.take(speed, ahead_of, out=lead_speed)
+    gap -= vehicle_length_m
 
 
 def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) -> None:
