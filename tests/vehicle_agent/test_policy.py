@@ -41,6 +41,20 @@ def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed(
     np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
 
 
+def test_one_cars_features_are_its_row_of_a_batch_bit_for_bit() -> None:
+    # the car's step builds its one row without broadcasting; the training environment's
+    # batches broadcast: the network must see the same numbers from both
+    acc_batch = acc_features([15.0, 7.3], 24.1, [12.0, 31.7], [True, False], 50.0, [3, 1])
+    np.testing.assert_array_equal(acc_features(7.3, 24.1, 31.7, False, 50.0, 1), acc_batch[1])
+    accel_batch = accel_features(
+        [30.0, 11.9], [30.0, 8.2], 30.0, [False, True], [math.inf, 37.5], [7.0, -2.6]
+    )
+    np.testing.assert_array_equal(accel_features(11.9, 8.2, 30.0, True, 37.5, -2.6), accel_batch[1])
+    np.testing.assert_array_equal(
+        accel_features(30.0, 30.0, 30.0, False, math.inf, 7.0), accel_batch[0]
+    )
+
+
 def test_acc_action_is_a_setting_around_the_plans_target_while_a_leader_is_seen() -> None:
     # plan 60 mph: -1 -> 40 mph, 0 -> 60 (the plan), +1 -> 80 (the clip bounds it later);
     # beyond [-1, 1] is clipped

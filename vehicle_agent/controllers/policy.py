@@ -95,18 +95,14 @@ def acc_features(
 ) -> FloatArray:
     """The `acc` observation (last axis: v, v_s, v_s ahead, l, s, g), scaled for the network."""
     setting = np.asarray(speed_setting_mph, dtype=np.float64) * MPS_PER_MPH
-    features: FloatArray = np.stack(
-        np.broadcast_arrays(
-            np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            np.asarray(lead_present, dtype=np.float64),
-            setting / SPEED_SCALE_MPS,
-            np.asarray(gap_setting, dtype=np.float64) - 2.0,
-        ),
-        axis=-1,
+    return _feature_columns(
+        np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        np.asarray(lead_present, dtype=np.float64),
+        setting / SPEED_SCALE_MPS,
+        np.asarray(gap_setting, dtype=np.float64) - 2.0,
     )
-    return features
 
 
 def accel_features(
@@ -125,17 +121,23 @@ def accel_features(
     measured = np.minimum(np.asarray(gap_m, dtype=np.float64), GAP_SCALE_M)
     gap = np.where(present, measured, GAP_SCALE_M)
     rel = np.where(present, np.asarray(rel_speed_mps, dtype=np.float64), 0.0)
-    features: FloatArray = np.stack(
-        np.broadcast_arrays(
-            np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
-            present.astype(np.float64),
-            gap / GAP_SCALE_M,
-            rel / REL_SPEED_SCALE_MPS,
-        ),
-        axis=-1,
+    return _feature_columns(
+        np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
+        present.astype(np.float64),
+        gap / GAP_SCALE_M,
+        rel / REL_SPEED_SCALE_MPS,
     )
+
+
+def _feature_columns(*columns: FloatArray) -> FloatArray:
+    """The features on the last axis. One car's step (every column a scalar, the car's and the
+    simulator's case every 0.1 s) is one small array, built without broadcasting, which was
+    most of a step's feature time; batches (the training environment's) broadcast."""
+    if all(column.ndim == 0 for column in columns):
+        return np.array(columns, dtype=np.float64)
+    features: FloatArray = np.stack(np.broadcast_arrays(*columns), axis=-1)
     return features
 
 
@@ -215,7 +217,8 @@ class PolicyNetwork:
             hidden = hidden @ weight + bias
             if index < last:
                 hidden = np.tanh(hidden)
-        clipped: FloatArray = np.clip(hidden, -1.0, 1.0)
+        # minimum(maximum()) is np.clip (NaN passes through both) without its wrapper's cost
+        clipped: FloatArray = np.minimum(np.maximum(hidden, -1.0), 1.0)
         return clipped
 
 
