@@ -22,7 +22,7 @@ from fastapi import Depends, Request, Response
 from sqlalchemy import select
 
 from app.core.config import Settings
-from app.core.db import SessionDep
+from app.core.sessions import SessionDep
 from app.models import OpsUser
 
 SESSION_COOKIE = "sf_session"

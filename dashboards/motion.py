@@ -20,7 +20,7 @@ from fastapi.templating import Jinja2Templates
 from sqlalchemy.orm import Session
 
 from app.core.config import Settings
-from app.core.db import SessionDep
+from app.core.sessions import SessionDep
 from app.motion.edie import EdieWindow, day_window, edie_field
 from app.motion.figure import window_figure
 from app.motion.fleet import FleetDay, engagement_share, fleet_pings

@@ -37,8 +37,8 @@ from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.config import Settings
-from app.core.db import SessionDep
 from app.core.ratelimit import RateLimiter, retry_after_header
+from app.core.sessions import SessionDep
 from app.fleet.readiness import CHECKS, Thresholds, describe_age, reason_counts
 from app.fleet.service import (
     PROBLEM_FILTERS,

@@ -1,23 +1,22 @@
-"""Database plumbing: URL forms, the one engine per process, sessions per request.
+"""Database plumbing: URL forms, the one engine per process, a session per job or command.
 
 The server is asynchronous (SQLAlchemy AsyncEngine on psycopg 3) so that many vehicles' pings can
-share one database round trip; command-line tools and migrations use a synchronous engine.
+share one database round trip; command-line tools and migrations use a synchronous engine. The
+request's session, a FastAPI dependency, is in `app.core.sessions`: this module does not import
+the web framework, which was a quarter of every command's start-up.
 """
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import Annotated, Any
+from typing import Any
 
 import psycopg
-from fastapi import Depends, Request
 from sqlalchemy import Engine, create_engine
 from sqlalchemy.engine import make_url
 from sqlalchemy.ext.asyncio import (
     AsyncEngine,
-    AsyncSession,
-    async_sessionmaker,
     create_async_engine,
 )
 from sqlalchemy.orm import Session, sessionmaker
@@ -110,15 +109,3 @@ def session_scope(engine: Engine) -> Iterator[Session]:
     factory = sessionmaker(engine, expire_on_commit=False)
     with factory() as session, session.begin():
         yield session
-
-
-async def get_session(request: Request) -> AsyncIterator[AsyncSession]:
-    """FastAPI dependency: one session per request, committed when the handler succeeds."""
-    factory: async_sessionmaker[AsyncSession] = request.app.state.sessionmaker
-    async with factory() as session, session.begin():
-        yield session
-
-
-# scope="function" ends the dependency (and commits) before the response is sent, so a 200
-# always means "committed" (FastAPI's default scope would commit after the response started).
-SessionDep = Annotated[AsyncSession, Depends(get_session, scope="function")]

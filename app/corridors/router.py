@@ -7,8 +7,8 @@ import hashlib
 from fastapi import APIRouter, HTTPException, Request, Response
 
 from app.auth import AuthDep
-from app.core.db import SessionDep
 from app.core.errors import error_responses
+from app.core.sessions import SessionDep
 from app.corridors.schemas import CorridorOut
 from app.corridors.service import corridor_geometry
 

@@ -8,8 +8,8 @@ from fastapi import APIRouter, HTTPException, Request
 
 from app.auth import FeedWriterDep
 from app.core.config import Settings
-from app.core.db import SessionDep
 from app.core.errors import error_responses
+from app.core.sessions import SessionDep
 from app.feeds.inrix import InrixFormatError, InrixResponse, readings_of
 from app.feeds.schemas import InrixAnswer
 from app.feeds.service import store_readings

@@ -11,8 +11,8 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request
 
 from app.auth import OperatorDep, ViewerDep
 from app.core.config import Settings
-from app.core.db import SessionDep
 from app.core.errors import error_responses
+from app.core.sessions import SessionDep
 from app.fleet.readiness import Thresholds
 from app.fleet.schemas import (
     AssignmentIn,

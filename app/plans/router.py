@@ -15,8 +15,8 @@ from pydantic import BeforeValidator
 
 from app.auth import AuthDep, Principal
 from app.core.config import Settings
-from app.core.db import SessionDep
 from app.core.errors import error_responses, is_database_outage, service_unavailable
+from app.core.sessions import SessionDep
 from app.plans.schemas import PlanHistoryOut
 from app.plans.service import (
     HeldPlans,

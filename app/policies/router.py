@@ -10,8 +10,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, File, Form, HTTPException, Path, Response, UploadFile
 
 from app.auth import AuthDep, OperatorDep, ViewerDep
-from app.core.db import SessionDep
 from app.core.errors import error_responses
+from app.core.sessions import SessionDep
 from app.policies.schemas import PolicyOut, PolicyUploadOut, policy_out
 from app.policies.service import (
     ManifestConflict,

@@ -10,8 +10,8 @@ from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response
 from app.auth import AuthDep, PingWriterDep, Principal, bearer_scheme
 from app.core import metrics
 from app.core.config import Settings
-from app.core.db import SessionDep
 from app.core.errors import error_responses
+from app.core.sessions import SessionDep
 from app.ingest.http import reply_to_pings
 from app.vehicles.reports import store_status, vehicle_config, vehicle_exists
 from contract.vehicles import (
