@@ -129,9 +129,14 @@ class Evaluation:
         return float(100.0 * (value / base - 1.0))
 
     def fuel_saving_pct(self, result: RunResult) -> float:
-        """Drop in fuel per distance against the baseline (positive = less fuel)."""
+        """Drop in fuel per distance against the baseline (positive = less fuel); NaN where
+        it is undefined: a platoon that travelled no distance (a leader that never moved) has
+        a fuel economy of 0 either way."""
         base = self.baseline(result.case.name).kpis.fuel_economy_mpg
-        return float(100.0 * (1.0 - base / result.kpis.fuel_economy_mpg))
+        value = result.kpis.fuel_economy_mpg
+        if value == 0 or not np.isfinite(base) or not np.isfinite(value):
+            return float("nan")
+        return float(100.0 * (1.0 - base / value))
 
     def distance_lost_m(self, result: RunResult) -> float:
         """How much further behind the leader the AVs ended than the humans in their places."""

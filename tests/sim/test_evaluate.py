@@ -258,3 +258,29 @@ def test_saved_runs_recompute_the_kpis(shared_dir: Path, tmp_path: Path) -> None
     # 26 followers (24 humans + the largest AV count), two AVs: the first right behind the
     # leader, the second 13 places back
     assert two.av_columns == (1, 14)
+
+
+def test_a_leader_that_never_moves_has_no_fuel_saving_rather_than_a_crash(
+    tmp_path: Path,
+) -> None:
+    """A drive standing still burns fuel over no distance: every platoon's economy is 0 mpg, so
+    the saving is undefined (NaN in the table), and the rest of the report is still written."""
+    standing = Case("shockwave", drive_from_speeds("standing", np.zeros(600)))
+    evaluation = evaluate(
+        [standing],
+        ["kernel_smooth"],
+        [ControllerVariant("microaccel", "accel")],
+        humans=24,
+        avs=1,
+        workers=1,
+    )
+    [run] = [r for r in evaluation.results if r.controller != BASELINE]
+    assert evaluation.baseline("shockwave/standing").kpis.fuel_economy_mpg == 0.0
+    assert np.isnan(evaluation.fuel_saving_pct(run))
+    assert run.kpis.collisions == 0
+    write_csv(evaluation, tmp_path / "evaluation.csv")
+    write_heatmap(evaluation, tmp_path / "heatmap.png")
+    header, _, row = markdown_table(evaluation).splitlines()[:3]
+    cells = dict(zip(header.split("|"), row.split("|"), strict=True))
+    assert cells[" fuel saving "].strip() == "n/a"
+    assert best_pair(evaluation) is None
