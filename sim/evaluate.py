@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from sim.av import StockAcc, agent_policy
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
+from sim.folds import drive_date
 from sim.gaps import GapBounds, GapKpis, gap_kpis
 from sim.kpi import Kpis, platoon_kpis
 from sim.plans import SimulatedPlanner
@@ -262,6 +263,7 @@ class Evaluation:
                 "optimum_fuel_saving_pct": self.optimum_pct(r),
                 "plans_run": r.plans_run,
                 "plans_buffered": r.plans_buffered,
+                "date": drive_date(r.case.drive),
             }
             row.update(r.kpis.as_dict())
             for kpi in KPI_DIRECTION:

@@ -2,23 +2,39 @@
 
 Two drives of one date share its traffic (the same waves, often the same minutes), so a
 controller tuned on one and scored on the other is scored on what it was tuned on. A fold holds
-out every drive of its dates; the date is the first 10 characters of a drive's name
-(`2021-03-08-22-35-14_masterArray_0_5373` -> `2021-03-08`).
+out every drive of its dates (`drive_date`): the date its name begins with, the recordings'
+convention (`2021-03-08-22-35-14_masterArray_0_5373` -> `2021-03-08`), or else the date on I-24
+of its first sample, so that a drive named otherwise is still put with its own day's traffic.
 """
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from datetime import datetime
+from zoneinfo import ZoneInfo
 
 from sim.drives import Drive
 
-DATE_CHARS = 10
+# A name that begins with a calendar date: the recordings' session stamp (UTC, YYYY-MM-DD-...).
+DATED_NAME = re.compile(r"(\d{4}-\d{2}-\d{2})(?!\d)")
+# I-24's local time: the traffic day a drive belongs to. The shared recordings' sessions start
+# in the afternoon or morning there, so their names' dates are their first samples' local dates
+# (a drive of the 2021-03-08 evening session starts after midnight UTC, still 03-08 on I-24).
+CORRIDOR_TIMEZONE = ZoneInfo("America/Chicago")
 
 
 def drive_date(drive: Drive) -> str:
-    """The date a drive was recorded on (YYYY-MM-DD, the start of its name)."""
-    return drive.name[:DATE_CHARS]
+    """The date a drive was recorded on (YYYY-MM-DD): the start of its name when that is a
+    date, else the local date on I-24 of its first sample."""
+    named = DATED_NAME.match(drive.name)
+    if named is not None:
+        try:
+            return datetime.strptime(named.group(1), "%Y-%m-%d").date().isoformat()
+        except ValueError:
+            pass  # digits in a date's shape that are no date (2021-13-45): use the samples
+    return datetime.fromtimestamp(drive.start_unix_s, CORRIDOR_TIMEZONE).date().isoformat()
 
 
 @dataclass(frozen=True)

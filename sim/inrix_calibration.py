@@ -41,6 +41,7 @@ from scipy.optimize import minimize
 from planner import InrixHistory, PlannerParams
 from planner.evaluation import DriveErrors, evaluate_drive
 from sim.drives import Drive
+from sim.folds import drive_date
 from sim.inrix import (
     CALIBRATED,
     PROBE_STEP_S,
@@ -114,12 +115,6 @@ START = FeedModel(
 )
 # The longest lag and window on the grid: the field series must reach this far back.
 LONGEST_LOOKBACK_S = float(GRID["lag_s"][-1] + GRID["window_s"][-1])
-
-
-def date_of(drive: Drive) -> str:
-    """The drive's date: its folder name's first 10 characters (two drives of a date saw the same
-    day's traffic, so a fair split keeps them together)."""
-    return drive.name[:10]
 
 
 @dataclass(frozen=True)
@@ -385,7 +380,7 @@ def header() -> str:
 def drive_label(drive: Drive) -> str:
     """`2021-03-08 #0`: the date and the drive's number within the session."""
     number = drive.name.split("masterArray_")[1].split("_")[0]
-    return f"{date_of(drive)} #{number}"
+    return f"{drive_date(drive)} #{number}"
 
 
 def compare(
@@ -483,16 +478,16 @@ def cross_validate(
     """Leave one date out: fit on the others, report the held-out date's statistics; returns
     the fit on every drive. The fits (one per date, then every drive) run in `workers`
     processes; each is deterministic, so the figures do not depend on how many."""
-    dates = sorted({date_of(drive.recorded.drive) for drive in drives})
+    dates = sorted({drive_date(drive.recorded.drive) for drive in drives})
     trainings = [
-        [drive for drive in drives if date_of(drive.recorded.drive) != date] for date in dates
+        [drive for drive in drives if drive_date(drive.recorded.drive) != date] for date in dates
     ]
     with ProcessPoolExecutor(max_workers=workers) as pool:
         models = list(pool.map(fit_from_every_wave_speed, [*trainings, list(drives)]))
     say(header())
     held_out_paths: list[PathErrors] = []
     for date, model in zip(dates, models, strict=False):
-        held_out = [drive for drive in drives if date_of(drive.recorded.drive) == date]
+        held_out = [drive for drive in drives if drive_date(drive.recorded.drive) == date]
         paths = simulate_all(held_out, model)
         held_out_paths.extend(paths)
         say(side_by_side(f"{date} held out", paths, [drive.real for drive in held_out]))

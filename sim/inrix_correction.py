@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from sim.folds import drive_date
 from sim.inrix import FREEFLOW_FROM_MPS, FloatArray, ProbePairing
 from sim.recorded import load_recorded_drives
 
@@ -102,7 +103,7 @@ def paired_readings(data: Path) -> list[PairedReadings]:
         reading = recorded.feed.speed_mps.ravel()[pairing.flat_index[0]]
         usable = pairing.valid[0] & np.isfinite(reading)
         paired.append(
-            PairedReadings(recorded.drive.name[:10], reading[usable], pairing.speed_mps[usable])
+            PairedReadings(drive_date(recorded.drive), reading[usable], pairing.speed_mps[usable])
         )
     return paired
 

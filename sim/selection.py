@@ -20,8 +20,6 @@ from typing import Any
 
 import numpy as np
 
-from sim.folds import DATE_CHARS
-
 Row = Mapping[str, Any]
 
 SHOCKWAVE_MAX_LOSS_PCT = -2.0
@@ -85,8 +83,9 @@ class FoldChoice:
 
 
 def date_of(row: Row) -> str:
-    """The date of a row's drive (cross-validation keeps each date on one side)."""
-    return str(row["drive"])[:DATE_CHARS]
+    """The date of a row's drive (`sim.folds.drive_date`, the rows' `date`): cross-validation
+    keeps each date on one side."""
+    return str(row["date"])
 
 
 def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:

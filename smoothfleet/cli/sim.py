@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import shlex
 import sys
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
@@ -22,7 +23,15 @@ from rich.progress import (
 )
 from rich.table import Table
 
-from sim.drives import DriveError, load_drive, load_drives, shared_data_dir
+from sim.drives import (
+    FREEFLOW_MIN_SPEED_MPS,
+    FREEFLOW_PERCENTILE,
+    Drive,
+    DriveError,
+    load_drive,
+    load_drives,
+    shared_data_dir,
+)
 from sim.evaluate import (
     BASELINE,
     ControllerVariant,
@@ -33,6 +42,7 @@ from sim.evaluate import (
     load_optimum,
     run_case,
 )
+from sim.folds import drive_date
 from sim.platoon import PlatoonRun
 from sim.recommended import (
     RECOMMENDED_CONTROLLER,
@@ -40,7 +50,7 @@ from sim.recommended import (
     RECOMMENDED_PLANNER_PARAMS,
     registered_variants,
 )
-from sim.recorded import load_recorded_drives
+from sim.recorded import RecordedDrive, load_recorded_drives
 from sim.report import (
     MAX_LOSS_PCT,
     best_pair,
@@ -116,6 +126,28 @@ def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
         return [ControllerVariant.parse(text) for text in texts] or registered_variants()
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="--controller") from None
+
+
+def _scenario_cases(
+    chosen: Sequence[str], drives: Sequence[Drive], recorded: Sequence[RecordedDrive] = ()
+) -> list[Case]:
+    """The cases of the chosen scenarios, or a ClickException saying why there are none (the
+    drives given are all of the other kind): an evaluation of nothing has no table to write."""
+    cases = scenario_cases(chosen, drives, recorded)
+    if cases:
+        return cases
+    kinds = Counter(drive.kind for drive in drives)
+    found = ", ".join(f"{count} {kind}" for kind, count in sorted(kinds.items())) or "none"
+    recorded_kinds = Counter(one.drive.kind for one in recorded)
+    if recorded_kinds:
+        found += "; recorded with INRIX: " + ", ".join(
+            f"{count} {kind}" for kind, count in sorted(recorded_kinds.items())
+        )
+    raise click.ClickException(
+        f"no drive falls in scenario {', '.join(chosen)} (drives found: {found}; a drive is "
+        f"freeflow when under {FREEFLOW_PERCENTILE:g} % of its time is below "
+        f"{FREEFLOW_MIN_SPEED_MPS:g} m/s, else shockwave)"
+    )
 
 
 def _planner_params(text: str | None) -> dict[str, Any]:
@@ -282,7 +314,7 @@ def evaluate_command(
         )
     except DriveError as error:
         raise click.ClickException(str(error)) from None
-    cases = scenario_cases(chosen, drives, recorded)
+    cases = _scenario_cases(chosen, drives, recorded)
     optimum = load_optimum(optimum_csv) if optimum_csv is not None else {}
     with progress_bar() as progress:
         task = progress.add_task("simulating", total=len(cases))
@@ -396,7 +428,15 @@ def select_command(
         drives = load_drives(drives_dir)
     except DriveError as error:
         raise click.ClickException(str(error)) from None
-    cases = scenario_cases(["shockwave", "freeflow"], drives)
+    cases = _scenario_cases(["shockwave", "freeflow"], drives)
+    dates = sorted({drive_date(case.drive) for case in cases})
+    if len(dates) < folds:
+        raise click.BadParameter(
+            f"the drives are of {len(dates)} date{'' if len(dates) == 1 else 's'} "
+            f"({', '.join(dates)}): too few for {folds} folds, each of which holds out whole "
+            "dates",
+            param_hint="--folds",
+        )
     rows: list[dict[str, Any]] = []
     for window in windows or (1500.0, 4000.0):
         params = {**RECOMMENDED_PLANNER_PARAMS, "window_m": window}

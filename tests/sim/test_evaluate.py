@@ -171,6 +171,26 @@ def test_cli_names_a_bad_controller_and_a_missing_folder(tmp_path: Path) -> None
     assert "Traceback" not in missing.stderr
 
 
+def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    write_drive(short_drives(shared_dir)[1], drives / "fast.csv")
+    result = run_cli(
+        "sim",
+        "evaluate",
+        "--drives",
+        str(drives),
+        "--scenario",
+        "shockwave",
+        "--out",
+        str(tmp_path / "out"),
+        env=cli_env(),
+    )
+    assert result.returncode != 0
+    assert "no drive falls in scenario shockwave (drives found: 1 freeflow;" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 def test_distance_lost_and_gap_figures_per_run() -> None:
     case = Case("shockwave", drive_from_speeds("d", np.full(10, 20.0)))
     base_final = np.array([1000.0, 960.0, 930.0])

@@ -23,6 +23,7 @@ def row(candidate: str, drive: str, scenario: str = "shockwave", **values: float
     base = {
         "candidate": candidate,
         "drive": drive,
+        "date": drive[:10],
         "scenario": scenario,
         "fuel_saving_pct": 0.0,
         "throughput_change_pct": 0.0,
@@ -163,3 +164,10 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
         "shockwave": "1",
         "freeflow": "1",
     }
+    # three folds of two dates are refused before anything is simulated, naming the dates
+    too_many = run_cli(
+        "sim", "select", "--drives", str(drives), "--folds", "3", "--out", str(out), env=cli_env()
+    )
+    assert too_many.returncode != 0
+    assert "2 dates (2021-04-05, 2021-04-07): too few for 3 folds" in too_many.stderr
+    assert "Traceback" not in too_many.stderr
