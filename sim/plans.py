@@ -26,6 +26,7 @@ from planner import (
     CorridorGrid,
     InrixHistory,
     LaneObservations,
+    NoInrixEstimate,
     PlannerInputs,
     PlannerParams,
     plan_speeds,
@@ -75,6 +76,14 @@ def simulated_inrix(drive: Drive, params: PlannerParams) -> InrixFeed:
     first = -math.ceil((params.inrix_history_s + INRIX_PERIOD_S) / INRIX_PERIOD_S) * INRIX_PERIOD_S
     stamps = np.arange(first, drive.duration_s + 1e-9, INRIX_PERIOD_S)
     return simulated_feed(drive, bounds, stamps, CALIBRATED)
+
+
+class FeedDoesNotCoverDrive(ValueError):
+    """The drive's recorded INRIX has no usable reading at a planner cycle: the feed must cover
+    the whole drive.
+
+    The server would skip that cycle and the AVs hand their cars back once their plan went
+    stale; the simulator does not model that outage, so it refuses the drive, naming it."""
 
 
 @dataclass
@@ -142,11 +151,20 @@ class SimulatedPlanner:
             np.asarray(self._ping_x)[window],
             np.asarray(self._ping_speed)[window],
         )
-        plan = plan_speeds(
-            PlannerInputs(self.grid, history, observations, now_s, tuple(self._previous_smoothed)),
-            self.algorithm,
-            self.params,
-        )
+        try:
+            plan = plan_speeds(
+                PlannerInputs(
+                    self.grid, history, observations, now_s, tuple(self._previous_smoothed)
+                ),
+                self.algorithm,
+                self.params,
+            )
+        except NoInrixEstimate as error:
+            raise FeedDoesNotCoverDrive(
+                f"{self.grid.corridor_id.removeprefix('sim:')}: no plan at {now_s:.0f} s into "
+                f"the drive ({error}): its recorded INRIX must cover the whole drive, with a "
+                f"reading at most {self.params.max_inrix_age_s:.0f} s old at every cycle"
+            ) from None
         self._previous_smoothed.appendleft(plan.smoothed_mps)
         while len(self._previous_smoothed) > self.params.standing_cycles:
             self._previous_smoothed.pop()

@@ -3,6 +3,7 @@ planner in the loop as it arrived."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 
 from contract.recorded import InrixMinutes
 from sim.drives import DriveError
-from sim.plans import SimulatedPlanner
+from sim.plans import FeedDoesNotCoverDrive, SimulatedPlanner
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
 from sim.scenarios import scenario_cases
 
@@ -78,6 +79,27 @@ def test_the_planner_reads_the_recorded_minutes(shared_dir: Path) -> None:
     # buffer variant prescribes buffers in some of its plans
     assert planner.plans_run == 9
     assert planner.plans_buffered > 0
+
+
+def test_a_feed_that_stops_before_the_drive_ends_is_refused_naming_the_drive(
+    shared_dir: Path,
+) -> None:
+    one = next(
+        one
+        for one in load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
+        if one.drive.name == FIRST_SHARED[0]
+    )
+    # the feed's minutes up to 2 minutes into the drive, as if the recording had stopped there
+    kept = one.feed.measured_at_s <= 120.0
+    cut = replace(
+        one.feed, measured_at_s=one.feed.measured_at_s[kept], speed_mps=one.feed.speed_mps[kept]
+    )
+    planner = SimulatedPlanner.for_drive(one.drive, "kernel_smooth", feed=cut)
+    planner.profile(0.0)
+    planner.profile(660.0)  # 571 s after the last reading (at 89.3 s): within the 600 s limit
+    refused = f"{one.drive.name}: no plan at 780 s .*newest INRIX is 691 s old"
+    with pytest.raises(FeedDoesNotCoverDrive, match=refused):
+        planner.profile(780.0)
 
 
 def test_a_folder_without_recordings_is_named(tmp_path: Path) -> None:
