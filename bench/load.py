@@ -40,13 +40,6 @@ class Latencies:
     def rate(self) -> float:
         return len(self.seconds) / self.duration_s
 
-    def ms(self, percentile: float) -> float:
-        return float(np.percentile(self.seconds, percentile) * 1000) if len(self.seconds) else 0.0
-
-    @property
-    def max_ms(self) -> float:
-        return float(self.seconds.max() * 1000) if len(self.seconds) else 0.0
-
 
 class _Connection:
     def __init__(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:

@@ -12,11 +12,6 @@ MPS_PER_KPH = 1.0 / 3.6
 KPH_PER_MPS = 3.6
 
 
-def mph_to_mps(speed_mph: float) -> float:
-    """Miles per hour to metres per second."""
-    return speed_mph * MPS_PER_MPH
-
-
 def mps_to_mph(speed_mps: float) -> float:
     """Metres per second to miles per hour."""
     return speed_mps / MPS_PER_MPH

@@ -194,11 +194,6 @@ class Settings(BaseSettings):
             raise ValueError("SMOOTHFLEET_SECRET_KEY must be set to a real secret in production")
         return self
 
-    @property
-    def uses_embedded_database(self) -> bool:
-        """True when no external server is configured."""
-        return self.database_url is None
-
 
 def _describe(error: ValidationError) -> str:
     """Turn pydantic's report into one line naming the environment variable."""
