@@ -13,6 +13,9 @@ from contract.controllers import POLICY_SHA256_PATTERN
 from contract.values import JsonFloat, StorableText, Timestamp, json_number, real
 
 VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
+# A car holds its plan this long after publication by default, then hands the car back; the
+# server's planner publishes every 60 s, so two skipped cycles still keep a car on its plan.
+STALE_PLAN_AFTER_S = 180.0
 # A batch is the agent's store-and-forward upload: at most this many pings per request.
 MAX_PINGS_PER_BATCH = 1000
 # Plan ids stay below 2^53: every JSON reader (IEEE doubles) holds them exactly.
@@ -156,7 +159,7 @@ class VehicleConfig(BaseModel):
     ping_period_s: float = Field(1.0, gt=0)
     status_period_s: float = Field(10.0, gt=0)
     plan_poll_s: float = Field(5.0, gt=0)
-    stale_plan_after_s: float = Field(180.0, gt=0)
+    stale_plan_after_s: float = Field(STALE_PLAN_AFTER_S, gt=0)
     config_version: int | None = Field(
         None, ge=1, description="bumped by every change; echoed in the car's status reports"
     )

@@ -105,6 +105,8 @@ class RunResult:
     driver_seconds: float = 0.0
     cut_ins: int = 0
     recommended: bool = False
+    # Planner cycles without INRIX, skipped as the server skips them (the AVs kept their plan).
+    plans_skipped: int = 0
 
 
 @dataclass(frozen=True)
@@ -194,6 +196,7 @@ class Evaluation:
                         np.mean([self.change_pct(r, kpi) for r in runs])
                     )
                 row["plans_buffered"] = sum(r.plans_buffered for r in runs)
+                row["plans_skipped"] = sum(r.plans_skipped for r in runs)
                 row["collisions"] = sum(r.kpis.collisions for r in runs)
                 row["gap_violations"] = sum(r.kpis.gap_violations for r in runs)
                 row["takeovers"] = sum(r.takeovers for r in runs)
@@ -263,6 +266,7 @@ class Evaluation:
                 "optimum_fuel_saving_pct": self.optimum_pct(r),
                 "plans_run": r.plans_run,
                 "plans_buffered": r.plans_buffered,
+                "plans_skipped": r.plans_skipped,
                 "date": drive_date(r.case.drive),
             }
             row.update(r.kpis.as_dict())
@@ -365,6 +369,7 @@ def run_case(
             driver_seconds=run.driver_seconds,
             cut_ins=run.cut_ins,
             recommended=recommended,
+            plans_skipped=schedule.plans_skipped,
         )
     if save is not None:
         save(result, run)

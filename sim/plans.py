@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from contract.vehicles import STALE_PLAN_AFTER_S
 from planner import (
     CorridorGrid,
     InrixHistory,
@@ -79,11 +80,12 @@ def simulated_inrix(drive: Drive, params: PlannerParams) -> InrixFeed:
 
 
 class FeedDoesNotCoverDrive(ValueError):
-    """The drive's recorded INRIX has no usable reading at a planner cycle: the feed must cover
-    the whole drive.
+    """The drive's recorded INRIX leaves the AVs without a fresh plan: none before the first
+    reading, or none for longer than a car holds one (`STALE_PLAN_AFTER_S`).
 
-    The server would skip that cycle and the AVs hand their cars back once their plan went
-    stale; the simulator does not model that outage, so it refuses the drive, naming it."""
+    The server skips a cycle without INRIX and the cars keep their plan, as the simulator does
+    (`SimulatedPlanner.plans_skipped`); past its staleness a car hands back to its stock ACC,
+    which the simulator does not model, so it refuses the drive, naming it."""
 
 
 @dataclass
@@ -98,6 +100,9 @@ class SimulatedPlanner:
     plans_run: int = 0
     # Plans that held a buffer (a standing bottleneck's deceleration region).
     plans_buffered: int = 0
+    # Cycles without INRIX: skipped, as the server skips them; the AVs keep the last plan.
+    plans_skipped: int = 0
+    stale_plan_after_s: float = STALE_PLAN_AFTER_S
     _ping_time: list[float] = field(default_factory=list)
     _ping_x: list[float] = field(default_factory=list)
     _ping_speed: list[float] = field(default_factory=list)
@@ -106,6 +111,7 @@ class SimulatedPlanner:
     epoch: datetime = datetime(2021, 1, 1, tzinfo=UTC)
     _lane_plan: LanePlan | None = None
     _published_at_s: float = -math.inf
+    _next_cycle_s: float = -math.inf
 
     @classmethod
     def for_drive(
@@ -129,9 +135,11 @@ class SimulatedPlanner:
 
     def profile(self, time_s: float) -> TargetProfile:
         """The plan the AVs hold at `time_s`, looked up as the agent does."""
-        if time_s >= self._published_at_s + self.period_s or self._lane_plan is None:
-            self._run(math.floor(time_s / self.period_s) * self.period_s)
-        assert self._lane_plan is not None  # _run publishes or raises
+        if time_s >= self._next_cycle_s:
+            cycle_s = math.floor(time_s / self.period_s) * self.period_s
+            self._run(cycle_s)
+            self._next_cycle_s = cycle_s + self.period_s
+        assert self._lane_plan is not None  # _run publishes, keeps a fresh plan or raises
         return self._lane_plan.profile(
             self.epoch + timedelta(seconds=time_s), DEFAULT_WAVE_SPEED_MPS
         )
@@ -160,11 +168,22 @@ class SimulatedPlanner:
                 self.params,
             )
         except NoInrixEstimate as error:
-            raise FeedDoesNotCoverDrive(
-                f"{self.grid.corridor_id.removeprefix('sim:')}: no plan at {now_s:.0f} s into "
-                f"the drive ({error}): its recorded INRIX must cover the whole drive, with a "
-                f"reading at most {self.params.max_inrix_age_s:.0f} s old at every cycle"
-            ) from None
+            # the next cycle publishes at the earliest one period on: until then the AVs hold
+            # the last plan, if they have one and it stays fresh that long
+            held_until_s = self._published_at_s + self.stale_plan_after_s
+            if self._lane_plan is None or now_s + self.period_s > held_until_s:
+                raise FeedDoesNotCoverDrive(
+                    f"{self.grid.corridor_id.removeprefix('sim:')}: no plan at {now_s:.0f} s "
+                    f"into the drive ({error}), and the AVs hold "
+                    + (
+                        "none yet"
+                        if self._lane_plan is None
+                        else f"one only until {held_until_s:.0f} s"
+                    )
+                    + ": the recorded INRIX must cover the whole drive"
+                ) from None
+            self.plans_skipped += 1
+            return
         self._previous_smoothed.appendleft(plan.smoothed_mps)
         while len(self._previous_smoothed) > self.params.standing_cycles:
             self._previous_smoothed.pop()

@@ -14,6 +14,7 @@ from sim.drives import DriveError
 from sim.plans import FeedDoesNotCoverDrive, SimulatedPlanner
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
 from sim.scenarios import scenario_cases
+from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
 
 def test_feed_positions_count_from_the_drives_start() -> None:
@@ -81,9 +82,12 @@ def test_the_planner_reads_the_recorded_minutes(shared_dir: Path) -> None:
     assert planner.plans_buffered > 0
 
 
-def test_a_feed_that_stops_before_the_drive_ends_is_refused_naming_the_drive(
+def test_cycles_without_inrix_are_skipped_until_the_held_plan_would_go_stale(
     shared_dir: Path,
 ) -> None:
+    """As the server: a cycle whose newest INRIX is too old publishes nothing and the AVs keep
+    their plan; once it would go stale before the next cycle (cars hand back, which the
+    simulator does not model), the drive is refused, named."""
     one = next(
         one
         for one in load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
@@ -91,15 +95,33 @@ def test_a_feed_that_stops_before_the_drive_ends_is_refused_naming_the_drive(
     )
     # the feed's minutes up to 2 minutes into the drive, as if the recording had stopped there
     kept = one.feed.measured_at_s <= 120.0
+    assert one.feed.measured_at_s[kept][-1] == pytest.approx(89.3)
     cut = replace(
         one.feed, measured_at_s=one.feed.measured_at_s[kept], speed_mps=one.feed.speed_mps[kept]
     )
     planner = SimulatedPlanner.for_drive(one.drive, "kernel_smooth", feed=cut)
     planner.profile(0.0)
-    planner.profile(660.0)  # 571 s after the last reading (at 89.3 s): within the 600 s limit
-    refused = f"{one.drive.name}: no plan at 780 s .*newest INRIX is 691 s old"
+    held = planner.profile(660.0)  # 571 s after the last reading: within the 600 s limit
+    assert (planner.plans_run, planner.plans_skipped) == (2, 0)
+    planner.profile(720.0)  # 631 s: skipped, the 660 s plan held (fresh until 840 s)
+    planner.profile(780.0)  # skipped: the next cycle, at 840 s, is still in time
+    later = planner.profile(790.0)
+    assert (planner.plans_run, planner.plans_skipped) == (2, 2)
+    # the held plan, read 130 s later: the same targets, shifted by the agent's wave speed
+    assert later.target_speed_mps.tolist() == held.target_speed_mps.tolist()
+    assert later.shift_m - held.shift_m == pytest.approx(-DEFAULT_WAVE_SPEED_MPS * 130.0)
+    refused = f"{one.drive.name}: no plan at 840 s .*newest INRIX is 751 s old.*until 840 s"
     with pytest.raises(FeedDoesNotCoverDrive, match=refused):
-        planner.profile(780.0)
+        planner.profile(840.0)
+    # a feed that starts after the drive: no plan to hold at all
+    late = replace(
+        one.feed,
+        measured_at_s=one.feed.measured_at_s[~kept],
+        speed_mps=one.feed.speed_mps[~kept],
+    )
+    starved = SimulatedPlanner.for_drive(one.drive, "kernel_smooth", feed=late)
+    with pytest.raises(FeedDoesNotCoverDrive, match="no plan at 0 s .*hold none yet"):
+        starved.profile(0.0)
 
 
 def test_a_folder_without_recordings_is_named(tmp_path: Path) -> None:
