@@ -230,6 +230,8 @@ def _accept(
         elif direction[row] != frame.direction:
             keep[row] = False
             report.other_direction += 1
+    if not keep.any():  # a batch of the other direction or of bad documents only
+        return None
     shaped = table.filter(pa.array(keep)) if not keep.all() else table
     rows = np.flatnonzero(keep)
     lengths = counts["timestamp"][keep].astype(np.int64)

@@ -100,6 +100,18 @@ def test_bad_documents_are_counted_with_their_reason_and_the_rest_imported(
     assert {entry["reason"] for entry in manifest["bad"]} == set(reasons.values())
 
 
+def test_a_file_with_nothing_to_import_is_counted_not_an_error(tmp_path: Path) -> None:
+    """A file of the other direction only, or of bad documents only, imports nothing and says
+    why (it used to end in an IndexError)."""
+    westbound = [document(f"w{i}", [0.0, 1.0], [0.0, 1.0], direction=-1) for i in range(3)]
+    other = import_motion_file(write(tmp_path / "w.json", westbound), tmp_path / "s", METRIC_FRAME)
+    assert (other.documents, other.other_direction, other.bad) == (0, 3, [])
+    broken = [document("short", [0.0, 1.0], [0.0]), {"a": 1}]
+    bad = import_motion_file(write(tmp_path / "b.json", broken), tmp_path / "s", METRIC_FRAME)
+    assert (bad.documents, len(bad.bad)) == (0, 2)
+    assert _count(tmp_path / "s", "motion_trajectories") == 0
+
+
 def test_a_file_that_breaks_off_keeps_the_documents_before_the_break(tmp_path: Path) -> None:
     text = json.dumps([document("a", [0.0, 1.0], [0.0, 20.0]), document("b", [0.0], [1.0])])
     path = tmp_path / "cut.json"
