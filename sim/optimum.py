@@ -431,6 +431,11 @@ def optimal_trajectory(
     settings = settings or OptimumSettings()
     if humans < 0:
         raise ValueError(f"humans must not be negative, got {humans}")
+    if not drive.position_m[-1] > 0.0:
+        raise ValueError(
+            f"{drive.name}: the leader never moves, so the platoon's fuel per distance, the "
+            "objective, is undefined"
+        )
     started = time.perf_counter()
     dt = drive.dt_s
     steps = drive.steps

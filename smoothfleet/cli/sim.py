@@ -817,7 +817,12 @@ def optimum_command(
             key = cache_key(drive, humans, bounds, settings, RAV4_2019)
             row = load_cached_row(cache, drive.name, key)
             if row is None:
-                result = optimal_trajectory(drive, humans=humans, bounds=bounds, settings=settings)
+                try:
+                    result = optimal_trajectory(
+                        drive, humans=humans, bounds=bounds, settings=settings
+                    )
+                except ValueError as error:  # the rows of the drives before it are written
+                    raise click.ClickException(str(error)) from None
                 row = save_cached(cache, result, key)
             rows.append(row)
             write_optimum_csv(rows, out_dir / "optimum.csv")

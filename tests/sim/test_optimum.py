@@ -135,3 +135,9 @@ def test_real_drive_slice_saves_fuel_within_the_envelope() -> None:
 def test_settings_refuse_what_cannot_be_solved(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=field):
         OptimumSettings(**{field: value})  # type: ignore[arg-type]
+
+
+def test_a_leader_that_never_moves_is_refused_naming_the_drive() -> None:
+    """Fuel per distance, the objective, is undefined over no distance (it divided by zero)."""
+    with pytest.raises(ValueError, match="standing: the leader never moves"):
+        optimal_trajectory(drive_from_speeds("standing", np.zeros(100)))
