@@ -28,7 +28,7 @@ from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
 from sim.gaps import GapBounds, GapKpis, gap_kpis
-from sim.kpi import Kpis, platoon_kpis
+from sim.kpi import Kpis, change_pct, fuel_saving_pct, platoon_kpis
 from sim.plans import SimulatedPlanner
 from sim.platoon import CutIns, HandBack, PlatoonRun, platoon_roles, simulate_platoon
 from sim.runs import run_file_name, write_run, write_runs_index
@@ -126,20 +126,12 @@ class Evaluation:
     def change_pct(self, result: RunResult, kpi: str) -> float:
         """Percentage change of a KPI against the case's baseline."""
         base = getattr(self.baseline(result.case.name).kpis, kpi)
-        value = getattr(result.kpis, kpi)
-        if base == 0 or not np.isfinite(base) or not np.isfinite(value):
-            return float("nan")
-        return float(100.0 * (value / base - 1.0))
+        return change_pct(float(getattr(result.kpis, kpi)), float(base))
 
     def fuel_saving_pct(self, result: RunResult) -> float:
-        """Drop in fuel per distance against the baseline (positive = less fuel); NaN where
-        it is undefined: a platoon that travelled no distance (a leader that never moved) has
-        a fuel economy of 0 either way."""
+        """Drop in fuel per distance against the case's baseline (`sim.kpi.fuel_saving_pct`)."""
         base = self.baseline(result.case.name).kpis.fuel_economy_mpg
-        value = result.kpis.fuel_economy_mpg
-        if value == 0 or not np.isfinite(base) or not np.isfinite(value):
-            return float("nan")
-        return float(100.0 * (1.0 - base / value))
+        return fuel_saving_pct(base, result.kpis.fuel_economy_mpg)
 
     def distance_lost_m(self, result: RunResult) -> float:
         """How much further behind the leader the AVs ended than the humans in their places."""

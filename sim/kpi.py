@@ -17,6 +17,7 @@ All functions take arrays with one row per time step and one column per vehicle 
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -64,6 +65,23 @@ def fuel_economy_mpg(
     if fuel_g <= 0:
         raise ValueError("no fuel was burnt: fuel economy is undefined")
     return (distance_m / METRES_PER_MILE) / (fuel_g * model.gallons_per_gram)
+
+
+def fuel_saving_pct(baseline_mpg: float, mpg: float) -> float:
+    """The drop in fuel per distance against the baseline, in % (positive = less fuel):
+    1 - mpg_baseline / mpg (paper, "Candidate Controller Selection"). NaN where it is undefined:
+    a platoon that travelled no distance (a leader that never moved) has 0 mpg either way."""
+    if mpg == 0 or not math.isfinite(baseline_mpg) or not math.isfinite(mpg):
+        return float("nan")
+    return 100.0 * (1.0 - baseline_mpg / mpg)
+
+
+def change_pct(value: float, baseline: float) -> float:
+    """A KPI's change against the baseline's, in %; NaN where it is undefined (a baseline of 0,
+    such as the throughput of a platoon that never moved, or a non-finite value)."""
+    if baseline == 0 or not math.isfinite(baseline) or not math.isfinite(value):
+        return float("nan")
+    return 100.0 * (value / baseline - 1.0)
 
 
 def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> FloatArray:

@@ -51,7 +51,7 @@ from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams
 from sim.drives import Drive
 from sim.energy import RAV4_2019, FuelModel
 from sim.gaps import GapBounds, gap_kpis
-from sim.kpi import platoon_kpis
+from sim.kpi import fuel_saving_pct, platoon_kpis
 from sim.platoon import (
     MAX_BRAKING_MPS2,
     AvObservation,
@@ -511,7 +511,7 @@ def optimal_trajectory(
         accel_mps2=accel,
         fuel_g=fuel_g,
         baseline_fuel_g=baseline_fuel_g,
-        fuel_saving_pct=100.0 * (1.0 - baseline_economy / economy),
+        fuel_saving_pct=fuel_saving_pct(baseline_economy, economy),
         total_fuel_saving_pct=100.0 * (1.0 - fuel_g / baseline_fuel_g),
         max_gap_m=envelope.max_av_gap_m,
         min_gap_m=float(run.gap_m[:, 0].min()),

@@ -25,7 +25,7 @@ from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
 from sim.gaps import GapBounds, gap_kpis
-from sim.kpi import Kpis, platoon_kpis
+from sim.kpi import Kpis, change_pct, fuel_saving_pct, platoon_kpis
 from sim.plans import SimulatedPlanner
 from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import AccClip, Controller, build_controller
@@ -88,10 +88,6 @@ class DriveScore:
 def is_stop_and_go(drive: Drive) -> bool:
     """A drive whose 2nd speed percentile is below 10 m/s."""
     return float(np.percentile(drive.speed_mps, 2.0)) < STOP_AND_GO_P2_MPS
-
-
-def _change_pct(value: float, base: float) -> float:
-    return float(100.0 * (value / base - 1.0))
 
 
 def simulate_one_av(
@@ -168,10 +164,10 @@ def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> D
         kind=drive.kind,
         stop_and_go=is_stop_and_go(drive),
         controller=label,
-        fuel_saving_pct=float(100.0 * (1.0 - base.fuel_economy_mpg / kpis.fuel_economy_mpg)),
-        throughput_change_pct=_change_pct(kpis.throughput_vph, base.throughput_vph),
-        network_speed_change_pct=_change_pct(kpis.network_speed_mps, base.network_speed_mps),
-        accel_rms_change_pct=_change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
+        fuel_saving_pct=fuel_saving_pct(base.fuel_economy_mpg, kpis.fuel_economy_mpg),
+        throughput_change_pct=change_pct(kpis.throughput_vph, base.throughput_vph),
+        network_speed_change_pct=change_pct(kpis.network_speed_mps, base.network_speed_mps),
+        accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,
         gap_within_share=within,
     )

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from sim.kpi import (
     accel_rms_mps2,
+    change_pct,
     fuel_economy_mpg,
+    fuel_saving_pct,
     jerk_rms_mps3,
     measurement_points_m,
     min_time_to_collision_s,
@@ -158,3 +162,18 @@ def test_a_car_that_merged_in_counts_where_it_crossed_in_the_lane() -> None:
     early = np.full((10, 1), np.nan)
     early[8:, 0] = merged[8:, 0]
     assert throughput_at_vph(run.position_m, 1.0, float(points[0]), early) == pytest.approx(1200.0)
+
+
+def test_fuel_saving_is_the_drop_in_fuel_per_distance_and_undefined_over_no_distance() -> None:
+    # 40 mpg before, 44 after: 1 - 40/44 = 9.09 % less fuel per mile
+    assert fuel_saving_pct(40.0, 44.0) == pytest.approx(100.0 / 11.0)
+    assert fuel_saving_pct(44.0, 40.0) == pytest.approx(-10.0)
+    # a platoon that never moved has 0 mpg either way (it divided by zero)
+    assert math.isnan(fuel_saving_pct(0.0, 0.0))
+    assert math.isnan(fuel_saving_pct(float("nan"), 40.0))
+
+
+def test_a_kpi_change_against_a_baseline_of_zero_is_undefined() -> None:
+    assert change_pct(1900.0, 2000.0) == pytest.approx(-5.0)
+    assert math.isnan(change_pct(0.0, 0.0))  # the throughput of a platoon that never moved
+    assert math.isnan(change_pct(float("inf"), 2.0))
