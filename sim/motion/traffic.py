@@ -16,6 +16,7 @@ when the run ends are cut there, like MOTION's fragments at the edge of a publis
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -52,6 +53,11 @@ ENTRY_SPEED_MPS = 25.0
 FLUSH_EVERY_STEPS = 1500
 
 
+def _positive(value: float) -> bool:
+    """A finite number above 0."""
+    return math.isfinite(value) and value > 0
+
+
 @dataclass(frozen=True, slots=True)
 class MotionRunConfig:
     """What to simulate: the section on the corridor, its lanes and the demand."""
@@ -67,12 +73,19 @@ class MotionRunConfig:
     driver: IdmParams = I24_IDM
 
     def __post_init__(self) -> None:
-        if self.duration_s <= 0 or self.section_length_m <= 0:
-            raise ValueError("duration_s and section_length_m must be positive")
+        # NaN and infinity too: `x <= 0` let them through
+        if not (_positive(self.duration_s) and _positive(self.section_length_m)):
+            raise ValueError(
+                "duration_s and section_length_m must be finite and above 0, not "
+                f"{self.duration_s} and {self.section_length_m}"
+            )
         if self.lanes < 1:
             raise ValueError(f"lanes must be at least 1, not {self.lanes}")
-        if self.demand_veh_per_h_per_lane <= 0:
-            raise ValueError("demand_veh_per_h_per_lane must be positive")
+        if not _positive(self.demand_veh_per_h_per_lane):
+            raise ValueError(
+                "demand_veh_per_h_per_lane must be finite and above 0, not "
+                f"{self.demand_veh_per_h_per_lane}"
+            )
         if not 0.0 <= self.fleet_share <= 1.0:
             raise ValueError(f"fleet_share must be within [0, 1], not {self.fleet_share}")
 
@@ -260,6 +273,8 @@ def boundary_speeds(drives: list[Drive], duration_s: float) -> FloatArray:
     """
     if not drives:
         raise ValueError("boundary_speeds needs at least one drive")
+    if not _positive(duration_s):
+        raise ValueError(f"duration_s must be finite and above 0, not {duration_s}")
     pieces: list[FloatArray] = []
     covered = 0.0
     while covered < duration_s:

@@ -10,11 +10,13 @@ import pytest
 
 from app.motion.importer import import_motion_file
 from app.motion.store import connect
+from sim.drives import drive_from_speeds
 from sim.motion.frame import MotionFrame
 from sim.motion.traffic import (
     MOTION_STEP_S,
     MotionRunConfig,
     SimulatedTrajectory,
+    boundary_speeds,
     simulate_motion_run,
 )
 from sim.motion.write import write_motion_json
@@ -91,3 +93,14 @@ def test_the_written_file_imports_point_for_point(tmp_path: Path) -> None:
     assert row[0] == sum(t.is_fleet for t in trajectories)
     assert row[1] == pytest.approx(6000.0, abs=0.01)  # 0.01 ft rounding in the file
     assert row[2] == 2
+
+
+@pytest.mark.parametrize("duration_s", [0.0, -5.0, float("nan"), float("inf")])
+def test_a_run_of_no_time_is_refused_by_name(duration_s: float) -> None:
+    """It ended in numpy's "need at least one array to concatenate" (or a NaN conversion)."""
+    with pytest.raises(ValueError, match="duration_s must be finite and above 0"):
+        boundary_speeds([drive_from_speeds("d", np.full(100, 20.0))], duration_s)
+    with pytest.raises(ValueError, match="duration_s and section_length_m must be finite"):
+        replace(CONFIG, duration_s=duration_s)
+    with pytest.raises(ValueError, match="demand_veh_per_h_per_lane must be finite"):
+        replace(CONFIG, demand_veh_per_h_per_lane=duration_s)
