@@ -4,8 +4,10 @@ console, and the one-line failure it may end with."""
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from typing import Any
 
 import click
 from rich.console import Console
@@ -18,6 +20,19 @@ console = Console()
 
 class CliError(Exception):
     """An expected failure: its message is printed as one line and the exit code is 1."""
+
+
+class FiniteFloatRange(click.FloatRange):
+    """click's FloatRange without NaN and infinity, which pass its bounds (every comparison
+    with NaN is false) and then fail far from the option that let them in."""
+
+    def convert(
+        self, value: Any, param: click.Parameter | None, ctx: click.Context | None
+    ) -> float:
+        number = float(super().convert(value, param, ctx))
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
 
 
 @contextmanager
@@ -74,6 +89,6 @@ def fleet_options(command: Callable[..., None]) -> Callable[..., None]:
     )(command)
     return click.option(
         "--duration",
-        type=click.FloatRange(min=1),
+        type=FiniteFloatRange(min=1),
         help="Stop after this many seconds (default: run until Ctrl-C).",
     )(command)

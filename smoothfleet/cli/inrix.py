@@ -31,6 +31,7 @@ from app.feeds.recording import (
 from app.feeds.replay import replay as replay_snapshots
 from app.feeds.service import StoreResult, shifted, store_readings
 from contract.recorded import RecordingError
+from smoothfleet.cli.common import FiniteFloatRange
 
 
 def _describe(result: StoreResult) -> str:
@@ -82,7 +83,9 @@ def inrix() -> None:
 
 @inrix.command("poll")
 @click.option(
-    "--period", type=float, help="Seconds between polls (SMOOTHFLEET_INRIX_POLL_PERIOD_S)."
+    "--period",
+    type=FiniteFloatRange(min=0, min_open=True),
+    help="Seconds between polls (SMOOTHFLEET_INRIX_POLL_PERIOD_S).",
 )
 @click.option("--count", type=click.IntRange(min=1), help="Stop after this many snapshots.")
 @click.option(
@@ -99,8 +102,6 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
         raise SettingsError("SMOOTHFLEET_INRIX_URL: must be set for `smoothfleet inrix poll`")
     if current.inrix_key is None or not current.inrix_key.get_secret_value():
         raise SettingsError("SMOOTHFLEET_INRIX_KEY: must be set for `smoothfleet inrix poll`")
-    if period is not None and period <= 0:
-        raise click.BadParameter("must be positive", param_hint="--period")
     url, key = current.inrix_url, current.inrix_key
     # httpx logs request URLs at INFO; keep it quiet, our own lines say what happened.
     logging.getLogger("httpx").setLevel(logging.WARNING)
@@ -129,7 +130,7 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
 @click.argument("recording", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "--speed",
-    type=click.FloatRange(min=0),
+    type=FiniteFloatRange(min=0),
     default=1.0,
     show_default=True,
     help="1 = real time, 10 = ten times faster, 0 = as fast as possible.",

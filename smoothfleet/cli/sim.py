@@ -23,6 +23,7 @@ from rich.progress import (
 )
 from rich.table import Table
 
+from planner.params import InvalidParams, PlannerParams
 from sim.drives import (
     FREEFLOW_MIN_SPEED_MPS,
     FREEFLOW_PERCENTILE,
@@ -63,7 +64,7 @@ from sim.report import (
 )
 from sim.scenarios import RECORDED_SCENARIOS, SCENARIOS, Case, scenario_cases
 from sim.selection import candidate_summary, choose, cross_validate, held_out_summary
-from smoothfleet.cli.common import fleet_options
+from smoothfleet.cli.common import FiniteFloatRange, fleet_options
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
 console = Console(width=max(Console().width, 160))
@@ -378,7 +379,7 @@ SELECTION_VARIANTS = (
     "--window",
     "windows",
     multiple=True,
-    type=click.FloatRange(min=100),
+    type=FiniteFloatRange(min=100),
     help="Planner smoothing window (m) to try (repeatable; default 1500 and 4000).",
 )
 @click.option(
@@ -437,9 +438,17 @@ def select_command(
             "dates",
             param_hint="--folds",
         )
+    candidates = [
+        {**RECOMMENDED_PLANNER_PARAMS, "window_m": window} for window in windows or (1500.0, 4000.0)
+    ]
+    for params in candidates:  # before anything is simulated
+        try:
+            PlannerParams.parse(params)
+        except InvalidParams as error:
+            raise click.BadParameter(str(error), param_hint="--window") from None
     rows: list[dict[str, Any]] = []
-    for window in windows or (1500.0, 4000.0):
-        params = {**RECOMMENDED_PLANNER_PARAMS, "window_m": window}
+    for params in candidates:
+        window = float(params["window_m"])
         with progress_bar() as progress:
             task = progress.add_task(f"window {window:.0f} m", total=len(cases))
 
@@ -625,7 +634,7 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option(
     "--gamma",
-    type=click.FloatRange(0.0, 1.0, max_open=True),
+    type=FiniteFloatRange(0.0, 1.0, max_open=True),
     default=None,
     help="PPO's discount per 0.1 s step: how far ahead a reward still counts "
     "[default: PpoSettings', 0.995, about 20 s].",
@@ -637,7 +646,7 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     show_default=True,
     help="IDM drivers behind the AV in training.",
 )
-@click.option("--episode-s", type=click.FloatRange(min=1.0), default=300.0, show_default=True)
+@click.option("--episode-s", type=FiniteFloatRange(min=1.0), default=300.0, show_default=True)
 @click.option(
     "--reward-candidates",
     default=None,
@@ -751,7 +760,7 @@ def train_command(
     "--control-interval",
     default=1.0,
     show_default=True,
-    type=click.FloatRange(min=0.1),
+    type=FiniteFloatRange(min=0.1),
     help="Seconds each piece of the piecewise-constant AV acceleration lasts.",
 )
 @click.option(

@@ -171,3 +171,19 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
     assert too_many.returncode != 0
     assert "2 dates (2021-04-05, 2021-04-07): too few for 3 folds" in too_many.stderr
     assert "Traceback" not in too_many.stderr
+    # a planner window the planner would refuse, likewise before any simulation
+    too_wide = run_cli(
+        "sim",
+        "select",
+        "--drives",
+        str(drives),
+        "--window",
+        "30000",
+        "--folds",
+        "2",
+        "--out",
+        str(out),
+        env=cli_env(),
+    )
+    assert too_wide.returncode != 0
+    assert "--window: planner parameter window_m" in too_wide.stderr
