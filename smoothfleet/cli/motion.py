@@ -30,7 +30,7 @@ from sim.drives import DriveError, load_drive, shared_data_dir
 from sim.motion.frame import DEFAULT_ANCHOR_X_FT, DEFAULT_ANCHOR_X_M, MotionFrame
 from sim.motion.traffic import MotionRunConfig, boundary_speeds, simulate_motion_run
 from sim.motion.write import write_motion_json
-from smoothfleet.cli.common import CliError, console, database, settings
+from smoothfleet.cli.common import CliError, FiniteFloatRange, console, database, settings
 
 # Real stop-and-go drives whose speeds set the traffic downstream of a generated hour.
 DEFAULT_BOUNDARY_DRIVES = (
@@ -52,12 +52,14 @@ def motion() -> None:
 @click.option("--store", type=click.Path(path_type=Path), help="Default: DATA_DIR/motion.")
 @click.option(
     "--anchor-x-ft",
+    type=FiniteFloatRange(),
     default=DEFAULT_ANCHOR_X_FT,
     show_default=True,
     help="MOTION x (ft) of the tie point.",
 )
 @click.option(
     "--anchor-x-m",
+    type=FiniteFloatRange(),
     default=DEFAULT_ANCHOR_X_M,
     show_default=True,
     help="Corridor x_m of the tie point.",
@@ -130,16 +132,24 @@ def _print_report(report: ImportReport) -> None:
 @motion.command("generate")
 @click.option("-o", "--output", required=True, type=click.Path(path_type=Path))
 @click.option("--start", "start_text", help="UTC start, ISO 8601 (default: this hour).")
-@click.option("--duration", "duration_s", default=3600.0, show_default=True, help="Seconds.")
+@click.option(
+    "--duration",
+    "duration_s",
+    type=FiniteFloatRange(min=0, min_open=True),
+    default=3600.0,
+    show_default=True,
+    help="Seconds.",
+)
 @click.option("--lanes", default=4, show_default=True)
 @click.option(
     "--demand",
     "demand_vph",
+    type=FiniteFloatRange(min=0, min_open=True),
     default=1500.0,
     show_default=True,
     help="Vehicles per hour and lane entering upstream.",
 )
-@click.option("--fleet-share", default=0.02, show_default=True)
+@click.option("--fleet-share", type=FiniteFloatRange(0.0, 1.0), default=0.02, show_default=True)
 @click.option("--seed", default=0, show_default=True)
 @click.option(
     "--drive",
@@ -191,10 +201,24 @@ def motion_generate(
 @motion.command("edie")
 @click.option("--since", required=True, help="ISO 8601 (UTC unless a zone is given).")
 @click.option("--until", required=True)
-@click.option("--from-m", "x_from_m", default=0.0, show_default=True)
-@click.option("--to-m", "x_to_m", default=15_000.0, show_default=True)
-@click.option("--h-t", "h_t_s", default=H_T_S, show_default=True, help="Box duration, s.")
-@click.option("--h-x", "h_x_m", default=H_X_M, show_default=True, help="Box length, m.")
+@click.option("--from-m", "x_from_m", type=FiniteFloatRange(), default=0.0, show_default=True)
+@click.option("--to-m", "x_to_m", type=FiniteFloatRange(), default=15_000.0, show_default=True)
+@click.option(
+    "--h-t",
+    "h_t_s",
+    type=FiniteFloatRange(),
+    default=H_T_S,
+    show_default=True,
+    help="Box duration, s.",
+)
+@click.option(
+    "--h-x",
+    "h_x_m",
+    type=FiniteFloatRange(),
+    default=H_X_M,
+    show_default=True,
+    help="Box length, m.",
+)
 @click.option("--lane", type=int, help="One lane (default: all).")
 @click.option("-o", "--output", type=click.Path(path_type=Path), help="CSV (default: stdout).")
 @click.option("--store", type=click.Path(path_type=Path))

@@ -84,3 +84,23 @@ def test_a_missing_file_and_a_bad_window_say_what_is_wrong(tmp_path: Path) -> No
     )
     assert backwards.returncode == 1
     assert "must be after since" in " ".join(backwards.stderr.split())
+    # a tie point or a box that is no finite number is refused at the option, before any
+    # position is computed from it (NaN imported NaN positions; infinity overflowed)
+    nan_anchor = run_cli(
+        "motion", "import", "--anchor-x-ft", "nan", str(tmp_path / "none.json"), env=env
+    )
+    assert nan_anchor.returncode == 2
+    assert "'--anchor-x-ft': 'nan' is not a finite number" in nan_anchor.stderr
+    endless = run_cli(
+        "motion",
+        "edie",
+        "--since",
+        "2022-11-16T12:00",
+        "--until",
+        "2022-11-16T13:00",
+        "--h-x",
+        "inf",
+        env=env,
+    )
+    assert endless.returncode == 2
+    assert "'--h-x': 'inf' is not a finite number" in endless.stderr
