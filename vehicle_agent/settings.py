@@ -23,7 +23,10 @@ class AgentSettingsError(Exception):
 class AgentSettings(BaseSettings):
     """Everything the agent can be told."""
 
-    model_config = SettingsConfigDict(env_prefix="SMOOTHFLEET_AGENT_", extra="ignore")
+    # NaN and infinity are no setting (they pass a bound's comparison or make a timeout endless)
+    model_config = SettingsConfigDict(
+        env_prefix="SMOOTHFLEET_AGENT_", extra="ignore", allow_inf_nan=False
+    )
 
     server_url: str
     token: SecretStr

@@ -26,7 +26,11 @@ class SettingsError(Exception):
 class Settings(BaseSettings):
     """Everything the server side can be told from the environment."""
 
-    model_config = SettingsConfigDict(env_prefix="SMOOTHFLEET_", extra="ignore")
+    # NaN and infinity are no setting: "inf" would pass every lower bound (ge=0) and make a
+    # period, a lifetime or a limit endless
+    model_config = SettingsConfigDict(
+        env_prefix="SMOOTHFLEET_", extra="ignore", allow_inf_nan=False
+    )
 
     environment: Literal["development", "production"] = "development"
 

@@ -114,6 +114,11 @@ def test_tokens_are_printed_once_and_stored_hashed(
         ),
         ({"SMOOTHFLEET_DATABASE_URL": "mysql://x@y/z"}, "SMOOTHFLEET_DATABASE_URL: must be"),
         ({"SMOOTHFLEET_PORT": "eighty"}, "SMOOTHFLEET_PORT:"),
+        # passes its lower bound (ge=0) unless the settings refuse infinity as such
+        (
+            {"SMOOTHFLEET_PING_MAX_FUTURE_S": "inf"},
+            "SMOOTHFLEET_PING_MAX_FUTURE_S: Input should be a finite number",
+        ),
     ],
 )
 def test_a_wrong_setting_is_one_line_naming_it(env: dict[str, str], expected: str) -> None:
