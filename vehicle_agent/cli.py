@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
+import sqlite3
 import sys
 import threading
 import time
@@ -146,6 +147,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
         except KeyboardInterrupt:
             return 0
+        try:
+            spool = PingSpool(settings.spool_path, settings.spool_max_rows)
+        except (OSError, sqlite3.Error) as error:
+            bus.shutdown()
+            sys.stderr.write(
+                f"smoothfleet-agent: cannot open the ping spool {settings.spool_path}: {error}\n"
+            )
+            return 1
         board = None
         if settings.button_board:
             lines = board_lines(settings.button_board)
@@ -160,7 +169,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             bus=bus,
             clock=SystemClock(),
             gps=gps_source(settings),
-            spool=PingSpool(settings.spool_path, settings.spool_max_rows),
+            spool=spool,
             server=server,
             button_port=board,
             dbc_cache=settings.dbc_cache_dir,

@@ -86,8 +86,13 @@ class AgentSettings(BaseSettings):
     @field_validator("gps")
     @classmethod
     def _gps(cls, value: str) -> str:
-        if value != "none" and not value.startswith("gpsd:"):
-            raise ValueError("must be gpsd:<host>:<port> or none")
+        if value == "none":
+            return value
+        port = value.removeprefix("gpsd:").partition(":")[2]
+        if not value.startswith("gpsd:") or not (
+            port == "" or (port.isdigit() and 1 <= int(port) <= 65535)
+        ):
+            raise ValueError("must be gpsd:<host>:<port> (a port 1-65535) or none")
         return value
 
     @field_validator("button_board")

@@ -43,6 +43,39 @@ def test_missing_and_wrong_settings_name_the_variable() -> None:
     assert wrong.returncode == 2
     assert wrong.stderr.startswith("smoothfleet-agent: SMOOTHFLEET_AGENT_TOKEN: must be the ")
     assert "Traceback" not in wrong.stderr
+    no_port = run_agent_cli(
+        "--vehicle-id", "SF-001", "--server", "http://x", "--token", "abc", "--gps", "gpsd:h:gps"
+    )
+    assert no_port.returncode == 2
+    assert no_port.stderr.strip() == (
+        "smoothfleet-agent: SMOOTHFLEET_AGENT_GPS: must be gpsd:<host>:<port> (a port 1-65535) "
+        "or none"
+    )
+
+
+def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "a-file").write_text("")
+    result = run_agent_cli(
+        "--server",
+        "http://127.0.0.1:9",
+        "--token",
+        "abc",
+        "--vehicle-id",
+        "SF-001",
+        "--make",
+        "toyota_rav4",
+        "--can",
+        "virtual:spool-test",
+        "--gps",
+        "none",
+        "--spool",
+        str(tmp_path / "a-file" / "pings.sqlite"),
+    )
+    assert result.returncode == 1
+    assert result.stderr.startswith(
+        f"smoothfleet-agent: cannot open the ping spool {tmp_path / 'a-file' / 'pings.sqlite'}: "
+    )
+    assert "Traceback" not in result.stderr
 
 
 def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
