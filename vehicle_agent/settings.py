@@ -14,6 +14,8 @@ from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
 PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
+# What --log-level may say (any case): the logging module's named levels.
+LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
 
 class AgentSettingsError(Exception):
@@ -95,6 +97,13 @@ class AgentSettings(BaseSettings):
             raise ValueError("must be gpsd:<host>:<port> (a port 1-65535) or none")
         return value
 
+    @field_validator("log_level")
+    @classmethod
+    def _known_level(cls, value: str) -> str:
+        if value.upper() not in LOG_LEVELS:
+            raise ValueError(f"must be one of {', '.join(LOG_LEVELS)}")
+        return value
+
     @field_validator("button_board")
     @classmethod
     def _board(cls, value: str | None) -> str | None:
@@ -118,6 +127,13 @@ def board_lines(spec: str) -> dict[CruiseButton, int]:
     missing = {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP} - set(lines)
     if missing:
         raise ValueError(f"no line for {', '.join(sorted(b.value for b in missing))}")
+    if any(line < 0 for line in lines.values()):
+        raise ValueError("GPIO lines are numbered from 0")
+    # one line wired to two buttons would press both whenever the agent presses either
+    shared = sorted({line for line in lines.values() if list(lines.values()).count(line) > 1})
+    if shared:
+        buttons = [b.value for b, line in lines.items() if line in shared]
+        raise ValueError(f"{' and '.join(buttons)} share line {shared[0]}: each needs its own")
     return lines
 
 

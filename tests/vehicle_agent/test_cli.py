@@ -123,6 +123,24 @@ def test_button_board_lines() -> None:
         CruiseButton.MINUS: 27,
         CruiseButton.GAP: 22,
     }
+    # one GPIO line wired to two buttons would press both: refused, as is a negative line
+    with pytest.raises(ValueError, match="plus and minus share line 17: each needs its own"):
+        board_lines("plus=17,minus=17,gap=22")
+    with pytest.raises(ValueError, match="numbered from 0"):
+        board_lines("plus=-1,minus=2,gap=3")
+
+
+def test_an_unknown_log_level_is_a_setting_error() -> None:
+    with pytest.raises(AgentSettingsError, match="SMOOTHFLEET_AGENT_LOG_LEVEL: must be one of"):
+        load_agent_settings(
+            server_url="http://x", token="abc", vehicle_id="SF-001", log_level="LOUD"
+        )
+    assert (
+        load_agent_settings(
+            server_url="http://x", token="abc", vehicle_id="SF-001", log_level="debug"
+        ).log_level
+        == "debug"
+    )
 
 
 def test_rate_keeper_sleeps_to_each_deadline_and_measures_lag() -> None:
