@@ -53,9 +53,9 @@ def test_missing_and_wrong_settings_name_the_variable() -> None:
     )
 
 
-def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
-    (tmp_path / "a-file").write_text("")
-    result = run_agent_cli(
+def run_agent_without_server(can: str, spool: Path) -> subprocess.CompletedProcess[str]:
+    """A RAV4 agent on `can` and `spool`, with no GPS and no server to reach."""
+    return run_agent_cli(
         "--server",
         "http://127.0.0.1:9",
         "--token",
@@ -65,36 +65,25 @@ def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
         "--make",
         "toyota_rav4",
         "--can",
-        "virtual:spool-test",
+        can,
         "--gps",
         "none",
         "--spool",
-        str(tmp_path / "a-file" / "pings.sqlite"),
+        str(spool),
     )
+
+
+def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "a-file").write_text("")
+    spool = tmp_path / "a-file" / "pings.sqlite"
+    result = run_agent_without_server("virtual:spool-test", spool)
     assert result.returncode == 1
-    assert result.stderr.startswith(
-        f"smoothfleet-agent: cannot open the ping spool {tmp_path / 'a-file' / 'pings.sqlite'}: "
-    )
+    assert result.stderr.startswith(f"smoothfleet-agent: cannot open the ping spool {spool}: ")
     assert "Traceback" not in result.stderr
 
 
 def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
-    result = run_agent_cli(
-        "--server",
-        "http://127.0.0.1:9",
-        "--token",
-        "abc",
-        "--vehicle-id",
-        "SF-001",
-        "--make",
-        "toyota_rav4",
-        "--can",
-        "nosuch:can0",
-        "--gps",
-        "none",
-        "--spool",
-        str(tmp_path / "s.sqlite"),
-    )
+    result = run_agent_without_server("nosuch:can0", tmp_path / "s.sqlite")
     assert result.returncode == 1
     assert result.stderr.startswith("smoothfleet-agent: cannot open CAN bus nosuch:can0")
 
