@@ -39,6 +39,7 @@ from vehicle_agent.settings import (
     AgentSettings,
     AgentSettingsError,
     board_lines,
+    gpsd_address,
     load_agent_settings,
 )
 from vehicle_agent.spool import PingSpool
@@ -96,10 +97,10 @@ def choose_car(
 
 def gps_source(settings: AgentSettings) -> GpsSource:
     """gpsd (gpsd:<host>:<port>), or none."""
-    if settings.gps == "none":
+    address = gpsd_address(settings.gps)
+    if address is None:
         return NoGps()
-    host, _, port = settings.gps.removeprefix("gpsd:").partition(":")
-    source = GpsdSource(time.monotonic, host or "127.0.0.1", int(port or 2947))
+    source = GpsdSource(time.monotonic, *address)
     source.start()
     return source
 

@@ -14,6 +14,9 @@ from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
 PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
+# gpsd's own address, for a `gpsd:` setting that leaves host or port out.
+GPSD_HOST = "127.0.0.1"
+GPSD_PORT = 2947
 # What --log-level may say (any case): the logging module's named levels.
 LOG_LEVELS = ("DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL")
 
@@ -38,7 +41,7 @@ class AgentSettings(BaseSettings):
     # Car interface key (nissan_rogue, cadillac_xt5, toyota_rav4); unset: from the server config.
     make: str | None = None
     # gpsd:<host>:<port>, or none (no GPS: the agent reports but never takes over).
-    gps: str = "gpsd:127.0.0.1:2947"
+    gps: str = f"gpsd:{GPSD_HOST}:{GPSD_PORT}"
     spool_path: Path = Field(
         default_factory=lambda: (
             Path(platformdirs.user_data_dir("smoothfleet-agent")) / "spool.sqlite"
@@ -88,13 +91,7 @@ class AgentSettings(BaseSettings):
     @field_validator("gps")
     @classmethod
     def _gps(cls, value: str) -> str:
-        if value == "none":
-            return value
-        port = value.removeprefix("gpsd:").partition(":")[2]
-        if not value.startswith("gpsd:") or not (
-            port == "" or (port.isdigit() and 1 <= int(port) <= 65535)
-        ):
-            raise ValueError("must be gpsd:<host>:<port> (a port 1-65535) or none")
+        gpsd_address(value)
         return value
 
     @field_validator("log_level")
@@ -110,6 +107,19 @@ class AgentSettings(BaseSettings):
         if value:
             board_lines(value)
         return value or None
+
+
+def gpsd_address(spec: str) -> tuple[str, int] | None:
+    """`gpsd:<host>:<port>` -> (host, port), host and port defaulting to gpsd's own; `none` ->
+    None (no GPS); anything else a ValueError."""
+    if spec == "none":
+        return None
+    host, _, port = spec.removeprefix("gpsd:").partition(":")
+    if not spec.startswith("gpsd:") or not (
+        port == "" or (port.isdigit() and 1 <= int(port) <= 65535)
+    ):
+        raise ValueError("must be gpsd:<host>:<port> (a port 1-65535) or none")
+    return host or GPSD_HOST, int(port or GPSD_PORT)
 
 
 def board_lines(spec: str) -> dict[CruiseButton, int]:
