@@ -102,7 +102,6 @@ class SimulatedPlanner:
     plans_buffered: int = 0
     # Cycles without INRIX: skipped, as the server skips them; the AVs keep the last plan.
     plans_skipped: int = 0
-    stale_plan_after_s: float = STALE_PLAN_AFTER_S
     _ping_time: list[float] = field(default_factory=list)
     _ping_x: list[float] = field(default_factory=list)
     _ping_speed: list[float] = field(default_factory=list)
@@ -170,7 +169,7 @@ class SimulatedPlanner:
         except NoInrixEstimate as error:
             # the next cycle publishes at the earliest one period on: until then the AVs hold
             # the last plan, if they have one and it stays fresh that long
-            held_until_s = self._published_at_s + self.stale_plan_after_s
+            held_until_s = self._published_at_s + STALE_PLAN_AFTER_S
             if self._lane_plan is None or now_s + self.period_s > held_until_s:
                 raise FeedDoesNotCoverDrive(
                     f"{self.grid.corridor_id.removeprefix('sim:')}: no plan at {now_s:.0f} s "

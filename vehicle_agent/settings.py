@@ -4,6 +4,7 @@ command line overriding them. A missing or wrong setting stops the agent with on
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 import platformdirs
@@ -140,10 +141,10 @@ def board_lines(spec: str) -> dict[CruiseButton, int]:
     if any(line < 0 for line in lines.values()):
         raise ValueError("GPIO lines are numbered from 0")
     # one line wired to two buttons would press both whenever the agent presses either
-    shared = sorted({line for line in lines.values() if list(lines.values()).count(line) > 1})
-    if shared:
-        buttons = [b.value for b, line in lines.items() if line in shared]
-        raise ValueError(f"{' and '.join(buttons)} share line {shared[0]}: each needs its own")
+    shared, uses = Counter(lines.values()).most_common(1)[0]
+    if uses > 1:
+        buttons = [button.value for button, used in lines.items() if used == shared]
+        raise ValueError(f"{' and '.join(buttons)} share line {shared}: each needs its own")
     return lines
 
 
