@@ -8,12 +8,14 @@ from collections import Counter
 from pathlib import Path
 
 import platformdirs
+from dotenv.parser import parse_stream
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
+ENV_PREFIX = "SMOOTHFLEET_AGENT_"
 PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
 # gpsd's own address, for a `gpsd:` setting that leaves host or port out.
 GPSD_HOST = "127.0.0.1"
@@ -30,9 +32,7 @@ class AgentSettings(BaseSettings):
     """Everything the agent can be told."""
 
     # NaN and infinity are no setting (they pass a bound's comparison or make a timeout endless)
-    model_config = SettingsConfigDict(
-        env_prefix="SMOOTHFLEET_AGENT_", extra="ignore", allow_inf_nan=False
-    )
+    model_config = SettingsConfigDict(env_prefix=ENV_PREFIX, extra="ignore", allow_inf_nan=False)
 
     server_url: str
     token: SecretStr
@@ -151,13 +151,45 @@ def board_lines(spec: str) -> dict[CruiseButton, int]:
 def load_agent_settings(env_file: Path | None = None, **overrides: object) -> AgentSettings:
     """Read the settings (command-line overrides win), or AgentSettingsError in one line."""
     given = {key: value for key, value in overrides.items() if value is not None}
-    if env_file is not None and not env_file.is_file():
-        raise AgentSettingsError(f"--env-file: {env_file} does not exist")
+    if env_file is not None:
+        check_env_file(env_file)
     try:
         return AgentSettings(_env_file=env_file, **given)  # type: ignore[arg-type]
     except ValidationError as error:
         first = error.errors()[0]
         location = [str(part) for part in first.get("loc", ())]
-        name = "SMOOTHFLEET_AGENT_" + location[0].upper() if location else "settings"
+        name = ENV_PREFIX + location[0].upper() if location else "settings"
         message = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
         raise AgentSettingsError(f"{name}: {message}") from None
+
+
+def check_env_file(env_file: Path) -> None:
+    """Refuse a settings file that would lose a setting without a word: python-dotenv skips a
+    line it cannot parse, and the settings ignore a name they do not know, so a car's
+    `SMOOTHFLEET_AGENT_VEHICLE_ID SF-010` or `SMOOTHFLEET_AGENT_VEHICEL_ID=SF-010` would leave it
+    on the default or stop it over a "missing" setting it was given. Names without the prefix
+    are left alone (one file may serve other programs). The error names the line, never its
+    text: the line may hold the token."""
+    known = {ENV_PREFIX + name.upper() for name in AgentSettings.model_fields}
+    try:
+        with env_file.open(encoding="utf-8") as stream:
+            bindings = list(parse_stream(stream))
+    except FileNotFoundError:
+        raise AgentSettingsError(f"--env-file: {env_file} does not exist") from None
+    except (OSError, UnicodeDecodeError) as error:
+        reason = error.strerror if isinstance(error, OSError) else "it is not UTF-8 text"
+        raise AgentSettingsError(f"--env-file: cannot read {env_file}: {reason}") from None
+    for binding in bindings:
+        original = binding.original
+        # a binding's text begins with the blank lines before it; its own line comes after them
+        line = original.line + len(original.string) - len(original.string.lstrip("\n"))
+        where = f"--env-file {env_file}, line {line}"
+        if binding.error:
+            raise AgentSettingsError(f"{where}: not NAME=value")
+        name = (binding.key or "").upper()
+        if not name.startswith(ENV_PREFIX):
+            continue
+        if name not in known:
+            raise AgentSettingsError(f"{where}: {name} is no agent setting")
+        if binding.value is None:
+            raise AgentSettingsError(f"{where}: {name} has no '=' and no value")

@@ -106,6 +106,35 @@ def test_settings_from_an_env_file_with_the_command_line_winning(tmp_path: Path)
         load_agent_settings(env_file, button_board="plus=17")
 
 
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        # a line without '=' would be skipped by the env-file reader: named, its text not shown
+        ("SMOOTHFLEET_AGENT_TOKEN secret-token-1\n", r"agent.env, line 3: not NAME=value$"),
+        # a misspelt name would be ignored, and the vehicle left on no id
+        (
+            "SMOOTHFLEET_AGENT_VEHICEL_ID=SF-010\n",
+            "line 3: SMOOTHFLEET_AGENT_VEHICEL_ID is no agent",
+        ),
+        ("SMOOTHFLEET_AGENT_VEHICLE_ID\n", "line 3: SMOOTHFLEET_AGENT_VEHICLE_ID has no '='"),
+    ],
+)
+def test_an_env_file_line_that_would_be_lost_is_refused(
+    tmp_path: Path, text: str, error: str
+) -> None:
+    env_file = tmp_path / "agent.env"
+    # a comment, a blank line and another program's name are fine
+    env_file.write_text(
+        "# SF-010's agent\n\n" + text + "OTHER_TOOL=1\nSMOOTHFLEET_AGENT_SERVER_URL=http://x\n"
+    )
+    with pytest.raises(AgentSettingsError, match=error) as refused:
+        load_agent_settings(env_file, token="abc", vehicle_id="SF-010")
+    assert "secret-token-1" not in str(refused.value)
+    env_file.write_bytes(b"SMOOTHFLEET_AGENT_CAN=\xff\n")
+    with pytest.raises(AgentSettingsError, match="cannot read .*agent.env: it is not UTF-8"):
+        load_agent_settings(env_file)
+
+
 def test_button_board_lines() -> None:
     assert board_lines("plus=17, minus=27,gap=22") == {
         CruiseButton.PLUS: 17,
