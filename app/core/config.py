@@ -6,6 +6,7 @@ INRIX_URL, INRIX_KEY) are a contract with operators; everything else here is our
 
 from __future__ import annotations
 
+import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -14,7 +15,6 @@ from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
-from pydantic_settings import SettingsError as SourceParseError
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
 
@@ -28,8 +28,11 @@ class Settings(BaseSettings):
 
     # NaN and infinity are no setting: "inf" would pass every lower bound (ge=0) and make a
     # period, a lifetime or a limit endless
+    # JSON-valued settings (a tuple, the planner's parameters) come through as text and are
+    # decoded by `_json_text` below, so that text which is no JSON is a validation error naming
+    # its variable, as every other wrong setting is
     model_config = SettingsConfigDict(
-        env_prefix="SMOOTHFLEET_", extra="ignore", allow_inf_nan=False
+        env_prefix="SMOOTHFLEET_", extra="ignore", allow_inf_nan=False, enable_decoding=False
     )
 
     environment: Literal["development", "production"] = "development"
@@ -121,6 +124,27 @@ class Settings(BaseSettings):
     dashboard_refresh_s: float = Field(5.0, gt=0)
     # Times people read are shown in the corridor's local time (I-24 runs through Nashville).
     dashboard_timezone: str = "America/Chicago"
+
+    @field_validator(
+        "planner_params",
+        "readiness_ping_age_s",
+        "readiness_status_age_s",
+        "readiness_plan_age_s",
+        "readiness_spool_backlog",
+        "readiness_cpu_temp_c",
+        "readiness_disk_free_mb",
+        "readiness_can_share",
+        "readiness_gps_satellites",
+        mode="before",
+    )
+    @classmethod
+    def _json_text(cls, value: object) -> object:
+        if not isinstance(value, str):
+            return value
+        try:
+            return json.loads(value)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"not valid JSON ({error.msg})") from None
 
     @field_validator(
         "readiness_ping_age_s",
@@ -216,10 +240,6 @@ def load_settings(**overrides: object) -> Settings:
         return Settings(**overrides)  # type: ignore[arg-type]
     except ValidationError as error:
         raise SettingsError(_describe(error)) from None
-    except SourceParseError as error:
-        # A JSON-valued setting that is not JSON: pydantic-settings names only the field.
-        field = str(error).split('"')[1] if '"' in str(error) else "settings"
-        raise SettingsError(f"SMOOTHFLEET_{field.upper()}: not valid JSON") from None
 
 
 @lru_cache(maxsize=1)

@@ -1,0 +1,49 @@
+"""Server settings read from the environment: JSON-valued ones decoded, and a wrong one named."""
+
+from __future__ import annotations
+
+import json
+from typing import get_origin
+
+import pytest
+
+from app.core.config import Settings, SettingsError, load_settings
+
+
+def json_valued_fields() -> list[str]:
+    """The settings an operator writes as JSON: tuples, and the planner's parameters."""
+    return [
+        name
+        for name, info in Settings.model_fields.items()
+        if get_origin(info.annotation) in (tuple, dict, list)
+    ]
+
+
+def test_every_json_valued_setting_reads_its_json(monkeypatch: pytest.MonkeyPatch) -> None:
+    fields = json_valued_fields()
+    assert "planner_params" in fields
+    assert "readiness_gps_satellites" in fields
+    defaults = Settings()
+    for name in fields:
+        value = getattr(defaults, name)
+        monkeypatch.setenv(f"SMOOTHFLEET_{name.upper()}", json.dumps(value))
+    read = load_settings()
+    for name in fields:
+        assert getattr(read, name) == getattr(defaults, name), name
+
+
+@pytest.mark.parametrize(
+    ("variable", "text", "error"),
+    [
+        ("PLANNER_PARAMS", '{"window_m": 4000', "SMOOTHFLEET_PLANNER_PARAMS: not valid JSON"),
+        ("READINESS_PING_AGE_S", "5, 60", "SMOOTHFLEET_READINESS_PING_AGE_S: not valid JSON"),
+        ("READINESS_PING_AGE_S", "[60, 5]", "READINESS_PING_AGE_S: give .* amber below red"),
+        ("PLANNER_PARAMS", '{"nosuch": 1}', "SMOOTHFLEET_PLANNER_PARAMS: planner parameter"),
+    ],
+)
+def test_a_wrong_json_setting_is_named(
+    monkeypatch: pytest.MonkeyPatch, variable: str, text: str, error: str
+) -> None:
+    monkeypatch.setenv(f"SMOOTHFLEET_{variable}", text)
+    with pytest.raises(SettingsError, match=error):
+        load_settings()
