@@ -1,5 +1,5 @@
 """Real I-24 drives (10 Hz) that lead the simulated platoons, read with `contract.recorded` and
-checked here for what a replay needs (no gaps, finite non-negative speeds).
+checked here for what a replay needs (no long gaps, finite non-negative speeds).
 
 The data (../shared/data/README.md) is the CIRCLES instrumented RAV4 on I-24 near Nashville:
 `Time` in unix seconds at 0.1 s steps, `Velocity` in km/h. A drive is replayed from its speed
@@ -23,9 +23,14 @@ FloatArray = NDArray[np.float64]
 
 DriveKind = Literal["shockwave", "freeflow"]
 
-# The recorder logs at 10 Hz; a step further than this from 0.1 s is a gap in the recording.
+# The recorder logs at 10 Hz; a step further than this from 0.1 s is off the grid.
 STEP_S = 0.1
 STEP_TOLERANCE_S = 0.011
+# A recording may drop a few samples or log them off the 0.1 s grid: such a stretch, up to this
+# long between two samples, is filled by linear interpolation onto the grid (as the shared
+# dataset's own preparation filled its missing steps). A longer hole is refused: the leader's
+# speed in it is unknown, and an interpolated wave is no wave the road made.
+MAX_FILLED_GAP_S = 1.0
 # A drive is free flow when even its slowest moments stay fast: its 2nd speed percentile at or
 # above 20 m/s (72 km/h, 45 mph). Every drive below that has at least one real slowdown wave.
 FREEFLOW_MIN_SPEED_MPS = 20.0
@@ -44,6 +49,9 @@ class Drive:
     dt_s: float
     start_unix_s: float
     speed_mps: FloatArray
+    # Seconds of the recording between samples more than a grid step apart, which the loader
+    # filled by interpolation (0 for a drive logged on its grid).
+    filled_s: float = 0.0
 
     @property
     def steps(self) -> int:
@@ -119,15 +127,29 @@ def replayable(recorded: RecordedTrajectory) -> Drive:
         row = int(np.argmax(bad)) + 2  # 1-based, after the header line
         raise DriveError(f"{path} row {row}: Time and Velocity must be finite, speed >= 0")
     steps = np.diff(time_s)
-    off = np.abs(steps - STEP_S) > STEP_TOLERANCE_S
-    if np.any(off):
-        row = int(np.argmax(off)) + 3
-        raise DriveError(
-            f"{path} row {row}: time step {steps[np.argmax(off)]:.3f} s, expected {STEP_S} s "
-            "(a gap in the recording)"
+    for refused, reason in (
+        (steps <= 0.0, "time does not increase (a repeated or out-of-order sample)"),
+        (
+            steps > MAX_FILLED_GAP_S + STEP_TOLERANCE_S,
+            f"a gap in the recording, longer than the {MAX_FILLED_GAP_S:g} s the loader fills",
+        ),
+    ):
+        if np.any(refused):
+            first = int(np.argmax(refused))
+            raise DriveError(f"{path} row {first + 3}: time step {steps[first]:.3f} s, {reason}")
+    off_grid = np.abs(steps - STEP_S) > STEP_TOLERANCE_S
+    if not np.any(off_grid):
+        return Drive(
+            name=recorded.name, dt_s=STEP_S, start_unix_s=float(time_s[0]), speed_mps=speed_mps
         )
+    elapsed_s = time_s - time_s[0]
+    grid_s = STEP_S * np.arange(int(np.floor(elapsed_s[-1] / STEP_S + 1e-6)) + 1)
     return Drive(
-        name=recorded.name, dt_s=STEP_S, start_unix_s=float(time_s[0]), speed_mps=speed_mps
+        name=recorded.name,
+        dt_s=STEP_S,
+        start_unix_s=float(time_s[0]),
+        speed_mps=np.interp(grid_s, elapsed_s, speed_mps),
+        filled_s=float(np.sum(steps[off_grid])),
     )
 
 

@@ -27,6 +27,8 @@ from planner.params import InvalidParams, PlannerParams
 from sim.drives import (
     FREEFLOW_MIN_SPEED_MPS,
     FREEFLOW_PERCENTILE,
+    MAX_FILLED_GAP_S,
+    STEP_S,
     Drive,
     DriveError,
     load_drive,
@@ -127,6 +129,37 @@ def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
         return [ControllerVariant.parse(text) for text in texts] or registered_variants()
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="--controller") from None
+
+
+def _read_drives(drives_dir: Path) -> list[Drive]:
+    """The folder's drives, or a ClickException naming the file and row that cannot be
+    replayed; a drive whose missing samples were filled is named, with how much was filled."""
+    try:
+        drives = load_drives(drives_dir)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    _say_filled(drives)
+    return drives
+
+
+def _read_recorded_drives(inrix_dir: Path) -> list[RecordedDrive]:
+    """`_read_drives` for the drives recorded with their INRIX minutes."""
+    try:
+        recorded = load_recorded_drives(inrix_dir)
+    except DriveError as error:
+        raise click.ClickException(str(error)) from None
+    _say_filled([one.drive for one in recorded])
+    return recorded
+
+
+def _say_filled(drives: Sequence[Drive]) -> None:
+    for drive in drives:
+        if drive.filled_s > 0.0:
+            console.print(
+                f"{drive.name}: {drive.filled_s:.1f} s between samples off the "
+                f"{STEP_S:g} s grid, filled by linear interpolation (gaps up to "
+                f"{MAX_FILLED_GAP_S:g} s are)"
+            )
 
 
 def _scenario_cases(
@@ -308,13 +341,8 @@ def evaluate_command(
             "no shared data found beside the checkout: pass --drives and --inrix-drives, or "
             "set SMOOTHFLEET_SHARED_DATA"
         )
-    try:
-        drives = load_drives(drives_dir)
-        recorded = (
-            load_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
-        )
-    except DriveError as error:
-        raise click.ClickException(str(error)) from None
+    drives = _read_drives(drives_dir)
+    recorded = _read_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
     cases = _scenario_cases(chosen, drives, recorded)
     optimum = load_optimum(optimum_csv) if optimum_csv is not None else {}
     with progress_bar() as progress:
@@ -425,10 +453,7 @@ def select_command(
         ]
     )
     variants = list({variant.name: variant for variant in variants}.values())
-    try:
-        drives = load_drives(drives_dir)
-    except DriveError as error:
-        raise click.ClickException(str(error)) from None
+    drives = _read_drives(drives_dir)
     cases = _scenario_cases(["shockwave", "freeflow"], drives)
     dates = sorted({drive_date(case.drive) for case in cases})
     if len(dates) < folds:
@@ -692,15 +717,15 @@ def train_command(
         raise click.ClickException(
             f"sim train needs the train extra (pip install -e '.[train]'): {error}"
         ) from None
+    drives = _read_drives(drives_dir)
     try:
-        drives = load_drives(drives_dir)
         config = EnvConfig(
             "acc" if actuation == "acc" else "accel",
             "request_time_margin" if accel_action == "request_time_margin" else "request",
             humans=humans,
             episode_s=episode_s,
         )
-    except (DriveError, ValueError) as error:
+    except ValueError as error:
         raise click.ClickException(str(error)) from None
     try:
         candidates = parse_reward_candidates(reward_candidates) if reward_candidates else []
@@ -804,10 +829,7 @@ def optimum_command(
             "no shared data found beside the checkout: pass --drives, or set "
             "SMOOTHFLEET_SHARED_DATA"
         )
-    try:
-        drives = load_drives(drives_dir)
-    except DriveError as error:
-        raise click.ClickException(str(error)) from None
+    drives = _read_drives(drives_dir)
     if names:
         unknown = sorted(set(names) - {drive.name for drive in drives})
         if unknown:

@@ -54,13 +54,38 @@ def test_speed_is_read_in_kmh_and_integrated(tmp_path: Path) -> None:
     np.testing.assert_allclose(drive.position_m, [0.0, 1.0, 2.5])
     np.testing.assert_allclose(drive.accel_mps2, [0.0, 100.0, 100.0])
     assert drive.duration_s == pytest.approx(0.2)
+    # on its grid: nothing filled
+    assert drive.filled_s == 0.0
 
 
-def test_a_gap_in_the_recording_is_named(tmp_path: Path) -> None:
+def test_a_gap_longer_than_the_loader_fills_is_named(tmp_path: Path) -> None:
     path = tmp_path / "gappy.csv"
-    path.write_text(HEADER + "100.0,36\n100.1,36\n100.9,36\n")
-    with pytest.raises(DriveError, match=r"gappy.csv row 4: time step 0.800 s"):
+    path.write_text(HEADER + "100.0,36\n100.1,36\n101.3,36\n")
+    with pytest.raises(
+        DriveError, match=r"gappy.csv row 4: time step 1.200 s, a gap in the recording, longer "
+    ):
         load_drive(path)
+
+
+def test_a_repeated_or_out_of_order_sample_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "twice.csv"
+    path.write_text(HEADER + "100.0,36\n100.1,36\n100.1,36\n100.2,36\n")
+    with pytest.raises(DriveError, match=r"twice.csv row 4: time step 0.000 s, time does not"):
+        load_drive(path)
+
+
+def test_dropped_and_jittered_samples_are_filled_onto_the_grid(tmp_path: Path) -> None:
+    path = tmp_path / "dropped.csv"
+    # 100.2 and 100.3 dropped (a 0.3 s step), then one sample logged 0.04 s late
+    path.write_text(HEADER + "100.0,36\n100.1,36\n100.4,72\n100.54,72\n100.6,72\n")
+    drive = load_drive(path)
+    assert drive.start_unix_s == 100.0
+    assert drive.steps == 6
+    # the dropped samples on the line between their neighbours (10 and 20 m/s), the late one
+    # read at 100.5 between 100.4 and 100.54, both at 20 m/s
+    np.testing.assert_allclose(drive.speed_mps, [10, 10, 10 + 10 / 3, 10 + 20 / 3, 20, 20, 20])
+    # the steps off the grid: 0.3, 0.14 and 0.06 s
+    assert drive.filled_s == pytest.approx(0.5)
 
 
 def test_a_missing_speed_is_named(tmp_path: Path) -> None:

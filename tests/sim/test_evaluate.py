@@ -175,6 +175,9 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     drives = tmp_path / "drives"
     drives.mkdir()
     write_drive(short_drives(shared_dir)[1], drives / "fast.csv")
+    # the recorder dropped two samples (rows 51 and 52): filled, and said so
+    lines = (drives / "fast.csv").read_text().splitlines(keepends=True)
+    (drives / "fast.csv").write_text("".join(lines[:50] + lines[52:]))
     result = run_cli(
         "sim",
         "evaluate",
@@ -186,6 +189,7 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
         str(tmp_path / "out"),
         env=cli_env(),
     )
+    assert "fast: 0.3 s between samples off the 0.1 s grid, filled by linear" in result.stdout
     assert result.returncode != 0
     assert "no drive falls in scenario shockwave (drives found: 1 freeflow;" in result.stderr
     assert "Traceback" not in result.stderr
