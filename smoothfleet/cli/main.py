@@ -564,7 +564,7 @@ def _demo_on(
         ) from None
     finally:
         engine.dispose()
-    public = current.public_url or f"http://{current.host}:{current.port}"
+    public = (current.public_url or f"http://{current.host}:{current.port}").rstrip("/")
     console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
     console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
     for controller, sha256 in policies.items():

@@ -47,3 +47,18 @@ def test_a_wrong_json_setting_is_named(
     monkeypatch.setenv(f"SMOOTHFLEET_{variable}", text)
     with pytest.raises(SettingsError, match=error):
         load_settings()
+
+
+@pytest.mark.parametrize("variable", ["INRIX_URL", "PUBLIC_URL"])
+def test_a_url_setting_needs_a_scheme_and_a_host(
+    monkeypatch: pytest.MonkeyPatch, variable: str
+) -> None:
+    # docker-compose hands an unset variable on as empty: unset
+    monkeypatch.setenv(f"SMOOTHFLEET_{variable}", "")
+    assert getattr(load_settings(), variable.lower()) is None
+    monkeypatch.setenv(f"SMOOTHFLEET_{variable}", "https://fleet.example/api")
+    assert getattr(load_settings(), variable.lower()) == "https://fleet.example/api"
+    for wrong in ("api.inrix.com/v1", "ftp://fleet.example", "https://"):
+        monkeypatch.setenv(f"SMOOTHFLEET_{variable}", wrong)
+        with pytest.raises(SettingsError, match=f"SMOOTHFLEET_{variable}: must be an http"):
+            load_settings()
