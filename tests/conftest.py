@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -23,21 +22,6 @@ from tests.support.databases import create_template, database_from_template
 TEMPLATE = "sf_template"
 SEEDED_TEMPLATE = "sf_template_seeded"
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Files with the most `slow` or `browser` tests first, then the largest: `scripts/test`
-    runs two workers that each take whole files in this order (`--dist loadfile
-    --no-loadscope-reorder`), and a long file handed out last runs alone while the other worker
-    idles. (xdist's own order, by number of tests, handed out the two-minute outage drill and
-    the demo near the end.) The sort is stable, so each file keeps its tests' order."""
-    slow = Counter(
-        item.path
-        for item in items
-        if item.get_closest_marker("slow") or item.get_closest_marker("browser")
-    )
-    size = Counter(item.path for item in items)
-    items.sort(key=lambda item: (-slow[item.path], -size[item.path]))
 
 
 @pytest.fixture(scope="session")
