@@ -2,10 +2,10 @@
 trajectories_with_inrix/): the planner in the loop reads what INRIX actually said.
 
 The recorded segment positions are in the frame of the I-24 reference line; the simulator works
-in distance along the drive. The drive's first GPS fix, located on the seed corridor (the same
-reference line resampled), gives the offset between the two. Each row of speed.csv is the
-response received at that time (relative to the drive's start), so it reaches the planner then:
-the feed's own ~3-minute lag is inside the numbers, as on the road.
+in distance along the drive. The drive's first GPS fix on the seed corridor (the same reference
+line resampled), less the distance driven to it, gives the offset between the two. Each row of
+speed.csv is the response received at that time (relative to the drive's start), so it reaches
+the planner then: the feed's own ~3-minute lag is inside the numbers, as on the road.
 """
 
 from __future__ import annotations
@@ -21,6 +21,12 @@ from contract.corridor import CorridorGeometry
 from contract.recorded import InrixMinutes, RecordingError, read_inrix_minutes, read_trajectory
 from sim.drives import Drive, DriveError, replayable
 from sim.traffic import InrixFeed
+
+# A recording may begin before the GPS has a fix, or on the ramp: its first fix on the corridor
+# places it if it comes within this much driving of the start (on every shared recording it is
+# the very first fix, 6-15 m from the reference line). Further on, the distance driven would no
+# longer say where on the corridor the drive began.
+MAX_DRIVEN_TO_FIRST_FIX_M = 1000.0
 
 
 @dataclass(frozen=True)
@@ -65,10 +71,17 @@ def load_recorded_drive(
     except RecordingError as error:
         raise DriveError(str(error)) from None
     drive = replayable(trajectory)
-    located = geometry.locate(trajectory.latitude_deg[:1], trajectory.longitude_deg[:1])
-    if not bool(located.on_corridor[0]):
-        raise DriveError(f"{directory.name}: the drive does not start on the seed corridor")
-    start_reference = float(located.x_m[0]) + origin_m
+    located = geometry.locate(trajectory.latitude_deg, trajectory.longitude_deg)
+    on_corridor = np.flatnonzero(located.on_corridor)
+    speed, time_s = trajectory.speed_mps, trajectory.time_unix_s
+    driven_m = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(time_s))])
+    if len(on_corridor) == 0 or driven_m[on_corridor[0]] > MAX_DRIVEN_TO_FIRST_FIX_M:
+        raise DriveError(
+            f"{directory.name}: no GPS fix on the seed corridor within the drive's first "
+            f"{MAX_DRIVEN_TO_FIRST_FIX_M:g} m"
+        )
+    first = on_corridor[0]
+    start_reference = float(located.x_m[first] - driven_m[first]) + origin_m
     return RecordedDrive(drive, feed_in_drive_frame(minutes, start_reference))
 
 

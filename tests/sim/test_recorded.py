@@ -3,13 +3,14 @@ planner in the loop as it arrived."""
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from contract.recorded import InrixMinutes
+from contract.recorded import InrixMinutes, read_trajectory
 from sim.drives import DriveError
 from sim.plans import FeedDoesNotCoverDrive, SimulatedPlanner
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
@@ -127,3 +128,42 @@ def test_cycles_without_inrix_are_skipped_until_the_held_plan_would_go_stale(
 def test_a_folder_without_recordings_is_named(tmp_path: Path) -> None:
     with pytest.raises(DriveError, match="no drive folders with INRIX recordings"):
         load_recorded_drives(tmp_path)
+
+
+def without_gps_for_the_first(rows: int, source: Path, folder: Path) -> Path:
+    """A copy of a recording whose first `rows` samples have no GPS fix (empty cells)."""
+    shutil.copytree(source, folder)
+    lines = (folder / "trajectory.csv").read_text().splitlines(keepends=True)
+    header = lines[0].rstrip("\n").split(",")
+    blank = [header.index("LatitudeGPS"), header.index("LongitudeGPS")]
+    for number in range(1, rows + 1):
+        cells = lines[number].split(",")
+        for index in blank:
+            cells[index] = ""
+        lines[number] = ",".join(cells)
+    (folder / "trajectory.csv").write_text("".join(lines))
+    return folder.parent
+
+
+def test_a_recording_that_begins_before_its_first_fix_is_placed_by_the_distance_driven(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    source = shared_dir / "data" / "trajectories_with_inrix" / FIRST_SHARED[0]
+    placed = load_recorded_drives(source.parent)
+    (original,) = (one for one in placed if one.drive.name == FIRST_SHARED[0])
+    trajectory = read_trajectory(source / "trajectory.csv")
+    driven_m = np.cumsum(trajectory.speed_mps) * 0.1
+    # no fix for the first 300 m: placed from the fix after them, within a few metres (GPS and
+    # the integrated wheel speed differ by about 1 %)
+    late_fix = int(np.searchsorted(driven_m, 300.0))
+    moved = load_recorded_drives(
+        without_gps_for_the_first(late_fix, source, tmp_path / "late" / source.name)
+    )[0]
+    np.testing.assert_allclose(moved.feed.segment_start_m, original.feed.segment_start_m, atol=5.0)
+    np.testing.assert_array_equal(moved.drive.speed_mps, original.drive.speed_mps)
+    # no fix for 1.1 km: where the drive began is no longer known
+    no_fix = int(np.searchsorted(driven_m, 1100.0))
+    with pytest.raises(DriveError, match="no GPS fix on the seed corridor within the drive's fi"):
+        load_recorded_drives(
+            without_gps_for_the_first(no_fix, source, tmp_path / "lost" / source.name)
+        )
