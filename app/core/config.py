@@ -226,6 +226,17 @@ class Settings(BaseSettings):
         return self
 
     @model_validator(mode="after")
+    def _a_real_database_in_production(self) -> Settings:
+        # the embedded server is the development default: in production a misspelt or lost
+        # SMOOTHFLEET_DATABASE_URL would quietly take the fleet's pings into a local database
+        if self.environment == "production" and self.database_url is None:
+            raise ValueError(
+                "SMOOTHFLEET_DATABASE_URL must be set in production (the embedded PostgreSQL is "
+                "for development)"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _no_placeholder_secrets_in_production(self) -> Settings:
         if (
             self.environment == "production"

@@ -62,3 +62,14 @@ def test_a_url_setting_needs_a_scheme_and_a_host(
         monkeypatch.setenv(f"SMOOTHFLEET_{variable}", wrong)
         with pytest.raises(SettingsError, match=f"SMOOTHFLEET_{variable}: must be an http"):
             load_settings()
+
+
+def test_production_needs_a_database_url(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SMOOTHFLEET_ENVIRONMENT", "production")
+    monkeypatch.setenv("SMOOTHFLEET_SECRET_KEY", "a-real-secret-of-32-characters-xx")
+    # a misspelt name is no database: production must not fall back to the embedded server
+    monkeypatch.setenv("SMOOTHFLEET_DATABSE_URL", "postgresql://u:p@db:5432/smoothfleet")
+    with pytest.raises(SettingsError, match="SMOOTHFLEET_DATABASE_URL must be set in production"):
+        load_settings()
+    monkeypatch.setenv("SMOOTHFLEET_DATABASE_URL", "postgresql://u:p@db:5432/smoothfleet")
+    assert load_settings().database_url == "postgresql://u:p@db:5432/smoothfleet"
