@@ -24,8 +24,8 @@ from sim.traffic import InrixFeed
 
 # A recording may begin before the GPS has a fix, or on the ramp: its first fix on the corridor
 # places it if it comes within this much driving of the start (on every shared recording it is
-# the very first fix, 6-15 m from the reference line). Further on, the distance driven would no
-# longer say where on the corridor the drive began.
+# the very first fix, 5.6-14.5 m from the reference line). Further on, the distance driven
+# would no longer say where on the corridor the drive began.
 MAX_DRIVEN_TO_FIRST_FIX_M = 1000.0
 
 
