@@ -4,6 +4,7 @@ command line overriding them. A missing or wrong setting stops the agent with on
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 from pathlib import Path
 
@@ -151,6 +152,15 @@ def board_lines(spec: str) -> dict[CruiseButton, int]:
 def load_agent_settings(env_file: Path | None = None, **overrides: object) -> AgentSettings:
     """Read the settings (command-line overrides win), or AgentSettingsError in one line."""
     given = {key: value for key, value in overrides.items() if value is not None}
+    # a systemd unit's EnvironmentFile= or Environment= hands the settings over as variables:
+    # a misspelt one is lost as silently as in --env-file
+    unknown = sorted(
+        name
+        for name in os.environ
+        if name.upper().startswith(ENV_PREFIX) and name.upper() not in setting_names()
+    )
+    if unknown:
+        raise AgentSettingsError(f"{unknown[0]} (in the environment) is no agent setting")
     if env_file is not None:
         check_env_file(env_file)
     try:
@@ -163,6 +173,11 @@ def load_agent_settings(env_file: Path | None = None, **overrides: object) -> Ag
         raise AgentSettingsError(f"{name}: {message}") from None
 
 
+def setting_names() -> set[str]:
+    """Every variable the agent reads, upper-case (the settings ignore case)."""
+    return {ENV_PREFIX + name.upper() for name in AgentSettings.model_fields}
+
+
 def check_env_file(env_file: Path) -> None:
     """Refuse a settings file that would lose a setting without a word: python-dotenv skips a
     line it cannot parse, and the settings ignore a name they do not know, so a car's
@@ -170,7 +185,6 @@ def check_env_file(env_file: Path) -> None:
     on the default or stop it over a "missing" setting it was given. Names without the prefix
     are left alone (one file may serve other programs). The error names the line, never its
     text: the line may hold the token."""
-    known = {ENV_PREFIX + name.upper() for name in AgentSettings.model_fields}
     try:
         with env_file.open(encoding="utf-8") as stream:
             bindings = list(parse_stream(stream))
@@ -189,7 +203,7 @@ def check_env_file(env_file: Path) -> None:
         name = (binding.key or "").upper()
         if not name.startswith(ENV_PREFIX):
             continue
-        if name not in known:
+        if name not in setting_names():
             raise AgentSettingsError(f"{where}: {name} is no agent setting")
         if binding.value is None:
             raise AgentSettingsError(f"{where}: {name} has no '=' and no value")

@@ -135,6 +135,17 @@ def test_an_env_file_line_that_would_be_lost_is_refused(
         load_agent_settings(env_file)
 
 
+def test_a_misspelt_setting_in_the_environment_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_VEHICEL_ID", "SF-010")
+    with pytest.raises(
+        AgentSettingsError, match=r"SMOOTHFLEET_AGENT_VEHICEL_ID \(in the environment\) is no"
+    ):
+        load_agent_settings(server_url="http://x", token="abc", vehicle_id="SF-001")
+    monkeypatch.delenv("SMOOTHFLEET_AGENT_VEHICEL_ID")
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_VEHICLE_ID", "SF-010")
+    assert load_agent_settings(server_url="http://x", token="abc").vehicle_id == "SF-010"
+
+
 def test_button_board_lines() -> None:
     assert board_lines("plus=17, minus=27,gap=22") == {
         CruiseButton.PLUS: 17,
