@@ -13,6 +13,7 @@ import math
 import re
 from datetime import UTC, datetime
 from typing import Annotated
+from urllib.parse import urlsplit
 
 from pydantic import AfterValidator, AwareDatetime, BeforeValidator, Field, Strict
 
@@ -29,6 +30,15 @@ _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 _NUMBERS = (int, float)
 _NOT_NUMBERS = (bool, str)
 _NOT_TEXT = "timestamp must be ISO 8601 text, e.g. 2026-11-30T12:00:00Z"
+
+
+def http_url(value: str) -> str:
+    """The URL, if it is http(s) and names a host: what the server's and the car's settings
+    accept for an address they will call or print."""
+    parts = urlsplit(value)
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError("must be an http:// or https:// URL with a host")
+    return value
 
 
 def storable_text(value: str) -> str:

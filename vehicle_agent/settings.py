@@ -13,6 +13,7 @@ from dotenv.parser import parse_stream
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from contract.values import http_url
 from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
@@ -64,9 +65,7 @@ class AgentSettings(BaseSettings):
     @field_validator("server_url")
     @classmethod
     def _http_url(cls, value: str) -> str:
-        if not value.startswith(("http://", "https://")):
-            raise ValueError("must be an http:// or https:// URL")
-        return value.rstrip("/")
+        return http_url(value).rstrip("/")
 
     @field_validator("token")
     @classmethod
@@ -154,10 +153,11 @@ def load_agent_settings(env_file: Path | None = None, **overrides: object) -> Ag
     given = {key: value for key, value in overrides.items() if value is not None}
     # a systemd unit's EnvironmentFile= or Environment= hands the settings over as variables:
     # a misspelt one is lost as silently as in --env-file
+    known = setting_names()
     unknown = sorted(
         name
         for name in os.environ
-        if name.upper().startswith(ENV_PREFIX) and name.upper() not in setting_names()
+        if name.upper().startswith(ENV_PREFIX) and name.upper() not in known
     )
     if unknown:
         raise AgentSettingsError(f"{unknown[0]} (in the environment) is no agent setting")
@@ -185,6 +185,7 @@ def check_env_file(env_file: Path) -> None:
     on the default or stop it over a "missing" setting it was given. Names without the prefix
     are left alone (one file may serve other programs). The error names the line, never its
     text: the line may hold the token."""
+    known = setting_names()
     try:
         with env_file.open(encoding="utf-8") as stream:
             bindings = list(parse_stream(stream))
@@ -203,7 +204,7 @@ def check_env_file(env_file: Path) -> None:
         name = (binding.key or "").upper()
         if not name.startswith(ENV_PREFIX):
             continue
-        if name not in setting_names():
+        if name not in known:
             raise AgentSettingsError(f"{where}: {name} is no agent setting")
         if binding.value is None:
             raise AgentSettingsError(f"{where}: {name} has no '=' and no value")

@@ -10,12 +10,13 @@ import json
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
-from urllib.parse import urlsplit
 from zoneinfo import ZoneInfo, ZoneInfoNotFoundError
 
 import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from contract.values import http_url
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
 
@@ -28,10 +29,9 @@ class Settings(BaseSettings):
     """Everything the server side can be told from the environment."""
 
     # NaN and infinity are no setting: "inf" would pass every lower bound (ge=0) and make a
-    # period, a lifetime or a limit endless
-    # JSON-valued settings (a tuple, the planner's parameters) come through as text and are
-    # decoded by `_json_text` below, so that text which is no JSON is a validation error naming
-    # its variable, as every other wrong setting is
+    # period, a lifetime or a limit endless. JSON-valued settings (a tuple, the planner's
+    # parameters) come through as text, decoded by `_json_text` below, so that text which is no
+    # JSON is a validation error naming its variable, as every other wrong setting is.
     model_config = SettingsConfigDict(
         env_prefix="SMOOTHFLEET_", extra="ignore", allow_inf_nan=False, enable_decoding=False
     )
@@ -182,10 +182,7 @@ class Settings(BaseSettings):
         # empty is unset (docker-compose passes an unset variable on as "")
         if not value:
             return None
-        parts = urlsplit(value)
-        if parts.scheme not in ("http", "https") or not parts.hostname:
-            raise ValueError("must be an http:// or https:// URL with a host")
-        return value
+        return http_url(value)
 
     @field_validator("database_url")
     @classmethod

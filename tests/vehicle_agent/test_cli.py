@@ -135,6 +135,14 @@ def test_an_env_file_line_that_would_be_lost_is_refused(
         load_agent_settings(env_file)
 
 
+def test_the_server_url_needs_a_scheme_and_a_host() -> None:
+    for wrong in ("fleet.example", "https://"):
+        with pytest.raises(
+            AgentSettingsError, match="SMOOTHFLEET_AGENT_SERVER_URL: must be an http:// or https"
+        ):
+            load_agent_settings(server_url=wrong, token="abc", vehicle_id="SF-001")
+
+
 def test_a_misspelt_setting_in_the_environment_is_refused(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SMOOTHFLEET_AGENT_VEHICEL_ID", "SF-010")
     with pytest.raises(
