@@ -193,6 +193,26 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     assert result.returncode != 0
     assert "no drive falls in scenario shockwave (drives found: 1 freeflow;" in result.stderr
     assert "Traceback" not in result.stderr
+    # run on its own scenario, it names no best pair on the shockwave drives it did not run
+    freeflow = run_cli(
+        "sim",
+        "evaluate",
+        "--drives",
+        str(drives),
+        "--scenario",
+        "freeflow",
+        "--planner",
+        "kernel_smooth",
+        "--controller",
+        "microaccel:accel",
+        "--out",
+        str(tmp_path / "out"),
+        env=cli_env(),
+        timeout=300,
+    )
+    assert freeflow.returncode == 0, freeflow.stderr
+    assert "no shockwave drive was run, so no pair is named best on shockwave" in freeflow.stdout
+    assert "no pair kept" not in freeflow.stdout
 
 
 def test_distance_lost_and_gap_figures_per_run() -> None:
