@@ -10,7 +10,7 @@ of its first sample, so that a drive named otherwise is still put with its own d
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime
 from zoneinfo import ZoneInfo
@@ -56,21 +56,29 @@ class Fold:
         return sorted({drive_date(drive) for drive in self.held_out})
 
 
-def date_folds(drives: Sequence[Drive], folds: int) -> list[Fold]:
-    """`folds` splits: the sorted dates dealt round-robin, each fold holding out its share."""
-    dates = sorted({drive_date(drive) for drive in drives})
+def held_out_dates(dates: Iterable[str], folds: int) -> list[frozenset[str]]:
+    """The dates each of `folds` folds holds out: the sorted distinct dates dealt round-robin,
+    so every date is held out by exactly one fold and every fold holds out at least one."""
+    distinct = sorted(set(dates))
     if folds < 2:
         raise ValueError(f"cross-validation needs at least 2 folds, got {folds}")
-    if len(dates) < folds:
-        raise ValueError(f"{len(dates)} dates cannot fill {folds} folds")
-    result = []
-    for index in range(folds):
-        held = set(dates[index::folds])
-        result.append(
-            Fold(
-                index,
-                tuple(drive for drive in drives if drive_date(drive) not in held),
-                tuple(drive for drive in drives if drive_date(drive) in held),
-            )
+    if len(distinct) < folds:
+        raise ValueError(
+            f"the drives span {len(distinct)} date{'s' if len(distinct) != 1 else ''} "
+            f"({', '.join(distinct)}), and {folds} folds need {folds}, one held out by each: "
+            "a date's drives saw the same traffic, so they never sit on both sides"
         )
-    return result
+    return [frozenset(distinct[index::folds]) for index in range(folds)]
+
+
+def date_folds(drives: Sequence[Drive], folds: int) -> list[Fold]:
+    """`folds` splits of the drives, each fold holding out the drives of its dates
+    (`held_out_dates`)."""
+    return [
+        Fold(
+            index,
+            tuple(drive for drive in drives if drive_date(drive) not in held),
+            tuple(drive for drive in drives if drive_date(drive) in held),
+        )
+        for index, held in enumerate(held_out_dates((drive_date(drive) for drive in drives), folds))
+    ]

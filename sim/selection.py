@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from sim.folds import held_out_dates
+
 Row = Mapping[str, Any]
 
 SHOCKWAVE_MAX_LOSS_PCT = -2.0
@@ -91,14 +93,10 @@ def date_of(row: Row) -> str:
 def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
     """Choose on the training dates of each fold, score on its held-out dates.
 
-    The sorted dates are dealt round-robin into `folds` groups (as `sim.folds.date_folds`).
+    The dates are dealt into folds as `sim.folds.date_folds` deals them (`held_out_dates`).
     """
-    dates = sorted({date_of(row) for row in rows})
-    if folds < 2 or folds > len(dates):
-        raise ValueError(f"{len(dates)} dates cannot make {folds} folds (at least 2)")
     result = []
-    for index in range(folds):
-        held = set(dates[index::folds])
+    for held in held_out_dates((date_of(row) for row in rows), folds):
         training = [row for row in rows if date_of(row) not in held]
         chosen = choose(training)
         scored = tuple(

@@ -41,7 +41,9 @@ def test_impossible_folds_are_refused() -> None:
     drives = [drive_from_speeds("2021-03-08-x", np.full(10, 20.0))]
     with pytest.raises(ValueError, match="at least 2 folds"):
         date_folds(drives, 1)
-    with pytest.raises(ValueError, match="1 dates cannot fill 2 folds"):
+    with pytest.raises(
+        ValueError, match=r"the drives span 1 date \(2021-03-08\), and 2 folds need 2"
+    ):
         date_folds(drives, 2)
 
 

@@ -95,7 +95,9 @@ def test_each_fold_is_scored_on_dates_it_did_not_choose_on() -> None:
 
 
 def test_folds_need_enough_dates() -> None:
-    with pytest.raises(ValueError, match="cannot make 3 folds"):
+    with pytest.raises(
+        ValueError, match=r"the drives span 2 dates \(2021-03-08, 2021-03-09\), and 3 folds need 3"
+    ):
         cross_validate([row("a", "2021-03-08-a"), row("a", "2021-03-09-a")], folds=3)
 
 
