@@ -90,11 +90,33 @@ def date_of(row: Row) -> str:
     return str(row["date"])
 
 
+def check_every_fold_can_choose(date_scenarios: Iterable[tuple[str, str]], folds: int) -> None:
+    """Refuse folds whose training dates hold no shockwave drive: the choice is made on the
+    shockwave drives' fuel saving (`standing`), so such a fold would choose on nothing.
+
+    `date_scenarios` is each run's (date, scenario); checked before anything is simulated.
+    """
+    pairs = list(date_scenarios)
+    shockwave_dates = {date for date, scenario in pairs if scenario == "shockwave"}
+    for held in held_out_dates((date for date, _ in pairs), folds):
+        if not shockwave_dates - held:
+            found = (
+                f"the shockwave drives are of {', '.join(sorted(shockwave_dates))}"
+                if shockwave_dates
+                else "no drive is a shockwave one"
+            )
+            raise ValueError(
+                f"the fold holding out {', '.join(sorted(held))} keeps no shockwave drive to "
+                f"choose on ({found}): give fewer folds, or drives of more dates with waves"
+            )
+
+
 def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
     """Choose on the training dates of each fold, score on its held-out dates.
 
     The dates are dealt into folds as `sim.folds.date_folds` deals them (`held_out_dates`).
     """
+    check_every_fold_can_choose(((date_of(row), str(row["scenario"])) for row in rows), folds)
     result = []
     for held in held_out_dates((date_of(row) for row in rows), folds):
         training = [row for row in rows if date_of(row) not in held]

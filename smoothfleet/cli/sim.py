@@ -65,7 +65,13 @@ from sim.report import (
     write_time_space,
 )
 from sim.scenarios import RECORDED_SCENARIOS, SCENARIOS, Case, scenario_cases
-from sim.selection import candidate_summary, choose, cross_validate, held_out_summary
+from sim.selection import (
+    candidate_summary,
+    check_every_fold_can_choose,
+    choose,
+    cross_validate,
+    held_out_summary,
+)
 from smoothfleet.cli.common import FiniteFloatRange, fleet_options
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -457,14 +463,12 @@ def select_command(
     variants = list({variant.name: variant for variant in variants}.values())
     drives = _read_drives(drives_dir)
     cases = _scenario_cases(["shockwave", "freeflow"], drives)
-    dates = sorted({drive_date(case.drive) for case in cases})
-    if len(dates) < folds:
-        raise click.BadParameter(
-            f"the drives are of {len(dates)} date{'' if len(dates) == 1 else 's'} "
-            f"({', '.join(dates)}): too few for {folds} folds, each of which holds out whole "
-            "dates",
-            param_hint="--folds",
+    try:
+        check_every_fold_can_choose(
+            ((drive_date(case.drive), case.scenario) for case in cases), folds
         )
+    except ValueError as error:
+        raise click.BadParameter(str(error), param_hint="--folds") from None
     candidates = [
         {**RECOMMENDED_PLANNER_PARAMS, "window_m": window} for window in windows or (1500.0, 4000.0)
     ]

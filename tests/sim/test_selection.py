@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
+from sim.drives import load_drive
 from sim.selection import (
     candidate_summary,
+    check_every_fold_can_choose,
     choose,
     cross_validate,
     held_out_summary,
@@ -17,6 +19,8 @@ from sim.selection import (
 )
 from tests.sim.test_evaluate import short_drives, write_drive
 from tests.support.servers import cli_env, run_cli
+
+WAVES_OF_03_15 = "trajectories/2021-03-15-12-46-38_masterArray_0_8314.csv"
 
 
 def row(candidate: str, drive: str, scenario: str = "shockwave", **values: float) -> dict:
@@ -101,6 +105,21 @@ def test_folds_need_enough_dates() -> None:
         cross_validate([row("a", "2021-03-08-a"), row("a", "2021-03-09-a")], folds=3)
 
 
+def test_a_fold_that_trains_on_no_wave_is_refused() -> None:
+    waves_on_one_date = [
+        row("a", "2021-03-08-a"),
+        row("a", "2021-03-09-a", scenario="freeflow"),
+        row("a", "2021-03-12-a", scenario="freeflow"),
+    ]
+    # 2 folds: 03-08 and 03-12 held out together leave 03-09, which has no wave to choose on
+    with pytest.raises(ValueError, match="the fold holding out 2021-03-08, 2021-03-12 keeps no"):
+        cross_validate(waves_on_one_date, folds=2)
+    with pytest.raises(ValueError, match=r"\(no drive is a shockwave one\)"):
+        check_every_fold_can_choose([("2021-03-08", "freeflow"), ("2021-03-09", "freeflow")], 2)
+    # a wave on each side: both folds choose on one
+    check_every_fold_can_choose([("2021-03-08", "shockwave"), ("2021-03-09", "shockwave")], 2)
+
+
 def test_the_candidate_summary_splits_each_candidate_by_scenario() -> None:
     rows = [
         row("b", "2021-03-08-a", fuel_saving_pct=4.0, distance_lost_m=100.0),
@@ -126,8 +145,10 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
 ) -> None:
     drives = tmp_path / "drives"
     drives.mkdir()
-    # a stop-and-go slice of 2021-04-05 and the freeflow drive of 2021-04-07: two dates, two folds
-    for drive in short_drives(shared_dir):
+    # stop-and-go slices of 2021-03-15 and 2021-04-05, the freeflow drive of 2021-04-07: two
+    # folds, each choosing on a date with waves (04-05; 03-15 and 04-07)
+    two_dates = short_drives(shared_dir)
+    for drive in (load_drive(shared_dir / "data" / WAVES_OF_03_15).slice(300.0, 300.0), *two_dates):
         write_drive(drive, drives / f"{drive.name[:19]}.csv")
     out = tmp_path / "out"
     result = run_cli(
@@ -153,26 +174,42 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
     assert "chosen on every date" in result.stdout
     with (out / "selection.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    # 2 candidates x (the slice as shockwave, the fast drive as freeflow)
-    assert len(rows) == 4
+    # 2 candidates x (the slices as shockwave, the fast drive as freeflow)
+    assert len(rows) == 6
     assert sorted({row["candidate"] for row in rows}) == [
         "kernel_smooth x microaccel/accel @ 1500 m",
         "kernel_smooth x simple/accel @ 1500 m",
     ]
     with (out / "held_out.csv").open() as handle:
         held_out = {row["scenario"]: row for row in csv.DictReader(handle)}
-    # each drive held out once: the shockwave slice by one fold, the freeflow drive by the other
+    # each drive held out once: the shockwave slices by one fold each, the freeflow drive by one
     assert {scenario: row["drives"] for scenario, row in held_out.items()} == {
-        "shockwave": "1",
+        "shockwave": "2",
         "freeflow": "1",
     }
-    # three folds of two dates are refused before anything is simulated, naming the dates
+    # four folds of three dates are refused before anything is simulated, naming the dates
     too_many = run_cli(
-        "sim", "select", "--drives", str(drives), "--folds", "3", "--out", str(out), env=cli_env()
+        "sim", "select", "--drives", str(drives), "--folds", "4", "--out", str(out), env=cli_env()
     )
     assert too_many.returncode != 0
-    assert "2 dates (2021-04-05, 2021-04-07): too few for 3 folds" in too_many.stderr
+    assert "span 3 dates (2021-03-15, 2021-04-05, 2021-04-07), and 4 folds need 4" in (
+        too_many.stderr
+    )
     assert "Traceback" not in too_many.stderr
+    # a fold whose training dates hold no wave would choose on nothing: refused, likewise
+    no_waves = tmp_path / "no_waves"
+    no_waves.mkdir()
+    for drive in two_dates:
+        write_drive(drive, no_waves / f"{drive.name[:19]}.csv")
+    refused = run_cli(
+        "sim", "select", "--drives", str(no_waves), "--folds", "2", "--out", str(out), env=cli_env()
+    )
+    assert refused.returncode != 0
+    assert (
+        "the fold holding out 2021-04-05 keeps no shockwave drive to choose on (the shockwave "
+        "drives are of 2021-04-05)"
+    ) in " ".join(refused.stderr.split())
+    assert "Traceback" not in refused.stderr
     # a planner window the planner would refuse, likewise before any simulation
     too_wide = run_cli(
         "sim",
