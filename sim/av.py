@@ -6,6 +6,13 @@ only the "minicar" flag) and the plan's target at its position, calls the very c
 the agent runs (`vehicle_agent.controllers.build_controller`), and turns its action into the
 acceleration the car makes: an `accel` car makes the commanded acceleration; an `acc` car hands
 its set points to a stock-ACC model (`StockAcc`), which decides the acceleration.
+
+Without a fresh plan (none published yet, or the last older than a car holds one, when the
+INRIX feed has stopped) the agent does not command: the car drives on its stock ACC, and the
+controller starts afresh with the next plan (`vehicle_agent.engage`, "plan_fresh"). An `acc`
+car's ACC keeps the settings the agent left; an `accel` car's (the RAV4 takes acceleration
+requests over its engaged ACC) resumes at the speed the car had when the requests stopped, our
+stand-in for the set speed the driver chose, which no recording holds.
 """
 
 from __future__ import annotations
@@ -13,6 +20,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, Protocol
 
+from sim.emulator.acc import SimulatedAccCar
 from sim.platoon import AvObservation
 from vehicle_agent.controllers import (
     AccelCommand,
@@ -33,8 +41,8 @@ PING_EVERY_STEPS = 10
 class PlanSource(Protocol):
     """Where an AV gets its plan and where its pings go (the server, or its simulation)."""
 
-    def profile(self, time_s: float) -> TargetProfile:
-        """The plan the vehicle holds at `time_s`."""
+    def profile(self, time_s: float) -> TargetProfile | None:
+        """The plan the vehicle holds at `time_s`; None while it holds none fresh."""
         ...
 
     def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
@@ -66,6 +74,16 @@ class StockAcc(Protocol):
         """The gap bars the car shows now."""
         ...
 
+    def hold_accel_mps2(
+        self,
+        time_s: float,
+        speed_mps: float,
+        gap_m: float | None,
+        lead_speed_mps: float | None,
+    ) -> float:
+        """The acceleration the ACC makes on its own settings, the agent pressing nothing."""
+        ...
+
     def cancel(self) -> None:
         """The driver braked: the ACC disengages (it engages again at the car's speed)."""
         ...
@@ -91,6 +109,13 @@ class AgentPolicy:
         self.senses_lead_state = senses_lead_state
         self.stock_acc = stock_acc
         self.braking_authority_mps2 = braking_authority_mps2(controller.actuation)
+        # The ACC that drives while the agent holds no fresh plan: the `acc` car's own, or
+        # the ACC under an `accel` car's requests.
+        self._acc_without_plan: StockAcc = stock_acc if stock_acc is not None else SimulatedAccCar()
+        self._without_plan = False
+        # Times the car was left to its ACC for want of a fresh plan, and the steps it drove so.
+        self.plan_hand_backs = 0
+        self.steps_without_plan = 0
         self._step = 0
 
     def _ping(self, observation: AvObservation) -> None:
@@ -112,6 +137,9 @@ class AgentPolicy:
         self._ping(observation)
         profile = self.plan.profile(time_s)
         lead_present = observation.gap_m <= RADAR_RANGE_M
+        if profile is None:
+            return self._acc_drives(observation, lead_present)
+        self._without_plan = False
         measured = lead_present and self.senses_lead_state
         rel_speed = observation.lead_speed_mps - observation.speed_mps
         action = self.controller.step(
@@ -134,6 +162,22 @@ class AgentPolicy:
         return self.stock_acc.accel_mps2(
             action,
             time_s,
+            observation.speed_mps,
+            observation.gap_m if lead_present else None,
+            observation.lead_speed_mps if lead_present else None,
+        )
+
+    def _acc_drives(self, observation: AvObservation, lead_present: bool) -> float:
+        """No fresh plan: the agent hands the car back to its ACC (once), which drives."""
+        if not self._without_plan:
+            self._without_plan = True
+            self.plan_hand_backs += 1
+            self.controller.reset()
+            if self.stock_acc is None:
+                self._acc_without_plan.cancel()  # resumes at the car's speed (module docstring)
+        self.steps_without_plan += 1
+        return self._acc_without_plan.hold_accel_mps2(
+            observation.time_s,
             observation.speed_mps,
             observation.gap_m if lead_present else None,
             observation.lead_speed_mps if lead_present else None,

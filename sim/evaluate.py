@@ -107,6 +107,10 @@ class RunResult:
     recommended: bool = False
     # Planner cycles without INRIX, skipped as the server skips them (the AVs kept their plan).
     plans_skipped: int = 0
+    # Times an AV was left to its stock ACC for want of a fresh plan (the feed had stopped, or
+    # had not begun), summed over the AVs, and the AV-seconds it drove so.
+    plan_hand_backs: int = 0
+    seconds_without_plan: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -189,6 +193,7 @@ class Evaluation:
                     )
                 row["plans_buffered"] = sum(r.plans_buffered for r in runs)
                 row["plans_skipped"] = sum(r.plans_skipped for r in runs)
+                row["plan_hand_backs"] = sum(r.plan_hand_backs for r in runs)
                 row["collisions"] = sum(r.kpis.collisions for r in runs)
                 row["gap_violations"] = sum(r.kpis.gap_violations for r in runs)
                 row["takeovers"] = sum(r.takeovers for r in runs)
@@ -259,6 +264,8 @@ class Evaluation:
                 "plans_run": r.plans_run,
                 "plans_buffered": r.plans_buffered,
                 "plans_skipped": r.plans_skipped,
+                "plan_hand_backs": r.plan_hand_backs,
+                "seconds_without_plan": r.seconds_without_plan,
                 "date": drive_date(r.case.drive),
             }
             row.update(r.kpis.as_dict())
@@ -362,6 +369,8 @@ def run_case(
             cut_ins=run.cut_ins,
             recommended=recommended,
             plans_skipped=schedule.plans_skipped,
+            plan_hand_backs=sum(policy.plan_hand_backs for policy in policies),
+            seconds_without_plan=sum(policy.steps_without_plan for policy in policies) * run.dt_s,
         )
     if save is not None:
         save(result, run)

@@ -174,7 +174,7 @@ def plan_ahead(
             schedule.record_ping(next_ping * STEP_S, position[next_ping], speed[next_ping])
             schedule.profile(next_ping * STEP_S)
             next_ping += PING_EVERY_STEPS
-        profile = schedule.profile(float(step) * STEP_S)
+        profile = schedule.held_profile(float(step) * STEP_S)
         ahead[row] = [profile.at(position[step] + offset) - speed[step] for offset in offsets_m]
     return ahead
 

@@ -79,13 +79,9 @@ def simulated_inrix(drive: Drive, params: PlannerParams) -> InrixFeed:
     return simulated_feed(drive, bounds, stamps, CALIBRATED)
 
 
-class FeedDoesNotCoverDrive(ValueError):
-    """The drive's recorded INRIX leaves the AVs without a fresh plan: none before the first
-    reading, or none for longer than a car holds one (`STALE_PLAN_AFTER_S`).
-
-    The server skips a cycle without INRIX and the cars keep their plan, as the simulator does
-    (`SimulatedPlanner.plans_skipped`); past its staleness a car hands back to its stock ACC,
-    which the simulator does not model, so it refuses the drive, naming it."""
+class NoPlanHeld(ValueError):
+    """The AVs hold no fresh plan at this time (`SimulatedPlanner.profile` is None), where the
+    caller needs one: a study or a training window on simulated INRIX, which always has one."""
 
 
 @dataclass
@@ -100,7 +96,8 @@ class SimulatedPlanner:
     plans_run: int = 0
     # Plans that held a buffer (a standing bottleneck's deceleration region).
     plans_buffered: int = 0
-    # Cycles without INRIX: skipped, as the server skips them; the AVs keep the last plan.
+    # Cycles without INRIX: skipped, as the server skips them; the AVs keep the last plan while
+    # it is fresh (`STALE_PLAN_AFTER_S`), then drive on their stock ACC (`sim.av`).
     plans_skipped: int = 0
     _ping_time: list[float] = field(default_factory=list)
     _ping_x: list[float] = field(default_factory=list)
@@ -132,16 +129,29 @@ class SimulatedPlanner:
         self._ping_x.append(x_m)
         self._ping_speed.append(speed_mps)
 
-    def profile(self, time_s: float) -> TargetProfile:
-        """The plan the AVs hold at `time_s`, looked up as the agent does."""
+    def profile(self, time_s: float) -> TargetProfile | None:
+        """The plan the AVs hold at `time_s`, looked up as the agent does; None while they hold
+        none fresh (the agent's `LanePlan.is_fresh`): before the first plan, or once the last
+        was published more than `STALE_PLAN_AFTER_S` ago, when the feed has stopped."""
         if time_s >= self._next_cycle_s:
             cycle_s = math.floor(time_s / self.period_s) * self.period_s
             self._run(cycle_s)
             self._next_cycle_s = cycle_s + self.period_s
-        assert self._lane_plan is not None  # _run publishes, keeps a fresh plan or raises
+        if self._lane_plan is None or time_s - self._published_at_s > STALE_PLAN_AFTER_S:
+            return None
         return self._lane_plan.profile(
             self.epoch + timedelta(seconds=time_s), DEFAULT_WAVE_SPEED_MPS
         )
+
+    def held_profile(self, time_s: float) -> TargetProfile:
+        """`profile`, for a caller that cannot go on without a plan (`NoPlanHeld` if none)."""
+        profile = self.profile(time_s)
+        if profile is None:
+            raise NoPlanHeld(
+                f"{self.grid.corridor_id.removeprefix('sim:')}: no fresh plan at {time_s:.0f} s "
+                f"({self.plans_run} published, {self.plans_skipped} cycles without INRIX)"
+            )
+        return profile
 
     def _run(self, now_s: float) -> None:
         visible = self.feed.visible_rows(now_s)
@@ -166,21 +176,8 @@ class SimulatedPlanner:
                 self.algorithm,
                 self.params,
             )
-        except NoInrixEstimate as error:
-            # the next cycle publishes at the earliest one period on: until then the AVs hold
-            # the last plan, if they have one and it stays fresh that long
-            held_until_s = self._published_at_s + STALE_PLAN_AFTER_S
-            if self._lane_plan is None or now_s + self.period_s > held_until_s:
-                raise FeedDoesNotCoverDrive(
-                    f"{self.grid.corridor_id.removeprefix('sim:')}: no plan at {now_s:.0f} s "
-                    f"into the drive ({error}), and the AVs hold "
-                    + (
-                        "none yet"
-                        if self._lane_plan is None
-                        else f"one only until {held_until_s:.0f} s"
-                    )
-                    + ": the recorded INRIX must cover the whole drive"
-                ) from None
+        except NoInrixEstimate:
+            # as the server: nothing is published; the AVs hold the last plan while it is fresh
             self.plans_skipped += 1
             return
         self._previous_smoothed.appendleft(plan.smoothed_mps)

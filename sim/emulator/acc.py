@@ -225,6 +225,22 @@ class SimulatedAccCar:
         """The driver braked: ACC off until the next set point engages it at the car's speed."""
         self.acc.cancel()
 
+    def hold_accel_mps2(
+        self,
+        time_s: float,
+        speed_mps: float,
+        gap_m: float | None,
+        lead_speed_mps: float | None,
+    ) -> float:
+        """The agent has handed the car back: it presses nothing more (a button it held is
+        released), and the ACC drives on the settings it shows; were it off, the driver sets
+        it at the car's speed."""
+        self.sequencer.stop()
+        self.acc.buttons(time_s, frozenset(), speed_mps)
+        if not self.acc.engaged:
+            self.acc.engage(max(speed_mps, MIN_SET_SPEED_MPH * MPS_PER_MPH))
+        return self.acc.accel(speed_mps, gap_m, lead_speed_mps)
+
     def accel_mps2(
         self,
         set_point: AccSetPoint,

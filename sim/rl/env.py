@@ -242,7 +242,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             planner = self.planners[env]
             if self.elapsed[env] % PING_EVERY_STEPS == 0:
                 planner.record_ping(time_s, x, float(self.speed[env, 1]))
-            profile = planner.profile(time_s)
+            profile = planner.held_profile(time_s)
             self.target_here[env] = profile.at(x)
             self.target_ahead[env] = profile.at(x + PLAN_LOOKAHEAD_M)
 

@@ -381,9 +381,18 @@ def evaluate_command(
         evaluation.write_runs_index(runs_dir)
         console.print(f"wrote {len(evaluation.results)} runs to {runs_dir}")
     console.print(summary_table(evaluation))
+    without_plan = [result for result in evaluation.results if result.plan_hand_backs]
+    if without_plan:
+        console.print(
+            "runs whose AVs were left without a fresh plan (the INRIX feed began late or "
+            f"stopped): {len(without_plan)}; hand-backs to the stock ACC: "
+            f"{sum(r.plan_hand_backs for r in without_plan)}; AV-seconds driven on it: "
+            f"{sum(r.seconds_without_plan for r in without_plan):.0f} (plan_hand_backs, "
+            "seconds_without_plan in evaluation.csv)"
+        )
     best = best_pair(evaluation)
     if not any(result.case.scenario == "shockwave" for result in evaluation.results):
-        console.print("no shockwave drive was run, so no pair is named best on shockwave")
+        console.print("the best pair is named on the shockwave scenario, which was not run")
     elif best is None:
         console.print(
             f"no pair kept throughput and speed within {MAX_LOSS_PCT:.0f} % on shockwave "

@@ -101,6 +101,57 @@ def test_an_acc_car_senses_only_the_minicar_flag() -> None:
     assert controller.seen[0].lead_rel_speed_mps is None
 
 
+class PlanLostBetween(FixedPlan):
+    """FixedPlan, but none held from `lost_s` until `back_s` (a stale plan, dropped)."""
+
+    def __init__(self, lost_s: float, back_s: float) -> None:
+        super().__init__()
+        self.lost_s, self.back_s = lost_s, back_s
+
+    def profile(self, time_s: float) -> TargetProfile | None:
+        return None if self.lost_s <= time_s < self.back_s else super().profile(time_s)
+
+
+class Resettable(Recording):
+    """Recording, counting the agent's resets."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.resets = 0
+
+    def reset(self) -> None:
+        self.resets += 1
+
+
+def test_without_a_fresh_plan_the_stock_acc_drives_and_the_controller_starts_afresh() -> None:
+    controller = Resettable()
+    policy = AgentPolicy(controller, PlanLostBetween(1.0, 2.0), senses_lead_state=True)
+    accels = [
+        policy.accel_mps2(AvObservation(step / 10, 25.0 * step / 10, 25.0, 200.0, 25.0))
+        for step in range(30)
+    ]
+    # the controller decides only while a plan is held (0-1 s and 2-3 s), and is reset once
+    assert len(controller.seen) == 20
+    assert controller.resets == 1
+    assert (policy.plan_hand_backs, policy.steps_without_plan) == (1, 10)
+    # meanwhile the car's ACC, resumed at the car's 25 m/s (56 mph) with no leader in range,
+    # holds its speed: 0.4 1/s x (56 mph - 25 m/s)
+    assert accels[10:20] == pytest.approx([0.4 * (56 * 0.44704 - 25.0)] * 10)
+    assert accels[:10] == accels[20:] == [0.0] * 10  # the controller's requests
+
+
+def test_an_acc_car_without_a_plan_keeps_the_settings_the_agent_left() -> None:
+    car = SimulatedAccCar()
+    policy = agent_policy("microaccel_acc", "acc", PlanLostBetween(30.0, 1e9), stock_acc=car)
+    for step in range(400):
+        policy.accel_mps2(AvObservation(step / 10, 25.0 * step / 10, 25.0, 200.0, 25.0))
+    left = (car.speed_setting_mph, car.gap_setting)
+    assert policy.plan_hand_backs == 1
+    for step in range(400, 500):
+        policy.accel_mps2(AvObservation(step / 10, 25.0 * step / 10, 25.0, 200.0, 25.0))
+    assert (car.speed_setting_mph, car.gap_setting) == left
+
+
 def test_acc_controllers_need_a_stock_acc_model() -> None:
     with pytest.raises(ValueError, match="stock-ACC model"):
         agent_policy("microaccel_acc", "acc", FixedPlan())

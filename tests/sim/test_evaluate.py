@@ -118,14 +118,21 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
     drives.mkdir()
     for drive in short_drives(shared_dir):
         write_drive(drive, drives / f"{drive.name[:19]}.csv")
-    # the two recordings with INRIX first shared, both stop-and-go
+    # the two recordings with INRIX first shared, both stop-and-go; the first one's feed as if
+    # it had begun two minutes into the drive (its minutes up to 89.3 s removed)
     recorded = tmp_path / "recorded"
     recorded.mkdir()
-    for name in (
+    late, whole = (
         "2021-03-15-12-46-38_2T3MWRFVXLW056972_masterArray_0_4917",
         "2021-04-22-12-47-13_2T3MWRFVXLW056972_masterArray_1_5292",
-    ):
-        (recorded / name).symlink_to(shared_dir / "data/trajectories_with_inrix" / name)
+    )
+    (recorded / whole).symlink_to(shared_dir / "data/trajectories_with_inrix" / whole)
+    (recorded / late).mkdir()
+    for path in (shared_dir / "data/trajectories_with_inrix" / late).iterdir():
+        lines = path.read_text().splitlines(keepends=True)
+        if path.suffix == ".csv" and path.name != "trajectory.csv":
+            lines = lines[:1] + [line for line in lines[1:] if float(line.split(",")[0]) > 120.0]
+        (recorded / late / path.name).write_text("".join(lines))
     out = tmp_path / "out"
     result = run_cli(
         "sim",
@@ -144,6 +151,11 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
         timeout=300,
     )
     assert result.returncode == 0, result.stderr
+    # until the late feed's first plan (the cycle at 180 s) the AV drives on its stock ACC
+    assert (
+        "runs whose AVs were left without a fresh plan (the INRIX feed began late or stopped): "
+        "1; hand-backs to the stock ACC: 1; AV-seconds driven on it: 180"
+    ) in " ".join(result.stdout.split())
     # on this short wave the AV's smoothing costs more than 2 % of network speed (above)
     assert "no pair kept throughput and speed within -2 % on shockwave" in result.stdout
     assert (out / "heatmap.png").exists()
@@ -211,7 +223,7 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
         timeout=300,
     )
     assert freeflow.returncode == 0, freeflow.stderr
-    assert "no shockwave drive was run, so no pair is named best on shockwave" in freeflow.stdout
+    assert "the best pair is named on the shockwave scenario, which was not run" in freeflow.stdout
     assert "no pair kept" not in freeflow.stdout
 
 

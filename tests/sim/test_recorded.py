@@ -12,9 +12,11 @@ import pytest
 
 from contract.recorded import InrixMinutes, read_trajectory
 from sim.drives import DriveError
-from sim.plans import FeedDoesNotCoverDrive, SimulatedPlanner
+from sim.evaluate import ControllerVariant, run_case
+from sim.plans import NoPlanHeld, SimulatedPlanner
+from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
-from sim.scenarios import scenario_cases
+from sim.scenarios import Case, scenario_cases
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
 
@@ -83,12 +85,10 @@ def test_the_planner_reads_the_recorded_minutes(shared_dir: Path) -> None:
     assert planner.plans_buffered > 0
 
 
-def test_cycles_without_inrix_are_skipped_until_the_held_plan_would_go_stale(
-    shared_dir: Path,
-) -> None:
+def test_cycles_without_inrix_are_skipped_and_a_stale_plan_is_dropped(shared_dir: Path) -> None:
     """As the server: a cycle whose newest INRIX is too old publishes nothing and the AVs keep
-    their plan; once it would go stale before the next cycle (cars hand back, which the
-    simulator does not model), the drive is refused, named."""
+    their plan while it is fresh (180 s, the agent's default), then hold none (the agent hands
+    the car back to its stock ACC: `sim.av`) until a plan is published again."""
     one = next(
         one
         for one in load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
@@ -103,26 +103,66 @@ def test_cycles_without_inrix_are_skipped_until_the_held_plan_would_go_stale(
     planner = SimulatedPlanner.for_drive(one.drive, "kernel_smooth", feed=cut)
     planner.profile(0.0)
     held = planner.profile(660.0)  # 571 s after the last reading: within the 600 s limit
+    assert held is not None
     assert (planner.plans_run, planner.plans_skipped) == (2, 0)
     planner.profile(720.0)  # 631 s: skipped, the 660 s plan held (fresh until 840 s)
-    planner.profile(780.0)  # skipped: the next cycle, at 840 s, is still in time
-    later = planner.profile(790.0)
-    assert (planner.plans_run, planner.plans_skipped) == (2, 2)
-    # the held plan, read 130 s later: the same targets, shifted by the agent's wave speed
+    planner.profile(780.0)  # skipped likewise
+    later = planner.profile(840.0)
+    assert later is not None
+    assert (planner.plans_run, planner.plans_skipped) == (2, 3)
+    # the held plan, read 180 s later: the same targets, shifted by the agent's wave speed
     assert later.target_speed_mps.tolist() == held.target_speed_mps.tolist()
-    assert later.shift_m - held.shift_m == pytest.approx(-DEFAULT_WAVE_SPEED_MPS * 130.0)
-    refused = f"{one.drive.name}: no plan at 840 s .*newest INRIX is 751 s old.*until 840 s"
-    with pytest.raises(FeedDoesNotCoverDrive, match=refused):
-        planner.profile(840.0)
-    # a feed that starts after the drive: no plan to hold at all
+    assert later.shift_m - held.shift_m == pytest.approx(-DEFAULT_WAVE_SPEED_MPS * 180.0)
+    # 180.1 s old: stale, and the feed never comes back
+    assert planner.profile(840.1) is None
+    assert planner.profile(900.0) is None
+    assert planner.plans_skipped == 4
+    with pytest.raises(NoPlanHeld, match=rf"{one.drive.name}: no fresh plan at 900 s \(2 publ"):
+        planner.held_profile(900.0)
+    # a feed that starts after the drive: no plan until its first minute has arrived
     late = replace(
         one.feed,
         measured_at_s=one.feed.measured_at_s[~kept],
         speed_mps=one.feed.speed_mps[~kept],
     )
     starved = SimulatedPlanner.for_drive(one.drive, "kernel_smooth", feed=late)
-    with pytest.raises(FeedDoesNotCoverDrive, match="no plan at 0 s .*hold none yet"):
-        starved.profile(0.0)
+    first_seen_s = float(late.measured_at_s[0] + late.latency_s)
+    assert starved.profile(0.0) is None
+    first_cycle_s = 60.0 * np.ceil(first_seen_s / 60.0)
+    assert starved.profile(first_cycle_s - 0.1) is None
+    assert starved.profile(first_cycle_s) is not None
+    assert starved.plans_run == 1
+
+
+def test_an_evaluation_drives_without_a_plan_on_the_stock_acc(shared_dir: Path) -> None:
+    """A recording whose INRIX begins after the drive is simulated, not refused: until the
+    first plan every AV drives on its stock ACC, counted as a plan hand-back; then its
+    controller takes over, and nobody collides."""
+    one = next(
+        one
+        for one in load_recorded_drives(shared_dir / "data" / "trajectories_with_inrix")
+        if one.drive.name == FIRST_SHARED[0]
+    )
+    late = one.feed.measured_at_s > 120.0
+    assert one.feed.measured_at_s[late][0] == pytest.approx(149.3)
+    cut = replace(
+        one.feed, measured_at_s=one.feed.measured_at_s[late], speed_mps=one.feed.speed_mps[late]
+    )
+    case = Case("shockwave_inrix", one.drive, inrix=cut)
+    for variant in ("microaccel:accel", "microaccel_acc:acc"):
+        result = run_case(
+            case,
+            RECOMMENDED_PLANNER,
+            ControllerVariant.parse(variant),
+            humans=22,
+            avs=2,
+            planner_params=RECOMMENDED_PLANNER_PARAMS,
+        )
+        assert result.kpis.collisions == 0, variant
+        # the cycles at 0, 60 and 120 s find no INRIX; the one at 180 s publishes the first plan
+        assert (result.plans_skipped, result.plans_run) == (3, 6), variant
+        assert result.plan_hand_backs == 2, variant
+        assert result.seconds_without_plan == pytest.approx(2 * 180.0), variant
 
 
 def test_a_folder_without_recordings_is_named(tmp_path: Path) -> None:
