@@ -13,11 +13,12 @@ from dotenv.parser import parse_stream
 from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from contract.environment import AGENT_ENV_PREFIX
 from contract.values import http_url
 from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
-ENV_PREFIX = "SMOOTHFLEET_AGENT_"
+ENV_PREFIX = AGENT_ENV_PREFIX
 PLACEHOLDER_TOKENS = frozenset({"", "change-me", "changeme", "token", "secret"})
 # gpsd's own address, for a `gpsd:` setting that leaves host or port out.
 GPSD_HOST = "127.0.0.1"

@@ -7,6 +7,9 @@ INRIX_URL, INRIX_KEY) are a contract with operators; everything else here is our
 from __future__ import annotations
 
 import json
+import logging
+import os
+from collections.abc import Mapping
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -16,9 +19,12 @@ import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from contract.environment import AGENT_ENV_PREFIX, SERVER_ENV_PREFIX, TOOL_VARIABLES
 from contract.values import http_url
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
+
+logger = logging.getLogger(__name__)
 
 
 class SettingsError(Exception):
@@ -33,7 +39,7 @@ class Settings(BaseSettings):
     # parameters) come through as text, decoded by `_json_text` below, so that text which is no
     # JSON is a validation error naming its variable, as every other wrong setting is.
     model_config = SettingsConfigDict(
-        env_prefix="SMOOTHFLEET_", extra="ignore", allow_inf_nan=False, enable_decoding=False
+        env_prefix=SERVER_ENV_PREFIX, extra="ignore", allow_inf_nan=False, enable_decoding=False
     )
 
     environment: Literal["development", "production"] = "development"
@@ -254,12 +260,38 @@ def _describe(error: ValidationError) -> str:
     return f"{name}: {message}"
 
 
+def unknown_variables(environ: Mapping[str, str]) -> list[str]:
+    """The names under the server's prefix that no program of ours reads: misspelt settings
+    (pydantic-settings matches names without regard to case, and so does this)."""
+    known = {SERVER_ENV_PREFIX + name.upper() for name in Settings.model_fields} | TOOL_VARIABLES
+    return sorted(
+        name
+        for name in environ
+        if name.upper().startswith(SERVER_ENV_PREFIX)
+        and not name.upper().startswith(AGENT_ENV_PREFIX)
+        and name.upper() not in known
+    )
+
+
 def load_settings(**overrides: object) -> Settings:
-    """Read the settings, raising SettingsError with one line naming a bad setting."""
+    """Read the settings, raising SettingsError with one line naming a bad setting.
+
+    A variable under the prefix that is no setting (`unknown_variables`) is refused in
+    production, where a misspelt name would leave a setting at its default unnoticed, and
+    logged as a warning in development, where stray variables are common."""
     try:
-        return Settings(**overrides)  # type: ignore[arg-type]
+        settings = Settings(**overrides)  # type: ignore[arg-type]
     except ValidationError as error:
         raise SettingsError(_describe(error)) from None
+    unknown = unknown_variables(os.environ)
+    if unknown and settings.environment == "production":
+        raise SettingsError(
+            f"{', '.join(unknown)}: no server setting of that name (misspelt? the settings are "
+            "the fields of Settings in app/core/config.py)"
+        )
+    if unknown:
+        logger.warning("%s: no server setting of that name, ignored", ", ".join(unknown))
+    return settings
 
 
 @lru_cache(maxsize=1)

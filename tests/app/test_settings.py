@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import logging
+import os
 from typing import get_origin
 
 import pytest
 
-from app.core.config import Settings, SettingsError, load_settings
+from app.core.config import Settings, SettingsError, load_settings, unknown_variables
 
 
 def json_valued_fields() -> list[str]:
@@ -72,4 +74,33 @@ def test_production_needs_a_database_url(monkeypatch: pytest.MonkeyPatch) -> Non
     with pytest.raises(SettingsError, match="SMOOTHFLEET_DATABASE_URL must be set in production"):
         load_settings()
     monkeypatch.setenv("SMOOTHFLEET_DATABASE_URL", "postgresql://u:p@db:5432/smoothfleet")
+    # the misspelt name itself is refused, named, once the setting it meant is there
+    with pytest.raises(SettingsError, match="SMOOTHFLEET_DATABSE_URL: no server setting"):
+        load_settings()
+    monkeypatch.delenv("SMOOTHFLEET_DATABSE_URL")
     assert load_settings().database_url == "postgresql://u:p@db:5432/smoothfleet"
+
+
+def test_a_misspelt_setting_is_refused_in_production_and_logged_in_development(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    for name in [name for name in os.environ if name.upper().startswith("SMOOTHFLEET_")]:
+        monkeypatch.delenv(name)
+    # the agent's settings and the tools' variables share the prefix: they are no typo
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_VEHICLE_ID", "SF-010")
+    monkeypatch.setenv("SMOOTHFLEET_SHARED_DATA", "/data")
+    monkeypatch.setenv("smoothfleet_planner_period_s", "30")  # matched without regard to case
+    assert unknown_variables(os.environ) == []
+    assert load_settings().planner_period_s == 30.0
+    monkeypatch.setenv("SMOOTHFLEET_PLANER_PERIOD_S", "30")
+    assert unknown_variables(os.environ) == ["SMOOTHFLEET_PLANER_PERIOD_S"]
+    with caplog.at_level(logging.WARNING, logger="app.core.config"):
+        assert load_settings().environment == "development"
+    assert "SMOOTHFLEET_PLANER_PERIOD_S: no server setting of that name, ignored" in caplog.text
+    monkeypatch.setenv("SMOOTHFLEET_ENVIRONMENT", "production")
+    monkeypatch.setenv("SMOOTHFLEET_SECRET_KEY", "a-real-secret-of-32-characters-xx")
+    monkeypatch.setenv("SMOOTHFLEET_DATABASE_URL", "postgresql://u:p@db:5432/smoothfleet")
+    with pytest.raises(
+        SettingsError, match=r"^SMOOTHFLEET_PLANER_PERIOD_S: no server setting of that name"
+    ):
+        load_settings()

@@ -1,0 +1,24 @@
+"""The environment variables of this project's programs, which share one prefix.
+
+The server reads `SMOOTHFLEET_<SETTING>`, the car `SMOOTHFLEET_AGENT_<SETTING>`, and a few tools
+one name each under the same prefix. A misspelt name reaches no program and its setting keeps
+its default without a word, so each program refuses a name under its own prefix that it does
+not know; for that the server must know which names are the others'.
+"""
+
+from __future__ import annotations
+
+SERVER_ENV_PREFIX = "SMOOTHFLEET_"
+AGENT_ENV_PREFIX = "SMOOTHFLEET_AGENT_"
+
+# Read by the project's tools, not by the server: the test suite's external PostgreSQL
+# (tests/conftest.py), the shared data for `smoothfleet sim` (sim.drives), the CLI's tracebacks
+# (smoothfleet.cli.main) and the benchmarks' stall probe (bench/stall_probe).
+TOOL_VARIABLES = frozenset(
+    {
+        "SMOOTHFLEET_TEST_DATABASE_URL",
+        "SMOOTHFLEET_SHARED_DATA",
+        "SMOOTHFLEET_DEBUG",
+        "SMOOTHFLEET_STALL_LOG",
+    }
+)
