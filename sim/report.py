@@ -82,11 +82,11 @@ def _summary_cells(row: dict[str, Any]) -> list[str]:
         row["controller"] + (" (recommended)" if row["recommended"] else ""),
         str(row["avs"]),
         str(row["cases"]),
-        _pct(row["fuel_saving_pct"]),
+        percent_text(row["fuel_saving_pct"]),
         share,
-        _pct(row["throughput_vph_change_pct"]),
-        _pct(row["network_speed_mps_change_pct"]),
-        _pct(row["accel_rms_mps2_change_pct"]),
+        percent_text(row["throughput_vph_change_pct"]),
+        percent_text(row["network_speed_mps_change_pct"]),
+        percent_text(row["accel_rms_mps2_change_pct"]),
         str(row["collisions"]),
         str(row["takeovers"]),
         str(row["cut_ins"]),
@@ -119,7 +119,8 @@ def markdown_table(evaluation: Evaluation) -> str:
     return header + "\n".join(lines) + "\n"
 
 
-def _pct(value: float) -> str:
+def percent_text(value: float) -> str:
+    """A change in % for people: signed, one decimal; "n/a" where it is undefined."""
     return "n/a" if not math.isfinite(value) else f"{value:+.1f} %"
 
 

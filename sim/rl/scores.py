@@ -11,6 +11,7 @@ keeps the gap envelope (`sim.gaps`). Groups: the stop-and-go drives (2nd speed p
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -180,6 +181,12 @@ GROUPS: dict[str, Callable[[DriveScore], bool]] = {
 }
 
 
+def _worst(values: Sequence[float]) -> float:
+    """The least of the drives' changes; NaN, as their mean, when one is undefined (the
+    builtin `min` would return NaN or skip it depending on where it stands in the list)."""
+    return min(values) if all(math.isfinite(value) for value in values) else float("nan")
+
+
 def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
     """Per controller and group: mean fuel saving, mean and worst throughput and network speed
     changes, collisions, the smallest share of time within the gap envelope."""
@@ -198,12 +205,14 @@ def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
                     "throughput_change_pct": float(
                         np.mean([s.throughput_change_pct for s in chosen])
                     ),
-                    "worst_throughput_change_pct": min(s.throughput_change_pct for s in chosen),
+                    "worst_throughput_change_pct": _worst(
+                        [s.throughput_change_pct for s in chosen]
+                    ),
                     "network_speed_change_pct": float(
                         np.mean([s.network_speed_change_pct for s in chosen])
                     ),
-                    "worst_network_speed_change_pct": min(
-                        s.network_speed_change_pct for s in chosen
+                    "worst_network_speed_change_pct": _worst(
+                        [s.network_speed_change_pct for s in chosen]
                     ),
                     "collisions": sum(s.collisions for s in chosen),
                     "min_gap_within_share": min(s.gap_within_share for s in chosen),

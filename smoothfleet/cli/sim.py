@@ -58,6 +58,7 @@ from sim.report import (
     MAX_LOSS_PCT,
     best_pair,
     markdown_table,
+    percent_text,
     summary_table,
     write_csv,
     write_heatmap,
@@ -776,11 +777,12 @@ def train_command(
     for row in result.summary:
         console.print(
             f"{row['controller']:>15} {row['group']:>12} ({row['drives']} drives): fuel saving "
-            f"{row['fuel_saving_pct']:+.1f} %, throughput {row['throughput_change_pct']:+.1f} % "
-            f"(worst {row['worst_throughput_change_pct']:+.1f} %), network speed "
-            f"{row['network_speed_change_pct']:+.1f} % (worst "
-            f"{row['worst_network_speed_change_pct']:+.1f} %), collisions {row['collisions']}, "
-            f"gap within bounds >= {100 * row['min_gap_within_share']:.1f} %"
+            f"{percent_text(row['fuel_saving_pct'])}, throughput "
+            f"{percent_text(row['throughput_change_pct'])} (worst "
+            f"{percent_text(row['worst_throughput_change_pct'])}), network speed "
+            f"{percent_text(row['network_speed_change_pct'])} (worst "
+            f"{percent_text(row['worst_network_speed_change_pct'])}), collisions "
+            f"{row['collisions']}, gap within bounds >= {100 * row['min_gap_within_share']:.1f} %"
         )
     console.print(
         f"wrote {result.policy_path} (sha256 {result.sha256[:12]}) and {result.manifest_path}"
