@@ -516,7 +516,7 @@ def select_command(
         table.add_row(
             ", ".join(choice.held_out_dates),
             choice.chosen.candidate,
-            f"{choice.chosen.fuel_saving_pct:+.1f} %",
+            percent_text(choice.chosen.fuel_saving_pct),
             "yes" if choice.chosen.meets_aims else f"no (short {choice.chosen.shortfall_pct:.1f})",
         )
     console.print(table)
@@ -594,8 +594,8 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
     evaluation = Evaluation([baseline, chosen])
     label = (
         f"{RECOMMENDED_PLANNER} x {RECOMMENDED_CONTROLLER.name}\nfuel saving "
-        f"{evaluation.fuel_saving_pct(chosen):+.1f} %, network speed "
-        f"{evaluation.change_pct(chosen, 'network_speed_mps'):+.1f} %, "
+        f"{percent_text(evaluation.fuel_saving_pct(chosen))}, network speed "
+        f"{percent_text(evaluation.change_pct(chosen, 'network_speed_mps'))}, "
         f"{chosen.cut_ins} cut-ins, {chosen.takeovers} takeovers"
     )
     write_time_space(
