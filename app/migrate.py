@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from importlib import resources
 from pathlib import Path
 
@@ -9,6 +10,7 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
+from alembic.script.revision import ResolutionError
 from sqlalchemy import Connection, Engine, text
 
 # The migration scripts are this package's data: Alembic runs them (their env.py imports
@@ -33,6 +35,29 @@ def head_revision() -> str:
     return heads[0]
 
 
+class UnknownRevision(ValueError):
+    """A migration target that names no revision of the packaged migrations."""
+
+
+# A relative target ("-1", "+2", "0003+1"): Alembic resolves it against the database's state.
+RELATIVE_REVISION = re.compile(r".*[+-]\d+")
+
+
+def check_revision(revision: str) -> None:
+    """Refuse, before any database is touched, a target that names no revision (`head`, `base`,
+    an id or its unique prefix; relative targets are left to Alembic)."""
+    if RELATIVE_REVISION.fullmatch(revision):
+        return
+    script = ScriptDirectory.from_config(alembic_config())
+    try:
+        script.revision_map.get_revisions(revision)
+    except ResolutionError as error:
+        known = ", ".join(reversed([one.revision for one in script.walk_revisions()]))
+        raise UnknownRevision(
+            f"no migration revision {revision!r} ({error}); the revisions: base, {known}, head"
+        ) from None
+
+
 def current_revision(connection: Connection) -> str | None:
     """The revision the database is at (None for an empty database)."""
     return MigrationContext.configure(connection).get_current_revision()
@@ -44,6 +69,7 @@ MIGRATION_LOCK_SQL = text("SELECT pg_advisory_xact_lock(hashtext('smoothfleet-mi
 
 def upgrade(engine: Engine, revision: str = "head") -> None:
     """Migrate the database up to `revision`, all steps in one transaction."""
+    check_revision(revision)
     with engine.begin() as connection:
         connection.execute(MIGRATION_LOCK_SQL)
         config = alembic_config()
@@ -53,6 +79,7 @@ def upgrade(engine: Engine, revision: str = "head") -> None:
 
 def downgrade(engine: Engine, revision: str) -> None:
     """Migrate the database down to `revision` ("base" empties it), in one transaction."""
+    check_revision(revision)
     with engine.begin() as connection:
         connection.execute(MIGRATION_LOCK_SQL)
         config = alembic_config()

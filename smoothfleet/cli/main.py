@@ -91,8 +91,12 @@ def db() -> None:
 @click.argument("revision", default="head")
 def db_upgrade(revision: str) -> None:
     """Migrate the schema up to REVISION (default: head)."""
-    from app.migrate import upgrade
+    from app.migrate import UnknownRevision, check_revision, upgrade
 
+    try:
+        check_revision(revision)
+    except UnknownRevision as error:
+        raise click.BadParameter(str(error), param_hint="REVISION") from None
     with database(settings()) as url:
         upgrade(make_sync_engine(url), revision)
     console.print(f"database at {revision}")
@@ -102,8 +106,12 @@ def db_upgrade(revision: str) -> None:
 @click.argument("revision")
 def db_downgrade(revision: str) -> None:
     """Migrate the schema down to REVISION ("base" removes every table)."""
-    from app.migrate import downgrade
+    from app.migrate import UnknownRevision, check_revision, downgrade
 
+    try:
+        check_revision(revision)
+    except UnknownRevision as error:
+        raise click.BadParameter(str(error), param_hint="REVISION") from None
     with database(settings()) as url:
         downgrade(make_sync_engine(url), revision)
     console.print(f"database at {revision}")

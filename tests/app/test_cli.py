@@ -14,6 +14,7 @@ import psutil
 import pytest
 from sqlalchemy import Engine, text
 
+from app.migrate import current_revision, head_revision
 from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
 
 ROSTER_HEADER = (
@@ -228,3 +229,32 @@ def test_the_embedded_server_still_stops_after_a_holder_was_killed(tmp_path: Pat
     while postgres_processes(data_dir / "pgdata") and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not postgres_processes(data_dir / "pgdata"), "embedded PostgreSQL left running"
+
+
+def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
+    database_url: str, engine: Engine
+) -> None:
+    """The operator's schema commands (docs/operations.md): down to base and back to head,
+    then the ping partitions' housekeeping, which a second run finds done."""
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    down = run_cli("db", "downgrade", "base", env=env)
+    assert down.returncode == 0, down.stderr
+    assert "database at base" in down.stdout
+    with engine.connect() as connection:
+        assert connection.execute(text("SELECT to_regclass('dim_vehicle')")).scalar() is None
+    up = run_cli("db", "upgrade", env=env)
+    assert up.returncode == 0, up.stderr
+    assert "database at head" in up.stdout
+    with engine.connect() as connection:
+        assert current_revision(connection) == head_revision()
+    first = run_cli("db", "maintain", env=env)
+    assert first.returncode == 0, first.stderr
+    assert "dropped (retention 90 days)" in first.stdout
+    again = run_cli("db", "maintain", env=env)
+    assert again.returncode == 0, again.stderr
+    assert "ping partitions: 0 created, 0 dropped" in again.stdout
+    unknown = run_cli("db", "upgrade", "no_such_revision", env=env)
+    assert unknown.returncode != 0
+    assert "no migration revision 'no_such_revision'" in unknown.stderr
+    assert "the revisions: base, 0001," in unknown.stderr
+    assert "Traceback" not in unknown.stderr

@@ -7,7 +7,14 @@ from alembic import command
 from alembic.script import ScriptDirectory
 from sqlalchemy import Engine, text
 
-from app.migrate import alembic_config, downgrade, head_revision, upgrade
+from app.migrate import (
+    UnknownRevision,
+    alembic_config,
+    check_revision,
+    downgrade,
+    head_revision,
+    upgrade,
+)
 
 FACT_KEYS = {
     # table: (primary key columns in order, distribution column)
@@ -150,3 +157,12 @@ def test_ping_table_is_partitioned_by_day(engine: Engine) -> None:
         ).scalar_one()
     assert strategy == "RANGE (ts)"
     assert partitions >= 9  # yesterday .. a week ahead, plus the default partition
+
+
+def test_a_target_that_names_no_revision_is_refused_before_the_database_is_touched() -> None:
+    for target in ("head", "base", "0003", "-1", "+2"):
+        check_revision(target)
+    with pytest.raises(UnknownRevision, match="no migration revision 'nosuch'"):
+        check_revision("nosuch")
+    with pytest.raises(UnknownRevision, match="Multiple revisions start with '00'"):
+        check_revision("00")
