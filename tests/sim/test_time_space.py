@@ -17,7 +17,7 @@ def test_the_diagram_shows_both_platoons_and_says_what_the_pair_did(
 ) -> None:
     stop_and_go, _ = short_drives(shared_dir)
     drive = tmp_path / "2021-04-05-21-39-05_slice.csv"
-    write_drive(stop_and_go, drive)
+    write_drive(stop_and_go.slice(0.0, 120.0), drive)  # two minutes of it: one wave
     output = tmp_path / "figures" / "time_space.png"
     result = run_cli(
         "sim", "time-space", "--drive", str(drive), "-o", str(output), env=cli_env(), timeout=300
