@@ -14,6 +14,7 @@ Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `ca
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,8 +30,19 @@ FREEFLOW_MAX_LOSS_PCT = -1.0
 FREEFLOW_KPIS = ("fuel_economy_mpg_change_pct", "throughput_change_pct", "network_speed_change_pct")
 
 
+# A collision, or a KPI the drives cannot measure (NaN: a platoon that never moved, a drive too
+# short for its tail to pass where its leader started), costs this many points of shortfall:
+# never traded for fuel, and never read as an aim met.
+UNMET_POINTS = 100.0
+
+
 def _mean(rows: Sequence[Row], key: str) -> float:
     return float(np.mean([float(row[key]) for row in rows])) if rows else float("nan")
+
+
+def _loss_beyond(aim_pct: float, change_pct: float) -> float:
+    """How far a mean change falls below its aim (UNMET_POINTS when it is undefined)."""
+    return UNMET_POINTS if math.isnan(change_pct) else max(0.0, aim_pct - change_pct)
 
 
 @dataclass(frozen=True)
@@ -49,15 +61,21 @@ class Standing:
 
 def standing(candidate: str, rows: Sequence[Row]) -> Standing:
     """The candidate's shockwave fuel saving and its total shortfall against the aims (a
-    collision counts 100 points: never traded for fuel)."""
+    collision, or a KPI left undefined, counts UNMET_POINTS)."""
     shock = [row for row in rows if row["scenario"] == "shockwave"]
     free = [row for row in rows if row["scenario"] == "freeflow"]
-    shortfall = 100.0 * sum(int(row["collisions"]) for row in rows)
+    shortfall = UNMET_POINTS * sum(int(row["collisions"]) for row in rows)
     for key in ("throughput_change_pct", "network_speed_change_pct"):
-        shortfall += max(0.0, SHOCKWAVE_MAX_LOSS_PCT - _mean(shock, key)) if shock else 0.0
+        shortfall += _loss_beyond(SHOCKWAVE_MAX_LOSS_PCT, _mean(shock, key)) if shock else 0.0
     for key in FREEFLOW_KPIS:
-        shortfall += max(0.0, FREEFLOW_MAX_LOSS_PCT - _mean(free, key)) if free else 0.0
+        shortfall += _loss_beyond(FREEFLOW_MAX_LOSS_PCT, _mean(free, key)) if free else 0.0
     return Standing(candidate, _mean(shock, "fuel_saving_pct"), shortfall)
+
+
+def _fuel_rank(standing: Standing) -> float:
+    """The objective for ranking: an undefined saving ranks below every defined one."""
+    saving = standing.fuel_saving_pct
+    return -math.inf if math.isnan(saving) else saving
 
 
 def choose(rows: Sequence[Row]) -> Standing:
@@ -71,8 +89,8 @@ def choose(rows: Sequence[Row]) -> Standing:
         raise ValueError("no candidate rows to choose from")
     meeting = [s for s in standings if s.meets_aims]
     if meeting:
-        return max(meeting, key=lambda s: s.fuel_saving_pct)
-    return min(standings, key=lambda s: (s.shortfall_pct, -s.fuel_saving_pct))
+        return max(meeting, key=_fuel_rank)
+    return min(standings, key=lambda s: (s.shortfall_pct, -_fuel_rank(s)))
 
 
 @dataclass(frozen=True)

@@ -69,6 +69,23 @@ def test_when_none_meets_the_aims_the_least_short_is_chosen() -> None:
     assert not chosen.meets_aims
 
 
+def test_an_undefined_kpi_meets_no_aim_and_an_undefined_saving_ranks_last() -> None:
+    # "stalled" held the platoon still on the freeflow drive: its fuel economy change is
+    # undefined there, which the builtin max(0, nan) used to read as the aim met
+    rows = [
+        row("stalled", "2021-03-08-a", fuel_saving_pct=20.0),
+        row("stalled", "2021-03-09-a", "freeflow", fuel_economy_mpg_change_pct=math.nan),
+        row("steady", "2021-03-08-a", fuel_saving_pct=5.0),
+        row("steady", "2021-03-09-a", "freeflow"),
+    ]
+    assert standing("stalled", rows[:2]).shortfall_pct == 100.0
+    assert choose(rows).candidate == "steady"
+    # a saving nobody can measure ranks below any measured one, whatever the order
+    unmeasured = [row("a", "2021-03-08-a", fuel_saving_pct=math.nan), row("b", "2021-03-08-a")]
+    assert choose(unmeasured).candidate == "b"
+    assert choose(unmeasured[::-1]).candidate == "b"
+
+
 def test_each_fold_is_scored_on_dates_it_did_not_choose_on() -> None:
     # "tuned" wins on 2021-03-08 only; "steady" is good everywhere
     rows = [
