@@ -823,7 +823,8 @@ def optimum_command(
     """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
 
     Each drive's result is cached in OUT/optimum/ (reused while the drive and the settings
-    are the same); OUT/optimum.csv gets one row per drive, rewritten after each drive.
+    are the same); OUT/optimum.csv gets one row per drive, rewritten after each drive. A drive
+    with no bound (its leader never moves) is named at the end, after the others are done.
     """
     try:
         from sim.optimum import (
@@ -858,6 +859,8 @@ def optimum_command(
     bounds = GapBounds()
     cache = out_dir / "optimum"
     rows = []
+    # Drives that have no bound (a leader that never moves): named at the end, the others done.
+    refused: list[str] = []
     with progress_bar() as progress:
         task = progress.add_task("optimising", total=len(drives))
         for drive in drives:
@@ -869,8 +872,10 @@ def optimum_command(
                     result = optimal_trajectory(
                         drive, humans=humans, bounds=bounds, settings=settings
                     )
-                except ValueError as error:  # the rows of the drives before it are written
-                    raise click.ClickException(str(error)) from None
+                except ValueError as error:
+                    refused.append(str(error))
+                    progress.advance(task)
+                    continue
                 row = save_cached(cache, result, key)
             rows.append(row)
             write_optimum_csv(rows, out_dir / "optimum.csv")
@@ -881,4 +886,9 @@ def optimum_command(
             f"{float(row['max_gap_m']):.1f} m, {float(row['gap_out_of_bounds_s']):.1f} s out of "
             f"bounds, {row['collisions']} collisions, {float(row['seconds']):.0f} s"
         )
-    console.print(f"wrote {out_dir / 'optimum.csv'}")
+    if rows:
+        console.print(f"wrote {out_dir / 'optimum.csv'}")
+    if refused:
+        raise click.ClickException(
+            f"no bound for {len(refused)} of {len(drives)} drives: " + "; ".join(refused)
+        )

@@ -67,3 +67,29 @@ def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path)
     )
     assert unknown.returncode != 0
     assert "no drive nope" in unknown.stderr
+
+
+def test_a_drive_without_a_bound_is_named_and_the_others_are_written(tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    _write_drive(drives / "parked.csv", np.zeros(20))
+    _write_drive(drives / "steady.csv", np.full(20, 90.0))
+    out = tmp_path / "out"
+    result = run_cli(
+        "sim",
+        "optimum",
+        "--drives",
+        str(drives),
+        "--humans",
+        "4",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=300,
+    )
+    assert result.returncode != 0
+    assert "no bound for 1 of 2 drives: parked: the leader never moves" in result.stderr
+    assert "Traceback" not in result.stderr
+    # the drive after it still has its bound
+    with (out / "optimum.csv").open(newline="") as handle:
+        assert [row["drive"] for row in csv.DictReader(handle)] == ["steady"]
