@@ -195,6 +195,7 @@ def best_pair(evaluation: Evaluation, scenario: str = "shockwave") -> dict[str, 
         and row["collisions"] == 0
         and row["throughput_vph_change_pct"] >= MAX_LOSS_PCT
         and row["network_speed_mps_change_pct"] >= MAX_LOSS_PCT
+        and math.isfinite(row["fuel_saving_pct"])  # a saving no drive measured ranks nowhere
     ]
     return max(candidates, key=lambda row: row["fuel_saving_pct"], default=None)
 

@@ -102,6 +102,8 @@ def test_best_pair_keeps_throughput_speed_and_safety() -> None:
             RunResult(case, "p", "slow", kpis(50.0, 2000.0, 19.4)),
             # saves more than "good" but crashes
             RunResult(case, "p", "crash", kpis(48.0, 2000.0, 20.0, collisions=1)),
+            # a fuel economy nothing can compare (0 mpg): no saving to rank, first or last
+            RunResult(case, "p", "unmeasured", kpis(0.0, 2000.0, 20.0)),
             # loses 1.5 % of throughput: within the aim
             RunResult(case, "p", "good", kpis(44.0, 1970.0, 19.9)),
         ]
