@@ -88,6 +88,11 @@ class OptimumSettings:
     margin_s: float = 0.05
     # L-BFGS-B iterations per penalty stage.
     max_iterations: int = 400
+    # Where the descent starts. 0: the AV driving as the humans do (the all-human run). Above
+    # 0: the AV driving the leader's speed averaged over this many seconds centred on each
+    # moment, a smoother start in another basin of this non-convex problem (a second start
+    # whose better result is the tighter bound).
+    start_smoothing_s: float = 0.0
 
     def __post_init__(self) -> None:
         if self.control_interval_s <= 0:
@@ -103,6 +108,10 @@ class OptimumSettings:
             raise ValueError(f"margin_m and margin_s must not be negative, got {self.margin_m}")
         if self.max_iterations < 1:
             raise ValueError(f"max_iterations must be at least 1, got {self.max_iterations}")
+        if not self.start_smoothing_s >= 0:
+            raise ValueError(
+                f"start_smoothing_s must not be negative, got {self.start_smoothing_s}"
+            )
 
 
 @dataclass(frozen=True)
@@ -413,6 +422,18 @@ def _sweep_inputs(
     )
 
 
+def centred_mean(values: FloatArray, window: int) -> FloatArray:
+    """Each sample's mean over `window` samples centred on it (fewer at the ends, where the
+    window leaves the array): a smoothing that neither lags nor invents samples."""
+    half = max(window, 1) // 2
+    total = np.concatenate([[0.0], np.cumsum(values, dtype=np.float64)])
+    index = np.arange(len(values))
+    low = np.maximum(index - half, 0)
+    high = np.minimum(index + half + 1, len(values))
+    mean: FloatArray = (total[high] - total[low]) / (high - low)
+    return mean
+
+
 def optimal_trajectory(
     drive: Drive,
     *,
@@ -425,7 +446,8 @@ def optimal_trajectory(
     """The fuel-optimal AV trajectory behind this drive's leader, verified in the simulator.
 
     Starts from the AV driving as the humans do (the all-human run's accelerations, within the
-    command range) and raises the envelope penalty stage by stage (paper sidebar (S4)-(S5)).
+    command range), or as `settings.start_smoothing_s` says, and raises the envelope penalty
+    stage by stage (paper sidebar (S4)-(S5)).
     """
     bounds = bounds or GapBounds()
     settings = settings or OptimumSettings()
@@ -450,7 +472,11 @@ def optimal_trajectory(
     piece_s = np.diff(np.append(piece_starts, steps)) * dt
     start_speed = float(baseline.speed_mps[0, 1])
     ends = np.append(piece_starts[1:], steps)
-    guess = np.asarray(baseline.speed_mps[ends, 1], dtype=np.float64)
+    guess = (
+        centred_mean(drive.speed_mps, round(settings.start_smoothing_s / dt))[ends]
+        if settings.start_smoothing_s > 0
+        else np.asarray(baseline.speed_mps[ends, 1], dtype=np.float64)
+    )
     fixed = _sweep_inputs(drive, baseline, bounds, settings, idm, model)
     gradient = np.zeros(steps)
 

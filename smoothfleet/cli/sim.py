@@ -806,6 +806,14 @@ def train_command(
     help="Seconds each piece of the piecewise-constant AV acceleration lasts.",
 )
 @click.option(
+    "--start-smoothing",
+    default=0.0,
+    show_default=True,
+    type=FiniteFloatRange(min=0.0),
+    help="Start the descent from the leader's speed averaged over this many seconds "
+    "(0: from the AV driving as the humans do).",
+)
+@click.option(
     "--out",
     "out_dir",
     type=click.Path(path_type=Path),
@@ -818,6 +826,7 @@ def optimum_command(
     names: tuple[str, ...],
     humans: int,
     control_interval: float,
+    start_smoothing: float,
     out_dir: Path,
 ) -> None:
     """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
@@ -855,7 +864,9 @@ def optimum_command(
                 f"no drive {', '.join(unknown)} in {drives_dir}", param_hint="--drive"
             )
         drives = [drive for drive in drives if drive.name in names]
-    settings = OptimumSettings(control_interval_s=control_interval)
+    settings = OptimumSettings(
+        control_interval_s=control_interval, start_smoothing_s=start_smoothing
+    )
     bounds = GapBounds()
     cache = out_dir / "optimum"
     rows = []

@@ -17,6 +17,7 @@ from sim.optimum import (
     ReplayPolicy,
     _platoon_cost_gradient,
     _sweep_inputs,
+    centred_mean,
     optimal_trajectory,
     platoon_fuel_g,
 )
@@ -104,6 +105,25 @@ def test_one_slowdown_is_smoothed_within_the_envelope() -> None:
     assert result.baseline_fuel_g == pytest.approx(platoon_fuel_g(baseline))
 
 
+def test_centred_mean_by_hand() -> None:
+    # window 3: each sample with its neighbours; the ends with the one neighbour they have
+    np.testing.assert_allclose(
+        centred_mean(np.array([0.0, 3.0, 6.0, 0.0]), 3), [1.5, 3.0, 3.0, 3.0]
+    )
+    np.testing.assert_allclose(centred_mean(np.array([2.0, 4.0]), 1), [2.0, 4.0])
+
+
+def test_a_smoothed_start_finds_the_dip_smoothed_as_well() -> None:
+    """The same dip from the other start: a bound within the envelope, saving fuel."""
+    t = _times(120.0)
+    drive = drive_from_speeds("dip", 25.0 - 15.0 * np.exp(-(((t - 40.0) / 8.0) ** 2)))
+    result = optimal_trajectory(drive, humans=8, settings=OptimumSettings(start_smoothing_s=20.0))
+    assert result.fuel_saving_pct > 3.0
+    assert result.collisions == 0
+    assert result.gap_out_of_bounds_s == 0.0
+    assert result.time_gap_violation_s == 0.0
+
+
 def test_replay_policy_plays_the_accelerations_back() -> None:
     drive = drive_from_speeds("steady", np.full(101, 20.0))
     accel = np.where(np.arange(100) < 50, -0.5, 0.5)
@@ -130,6 +150,8 @@ def test_real_drive_slice_saves_fuel_within_the_envelope() -> None:
         ("penalty_weights", ()),
         ("margin_m", -1.0),
         ("max_iterations", 0),
+        ("start_smoothing_s", -1.0),
+        ("start_smoothing_s", float("nan")),
     ],
 )
 def test_settings_refuse_what_cannot_be_solved(field: str, value: object) -> None:
