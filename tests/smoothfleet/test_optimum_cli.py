@@ -67,6 +67,11 @@ def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path)
     )
     assert unknown.returncode != 0
     assert "no drive nope" in unknown.stderr
+    backwards = run_cli(
+        "sim", "optimum", "--drives", str(drives), "--start-smoothing", "-5", env=cli_env()
+    )
+    assert backwards.returncode != 0
+    assert "--start-smoothing" in backwards.stderr
 
 
 def test_a_drive_without_a_bound_is_named_and_the_others_are_written(tmp_path: Path) -> None:
