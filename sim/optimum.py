@@ -36,7 +36,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, cast
@@ -135,6 +135,8 @@ class OptimumResult:
     collisions: int
     iterations: int
     seconds: float
+    # Where the descent started (`OptimumSettings.start_smoothing_s`; 0: the all-human run).
+    start_smoothing_s: float
     run: PlatoonRun
 
 
@@ -546,6 +548,7 @@ def optimal_trajectory(
         collisions=run.collisions,
         iterations=iterations,
         seconds=time.perf_counter() - started,
+        start_smoothing_s=settings.start_smoothing_s,
         run=run,
     )
 
@@ -563,6 +566,7 @@ OPTIMUM_COLUMNS = (
     "collisions",
     "iterations",
     "seconds",
+    "start_smoothing_s",
 )
 CACHE_VERSION = 2
 
@@ -580,7 +584,33 @@ def result_row(result: OptimumResult) -> dict[str, str | float | int]:
         "collisions": result.collisions,
         "iterations": result.iterations,
         "seconds": round(result.seconds, 2),
+        "start_smoothing_s": result.start_smoothing_s,
     }
+
+
+def best_row(rows: Sequence[Mapping[str, str | float | int]]) -> dict[str, str | float | int]:
+    """The bound of a drive solved from several starts: the fewest collisions, then seconds
+    under the time gap, then seconds outside the space envelope (a start's result counts in
+    full only with none), then the largest fuel saving; the first start wins a tie."""
+    if not rows:
+        raise ValueError("no result to choose a bound from")
+
+    def rank(row: Mapping[str, str | float | int]) -> tuple[float, float, float, float]:
+        return (
+            float(row["collisions"]),
+            float(row["time_gap_violation_s"]),
+            float(row["gap_out_of_bounds_s"]),
+            -float(row["fuel_saving_pct"]),
+        )
+
+    chosen = min(rows, key=rank)
+    return dict(chosen)
+
+
+def cache_stem(drive_name: str, start_smoothing_s: float) -> str:
+    """The cache files' name for a drive and start: the drive's own for the all-human start
+    (as before starts could be chosen), `NAME.start60s` for the others."""
+    return drive_name if start_smoothing_s == 0 else f"{drive_name}.start{start_smoothing_s:g}s"
 
 
 def cache_key(
@@ -592,9 +622,12 @@ def cache_key(
     return digest.hexdigest()
 
 
-def load_cached_row(directory: Path, name: str, key: str) -> dict[str, str | float | int] | None:
-    """The cached row of a drive if it was computed from the same inputs, else None."""
-    path = directory / f"{name}.json"
+def load_cached_row(
+    directory: Path, name: str, key: str, start_smoothing_s: float = 0.0
+) -> dict[str, str | float | int] | None:
+    """The cached row of a drive and start if it was computed from the same inputs, else
+    None (rows cached before the start was recorded get it from the settings it is keyed by)."""
+    path = directory / f"{cache_stem(name, start_smoothing_s)}.json"
     if not path.is_file():
         return None
     try:
@@ -604,15 +637,16 @@ def load_cached_row(directory: Path, name: str, key: str) -> dict[str, str | flo
     if not isinstance(stored, dict) or stored.get("key") != key:
         return None
     row = stored.get("row")
-    return row if isinstance(row, dict) else None
+    return {**row, "start_smoothing_s": start_smoothing_s} if isinstance(row, dict) else None
 
 
 def save_cached(directory: Path, result: OptimumResult, key: str) -> dict[str, str | float | int]:
     """Keep a drive's bound (row and accelerations) so a rerun and the evaluation reuse it."""
     directory.mkdir(parents=True, exist_ok=True)
     row = result_row(result)
-    np.save(directory / f"{result.drive_name}.npy", result.accel_mps2)
-    (directory / f"{result.drive_name}.json").write_text(json.dumps({"key": key, "row": row}))
+    stem = cache_stem(result.drive_name, result.start_smoothing_s)
+    np.save(directory / f"{stem}.npy", result.accel_mps2)
+    (directory / f"{stem}.json").write_text(json.dumps({"key": key, "row": row}))
     return row
 
 

@@ -807,11 +807,14 @@ def train_command(
 )
 @click.option(
     "--start-smoothing",
-    default=0.0,
+    "starts",
+    multiple=True,
+    default=(0.0,),
     show_default=True,
     type=FiniteFloatRange(min=0.0),
     help="Start the descent from the leader's speed averaged over this many seconds "
-    "(0: from the AV driving as the humans do).",
+    "(0: from the AV driving as the humans do); repeatable: each drive's bound is the best "
+    "start's.",
 )
 @click.option(
     "--out",
@@ -826,18 +829,20 @@ def optimum_command(
     names: tuple[str, ...],
     humans: int,
     control_interval: float,
-    start_smoothing: float,
+    starts: tuple[float, ...],
     out_dir: Path,
 ) -> None:
     """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
 
-    Each drive's result is cached in OUT/optimum/ (reused while the drive and the settings
-    are the same); OUT/optimum.csv gets one row per drive, rewritten after each drive. A drive
-    with no bound (its leader never moves) is named at the end, after the others are done.
+    Each drive's result is cached in OUT/optimum/ per start (reused while the drive and the
+    settings are the same); OUT/optimum.csv gets one row per drive, its best start's
+    (`sim.optimum.best_row`), rewritten after each drive. A drive with no bound (its leader
+    never moves) is named at the end, after the others are done.
     """
     try:
         from sim.optimum import (
             OptimumSettings,
+            best_row,
             cache_key,
             load_cached_row,
             optimal_trajectory,
@@ -864,38 +869,56 @@ def optimum_command(
                 f"no drive {', '.join(unknown)} in {drives_dir}", param_hint="--drive"
             )
         drives = [drive for drive in drives if drive.name in names]
-    settings = OptimumSettings(
-        control_interval_s=control_interval, start_smoothing_s=start_smoothing
-    )
+    every_start = [
+        OptimumSettings(control_interval_s=control_interval, start_smoothing_s=start)
+        for start in dict.fromkeys(starts)
+    ]
     bounds = GapBounds()
     cache = out_dir / "optimum"
     rows = []
+    # Each drive's saving from every start, printed beside its bound.
+    by_start: dict[str, list[str]] = {}
     # Drives that have no bound (a leader that never moves): named at the end, the others done.
     refused: list[str] = []
     with progress_bar() as progress:
-        task = progress.add_task("optimising", total=len(drives))
+        task = progress.add_task("optimising", total=len(drives) * len(every_start))
         for drive in drives:
             progress.update(task, description=drive.name[:60])
-            key = cache_key(drive, humans, bounds, settings, RAV4_2019)
-            row = load_cached_row(cache, drive.name, key)
-            if row is None:
-                try:
-                    result = optimal_trajectory(
-                        drive, humans=humans, bounds=bounds, settings=settings
-                    )
-                except ValueError as error:
-                    refused.append(str(error))
-                    progress.advance(task)
-                    continue
-                row = save_cached(cache, result, key)
-            rows.append(row)
+            solved: list[dict[str, str | float | int]] = []
+            for settings in every_start:
+                start = settings.start_smoothing_s
+                key = cache_key(drive, humans, bounds, settings, RAV4_2019)
+                row = load_cached_row(cache, drive.name, key, start)
+                if row is None:
+                    try:
+                        result = optimal_trajectory(
+                            drive, humans=humans, bounds=bounds, settings=settings
+                        )
+                    except ValueError as error:
+                        refused.append(str(error))
+                        progress.advance(task, len(every_start) - len(solved))
+                        break
+                    row = save_cached(cache, result, key)
+                solved.append(row)
+                progress.advance(task)
+            if len(solved) < len(every_start):
+                continue
+            by_start[drive.name] = [
+                f"{float(row['fuel_saving_pct']):+.2f} % from {float(row['start_smoothing_s']):g} s"
+                for row in solved
+            ]
+            rows.append(best_row(solved))
             write_optimum_csv(rows, out_dir / "optimum.csv")
-            progress.advance(task)
     for row in rows:
         console.print(
             f"{row['drive']}: fuel saving {float(row['fuel_saving_pct']):+.2f} %, largest gap "
             f"{float(row['max_gap_m']):.1f} m, {float(row['gap_out_of_bounds_s']):.1f} s out of "
             f"bounds, {row['collisions']} collisions, {float(row['seconds']):.0f} s"
+            + (
+                f" (starts: {', '.join(by_start[str(row['drive'])])})"
+                if len(every_start) > 1
+                else ""
+            )
         )
     if rows:
         console.print(f"wrote {out_dir / 'optimum.csv'}")

@@ -17,6 +17,7 @@ from sim.optimum import (
     ReplayPolicy,
     _platoon_cost_gradient,
     _sweep_inputs,
+    best_row,
     centred_mean,
     optimal_trajectory,
     platoon_fuel_g,
@@ -103,6 +104,26 @@ def test_one_slowdown_is_smoothed_within_the_envelope() -> None:
     # the figures are the replay's: recomputing them from its trajectories gives the same
     assert result.fuel_g == pytest.approx(platoon_fuel_g(result.run))
     assert result.baseline_fuel_g == pytest.approx(platoon_fuel_g(baseline))
+
+
+def test_the_bound_of_several_starts_is_the_best_within_the_envelope() -> None:
+    def row(start: float, fuel: float, out_s: float = 0.0, collisions: int = 0) -> dict:
+        return {
+            "start_smoothing_s": start,
+            "fuel_saving_pct": fuel,
+            "collisions": collisions,
+            "time_gap_violation_s": 0.0,
+            "gap_out_of_bounds_s": out_s,
+        }
+
+    # the most fuel within the envelope; more fuel with a collision or outside it counts less
+    rows = [row(0, 4.0), row(10, 6.0), row(60, 9.0, collisions=1), row(30, 8.0, out_s=2.0)]
+    assert best_row(rows)["start_smoothing_s"] == 10
+    # a freeflow drive whose every start leaves the envelope in its first seconds: the fewest
+    assert best_row([row(0, 0.2, out_s=8.1), row(60, 0.5, out_s=8.1)])["start_smoothing_s"] == 60
+    assert best_row([row(0, 0.2, out_s=8.1), row(60, 0.5, out_s=9.0)])["start_smoothing_s"] == 0
+    # a tie goes to the first start
+    assert best_row([row(0, 1.0), row(60, 1.0)])["start_smoothing_s"] == 0
 
 
 def test_centred_mean_by_hand() -> None:

@@ -52,6 +52,29 @@ def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Pat
     with (out / "optimum.csv").open(newline="") as handle:
         assert list(csv.DictReader(handle)) == [by_drive["dip"]]
 
+    # a second start: its own cache files beside the first's, the better of the two in the CSV
+    both = run_cli(
+        *args,
+        "--drive",
+        "dip",
+        "--start-smoothing",
+        "0",
+        "--start-smoothing",
+        "20",
+        env=cli_env(),
+        timeout=300,
+    )
+    assert both.returncode == 0, both.stderr
+    assert (out / "optimum" / "dip.json").stat().st_mtime_ns == cached
+    assert (out / "optimum" / "dip.start20s.npy").exists()
+    with (out / "optimum.csv").open(newline="") as handle:
+        [row] = list(csv.DictReader(handle))
+    from_zero = float(by_drive["dip"]["fuel_saving_pct"])
+    assert float(row["fuel_saving_pct"]) >= from_zero
+    assert row["start_smoothing_s"] in ("0.0", "20.0")
+    assert f"{from_zero:+.2f} % from 0 s" in both.stdout
+    assert "from 20 s)" in both.stdout
+
 
 def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path) -> None:
     missing = run_cli(
