@@ -921,6 +921,21 @@ def optimum_command(
             )
         )
     if rows:
+        from sim.rl.scores import is_stop_and_go
+
+        saving = {str(row["drive"]): float(row["fuel_saving_pct"]) for row in rows}
+        groups = {
+            "shockwave": [d.name for d in drives if d.kind == "shockwave"],
+            "stop-and-go": [d.name for d in drives if is_stop_and_go(d)],
+            "freeflow": [d.name for d in drives if d.kind == "freeflow"],
+        }
+        for group, members in groups.items():
+            values = [saving[name] for name in members if name in saving]
+            if values:
+                console.print(
+                    f"{group} ({len(values)} drives): mean {sum(values) / len(values):+.2f} % "
+                    f"[{min(values):+.2f}, {max(values):+.2f}]"
+                )
         console.print(f"wrote {out_dir / 'optimum.csv'}")
     if refused:
         raise click.ClickException(

@@ -35,6 +35,11 @@ def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Pat
         rows = list(csv.DictReader(handle))
     assert tuple(rows[0]) == OPTIMUM_COLUMNS
     assert [row["drive"] for row in rows] == ["dip", "steady"]
+    # the bound per group of drives: the dip's is a wave (not stop-and-go: above 10 m/s)
+    saving = {row["drive"]: float(row["fuel_saving_pct"]) for row in rows}
+    assert f"shockwave (1 drives): mean {saving['dip']:+.2f} %" in first.stdout
+    assert f"freeflow (1 drives): mean {saving['steady']:+.2f} %" in first.stdout
+    assert "stop-and-go" not in first.stdout
     by_drive = {row["drive"]: row for row in rows}
     assert float(by_drive["dip"]["fuel_saving_pct"]) > 1.0
     assert abs(float(by_drive["steady"]["fuel_saving_pct"])) < 0.1
