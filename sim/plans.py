@@ -106,7 +106,6 @@ class SimulatedPlanner:
     # Simulated time 0 on the plans' clock (plans carry wall-clock publication times).
     epoch: datetime = datetime(2021, 1, 1, tzinfo=UTC)
     _lane_plan: LanePlan | None = None
-    _published_at_s: float = -math.inf
     _next_cycle_s: float = -math.inf
 
     @classmethod
@@ -137,11 +136,10 @@ class SimulatedPlanner:
             cycle_s = math.floor(time_s / self.period_s) * self.period_s
             self._run(cycle_s)
             self._next_cycle_s = cycle_s + self.period_s
-        if self._lane_plan is None or time_s - self._published_at_s > STALE_PLAN_AFTER_S:
+        wall = self.epoch + timedelta(seconds=time_s)
+        if self._lane_plan is None or not self._lane_plan.is_fresh(wall, STALE_PLAN_AFTER_S):
             return None
-        return self._lane_plan.profile(
-            self.epoch + timedelta(seconds=time_s), DEFAULT_WAVE_SPEED_MPS
-        )
+        return self._lane_plan.profile(wall, DEFAULT_WAVE_SPEED_MPS)
 
     def held_profile(self, time_s: float) -> TargetProfile:
         """`profile`, for a caller that cannot go on without a plan (`NoPlanHeld` if none)."""
@@ -198,6 +196,5 @@ class SimulatedPlanner:
             ],
         )
         self._lane_plan = LanePlan(agent_plan, SIM_LANE, None)
-        self._published_at_s = now_s
         self.plans_run += 1
         self.plans_buffered += int(bool(plan.is_buffer.any()))
