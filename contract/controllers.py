@@ -148,6 +148,12 @@ class ControllerConfigError(ValueError):
         self.field = field
         self.reason = reason
 
+    def __reduce__(self) -> tuple[type[ControllerConfigError], tuple[str, str, str]]:
+        """Rebuilt from all three parts: a simulation worker's error reaches the process that
+        started it as itself (pickle's default would call the class with the message alone,
+        and the failed rebuild breaks the whole process pool)."""
+        return (type(self), (self.field, self.reason, str(self)))
+
 
 class WrongActuation(ControllerConfigError):
     """A registered controller with valid parameters that cannot drive this vehicle's actuation:

@@ -74,6 +74,7 @@ from sim.selection import (
     held_out_summary,
 )
 from smoothfleet.cli.common import FiniteFloatRange, fleet_options
+from vehicle_agent.controllers.registry import build_controller
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
 console = Console(width=max(Console().width, 160))
@@ -132,10 +133,15 @@ class IntListOption(click.Option):
 
 
 def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
+    """The variants named, each built once as the agent builds it (its parameters checked, its
+    policy file read), so a mistake is named before any drive is simulated."""
     try:
-        return [ControllerVariant.parse(text) for text in texts] or registered_variants()
-    except ValueError as error:
+        variants = [ControllerVariant.parse(text) for text in texts]
+        for variant in variants:
+            build_controller(variant.controller, variant.actuation, variant.params)
+    except ValueError as error:  # ControllerConfigError and PolicyFileError among them
         raise click.BadParameter(str(error), param_hint="--controller") from None
+    return variants or registered_variants()
 
 
 def _read_drives(drives_dir: Path) -> list[Drive]:

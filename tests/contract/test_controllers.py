@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 from typing import Any
 
 import jsonschema_rs
@@ -102,3 +103,18 @@ def test_nested_params_are_validated_whole() -> None:
     assert isinstance(params, MicroAccelParams)
     assert params.k == 0.4
     assert params.lane_change.c == 0.5
+
+
+@pytest.mark.parametrize("error_class", [ControllerConfigError, WrongActuation])
+def test_a_config_error_crosses_a_process_boundary_as_itself(
+    error_class: type[ControllerConfigError],
+) -> None:
+    """A simulation worker's refusal is pickled to the process that started it."""
+    error = error_class("controller.params.k", "too small", "controller microaccel: params.k")
+    copy = pickle.loads(pickle.dumps(error))
+    assert type(copy) is error_class
+    assert (copy.field, copy.reason, str(copy)) == (
+        "controller.params.k",
+        "too small",
+        "controller microaccel: params.k",
+    )

@@ -185,6 +185,33 @@ def test_cli_names_a_bad_controller_and_a_missing_folder(tmp_path: Path) -> None
     assert "Traceback" not in missing.stderr
 
 
+def test_cli_refuses_parameters_the_registry_refuses_before_simulating(tmp_path: Path) -> None:
+    """Two workers, as a default run has: the refusal came back from a worker as a broken
+    process pool, and now is named before the first drive is simulated."""
+    out = tmp_path / "out"
+    for variant, named in (
+        ('microaccel:accel:{"k": -1}', "controller microaccel: params.k: Input should be greater"),
+        ('rl_accel:accel:{"policy": "/nowhere/rl.npz"}', "/nowhere/rl.npz"),
+    ):
+        result = run_cli(
+            "sim",
+            "evaluate",
+            "--controller",
+            variant,
+            "--workers",
+            "2",
+            "--out",
+            str(out),
+            env=cli_env(),
+        )
+        assert result.returncode == 2, result.stderr
+        assert "Invalid value for --controller" in result.stderr
+        assert named in result.stderr
+        assert "Traceback" not in result.stderr
+        assert "ProcessPool" not in result.stderr
+        assert not out.exists()
+
+
 def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) -> None:
     drives = tmp_path / "drives"
     drives.mkdir()
