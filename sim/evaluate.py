@@ -488,9 +488,35 @@ def default_workers() -> int:
     return max(1, len(os.sched_getaffinity(0)))
 
 
+class OptimumFileError(ValueError):
+    """A file that is not `smoothfleet sim optimum`'s CSV; the message names it and why."""
+
+
 def load_optimum(path: Path) -> dict[str, float]:
-    """Drive name -> optimal fuel saving (%) from `smoothfleet sim optimum`'s CSV."""
+    """Drive name -> optimal fuel saving (%) from `smoothfleet sim optimum`'s CSV.
+
+    A file without the `drive` and `fuel_saving_pct` columns, without a row, or with a saving
+    that is no number is refused: read as it stands, it would leave every "of optimum" n/a
+    without a word."""
     import csv
 
+    bounds: dict[str, float] = {}
     with path.open(newline="") as handle:
-        return {row["drive"]: float(row["fuel_saving_pct"]) for row in csv.DictReader(handle)}
+        reader = csv.DictReader(handle)
+        columns = reader.fieldnames or []
+        missing = [name for name in ("drive", "fuel_saving_pct") if name not in columns]
+        if missing:
+            raise OptimumFileError(
+                f"{path}: not a `sim optimum` CSV (no column {' or '.join(missing)})"
+            )
+        for row in reader:
+            saving = row["fuel_saving_pct"]
+            try:
+                bounds[row["drive"]] = float(saving)
+            except (TypeError, ValueError):
+                raise OptimumFileError(
+                    f"{path}, line {reader.line_num}: fuel_saving_pct {saving!r} is not a number"
+                ) from None
+    if not bounds:
+        raise OptimumFileError(f"{path}: no drive's bound in it")
+    return bounds

@@ -39,6 +39,7 @@ from sim.evaluate import (
     BASELINE,
     ControllerVariant,
     Evaluation,
+    OptimumFileError,
     RunResult,
     default_workers,
     evaluate,
@@ -142,6 +143,21 @@ def _controller_variants(texts: tuple[str, ...]) -> list[ControllerVariant]:
     except ValueError as error:  # ControllerConfigError and PolicyFileError among them
         raise click.BadParameter(str(error), param_hint="--controller") from None
     return variants or registered_variants()
+
+
+def _read_optimum(path: Path, cases: Sequence[Case]) -> dict[str, float]:
+    """The bound per drive from `--optimum`, and how many of the drives it covers (a drive
+    recorded with its INRIX has none, `sim optimum` runs on the trajectories only)."""
+    try:
+        optimum = load_optimum(path)
+    except OptimumFileError as error:
+        raise click.BadParameter(str(error), param_hint="--optimum") from None
+    drives = {case.drive.name for case in cases}
+    console.print(
+        f"--optimum: a bound for {len(drives & optimum.keys())} of the {len(drives)} drives "
+        'evaluated (the others\' "of optimum" is n/a)'
+    )
+    return optimum
 
 
 def _read_drives(drives_dir: Path) -> list[Drive]:
@@ -357,7 +373,7 @@ def evaluate_command(
     drives = _read_drives(drives_dir)
     recorded = _read_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
     cases = _scenario_cases(chosen, drives, recorded)
-    optimum = load_optimum(optimum_csv) if optimum_csv is not None else {}
+    optimum = _read_optimum(optimum_csv, cases) if optimum_csv is not None else {}
     with progress_bar() as progress:
         task = progress.add_task("simulating", total=len(cases))
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import csv
+import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +12,15 @@ import pandas as pd
 import pytest
 
 from sim.drives import Drive, drive_from_speeds, load_drive
-from sim.evaluate import BASELINE, ControllerVariant, Evaluation, RunResult, evaluate
+from sim.evaluate import (
+    BASELINE,
+    ControllerVariant,
+    Evaluation,
+    OptimumFileError,
+    RunResult,
+    evaluate,
+    load_optimum,
+)
 from sim.gaps import GapKpis
 from sim.kpi import Kpis, fuel_economy_mpg
 from sim.report import best_pair, markdown_table, write_csv, write_heatmap
@@ -185,6 +195,29 @@ def test_cli_names_a_bad_controller_and_a_missing_folder(tmp_path: Path) -> None
     assert "Traceback" not in missing.stderr
 
 
+def test_an_optimum_file_that_is_not_the_bounds_is_refused(tmp_path: Path) -> None:
+    """Read as it stood, any CSV gave every "of optimum" n/a without a word."""
+    good = tmp_path / "optimum.csv"
+    good.write_text("drive,start_smoothing_s,fuel_saving_pct\na,0,8.5\nb,60,nan\n")
+    bounds = load_optimum(good)
+    assert bounds["a"] == 8.5
+    assert math.isnan(bounds["b"])
+    for text, named in (
+        ('{"drive": "a"}\n', "not a `sim optimum` CSV (no column drive or fuel_saving_pct)"),
+        ("drive,saving\na,1\n", "(no column fuel_saving_pct)"),
+        ("drive,fuel_saving_pct\na,8.5\nb,lots\n", "line 3: fuel_saving_pct 'lots' is not a"),
+        ("drive,fuel_saving_pct\n", "no drive's bound in it"),
+    ):
+        bad = tmp_path / "bad.csv"
+        bad.write_text(text)
+        with pytest.raises(OptimumFileError, match=re.escape(named)):
+            load_optimum(bad)
+    refused = run_cli("sim", "evaluate", "--optimum", str(bad), env=cli_env())
+    assert refused.returncode == 2
+    assert "Invalid value for --optimum" in refused.stderr
+    assert "no drive's bound in it" in refused.stderr
+
+
 def test_cli_refuses_parameters_the_registry_refuses_before_simulating(tmp_path: Path) -> None:
     """Two workers, as a default run has: the refusal came back from a worker as a broken
     process pool, and now is named before the first drive is simulated."""
@@ -235,6 +268,8 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     assert "no drive falls in scenario shockwave (drives found: 1 freeflow;" in result.stderr
     assert "Traceback" not in result.stderr
     # run on its own scenario, it names no best pair on the shockwave drives it did not run
+    bound = tmp_path / "optimum.csv"
+    bound.write_text("drive,fuel_saving_pct\nfast,0.4\nelsewhere,9.0\n")
     freeflow = run_cli(
         "sim",
         "evaluate",
@@ -246,6 +281,8 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
         "kernel_smooth",
         "--controller",
         "microaccel:accel",
+        "--optimum",
+        str(bound),
         "--out",
         str(tmp_path / "out"),
         env=cli_env(),
@@ -253,6 +290,10 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     )
     assert freeflow.returncode == 0, freeflow.stderr
     assert "the best pair is named on the shockwave scenario, which was not run" in freeflow.stdout
+    assert (
+        '--optimum: a bound for 1 of the 1 drives evaluated (the others\' "of optimum" is n/a)'
+        in (" ".join(freeflow.stdout.split()))
+    )
     assert "no pair kept" not in freeflow.stdout
 
 
