@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import importlib
 import math
+import os
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from pathlib import Path
 from typing import Any
 
 import click
@@ -33,6 +35,42 @@ class FiniteFloatRange(click.FloatRange):
         if not math.isfinite(number):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return number
+
+
+def output_folder(path: Path, option: str) -> Path:
+    """`path` made a folder this user can write into, or a BadParameter naming `option`.
+
+    Commands call it once their inputs are read and before they compute: a folder that cannot
+    be made used to fail only when the results were written, minutes of simulation later, and
+    lose them."""
+    return _made_folder(path, path, option)
+
+
+def output_file(path: Path, option: str) -> Path:
+    """`path` a file that can be written: its folder made as `output_folder` makes one."""
+    if path.is_dir():
+        raise click.BadParameter(f"{path} is a folder, not a file", param_hint=option)
+    _made_folder(path.parent, path, option)
+    return path
+
+
+def _made_folder(folder: Path, named: Path, option: str) -> Path:
+    """Make `folder` for the output `named` on the command line, or say why it cannot be."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        for ancestor in (folder, *folder.parents):
+            if ancestor.exists():
+                if not ancestor.is_dir():
+                    reason = f"{named}: {ancestor} is a file, not a folder"
+                    raise click.BadParameter(reason, param_hint=option) from None
+                break
+        reason = f"{named}: {folder} cannot be made a folder ({error.strerror or error})"
+        raise click.BadParameter(reason, param_hint=option) from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        reason = f"{named}: this user cannot write into {folder}"
+        raise click.BadParameter(reason, param_hint=option)
+    return folder
 
 
 @contextmanager

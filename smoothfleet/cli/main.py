@@ -60,6 +60,7 @@ from smoothfleet.cli.common import (
     console,
     database,
     fleet_options,
+    output_file,
     settings,
 )
 
@@ -400,6 +401,8 @@ def analytics_export(
     except UnknownView as error:
         raise CliError(f"analytics export: {error}") from None
     window = {"since": _moment(since, "--since"), "until": _moment(until, "--until")}
+    if output != "-":
+        output_file(Path(output), "--output")
     with database(settings()) as url, make_sync_engine(url).connect() as connection:
         with click.open_file(output, "w", encoding="utf-8", lazy=False) as out:
             try:

@@ -30,7 +30,14 @@ from sim.drives import DriveError, load_drive, shared_data_dir
 from sim.motion.frame import DEFAULT_ANCHOR_X_FT, DEFAULT_ANCHOR_X_M, MotionFrame
 from sim.motion.traffic import MotionRunConfig, boundary_speeds, simulate_motion_run
 from sim.motion.write import write_motion_json
-from smoothfleet.cli.common import CliError, FiniteFloatRange, console, database, settings
+from smoothfleet.cli.common import (
+    CliError,
+    FiniteFloatRange,
+    console,
+    database,
+    output_file,
+    settings,
+)
 
 # Real stop-and-go drives whose speeds set the traffic downstream of a generated hour.
 DEFAULT_BOUNDARY_DRIVES = (
@@ -191,6 +198,7 @@ def motion_generate(
         )
     except (DriveError, ValueError) as error:
         raise CliError(str(error)) from None
+    output_file(output, "--output")
     with console.status(f"simulating {duration_s:g} s of {lanes} lanes"):
         documents, points = write_motion_json(
             output, simulate_motion_run(config, boundary), MotionFrame(), seed
@@ -238,6 +246,8 @@ def motion_edie(
         window = EdieWindow(_moment(since), _moment(until), x_from_m, x_to_m, h_t_s, h_x_m, lane)
     except EdieWindowError as error:
         raise CliError(str(error)) from None
+    if output is not None:
+        output_file(output, "--output")
     field = edie_field(store or motion_store(settings()), window)
     text = field.to_csv(index=False, date_format="%Y-%m-%dT%H:%M:%SZ")
     if output is None:
@@ -258,6 +268,7 @@ def motion_plot(day_text: str, output: Path, corridor_id: str, store: Path | Non
         day = date.fromisoformat(day_text)
     except ValueError:
         raise CliError(f"--date {day_text!r} is not YYYY-MM-DD") from None
+    output_file(output, "--output")
     current = settings()
     with database(current) as url:
         engine = make_sync_engine(url)

@@ -74,7 +74,12 @@ from sim.selection import (
     cross_validate,
     held_out_summary,
 )
-from smoothfleet.cli.common import FiniteFloatRange, fleet_options
+from smoothfleet.cli.common import (
+    FiniteFloatRange,
+    fleet_options,
+    output_file,
+    output_folder,
+)
 from vehicle_agent.controllers.registry import build_controller
 
 # Wide enough for the evaluation table when the output is a file or a pipe.
@@ -374,6 +379,9 @@ def evaluate_command(
     recorded = _read_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
     cases = _scenario_cases(chosen, drives, recorded)
     optimum = _read_optimum(optimum_csv, cases) if optimum_csv is not None else {}
+    output_folder(out_dir, "--out")
+    if runs_dir is not None:
+        output_folder(runs_dir, "--save-runs")
     with progress_bar() as progress:
         task = progress.add_task("simulating", total=len(cases))
 
@@ -396,7 +404,6 @@ def evaluate_command(
         except ValueError as error:
             raise click.ClickException(str(error)) from None
     evaluation = Evaluation(evaluation.results, optimum)
-    out_dir.mkdir(parents=True, exist_ok=True)
     write_csv(evaluation, out_dir / "evaluation.csv")
     write_heatmap(evaluation, out_dir / "heatmap.png")
     (out_dir / "summary.md").write_text(markdown_table(evaluation))
@@ -509,6 +516,7 @@ def select_command(
             PlannerParams.parse(params)
         except InvalidParams as error:
             raise click.BadParameter(str(error), param_hint="--window") from None
+    output_folder(out_dir, "--out")
     rows: list[dict[str, Any]] = []
     for params in candidates:
         window = float(params["window_m"])
@@ -559,7 +567,6 @@ def select_command(
         f"chosen on every date (the deployment pair; its score here is not a result): "
         f"{deployed.candidate}"
     )
-    out_dir.mkdir(parents=True, exist_ok=True)
     write_rows(rows, out_dir / "selection.csv")
     write_rows(summary, out_dir / "held_out.csv")
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
@@ -597,6 +604,7 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
         drive = load_drive(drive_path)
     except DriveError as error:
         raise click.ClickException(str(error)) from None
+    output_file(output, "--output")
     case = Case("shockwave", drive)
     runs: dict[str, PlatoonRun] = {}
 
@@ -772,6 +780,7 @@ def train_command(
     settings = PpoSettings(num_envs=num_envs)
     if gamma is not None:
         settings = replace(settings, gamma=gamma)
+    output_folder(out_dir, "--out")
     with progress_bar() as progress:
         tasks: dict[str, TaskID] = {}
 
@@ -896,7 +905,7 @@ def optimum_command(
         for start in dict.fromkeys(starts)
     ]
     bounds = GapBounds()
-    cache = out_dir / "optimum"
+    cache = output_folder(out_dir / "optimum", "--out")
     rows = []
     # Each drive's saving from every start, printed beside its bound.
     by_start: dict[str, list[str]] = {}
