@@ -31,7 +31,7 @@ from app.feeds.recording import (
 from app.feeds.replay import replay as replay_snapshots
 from app.feeds.service import StoreResult, shifted, store_readings
 from contract.recorded import RecordingError
-from smoothfleet.cli.common import FiniteFloatRange
+from smoothfleet.cli.common import FiniteFloatRange, output_file
 
 
 def _describe(result: StoreResult) -> str:
@@ -103,6 +103,8 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
     if current.inrix_key is None or not current.inrix_key.get_secret_value():
         raise SettingsError("SMOOTHFLEET_INRIX_KEY: must be set for `smoothfleet inrix poll`")
     url, key = current.inrix_url, current.inrix_key
+    if record is not None:  # the first snapshot's append would fail, after it was stored
+        output_file(record, "--record")
     # httpx logs request URLs at INFO; keep it quiet, our own lines say what happened.
     logging.getLogger("httpx").setLevel(logging.WARNING)
     logging.basicConfig(level=logging.INFO, format="smoothfleet inrix: %(message)s")
@@ -172,6 +174,7 @@ def convert(drive_dir: Path, recording: Path) -> None:
     """Make a recording from a drive of ../shared/data/trajectories_with_inrix/."""
     from smoothfleet.cli.common import CliError
 
+    output_file(recording, "RECORDING")
     try:
         count = write_recording(recording, snapshots_from_drive(drive_dir))
     except RecordingError as error:

@@ -33,10 +33,12 @@ def test_a_file_in_the_way_is_named(tmp_path: Path) -> None:
     assert blocker.read_text() == "an earlier run's CSV"
 
 
-def test_sim_commands_refuse_it_before_simulating(tmp_path: Path) -> None:
+def test_commands_refuse_it_before_computing(tmp_path: Path, shared_dir: Path) -> None:
     blocker = tmp_path / "results"
     blocker.write_text("")
+    recorded = sorted((shared_dir / "data" / "trajectories_with_inrix").iterdir())[0]
     for command in (
+        ("inrix", "convert", str(recorded), str(blocker / "recording.jsonl")),
         ("sim", "evaluate", "--out", str(blocker / "evaluation")),
         ("sim", "select", "--out", str(blocker / "selection")),
         ("sim", "time-space", "-o", str(blocker / "time_space.png")),
