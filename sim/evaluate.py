@@ -13,6 +13,7 @@ Fuel saving is the drop in fuel per distance, 1 - mpg_baseline / mpg_variant.
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -148,6 +149,21 @@ class Evaluation:
     def optimum_pct(self, result: RunResult) -> float:
         """The optimal bound's fuel saving on this run's drive (NaN when not computed)."""
         return float(self.optimum_fuel_saving_pct.get(result.case.drive.name, float("nan")))
+
+    def unmeasured(self) -> dict[str, list[str]]:
+        """Per paper KPI, the cases whose all-human baseline gives no figure to compare with
+        (a drive too short for the platoon's tail to pass where its leader started, a leader
+        that never moves): every pair's change there is undefined, and so is the scenario's
+        mean, which the tables show as n/a."""
+        found: dict[str, list[str]] = {}
+        for result in self.results:
+            if result.controller != BASELINE:
+                continue
+            for kpi in PAPER_KPIS:
+                value = float(getattr(result.kpis, kpi))
+                if value == 0 or not math.isfinite(value):
+                    found.setdefault(kpi, []).append(result.case.name)
+        return found
 
     def variants(self) -> list[tuple[str, str, int]]:
         """(planner, controller, avs) evaluated, in run order."""

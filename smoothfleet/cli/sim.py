@@ -411,6 +411,11 @@ def evaluate_command(
         evaluation.write_runs_index(runs_dir)
         console.print(f"wrote {len(evaluation.results)} runs to {runs_dir}")
     console.print(summary_table(evaluation))
+    for kpi, unmeasured in evaluation.unmeasured().items():
+        console.print(
+            f"{kpi}: the all-human platoon gives no figure on {len(unmeasured)} drive(s), so "
+            f"every pair's change there and its scenario's mean are n/a: {', '.join(unmeasured)}"
+        )
     without_plan = [result for result in evaluation.results if result.plan_hand_backs]
     if without_plan:
         console.print(

@@ -103,6 +103,29 @@ def kpis(mpg: float, throughput: float, speed: float, collisions: int = 0) -> Kp
     return Kpis(mpg, throughput, speed, 0.5, 1.0, 5.0, 10.0, collisions, 0)
 
 
+def test_drives_the_baseline_cannot_measure_are_named_per_kpi() -> None:
+    short = Case("freeflow", drive_from_speeds("short", np.full(10, 20.0)))
+    still = Case("freeflow", drive_from_speeds("still", np.zeros(10)))
+    fine = Case("freeflow", drive_from_speeds("fine", np.full(10, 20.0)))
+    evaluation = Evaluation(
+        [
+            # too short for the platoon's tail to pass where its leader started
+            RunResult(short, "-", BASELINE, kpis(40.0, float("nan"), 20.0)),
+            RunResult(short, "p", "c", kpis(44.0, float("nan"), 20.0)),
+            # a leader that never moves: no distance, no flow, no speed
+            RunResult(still, "-", BASELINE, kpis(0.0, 0.0, 0.0)),
+            RunResult(fine, "-", BASELINE, kpis(40.0, 2000.0, 20.0)),
+            # a pair that stalls on a drive the baseline measures is its own failure, not listed
+            RunResult(fine, "p", "c", kpis(40.0, float("nan"), 20.0)),
+        ]
+    )
+    assert evaluation.unmeasured() == {
+        "throughput_vph": ["freeflow/short", "freeflow/still"],
+        "fuel_economy_mpg": ["freeflow/still"],
+        "network_speed_mps": ["freeflow/still"],
+    }
+
+
 def test_best_pair_keeps_throughput_speed_and_safety() -> None:
     case = Case("shockwave", drive_from_speeds("d", np.full(10, 20.0)))
     evaluation = Evaluation(
