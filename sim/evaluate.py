@@ -18,6 +18,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +49,31 @@ KPI_DIRECTION: dict[str, int] = {
     "min_ttc_s": +1,
 }
 PAPER_KPIS = ("fuel_economy_mpg", "throughput_vph", "network_speed_mps")
+# The paper KPI each per-run column compares (`Evaluation.rows`): a drive whose all-human
+# platoon cannot measure that KPI is left out of the column's means, for every pair alike.
+COLUMN_KPI = {
+    "fuel_saving_pct": "fuel_economy_mpg",
+    "fuel_economy_mpg_change_pct": "fuel_economy_mpg",
+    "throughput_change_pct": "throughput_vph",
+    "throughput_vph_change_pct": "throughput_vph",
+    "network_speed_change_pct": "network_speed_mps",
+    "network_speed_mps_change_pct": "network_speed_mps",
+}
+# The `Evaluation.rows` column naming the paper KPIs the case's baseline cannot measure.
+UNMEASURED_COLUMN = "unmeasured_by_baseline"
+
+
+def measured_mean(rows: Sequence[Mapping[str, Any]], column: str) -> float:
+    """The mean of a per-run column over the rows whose baseline measures its KPI (NaN when
+    none does). A row whose own value is undefined where the baseline's is not still counts:
+    its NaN is the pair's failure, not the drive's."""
+    kpi = COLUMN_KPI.get(column)
+    values = [
+        float(row[column])
+        for row in rows
+        if kpi is None or kpi not in str(row.get(UNMEASURED_COLUMN, "")).split(";")
+    ]
+    return float(np.mean(values)) if values else float("nan")
 
 
 @dataclass(frozen=True)
@@ -153,8 +179,8 @@ class Evaluation:
     def unmeasured(self) -> dict[str, list[str]]:
         """Per paper KPI, the cases whose all-human baseline gives no figure to compare with
         (a drive too short for the platoon's tail to pass where its leader started, a leader
-        that never moves): every pair's change there is undefined, and so is the scenario's
-        mean, which the tables show as n/a."""
+        that never moves): every pair's change there is undefined, so those drives are left
+        out of that KPI's means, for every pair alike."""
         found: dict[str, list[str]] = {}
         for result in self.results:
             if result.controller != BASELINE:
@@ -164,6 +190,18 @@ class Evaluation:
                 if value == 0 or not math.isfinite(value):
                     found.setdefault(kpi, []).append(result.case.name)
         return found
+
+    @staticmethod
+    def _measured_mean(
+        runs: Sequence[RunResult],
+        kpi: str,
+        figure: Callable[[RunResult], float],
+        unmeasured: Mapping[str, list[str]],
+    ) -> float:
+        """The figure's mean over the runs on drives whose baseline measures `kpi`."""
+        left_out = set(unmeasured.get(kpi, ()))
+        values = [figure(r) for r in runs if r.case.name not in left_out]
+        return float(np.mean(values)) if values else float("nan")
 
     def variants(self) -> list[tuple[str, str, int]]:
         """(planner, controller, avs) evaluated, in run order."""
@@ -181,6 +219,7 @@ class Evaluation:
     def summary(self) -> list[dict[str, Any]]:
         """One row per scenario x planner x controller x AVs: mean changes over its cases."""
         rows = []
+        unmeasured = self.unmeasured()
         for scenario in self.scenarios():
             for planner, controller, avs in self.variants():
                 runs = [
@@ -191,7 +230,6 @@ class Evaluation:
                 ]
                 if not runs:
                     continue
-                savings = [self.fuel_saving_pct(r) for r in runs]
                 optimum = [self.optimum_pct(r) for r in runs]
                 row: dict[str, Any] = {
                     "scenario": scenario,
@@ -200,12 +238,14 @@ class Evaluation:
                     "avs": avs,
                     "recommended": runs[0].recommended,
                     "cases": len(runs),
-                    "fuel_saving_pct": float(np.mean(savings)),
+                    "fuel_saving_pct": self._measured_mean(
+                        runs, "fuel_economy_mpg", self.fuel_saving_pct, unmeasured
+                    ),
                     "optimum_fuel_saving_pct": float(np.mean(optimum)),
                 }
                 for kpi in KPI_DIRECTION:
-                    row[f"{kpi}_change_pct"] = float(
-                        np.mean([self.change_pct(r, kpi) for r in runs])
+                    row[f"{kpi}_change_pct"] = self._measured_mean(
+                        runs, kpi, partial(self.change_pct, kpi=kpi), unmeasured
                     )
                 row["plans_buffered"] = sum(r.plans_buffered for r in runs)
                 row["plans_skipped"] = sum(r.plans_skipped for r in runs)
@@ -254,7 +294,9 @@ class Evaluation:
 
     def rows(self) -> list[dict[str, Any]]:
         """One row per run (the CSV a reviewer recomputes from): identity, the paper's KPI
-        changes, safety and gap figures, then every absolute KPI and change."""
+        changes, safety and gap figures, then every absolute KPI and change, and the paper
+        KPIs the case's baseline cannot measure."""
+        unmeasured = self.unmeasured()
         out = []
         for r in self.results:
             row: dict[str, Any] = {
@@ -287,6 +329,9 @@ class Evaluation:
             row.update(r.kpis.as_dict())
             for kpi in KPI_DIRECTION:
                 row[f"{kpi}_change_pct"] = self.change_pct(r, kpi)
+            row[UNMEASURED_COLUMN] = ";".join(
+                kpi for kpi, cases in unmeasured.items() if r.case.name in cases
+            )
             out.append(row)
         return out
 

@@ -19,8 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
+from sim.evaluate import measured_mean
 from sim.folds import held_out_dates
 
 Row = Mapping[str, Any]
@@ -34,10 +33,6 @@ FREEFLOW_KPIS = ("fuel_economy_mpg_change_pct", "throughput_change_pct", "networ
 # short for its tail to pass where its leader started), costs this many points of shortfall:
 # never traded for fuel, and never read as an aim met.
 UNMET_POINTS = 100.0
-
-
-def _mean(rows: Sequence[Row], key: str) -> float:
-    return float(np.mean([float(row[key]) for row in rows])) if rows else float("nan")
 
 
 def _loss_beyond(aim_pct: float, change_pct: float) -> float:
@@ -66,10 +61,12 @@ def standing(candidate: str, rows: Sequence[Row]) -> Standing:
     free = [row for row in rows if row["scenario"] == "freeflow"]
     shortfall = UNMET_POINTS * sum(int(row["collisions"]) for row in rows)
     for key in ("throughput_change_pct", "network_speed_change_pct"):
-        shortfall += _loss_beyond(SHOCKWAVE_MAX_LOSS_PCT, _mean(shock, key)) if shock else 0.0
+        shortfall += (
+            _loss_beyond(SHOCKWAVE_MAX_LOSS_PCT, measured_mean(shock, key)) if shock else 0.0
+        )
     for key in FREEFLOW_KPIS:
-        shortfall += _loss_beyond(FREEFLOW_MAX_LOSS_PCT, _mean(free, key)) if free else 0.0
-    return Standing(candidate, _mean(shock, "fuel_saving_pct"), shortfall)
+        shortfall += _loss_beyond(FREEFLOW_MAX_LOSS_PCT, measured_mean(free, key)) if free else 0.0
+    return Standing(candidate, measured_mean(shock, "fuel_saving_pct"), shortfall)
 
 
 def _fuel_rank(standing: Standing) -> float:
@@ -157,15 +154,15 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
             {
                 "scenario": scenario,
                 "drives": len(rows),
-                "fuel_saving_pct": _mean(rows, "fuel_saving_pct"),
-                "throughput_change_pct": _mean(rows, "throughput_change_pct"),
-                "network_speed_change_pct": _mean(rows, "network_speed_change_pct"),
-                "fuel_economy_mpg_change_pct": _mean(rows, "fuel_economy_mpg_change_pct"),
+                "fuel_saving_pct": measured_mean(rows, "fuel_saving_pct"),
+                "throughput_change_pct": measured_mean(rows, "throughput_change_pct"),
+                "network_speed_change_pct": measured_mean(rows, "network_speed_change_pct"),
+                "fuel_economy_mpg_change_pct": measured_mean(rows, "fuel_economy_mpg_change_pct"),
                 "collisions": sum(int(row["collisions"]) for row in rows),
                 "takeovers": sum(int(row["takeovers"]) for row in rows),
                 "cut_ins": sum(int(row["cut_ins"]) for row in rows),
-                "within_bounds_share": _mean(rows, "within_bounds_share"),
-                "distance_lost_m": _mean(rows, "distance_lost_m"),
+                "within_bounds_share": measured_mean(rows, "within_bounds_share"),
+                "distance_lost_m": measured_mean(rows, "distance_lost_m"),
             }
         )
     return summary
@@ -183,16 +180,20 @@ def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
         summary.append(
             {
                 "candidate": candidate,
-                "shockwave_fuel_saving_pct": _mean(shock, "fuel_saving_pct"),
-                "shockwave_throughput_change_pct": _mean(shock, "throughput_change_pct"),
-                "shockwave_network_speed_change_pct": _mean(shock, "network_speed_change_pct"),
-                "freeflow_fuel_saving_pct": _mean(free, "fuel_saving_pct"),
-                "freeflow_throughput_change_pct": _mean(free, "throughput_change_pct"),
-                "freeflow_network_speed_change_pct": _mean(free, "network_speed_change_pct"),
+                "shockwave_fuel_saving_pct": measured_mean(shock, "fuel_saving_pct"),
+                "shockwave_throughput_change_pct": measured_mean(shock, "throughput_change_pct"),
+                "shockwave_network_speed_change_pct": measured_mean(
+                    shock, "network_speed_change_pct"
+                ),
+                "freeflow_fuel_saving_pct": measured_mean(free, "fuel_saving_pct"),
+                "freeflow_throughput_change_pct": measured_mean(free, "throughput_change_pct"),
+                "freeflow_network_speed_change_pct": measured_mean(
+                    free, "network_speed_change_pct"
+                ),
                 "collisions": sum(int(row["collisions"]) for row in own),
                 "takeovers": sum(int(row["takeovers"]) for row in own),
-                "within_bounds_share": _mean(own, "within_bounds_share"),
-                "shockwave_distance_lost_m": _mean(shock, "distance_lost_m"),
+                "within_bounds_share": measured_mean(own, "within_bounds_share"),
+                "shockwave_distance_lost_m": measured_mean(shock, "distance_lost_m"),
             }
         )
     return summary

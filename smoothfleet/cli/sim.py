@@ -413,8 +413,8 @@ def evaluate_command(
     console.print(summary_table(evaluation))
     for kpi, unmeasured in evaluation.unmeasured().items():
         console.print(
-            f"{kpi}: the all-human platoon gives no figure on {len(unmeasured)} drive(s), so "
-            f"every pair's change there and its scenario's mean are n/a: {', '.join(unmeasured)}"
+            f"{kpi}: the all-human platoon gives no figure on {len(unmeasured)} drive(s), left "
+            f"out of that KPI's means for every pair alike: {', '.join(unmeasured)}"
         )
     without_plan = [result for result in evaluation.results if result.plan_hand_backs]
     if without_plan:

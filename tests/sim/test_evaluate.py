@@ -14,12 +14,14 @@ import pytest
 from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.evaluate import (
     BASELINE,
+    UNMEASURED_COLUMN,
     ControllerVariant,
     Evaluation,
     OptimumFileError,
     RunResult,
     evaluate,
     load_optimum,
+    measured_mean,
 )
 from sim.gaps import GapKpis
 from sim.kpi import Kpis, fuel_economy_mpg
@@ -124,6 +126,23 @@ def test_drives_the_baseline_cannot_measure_are_named_per_kpi() -> None:
         "fuel_economy_mpg": ["freeflow/still"],
         "network_speed_mps": ["freeflow/still"],
     }
+    # the short drive is left out of the throughput mean, for every pair alike; the stall on
+    # a drive the baseline measures still makes it undefined
+    [row] = evaluation.summary()
+    assert math.isnan(row["throughput_vph_change_pct"])
+    assert row["fuel_saving_pct"] == pytest.approx((100 * (1 - 40 / 44) + 0.0) / 2)
+    kept = Evaluation([r for r in evaluation.results if r.case.drive.name != "fine"])
+    [row] = kept.summary()
+    assert math.isnan(row["throughput_vph_change_pct"])  # no drive measures it: n/a, not 0
+    assert row["fuel_saving_pct"] == pytest.approx(100 * (1 - 40 / 44))
+    rows = {r["drive"]: r for r in evaluation.rows() if r["controller"] == "c"}
+    assert rows["short"][UNMEASURED_COLUMN] == "throughput_vph"
+    assert rows["fine"][UNMEASURED_COLUMN] == ""
+    assert measured_mean(list(rows.values()), "fuel_saving_pct") == pytest.approx(
+        (100 * (1 - 40 / 44) + 0.0) / 2
+    )
+    assert math.isnan(measured_mean([rows["short"]], "throughput_change_pct"))
+    assert measured_mean([rows["short"]], "network_speed_change_pct") == 0.0
 
 
 def test_best_pair_keeps_throughput_speed_and_safety() -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from sim.drives import load_drive
+from sim.evaluate import UNMEASURED_COLUMN
 from sim.selection import (
     candidate_summary,
     check_every_fold_can_choose,
@@ -84,6 +85,26 @@ def test_an_undefined_kpi_meets_no_aim_and_an_undefined_saving_ranks_last() -> N
     unmeasured = [row("a", "2021-03-08-a", fuel_saving_pct=math.nan), row("b", "2021-03-08-a")]
     assert choose(unmeasured).candidate == "b"
     assert choose(unmeasured[::-1]).candidate == "b"
+
+
+def test_a_drive_the_baseline_cannot_measure_is_left_out_for_every_candidate() -> None:
+    # 2021-03-09-short is too short for the all-human platoon's throughput: every candidate's
+    # change there is undefined, and it no longer makes every candidate miss the aim
+    short = {"throughput_change_pct": math.nan, UNMEASURED_COLUMN: "throughput_vph"}
+    rows = [
+        row("keeps", "2021-03-08-a", fuel_saving_pct=4.0, throughput_change_pct=-1.0),
+        row("keeps", "2021-03-09-short", fuel_saving_pct=6.0, **short),
+        row("loses", "2021-03-08-a", fuel_saving_pct=9.0, throughput_change_pct=-5.0),
+        row("loses", "2021-03-09-short", fuel_saving_pct=9.0, **short),
+    ]
+    keeps = standing("keeps", rows[:2])
+    assert keeps.shortfall_pct == 0.0
+    assert keeps.fuel_saving_pct == pytest.approx(5.0)  # fuel is measured on both drives
+    assert standing("loses", rows[2:]).shortfall_pct == pytest.approx(3.0)
+    assert choose(rows).candidate == "keeps"
+    # a candidate that stalls where the baseline measures throughput still misses the aim
+    stalled = [row("stalled", "2021-03-08-a", throughput_change_pct=math.nan), rows[1]]
+    assert standing("stalled", stalled).shortfall_pct == 100.0
 
 
 def test_each_fold_is_scored_on_dates_it_did_not_choose_on() -> None:
