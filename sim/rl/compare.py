@@ -36,7 +36,7 @@ def policy_scores(manifest: Mapping[str, Any], source: str) -> list[DriveScore]:
     beside it)."""
     try:
         rows = manifest["cross_validation"]["drives"]
-        controller = "rl_acc" if manifest["actuation"] == "acc" else "rl_accel"
+        controller = f"rl_{manifest['actuation']}"
         scores = [DriveScore(**row) for row in rows]
     except (KeyError, TypeError) as error:
         raise ManifestError(f"{source}: no held-out drive scores ({error})") from None
