@@ -18,7 +18,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from functools import partial
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -148,11 +148,19 @@ class Evaluation:
     # Per drive name: the fuel saving of the fuel-optimal AV trajectory (sim.optimum), if known.
     optimum_fuel_saving_pct: Mapping[str, float] = field(default_factory=dict)
 
+    @cached_property
+    def _baselines(self) -> dict[str, RunResult]:
+        """The all-human run of each case, by case name (every change is taken against one:
+        a scan of the results per lookup made the tables quadratic in the runs)."""
+        found: dict[str, RunResult] = {}
+        for r in self.results:
+            if r.controller == BASELINE:
+                found.setdefault(r.case.name, r)
+        return found
+
     def baseline(self, case_name: str) -> RunResult:
         """The all-human run of a case."""
-        return next(
-            r for r in self.results if r.case.name == case_name and r.controller == BASELINE
-        )
+        return self._baselines[case_name]
 
     def change_pct(self, result: RunResult, kpi: str) -> float:
         """Percentage change of a KPI against the case's baseline."""
@@ -191,18 +199,6 @@ class Evaluation:
                     found.setdefault(kpi, []).append(result.case.name)
         return found
 
-    @staticmethod
-    def _measured_mean(
-        runs: Sequence[RunResult],
-        kpi: str,
-        figure: Callable[[RunResult], float],
-        unmeasured: Mapping[str, list[str]],
-    ) -> float:
-        """The figure's mean over the runs on drives whose baseline measures `kpi`."""
-        left_out = set(unmeasured.get(kpi, ()))
-        values = [figure(r) for r in runs if r.case.name not in left_out]
-        return float(np.mean(values)) if values else float("nan")
-
     def variants(self) -> list[tuple[str, str, int]]:
         """(planner, controller, avs) evaluated, in run order."""
         seen: list[tuple[str, str, int]] = []
@@ -219,17 +215,20 @@ class Evaluation:
     def summary(self) -> list[dict[str, Any]]:
         """One row per scenario x planner x controller x AVs: mean changes over its cases."""
         rows = []
-        unmeasured = self.unmeasured()
+        # the per-run figures, so the means leave out what `measured_mean` leaves out
+        run_rows = self.rows()
         for scenario in self.scenarios():
             for planner, controller, avs in self.variants():
-                runs = [
-                    r
-                    for r in self.results
+                chosen = [
+                    index
+                    for index, r in enumerate(self.results)
                     if r.case.scenario == scenario
                     and (r.planner, r.controller, r.avs) == (planner, controller, avs)
                 ]
-                if not runs:
+                if not chosen:
                     continue
+                runs = [self.results[index] for index in chosen]
+                own_rows = [run_rows[index] for index in chosen]
                 optimum = [self.optimum_pct(r) for r in runs]
                 row: dict[str, Any] = {
                     "scenario": scenario,
@@ -238,15 +237,11 @@ class Evaluation:
                     "avs": avs,
                     "recommended": runs[0].recommended,
                     "cases": len(runs),
-                    "fuel_saving_pct": self._measured_mean(
-                        runs, "fuel_economy_mpg", self.fuel_saving_pct, unmeasured
-                    ),
+                    "fuel_saving_pct": measured_mean(own_rows, "fuel_saving_pct"),
                     "optimum_fuel_saving_pct": float(np.mean(optimum)),
                 }
                 for kpi in KPI_DIRECTION:
-                    row[f"{kpi}_change_pct"] = self._measured_mean(
-                        runs, kpi, partial(self.change_pct, kpi=kpi), unmeasured
-                    )
+                    row[f"{kpi}_change_pct"] = measured_mean(own_rows, f"{kpi}_change_pct")
                 row["plans_buffered"] = sum(r.plans_buffered for r in runs)
                 row["plans_skipped"] = sum(r.plans_skipped for r in runs)
                 row["plan_hand_backs"] = sum(r.plan_hand_backs for r in runs)
