@@ -13,7 +13,6 @@ Fuel saving is the drop in fuel per distance, 1 - mpg_baseline / mpg_variant.
 from __future__ import annotations
 
 import json
-import math
 import os
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -30,7 +29,15 @@ from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
 from sim.gaps import GapBounds, GapKpis, gap_kpis
-from sim.kpi import Kpis, change_pct, fuel_saving_pct, platoon_kpis
+from sim.kpi import (
+    UNMEASURED_COLUMN,
+    Kpis,
+    change_pct,
+    fuel_saving_pct,
+    measured_mean,
+    platoon_kpis,
+    unmeasured_paper_kpis,
+)
 from sim.plans import SimulatedPlanner
 from sim.platoon import CutIns, HandBack, PlatoonRun, platoon_roles, simulate_platoon
 from sim.runs import run_file_name, write_run, write_runs_index
@@ -48,32 +55,6 @@ KPI_DIRECTION: dict[str, int] = {
     "min_gap_m": +1,
     "min_ttc_s": +1,
 }
-PAPER_KPIS = ("fuel_economy_mpg", "throughput_vph", "network_speed_mps")
-# The paper KPI each per-run column compares (`Evaluation.rows`): a drive whose all-human
-# platoon cannot measure that KPI is left out of the column's means, for every pair alike.
-COLUMN_KPI = {
-    "fuel_saving_pct": "fuel_economy_mpg",
-    "fuel_economy_mpg_change_pct": "fuel_economy_mpg",
-    "throughput_change_pct": "throughput_vph",
-    "throughput_vph_change_pct": "throughput_vph",
-    "network_speed_change_pct": "network_speed_mps",
-    "network_speed_mps_change_pct": "network_speed_mps",
-}
-# The `Evaluation.rows` column naming the paper KPIs the case's baseline cannot measure.
-UNMEASURED_COLUMN = "unmeasured_by_baseline"
-
-
-def measured_mean(rows: Sequence[Mapping[str, Any]], column: str) -> float:
-    """The mean of a per-run column over the rows whose baseline measures its KPI (NaN when
-    none does). A row whose own value is undefined where the baseline's is not still counts:
-    its NaN is the pair's failure, not the drive's."""
-    kpi = COLUMN_KPI.get(column)
-    values = [
-        float(row[column])
-        for row in rows
-        if kpi is None or kpi not in str(row.get(UNMEASURED_COLUMN, "")).split(";")
-    ]
-    return float(np.mean(values)) if values else float("nan")
 
 
 @dataclass(frozen=True)
@@ -186,17 +167,14 @@ class Evaluation:
 
     def unmeasured(self) -> dict[str, list[str]]:
         """Per paper KPI, the cases whose all-human baseline gives no figure to compare with
-        (a drive too short for the platoon's tail to pass where its leader started, a leader
-        that never moves): every pair's change there is undefined, so those drives are left
-        out of that KPI's means, for every pair alike."""
+        (`sim.kpi.unmeasured_paper_kpis`): every pair's change there is undefined, so those
+        drives are left out of that KPI's means, for every pair alike."""
         found: dict[str, list[str]] = {}
         for result in self.results:
             if result.controller != BASELINE:
                 continue
-            for kpi in PAPER_KPIS:
-                value = float(getattr(result.kpis, kpi))
-                if value == 0 or not math.isfinite(value):
-                    found.setdefault(kpi, []).append(result.case.name)
+            for kpi in filter(None, unmeasured_paper_kpis(result.kpis).split(";")):
+                found.setdefault(kpi, []).append(result.case.name)
         return found
 
     def variants(self) -> list[tuple[str, str, int]]:

@@ -18,7 +18,9 @@ All functions take arrays with one row per time step and one column per vehicle 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +33,23 @@ FloatArray = NDArray[np.float64]
 
 THROUGHPUT_POINTS = 5
 SECONDS_PER_HOUR = 3600.0
+
+# The three KPIs the paper selects controllers by ("Candidate Controller Selection").
+PAPER_KPIS = ("fuel_economy_mpg", "throughput_vph", "network_speed_mps")
+# The paper KPI each per-run column compares (`sim.evaluate`'s rows, `sim.rl.scores`' drive
+# scores): a drive whose all-human platoon cannot measure that KPI is left out of the column's
+# means, for every controller alike.
+COLUMN_KPI = {
+    "fuel_saving_pct": "fuel_economy_mpg",
+    "fuel_economy_mpg_change_pct": "fuel_economy_mpg",
+    "throughput_change_pct": "throughput_vph",
+    "throughput_vph_change_pct": "throughput_vph",
+    "network_speed_change_pct": "network_speed_mps",
+    "network_speed_mps_change_pct": "network_speed_mps",
+}
+# The per-run column naming the paper KPIs the run's all-human baseline cannot measure,
+# `;`-separated (empty: it measures all three).
+UNMEASURED_COLUMN = "unmeasured_by_baseline"
 
 
 @dataclass(frozen=True)
@@ -50,6 +69,37 @@ class Kpis:
     def as_dict(self) -> dict[str, float]:
         """Field name -> value, for tables and CSV rows."""
         return {name: float(value) for name, value in asdict(self).items()}
+
+
+def unmeasured_paper_kpis(baseline: Kpis) -> str:
+    """The paper KPIs the all-human `baseline` gives no figure for (0 or not finite: a drive
+    too short for the platoon's tail to pass where its leader started, a leader that never
+    moves), `;`-separated as in `UNMEASURED_COLUMN`. Every controller's change against such a
+    figure is undefined through no fault of its own."""
+    return ";".join(
+        kpi
+        for kpi in PAPER_KPIS
+        if (value := float(getattr(baseline, kpi))) == 0 or not math.isfinite(value)
+    )
+
+
+def measured_values(rows: Sequence[Mapping[str, Any]], column: str) -> list[float]:
+    """A per-run column's values over the rows whose baseline measures its KPI. A row whose own
+    value is undefined where the baseline's is not still counts: its NaN is the controller's
+    failure (it stalled the platoon), not the drive's."""
+    kpi = COLUMN_KPI.get(column)
+    return [
+        float(row[column])
+        for row in rows
+        if kpi is None or kpi not in str(row.get(UNMEASURED_COLUMN, "")).split(";")
+    ]
+
+
+def measured_mean(rows: Sequence[Mapping[str, Any]], column: str) -> float:
+    """The mean of `measured_values` (NaN when no row's baseline measures the KPI, or when a
+    counted row is itself undefined)."""
+    values = measured_values(rows, column)
+    return float(np.mean(values)) if values else float("nan")
 
 
 def fuel_economy_mpg(

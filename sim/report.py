@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 from rich.table import Table
 
-from sim.evaluate import KPI_DIRECTION, PAPER_KPIS, Evaluation
+from sim.evaluate import KPI_DIRECTION, Evaluation
+from sim.kpi import PAPER_KPIS
 from sim.platoon import PlatoonRun
 
 # KPIs drawn in the heatmap: the paper's three and comfort.

@@ -19,8 +19,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from sim.evaluate import measured_mean
 from sim.folds import held_out_dates
+from sim.kpi import measured_mean
 
 Row = Mapping[str, Any]
 

@@ -19,6 +19,7 @@ candidate (the weights used until the data shows better ones).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -29,7 +30,14 @@ import numpy as np
 from sim.drives import Drive
 from sim.folds import date_folds, drive_date
 from sim.rl.env import EnvConfig, RewardWeights
-from sim.rl.scores import GROUPS, ControllerUnderTest, DriveScore, score_drives, scoring_progress
+from sim.rl.scores import (
+    GROUPS,
+    ControllerUnderTest,
+    DriveScore,
+    group_mean,
+    score_drives,
+    scoring_progress,
+)
 from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
 
 INNER_FOLDS = 2
@@ -97,12 +105,16 @@ def admissibility(scores: Sequence[DriveScore]) -> list[str]:
         if not chosen:
             continue
         floor = MAX_FREEFLOW_LOSS_PCT if group == "freeflow" else MAX_LOSS_PCT
-        throughput = float(np.mean([score.throughput_change_pct for score in chosen]))
-        speed = float(np.mean([score.network_speed_change_pct for score in chosen]))
-        if throughput < floor:
-            broken.append(f"{group} throughput {throughput:+.2f} % < {floor:+.0f} %")
-        if speed < floor:
-            broken.append(f"{group} network speed {speed:+.2f} % < {floor:+.0f} %")
+        for column, figure in (
+            ("throughput_change_pct", "throughput"),
+            ("network_speed_change_pct", "network speed"),
+        ):
+            change = group_mean(chosen, column)
+            if not math.isfinite(change):
+                # a drive the candidate left without a figure (it stalled the platoon)
+                broken.append(f"{group} {figure} undefined")
+            elif change < floor:
+                broken.append(f"{group} {figure} {change:+.2f} % < {floor:+.0f} %")
     collisions = sum(score.collisions for score in scores)
     if collisions:
         broken.append(f"{collisions} collision(s)")
@@ -113,10 +125,10 @@ def admissibility(scores: Sequence[DriveScore]) -> list[str]:
 
 
 def ranking_fuel_saving_pct(scores: Sequence[DriveScore]) -> float:
-    """Mean fuel saving over the drives of the ranking group (NaN if it has none)."""
+    """Mean fuel saving over the drives of the ranking group whose all-human platoon measures
+    it (`group_mean`; NaN if it has none)."""
     member = GROUPS[CHOSEN_BY]
-    savings = [score.fuel_saving_pct for score in scores if member(score)]
-    return float(np.mean(savings)) if savings else float("nan")
+    return group_mean([score for score in scores if member(score)], "fuel_saving_pct")
 
 
 def choose(candidate_scores: Sequence[Sequence[DriveScore]]) -> int:

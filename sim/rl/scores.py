@@ -26,7 +26,15 @@ from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
 from sim.gaps import GapBounds, gap_kpis
-from sim.kpi import Kpis, change_pct, fuel_saving_pct, platoon_kpis
+from sim.kpi import (
+    Kpis,
+    change_pct,
+    fuel_saving_pct,
+    measured_mean,
+    measured_values,
+    platoon_kpis,
+    unmeasured_paper_kpis,
+)
 from sim.plans import SimulatedPlanner
 from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import AccClip, Controller, build_controller
@@ -80,6 +88,10 @@ class DriveScore:
     accel_rms_change_pct: float
     collisions: int
     gap_within_share: float
+    # The paper KPIs the all-human platoon of this drive cannot measure (`sim.kpi.
+    # UNMEASURED_COLUMN`): left out of those KPIs' group means for every controller alike.
+    # Empty in manifests written before the field existed (no shared drive needed it).
+    unmeasured_by_baseline: str = ""
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values (manifest, CSV)."""
@@ -171,6 +183,7 @@ def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> D
         accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,
         gap_within_share=within,
+        unmeasured_by_baseline=unmeasured_paper_kpis(base),
     )
 
 
@@ -181,15 +194,26 @@ GROUPS: dict[str, Callable[[DriveScore], bool]] = {
 }
 
 
-def _worst(values: Sequence[float]) -> float:
-    """The least of the drives' changes; NaN, as their mean, when one is undefined (the
+def group_mean(scores: Sequence[DriveScore], column: str) -> float:
+    """The mean of a drive-score column by the project's one rule (`sim.kpi.measured_mean`):
+    a drive whose all-human platoon cannot measure the column's KPI is left out; one the
+    controller left undefined makes the mean NaN."""
+    return measured_mean([score.as_dict() for score in scores], column)
+
+
+def group_worst(scores: Sequence[DriveScore], column: str) -> float:
+    """The least of the same drives' values; NaN, as their mean, when one is undefined (the
     builtin `min` would return NaN or skip it depending on where it stands in the list)."""
-    return min(values) if all(math.isfinite(value) for value in values) else float("nan")
+    values = measured_values([score.as_dict() for score in scores], column)
+    if not values or not all(math.isfinite(value) for value in values):
+        return float("nan")
+    return min(values)
 
 
 def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
     """Per controller and group: mean fuel saving, mean and worst throughput and network speed
-    changes, collisions, the smallest share of time within the gap envelope."""
+    changes (drives the all-human platoon cannot measure left out), collisions, the smallest
+    share of time within the gap envelope."""
     rows = []
     for label in dict.fromkeys(score.controller for score in scores):
         for group, member in GROUPS.items():
@@ -201,18 +225,12 @@ def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
                     "controller": label,
                     "group": group,
                     "drives": len(chosen),
-                    "fuel_saving_pct": float(np.mean([s.fuel_saving_pct for s in chosen])),
-                    "throughput_change_pct": float(
-                        np.mean([s.throughput_change_pct for s in chosen])
-                    ),
-                    "worst_throughput_change_pct": _worst(
-                        [s.throughput_change_pct for s in chosen]
-                    ),
-                    "network_speed_change_pct": float(
-                        np.mean([s.network_speed_change_pct for s in chosen])
-                    ),
-                    "worst_network_speed_change_pct": _worst(
-                        [s.network_speed_change_pct for s in chosen]
+                    "fuel_saving_pct": group_mean(chosen, "fuel_saving_pct"),
+                    "throughput_change_pct": group_mean(chosen, "throughput_change_pct"),
+                    "worst_throughput_change_pct": group_worst(chosen, "throughput_change_pct"),
+                    "network_speed_change_pct": group_mean(chosen, "network_speed_change_pct"),
+                    "worst_network_speed_change_pct": group_worst(
+                        chosen, "network_speed_change_pct"
                     ),
                     "collisions": sum(s.collisions for s in chosen),
                     "min_gap_within_share": min(s.gap_within_share for s in chosen),

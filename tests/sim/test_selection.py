@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from sim.drives import load_drive
-from sim.evaluate import UNMEASURED_COLUMN
+from sim.kpi import UNMEASURED_COLUMN
 from sim.selection import (
     candidate_summary,
     check_every_fold_can_choose,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ from sim.rl.reward_selection import (
     admissibility,
     choose,
     parse_reward_candidates,
+    ranking_fuel_saving_pct,
 )
 from sim.rl.scores import DriveScore
 from tests.sim.rl.test_train import FREEFLOW, train_accel
@@ -29,6 +31,7 @@ def score(
     collisions: int = 0,
     within: float = 1.0,
     stop_and_go: bool = False,
+    unmeasured: str = "",
 ) -> DriveScore:
     return DriveScore(
         drive=f"2021-04-05-{kind}",
@@ -42,6 +45,7 @@ def score(
         accel_rms_change_pct=0.0,
         collisions=collisions,
         gap_within_share=within,
+        unmeasured_by_baseline=unmeasured,
     )
 
 
@@ -96,6 +100,26 @@ def test_the_admissible_candidate_saving_most_on_shockwave_drives_is_chosen() ->
     # none admissible, or a tie: the first candidate (the defaults) stays
     assert choose([saves_most_by_falling_back, saves_most_by_falling_back]) == 0
     assert choose([defaults, list(defaults)]) == 0
+
+
+def test_a_candidate_that_leaves_a_bound_undefined_is_not_admissible() -> None:
+    # it stalled the platoon on a drive whose all-human platoon gives a throughput
+    stalled = [score("shockwave", 12.0, throughput=math.nan), score("freeflow", 0.0)]
+    assert admissibility(stalled) == ["shockwave throughput undefined"]
+    assert choose([[score("shockwave", 1.0), score("freeflow", 0.0)], stalled]) == 0
+
+
+def test_a_drive_the_all_human_platoon_cannot_measure_counts_for_no_candidate() -> None:
+    # a drive too short for the platoon's tail to pass where the leader started: every
+    # candidate's throughput and fuel saving there are undefined, through no fault of its own
+    short = score(
+        "shockwave", math.nan, throughput=math.nan, unmeasured="fuel_economy_mpg;throughput_vph"
+    )
+    defaults = [score("shockwave", 1.0), short]
+    saves_more = [score("shockwave", 2.0), short]
+    assert admissibility(defaults) == admissibility(saves_more) == []
+    assert ranking_fuel_saving_pct(saves_more) == 2.0
+    assert choose([defaults, saves_more]) == 1
 
 
 @pytest.mark.slow
