@@ -31,11 +31,6 @@ def next_gap_setting(gap: int) -> int:
     return MAX_GAP_SETTING if gap <= MIN_GAP_SETTING else gap - 1
 
 
-def gap_presses(current: int, wanted: int) -> int:
-    """How many gap button presses take the car from `current` to `wanted` bars."""
-    return (current - wanted) % (MAX_GAP_SETTING - MIN_GAP_SETTING + 1)
-
-
 # The cars' ACC: a press shorter than this changes the set speed by 1 mph on release; holding
 # it this long changes it by 5 mph (and by 5 more every further LONG_PRESS_S held).
 LONG_PRESS_S = 0.6
@@ -113,11 +108,6 @@ class ButtonSequencer:
         self.phase = Phase.IDLE
         self.button = None
         self._expectation = None
-
-    @property
-    def busy(self) -> bool:
-        """True while a press or its release is in progress."""
-        return self.phase is not Phase.IDLE
 
     def step(self, now: float, speed_mph: float | None, gap: int | None) -> CruiseButton | None:
         """Advance to `now` given the car's reported set speed and gap; the button to hold."""

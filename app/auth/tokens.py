@@ -183,10 +183,6 @@ class TokenCache:
         self._entries[token_hash] = (self._clock() + self._ttl_s, found)
         return found
 
-    def forget(self) -> None:
-        """Drop every cached entry (the next request of each token looks it up again)."""
-        self._entries.clear()
-
     async def _lookup(self, token_hash: str) -> Principal | None:
         async with self._engine.begin() as connection:
             row = (await connection.execute(LOOKUP_SQL, {"token_hash": token_hash})).first()
