@@ -78,6 +78,9 @@ GPS_MAX_AGE_S = 2.0
 ECHO_GRACE_S = 0.3
 # The safety layer refusing a command keeps the agent off for this long (s).
 ACTUATOR_FAULT_HOLD_S = 1.0
+# A controller that raised keeps the agent off for this long (s): one that keeps failing is
+# retried after the hold and the engage wait, not at the control rate.
+CONTROLLER_FAULT_HOLD_S = 1.0
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
@@ -219,6 +222,7 @@ class Agent:
         self._own_button: CruiseButton | None = None
         self._own_released: tuple[float, CruiseButton] | None = None
         self._actuator_fault_until = -math.inf
+        self._controller_fault_until = -math.inf
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -276,6 +280,7 @@ class Agent:
                 on_corridor=on_corridor,
                 in_lane=self._in_lane(fix, assignment),
                 plan_fresh=plan_fresh,
+                controller_ok=now >= self._controller_fault_until,
                 actuator_ok=now >= self._actuator_fault_until,
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 driver_active=self._driver_active(reading, now, previous.commanding),
@@ -386,6 +391,9 @@ class Agent:
         self._running = self.assignment
         self._running.controller.reset()
         self.limiter.reset(measured_accel or 0.0, now)
+        # until the controller's first command: what the car does now, never the last request of
+        # an earlier engagement (a controller failing at its first step would leave that one)
+        self._requested_accel = measured_accel or 0.0
         self.safety.idle()
         self._next_control_s = now
         log.info("agent takes over (%s)", self.assignment.config.controller.name)
@@ -424,7 +432,7 @@ class Agent:
         except (ArithmeticError, ValueError, TypeError) as error:
             self.stats.controller_errors += 1
             log.warning("controller %s failed: %s", running.config.controller.name, error)
-            self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+            self._controller_fault_until = now + CONTROLLER_FAULT_HOLD_S
             return
         self.stats.control_steps += 1
         if isinstance(action, AccSetPoint):

@@ -111,6 +111,41 @@ def test_can_loss_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) 
         assert r.emulator.agent_frames == sent  # no more requests: the stock ACC drives
 
 
+def test_a_failing_controller_hands_back_within_one_period_and_says_so(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        assignment = r.agent.assignment
+        assert assignment is not None
+
+        failures: list[float] = []
+
+        def fails(observation: object) -> None:
+            failures.append(r.clock.monotonic())
+            raise ZeroDivisionError("float division by zero")
+
+        # a fault inside the real controller, as a numerical bug would raise it
+        monkeypatch.setattr(assignment.controller, "step", fails)
+        r.run(CONTROL_PERIOD_S, until=lambda: bool(failures))
+        assert failures
+        assert hand_back_time(r, failures[0]) <= CONTROL_PERIOD_S
+        assert r.agent.state.reason == "controller failed"
+        assert r.agent.stats.controller_errors == 1
+        assert r.agent.stats.handbacks["controller failed"] == 1
+        sent = r.emulator.agent_frames
+        r.run(1.0)
+        assert r.emulator.agent_frames == sent  # the stock ACC drives
+        # still failing: retried after the hold, handed back again, never left engaged
+        r.run(5.0)
+        assert r.agent.stats.controller_errors > 1
+        assert not engaged(r)
+        # working again: the agent takes over by itself
+        monkeypatch.undo()
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+
+
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
 def test_driver_override_hands_back_within_one_period(
     action: str, tmp_path: Path, dbc_cache: Path
