@@ -76,7 +76,8 @@ CONTROL_PERIOD_S = 0.1
 GPS_MAX_AGE_S = 2.0
 # The car's button message echoes the agent's own presses for a moment after release (s).
 ECHO_GRACE_S = 0.3
-# The safety layer refusing a command keeps the agent off for this long (s).
+# The safety layer refusing a command, or the CAN bus refusing to send one, keeps the agent
+# off for this long (s).
 ACTUATOR_FAULT_HOLD_S = 1.0
 # A controller that raised keeps the agent off for this long (s): one that keeps failing is
 # retried after the hold and the engage wait, not at the control rate.
@@ -223,6 +224,7 @@ class Agent:
         self._own_released: tuple[float, CruiseButton] | None = None
         self._actuator_fault_until = -math.inf
         self._controller_fault_until = -math.inf
+        self._send_fault_until = -math.inf
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -282,6 +284,7 @@ class Agent:
                 plan_fresh=plan_fresh,
                 controller_ok=now >= self._controller_fault_until,
                 actuator_ok=now >= self._actuator_fault_until,
+                commands_sent=now >= self._send_fault_until,
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
@@ -453,13 +456,20 @@ class Agent:
                 self._own_released = (now, self._own_button)
             self._own_button = held
             refused_before = sum(self.safety.refused.values())
+            send_errors_before = self.sender.send_errors
             self.buttons.hold(held, context)
             if sum(self.safety.refused.values()) > refused_before:
                 self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+            if self.sender.send_errors > send_errors_before:
+                self._send_fault_until = now + ACTUATOR_FAULT_HOLD_S
         elif self.accel_port is not None and self.state.commanding and self.accel_port.due(now):
             accel = self.limiter.limit(now, self._requested_accel)
+            send_errors_before = self.sender.send_errors
             if not self.accel_port.request(accel, context):
-                self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+                if self.sender.send_errors > send_errors_before:
+                    self._send_fault_until = now + ACTUATOR_FAULT_HOLD_S
+                else:
+                    self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
 
     # Telemetry --------------------------------------------------------------------------------
 

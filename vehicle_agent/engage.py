@@ -7,9 +7,10 @@ button: the agent keeps off until `override_holdoff_s` after the driver's last t
 Every step the inputs are checked in a fixed order; the first that fails hands the car back in
 that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged by
 the driver, GPS healthy, on the assigned corridor, in the assigned lane, plan fresh, controller
-working, actuator healthy, and the stop the leader ahead needs within the braking the agent may
-command. Taking over needs all of them to have held for `engage_after_s` without interruption,
-so a flickering input cannot toggle control on and off at the loop rate.
+working, actuator healthy, commands reaching the bus, and the stop the leader ahead needs within
+the braking the agent may command. Taking over needs all of them to have held for
+`engage_after_s` without interruption, so a flickering input cannot toggle control on and off at
+the loop rate.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ class EngageInputs:
     # The controller gave a command at its last steps (it raised none within the hold).
     controller_ok: bool
     actuator_ok: bool
+    # The command frames went out: the CAN bus took the last ones (within the hold).
+    commands_sent: bool
     # The stop the radar's leader needs is within the braking the agent may command
     # (vehicle_agent.stopping).
     stop_within_authority: bool
@@ -58,6 +61,7 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("plan_fresh", "no fresh plan"),
     ("controller_ok", "controller failed"),
     ("actuator_ok", "actuator refused by the safety layer"),
+    ("commands_sent", "commands not reaching the CAN bus"),
     ("stop_within_authority", "stopping needs more braking than the agent may command"),
 )
 
