@@ -79,6 +79,8 @@ ECHO_GRACE_S = 0.3
 # The safety layer refusing a command, or the CAN bus refusing to send one, keeps the agent
 # off for this long (s).
 ACTUATOR_FAULT_HOLD_S = 1.0
+# The reason reported when a pass of the control loop failed outright (`Agent.tick`).
+STEP_FAILED = "agent step failed"
 # A controller that raised keeps the agent off for this long (s): one that keeps failing is
 # retried after the hold and the engage wait, not at the control rate.
 CONTROLLER_FAULT_HOLD_S = 1.0
@@ -251,7 +253,20 @@ class Agent:
     # Control ----------------------------------------------------------------------------------
 
     def tick(self) -> None:
-        """One pass of the control loop (see the module docstring)."""
+        """One pass of the control loop (see the module docstring).
+
+        Whatever fails in it (the CAN interface going down under `recv`, a bug anywhere in the
+        pass) hands the car back before the error goes on to the loop that logs it: left alone,
+        the agent would stay ENGAGED in its reports while commanding nothing, and a button board
+        would keep holding the button it held.
+        """
+        try:
+            self._tick()
+        except Exception:
+            self._fail_safe(STEP_FAILED)
+            raise
+
+    def _tick(self) -> None:
         now = self.clock.monotonic()
         wall = self.clock.now()
         self.stats.ticks += 1
@@ -432,7 +447,7 @@ class Agent:
         )
         try:
             action: Action = running.controller.step(observation)
-        except (ArithmeticError, ValueError, TypeError) as error:
+        except Exception as error:  # whatever a controller raises is the controller's failure
             self.stats.controller_errors += 1
             log.warning("controller %s failed: %s", running.config.controller.name, error)
             self._controller_fault_until = now + CONTROLLER_FAULT_HOLD_S
@@ -783,6 +798,21 @@ class Agent:
                 break
         self._upload_schedule.done(now, 1.0)
         return uploaded
+
+    def _fail_safe(self, reason: str) -> None:
+        """Hand back and release any held button, trusting nothing of the failed pass."""
+        now = self.clock.monotonic()
+        if self.state.commanding:
+            self._hand_back(reason)
+        self.state = engage.EngageState(engage.Mode.STOCK, now, None, reason)
+        if self.buttons is None or self._own_button is None:
+            return
+        self._own_released = (now, self._own_button)
+        self._own_button = None
+        try:
+            self.buttons.hold(None, SafetyContext(now, self.reader.snapshot(now)))
+        except Exception:
+            log.exception("releasing the %s button failed", self._own_released[1].name)
 
     def shutdown(self) -> None:
         """Stop commanding (the stock ACC keeps driving) and close the spool."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime, timedelta
@@ -26,6 +26,8 @@ from vehicle_agent.clock import ManualClock
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.plan import Plan
 from vehicle_agent.policies import PolicyStore
+from vehicle_agent.ports import ButtonPort
+from vehicle_agent.safety import SafetyLayer
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 
@@ -162,8 +164,10 @@ def rig(
     start: datetime | None = None,
     vehicle_id: str = "SF-TEST",
     policies: PolicyStore | None = None,
+    button_port: Callable[[SafetyLayer], ButtonPort] | None = None,
 ) -> Iterator[Rig]:
-    """An engaged-ready agent and emulated car (the driver has not set ACC yet)."""
+    """An engaged-ready agent and emulated car (the driver has not set ACC yet); `button_port`
+    replaces the make's CAN button frames (a GPIO board: the emulated car then sees no press)."""
     channel = f"agent-rig-{next(_channels)}"
     car_bus = can.Bus(interface="virtual", channel=channel)
     agent_bus = can.Bus(interface="virtual", channel=channel)
@@ -189,6 +193,7 @@ def rig(
         server=server,
         dbc_cache=dbc_cache,
         policies=policies,
+        button_port=button_port,
     )
     if server is None:
         agent.configure(

@@ -14,6 +14,8 @@ from sim.emulator.rig import Rig, rig, uniform_plan
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import Mode
+from vehicle_agent.ports import GpioButtonBoard
+from vehicle_agent.safety import SafetyLayer
 
 CONTROL_PERIOD_S = 0.1
 
@@ -123,9 +125,9 @@ def test_a_failing_controller_hands_back_within_one_period_and_says_so(
 
         def fails(observation: object) -> None:
             failures.append(r.clock.monotonic())
-            raise ZeroDivisionError("float division by zero")
+            raise IndexError("index 64 is out of bounds for axis 0 with size 64")
 
-        # a fault inside the real controller, as a numerical bug would raise it
+        # a fault inside the real controller, as a bug in its code would raise it
         monkeypatch.setattr(assignment.controller, "step", fails)
         r.run(CONTROL_PERIOD_S, until=lambda: bool(failures))
         assert failures
@@ -176,6 +178,57 @@ def test_commands_the_bus_will_not_send_hand_back_and_say_so(
         monkeypatch.undo()
         r.run(5.0, until=lambda: engaged(r))
         assert engaged(r), r.agent.state.reason
+
+
+def network_down(timeout: float | None = None) -> None:
+    raise can.CanOperationError("Network is down")
+
+
+def test_a_can_interface_going_down_hands_back_at_once(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        # the agent's real bus, its interface gone (`ip link set can0 down`, an adapter pulled)
+        monkeypatch.setattr(r.agent_bus, "recv", network_down)
+        with pytest.raises(can.CanOperationError):
+            r.run(CONTROL_PERIOD_S)
+        assert not engaged(r)
+        assert r.agent.state.reason == "agent step failed"
+        assert r.agent.stats.handbacks["agent step failed"] == 1
+        # every pass fails while it is down: the agent stays off
+        for _ in range(20):
+            with pytest.raises(can.CanOperationError):
+                r.run(CONTROL_PERIOD_S)
+        assert not engaged(r)
+        # up again: the agent takes over by itself
+        monkeypatch.undo()
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+
+
+def test_a_failed_pass_lets_go_of_the_button_a_gpio_board_holds(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A GPIO line stays high until written low: without the release, a failing control loop
+    would hold the button for good (SET- walking the set speed down to the car's minimum)."""
+    lines = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
+    levels: dict[int, bool] = {}
+
+    def board(safety: SafetyLayer) -> GpioButtonBoard:
+        return GpioButtonBoard(lines, levels.__setitem__, safety)
+
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple", button_port=board) as r:
+        # set at 50 mph under a 60 mph plan: the agent presses to raise it
+        engage_and_settle(r, set_speed_mph=50)
+        r.run(2.0, until=lambda: any(levels.values()))
+        assert any(levels.values()), "no button held"
+        monkeypatch.setattr(r.agent_bus, "recv", network_down)
+        with pytest.raises(can.CanOperationError):
+            r.run(CONTROL_PERIOD_S)
+        assert not any(levels.values())
+        assert not engaged(r)
+        assert r.agent.state.reason == "agent step failed"
 
 
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
