@@ -156,7 +156,6 @@ class AgentStats:
     control_steps: int = 0
     pings_spooled: int = 0
     pings_uploaded: int = 0
-    pings_without_fix: int = 0
     # Fields left out of a ping or status report because they broke the contract, per message.
     fields_dropped: Counter[str] = field(default_factory=Counter)
     handbacks: Counter[str] = field(default_factory=Counter)
@@ -498,7 +497,6 @@ class Agent:
         self._next_ping_s = now + period if late else self._next_ping_s + period
         ping = self.ping()
         if ping is None:
-            self.stats.pings_without_fix += 1
             return False
         self.spool.add(ping)
         self.stats.pings_spooled += 1
