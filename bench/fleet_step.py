@@ -33,12 +33,11 @@ import can
 import numpy as np
 
 from contract.corridor import CorridorGeometry
-from contract.vehicles import ControllerConfig, VehicleConfig
 from seed_data.build import ROSTER_FILE
 from sim.drives import load_drive
-from sim.emulator.rig import CORRIDOR, seed_geometry, uniform_plan
+from sim.emulator.rig import seed_geometry
 from sim.fleet.traffic import CorridorTraffic, synthetic_waves
-from sim.fleet.worker import CONTROL_PERIOD_S, Fleet, FleetCar, VehicleSpec
+from sim.fleet.worker import CONTROL_PERIOD_S, Fleet, VehicleSpec
 from smoothfleet.cli.demo import TRAFFIC_DRIVE, TRAFFIC_OFFSET_S
 from vehicle_agent.cars import car_for
 from vehicle_agent.codec import codec_for
@@ -70,26 +69,6 @@ def roster_specs(count: int, geometry: CorridorGeometry) -> list[tuple[VehicleSp
         )
         for order, row in enumerate(rows)
     ]
-
-
-def configure(car: FleetCar, controller: str, geometry: CorridorGeometry) -> None:
-    """What the server's config and plan would give the car's agent."""
-    interface = car.agent.car
-    spec = car.spec
-    config = VehicleConfig(
-        vehicle_id=spec.vehicle_id,
-        make=interface.make,
-        model=interface.model,
-        year=spec.year,
-        actuation=interface.actuation,
-        corridor_id=CORRIDOR,
-        route="I-24-WB mainline",
-        assigned_lane=spec.lane,
-        controller=ControllerConfig(name=controller, params={}),
-        stale_plan_after_s=3600.0,
-    )
-    car.agent.configure(config, geometry)
-    car.agent.accept_plan(uniform_plan(25.0, published=car.clock.now(), lanes=(spec.lane,)))
 
 
 def decode_baseline(frames_per_make: Counter[str], dbc_cache: Path) -> float:
@@ -135,7 +114,7 @@ def main() -> None:
             server_for=lambda vehicle: None,
         )
         for car, (_, controller) in zip(fleet.cars, specs, strict=True):
-            configure(car, controller, geometry)
+            car.configure_without_server(controller, geometry, 25.0)
         fleet.start()
         step_cpu: list[float] = []
         intervals: list[float] = []

@@ -131,19 +131,21 @@ class Rig:
 def vehicle_config(
     key: str, controller: str, params: dict[str, Any] | None = None, **fields: Any
 ) -> VehicleConfig:
+    """The config the server would give a car of `key` running `controller`; `fields` set or
+    override any other of its fields (vehicle_id, assigned_lane, stale_plan_after_s, ...)."""
     car = car_for(key)
-    return VehicleConfig(
-        vehicle_id="SF-TEST",
-        make=car.make,
-        model=car.model,
-        year=car.years[0],
-        actuation=car.actuation,
-        corridor_id=CORRIDOR,
-        route="I-24-WB mainline",
-        assigned_lane=2,
-        controller=ControllerConfig(name=controller, params=params or {}),
-        **fields,
-    )
+    defaults: dict[str, Any] = {
+        "vehicle_id": "SF-TEST",
+        "make": car.make,
+        "model": car.model,
+        "year": car.years[0],
+        "actuation": car.actuation,
+        "corridor_id": CORRIDOR,
+        "route": "I-24-WB mainline",
+        "assigned_lane": 2,
+        "controller": ControllerConfig(name=controller, params=params or {}),
+    }
+    return VehicleConfig(**(defaults | fields))
 
 
 @contextmanager

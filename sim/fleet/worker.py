@@ -36,6 +36,7 @@ from pydantic import BaseModel
 from contract.corridor import CorridorGeometry
 from sim.drives import load_drive
 from sim.emulator.car import CarEmulator
+from sim.emulator.rig import uniform_plan, vehicle_config
 from sim.energy import RAV4_2019
 from sim.fleet.traffic import CorridorTraffic, TrafficLeaders, synthetic_waves
 from vehicle_agent.agent import Agent
@@ -112,6 +113,24 @@ class FleetCar:
     emulator: CarEmulator
     agent: Agent
     buses: tuple[can.BusABC, can.BusABC]
+
+    def configure_without_server(
+        self, controller: str, geometry: CorridorGeometry, plan_speed_mps: float
+    ) -> None:
+        """Give the agent what the server's config and a plan at `plan_speed_mps` would give it
+        (a fleet with no server: bench/fleet_step.py, the tests)."""
+        config = vehicle_config(
+            self.agent.car.key,
+            controller,
+            vehicle_id=self.spec.vehicle_id,
+            year=self.spec.year,
+            assigned_lane=self.spec.lane,
+            stale_plan_after_s=3600.0,
+        )
+        self.agent.configure(config, geometry)
+        self.agent.accept_plan(
+            uniform_plan(plan_speed_mps, published=self.clock.now(), lanes=(self.spec.lane,))
+        )
 
     @property
     def sub_ticks(self) -> bool:
@@ -233,7 +252,12 @@ class Fleet:
                 moment = previous + (now - previous) * tick / ticks
                 car.clock.set(moment)
                 car.emulator.step(moment)
-                car.agent.tick()
+                try:
+                    car.agent.tick()
+                except Exception:
+                    # as on a car (vehicle_agent.runner): the agent has handed back; its loop,
+                    # and every other car of the worker, drive on
+                    log.exception("vehicle %s: control step failed", car.spec.vehicle_id)
             car.agent.record()
             self.distance_m += car.emulator.position_m - before
             if car.emulator.position_m > self.corridor.length_m - WRAP_MARGIN_M:
