@@ -79,6 +79,10 @@ ECHO_GRACE_S = 0.3
 # The safety layer refusing a command, or the CAN bus refusing to send one, keeps the agent
 # off for this long (s).
 ACTUATOR_FAULT_HOLD_S = 1.0
+# Presses the car did not confirm (the sequencer gave up: a broken button wire, a car ignoring
+# the frames) keep the agent off this long (s): each retry costs `max_retries` futile presses,
+# so a car whose buttons do not work is retried every few engage waits, not at their rate.
+PRESS_FAULT_HOLD_S = 10.0
 # The reason reported when a pass of the control loop failed outright (`Agent.tick`).
 STEP_FAILED = "agent step failed"
 # A controller that raised keeps the agent off for this long (s): one that keeps failing is
@@ -226,6 +230,7 @@ class Agent:
         self._actuator_fault_until = -math.inf
         self._controller_fault_until = -math.inf
         self._send_fault_until = -math.inf
+        self._press_fault_until = -math.inf
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -299,6 +304,7 @@ class Agent:
                 controller_ok=now >= self._controller_fault_until,
                 actuator_ok=now >= self._actuator_fault_until,
                 commands_sent=now >= self._send_fault_until,
+                presses_confirmed=now >= self._press_fault_until,
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
@@ -466,6 +472,8 @@ class Agent:
                 held = self.sequencer.step(
                     now, reading.acc_speed_setting_mph, reading.acc_gap_setting
                 )
+                if self.sequencer.stalled:
+                    self._press_fault_until = now + PRESS_FAULT_HOLD_S
             if self._own_button is not None and held != self._own_button:
                 self._own_released = (now, self._own_button)
             self._own_button = held

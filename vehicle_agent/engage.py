@@ -7,10 +7,10 @@ button: the agent keeps off until `override_holdoff_s` after the driver's last t
 Every step the inputs are checked in a fixed order; the first that fails hands the car back in
 that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged by
 the driver, GPS healthy, on the assigned corridor, in the assigned lane, plan fresh, controller
-working, actuator healthy, commands reaching the bus, and the stop the leader ahead needs within
-the braking the agent may command. Taking over needs all of them to have held for
-`engage_after_s` without interruption, so a flickering input cannot toggle control on and off at
-the loop rate.
+working, actuator healthy, commands reaching the bus, button presses confirmed by the car, and
+the stop the leader ahead needs within the braking the agent may command. Taking over needs all
+of them to have held for `engage_after_s` without interruption, so a flickering input cannot
+toggle control on and off at the loop rate.
 """
 
 from __future__ import annotations
@@ -44,6 +44,8 @@ class EngageInputs:
     actuator_ok: bool
     # The command frames went out: the CAN bus took the last ones (within the hold).
     commands_sent: bool
+    # The car confirmed the agent's button presses (no stall of the sequencer within the hold).
+    presses_confirmed: bool
     # The stop the radar's leader needs is within the braking the agent may command
     # (vehicle_agent.stopping).
     stop_within_authority: bool
@@ -62,6 +64,7 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("controller_ok", "controller failed"),
     ("actuator_ok", "actuator refused by the safety layer"),
     ("commands_sent", "commands not reaching the CAN bus"),
+    ("presses_confirmed", "button presses not confirmed by the car"),
     ("stop_within_authority", "stopping needs more braking than the agent may command"),
 )
 

@@ -231,6 +231,28 @@ def test_a_failed_pass_lets_go_of_the_button_a_gpio_board_holds(
         assert r.agent.state.reason == "agent step failed"
 
 
+def test_presses_the_car_does_not_take_hand_back_and_say_so(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses
+
+        def lost(frame: can.Message, timeout: float | None = None) -> None:
+            """A broken button wire: the frame leaves without error and never arrives."""
+
+        monkeypatch.setattr(r.agent_bus, "send", lost)
+        r.run(10.0, until=lambda: not engaged(r))
+        assert not engaged(r)
+        assert r.agent.state.reason == "button presses not confirmed by the car"
+        # held off, not re-engaging at the engage wait's rate
+        r.run(5.0)
+        assert not engaged(r)
+        # the wire mended: after the hold the agent takes over and presses again
+        monkeypatch.undo()
+        r.run(15.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+
+
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
 def test_driver_override_hands_back_within_one_period(
     action: str, tmp_path: Path, dbc_cache: Path
