@@ -114,6 +114,12 @@ class VehicleStatusReport(BaseModel):
     policy_sha256: str | None = Field(
         None, pattern=POLICY_SHA256_PATTERN, description="the policy the controller runs"
     )
+    engage_reason: StorableText | None = Field(
+        None,
+        max_length=120,
+        description="why the agent commands the car or leaves it to its stock ACC, in the "
+        "agent's words ('engaged', 'no fresh plan', 'controller failed', ...)",
+    )
 
     _integers = field_validator(
         "gps_satellites", "plan_id", "spool_backlog", "config_version", mode="before"

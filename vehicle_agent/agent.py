@@ -587,6 +587,7 @@ class Agent:
             else None,
             "config_version": self.config.config_version if self.config else None,
             "policy_sha256": snapshot.policy_sha256 if snapshot else None,
+            "engage_reason": snapshot.reason if snapshot else None,
         }
         status = self._message(
             VehicleStatusReport,

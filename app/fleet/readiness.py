@@ -138,6 +138,7 @@ class LastStatus:
     is_ups_on_battery: bool | None = None
     server_rtt_ms: float | None = None
     policy_sha256: str | None = None
+    engage_reason: str | None = None
 
 
 @dataclass(frozen=True)

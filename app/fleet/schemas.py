@@ -129,6 +129,9 @@ class StatusOut(BaseModel):
     ups_on_battery: bool | None
     server_rtt_ms: float | None
     policy_sha256: str | None = Field(None, description="the policy the controller runs")
+    engage_reason: str | None = Field(
+        None, description="why the agent commands the car or leaves it to its stock ACC"
+    )
 
 
 class CheckOut(BaseModel):
@@ -245,6 +248,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
             ups_on_battery=status.is_ups_on_battery,
             server_rtt_ms=status.server_rtt_ms,
             policy_sha256=status.policy_sha256,
+            engage_reason=status.engage_reason,
         ),
         checks=[
             CheckOut(

@@ -103,6 +103,7 @@ class VehicleStatus(Base):
     server_rtt_ms: Mapped[float | None] = mapped_column(REAL)
     config_version: Mapped[int | None] = mapped_column(Integer)
     policy_sha256: Mapped[str | None] = mapped_column(Text)
+    engage_reason: Mapped[str | None] = mapped_column(Text)
 
 
 class InrixEstimate(Base):

@@ -55,6 +55,7 @@ def test_a_status_report_is_stored_with_the_warehouse_names(
         cpu_temp_c=61.5,
         ups_on_battery=False,
         server_rtt_ms=85.0,
+        engage_reason="no fresh plan",
     )
     answer = api.post("/api/v1/vehicles/SF-007/status", json=body, headers=car)
 
@@ -67,6 +68,7 @@ def test_a_status_report_is_stored_with_the_warehouse_names(
     assert (row["is_controller_running"], row["is_ups_on_battery"]) == (False, False)
     assert (row["agent_version"], row["gps_satellites"], row["spool_backlog"]) == ("1.4.2", 11, 3)
     assert row["cpu_temp_c"] == 61.5
+    assert row["engage_reason"] == "no fresh plan"
     assert row["received_at"] is not None
 
     again = api.post("/api/v1/vehicles/SF-007/status", json=body, headers=car)

@@ -453,6 +453,27 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         assert client.get("/timespace", params={"field": "fuel"}).status_code == 400
 
 
+def test_the_status_history_says_why_the_agent_stopped(site: str, seeded_engine: Engine) -> None:
+    now = datetime.now(UTC).replace(microsecond=0)
+    with httpx.Client(base_url=site, timeout=30) as client:
+        admin = issue(seeded_engine, "admin")
+        stopped = healthy_status(
+            now - timedelta(seconds=12),
+            controller_running=False,
+            engage_reason="button presses not confirmed by the car",
+        )
+        post_status(client, admin, "SF-003", **stopped)
+        post_status(client, admin, "SF-003", **healthy_status(now - timedelta(seconds=2)))
+    with logged_in(site, "viewer") as client:
+        history = client.get("/vehicles/SF-003/history/live").text
+    # only the report where it had stopped carries a reason, beside the controller
+    assert history.count('data-field="engage-reason"') == 1
+    assert (
+        '(stopped: <span data-field="engage-reason">button presses not confirmed by the car'
+        "</span>)" in history
+    )
+
+
 def test_days_are_the_corridors_local_days(site: str, seeded_engine: Engine) -> None:
     # Yesterday in Nashville (UTC-6 in winter, -5 in summer) from 17:30 to 19:30: the first
     # hour is engaged, the second not. In UTC the evening spans two days; locally it is one.

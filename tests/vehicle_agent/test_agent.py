@@ -244,6 +244,10 @@ def test_presses_the_car_does_not_take_hand_back_and_say_so(
         r.run(10.0, until=lambda: not engaged(r))
         assert not engaged(r)
         assert r.agent.state.reason == "button presses not confirmed by the car"
+        # the status report says why, for the operator's dashboard
+        status = r.agent.status_report()
+        assert status["controller_running"] is False
+        assert status["engage_reason"] == "button presses not confirmed by the car"
         # held off, not re-engaging at the engage wait's rate
         r.run(5.0)
         assert not engaged(r)
