@@ -19,7 +19,7 @@ import logging
 import math
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -812,6 +812,10 @@ class Agent:
         if self.state.commanding:
             self._hand_back(reason)
         self.state = engage.EngageState(engage.Mode.STOCK, now, None, reason)
+        if self.snapshot is not None:
+            # telemetry reads the snapshot, which the failed pass did not renew: it must not go
+            # on reporting the car as commanded
+            self.snapshot = replace(self.snapshot, mode=self.state.mode, reason=reason)
         if self.buttons is None or self._own_button is None:
             return
         self._own_released = (now, self._own_button)

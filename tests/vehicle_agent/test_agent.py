@@ -196,6 +196,14 @@ def test_a_can_interface_going_down_hands_back_at_once(
         assert not engaged(r)
         assert r.agent.state.reason == "agent step failed"
         assert r.agent.stats.handbacks["agent step failed"] == 1
+        # what the car reports says so too, though no pass renews its snapshot
+        status = r.agent.status_report()
+        assert status["controller_running"] is False
+        assert status["engage_reason"] == "agent step failed"
+        r.clock.advance(1.0)
+        ping = r.agent.ping()
+        assert ping is not None
+        assert ping["controller_engaged"] is False
         # every pass fails while it is down: the agent stays off
         for _ in range(20):
             with pytest.raises(can.CanOperationError):
