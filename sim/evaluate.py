@@ -173,7 +173,7 @@ class Evaluation:
         for result in self.results:
             if result.controller != BASELINE:
                 continue
-            for kpi in filter(None, unmeasured_paper_kpis(result.kpis).split(";")):
+            for kpi in unmeasured_paper_kpis(result.kpis):
                 found.setdefault(kpi, []).append(result.case.name)
         return found
 

@@ -71,12 +71,12 @@ class Kpis:
         return {name: float(value) for name, value in asdict(self).items()}
 
 
-def unmeasured_paper_kpis(baseline: Kpis) -> str:
+def unmeasured_paper_kpis(baseline: Kpis) -> tuple[str, ...]:
     """The paper KPIs the all-human `baseline` gives no figure for (0 or not finite: a drive
     too short for the platoon's tail to pass where its leader started, a leader that never
-    moves), `;`-separated as in `UNMEASURED_COLUMN`. Every controller's change against such a
-    figure is undefined through no fault of its own."""
-    return ";".join(
+    moves). Every controller's change against such a figure is undefined through no fault of
+    its own."""
+    return tuple(
         kpi
         for kpi in PAPER_KPIS
         if (value := float(getattr(baseline, kpi))) == 0 or not math.isfinite(value)

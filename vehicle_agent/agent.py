@@ -76,18 +76,19 @@ CONTROL_PERIOD_S = 0.1
 GPS_MAX_AGE_S = 2.0
 # The car's button message echoes the agent's own presses for a moment after release (s).
 ECHO_GRACE_S = 0.3
-# The safety layer refusing a command, or the CAN bus refusing to send one, keeps the agent
-# off for this long (s).
-ACTUATOR_FAULT_HOLD_S = 1.0
-# Presses the car did not confirm (the sequencer gave up: a broken button wire, a car ignoring
-# the frames) keep the agent off this long (s): each retry costs `max_retries` futile presses,
-# so a car whose buttons do not work is retried every few engage waits, not at their rate.
-PRESS_FAULT_HOLD_S = 10.0
+# How long a fault keeps its engage check failing (s), per check. A controller that raised, the
+# safety layer refusing a command, or the CAN bus refusing to send one: 1 s, so a fault that
+# persists is retried after the hold and the engage wait, not at the control rate. Presses the
+# car did not confirm (the sequencer gave up: a broken button wire, a car ignoring the frames):
+# 10 s, as each retry costs `max_retries` futile presses.
+FAULT_HOLDS_S = {
+    "controller_ok": 1.0,
+    "actuator_ok": 1.0,
+    "commands_sent": 1.0,
+    "presses_confirmed": 10.0,
+}
 # The reason reported when a pass of the control loop failed outright (`Agent.tick`).
 STEP_FAILED = "agent step failed"
-# A controller that raised keeps the agent off for this long (s): one that keeps failing is
-# retried after the hold and the engage wait, not at the control rate.
-CONTROLLER_FAULT_HOLD_S = 1.0
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
@@ -227,10 +228,8 @@ class Agent:
         self._requested_accel = 0.0
         self._own_button: CruiseButton | None = None
         self._own_released: tuple[float, CruiseButton] | None = None
-        self._actuator_fault_until = -math.inf
-        self._controller_fault_until = -math.inf
-        self._send_fault_until = -math.inf
-        self._press_fault_until = -math.inf
+        # engage check (a key of FAULT_HOLDS_S) -> until when its last fault fails it
+        self._faults_until: dict[str, float] = {}
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -301,10 +300,10 @@ class Agent:
                 on_corridor=on_corridor,
                 in_lane=self._in_lane(fix, assignment),
                 plan_fresh=plan_fresh,
-                controller_ok=now >= self._controller_fault_until,
-                actuator_ok=now >= self._actuator_fault_until,
-                commands_sent=now >= self._send_fault_until,
-                presses_confirmed=now >= self._press_fault_until,
+                controller_ok=self._fault_clear("controller_ok", now),
+                actuator_ok=self._fault_clear("actuator_ok", now),
+                commands_sent=self._fault_clear("commands_sent", now),
+                presses_confirmed=self._fault_clear("presses_confirmed", now),
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
@@ -455,7 +454,7 @@ class Agent:
         except Exception as error:  # whatever a controller raises is the controller's failure
             self.stats.controller_errors += 1
             log.warning("controller %s failed: %s", running.config.controller.name, error)
-            self._controller_fault_until = now + CONTROLLER_FAULT_HOLD_S
+            self._fault("controller_ok", now)
             return
         self.stats.control_steps += 1
         if isinstance(action, AccSetPoint):
@@ -473,7 +472,7 @@ class Agent:
                     now, reading.acc_speed_setting_mph, reading.acc_gap_setting
                 )
                 if self.sequencer.stalled:
-                    self._press_fault_until = now + PRESS_FAULT_HOLD_S
+                    self._fault("presses_confirmed", now)
             if self._own_button is not None and held != self._own_button:
                 self._own_released = (now, self._own_button)
             self._own_button = held
@@ -481,17 +480,15 @@ class Agent:
             send_errors_before = self.sender.send_errors
             self.buttons.hold(held, context)
             if sum(self.safety.refused.values()) > refused_before:
-                self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+                self._fault("actuator_ok", now)
             if self.sender.send_errors > send_errors_before:
-                self._send_fault_until = now + ACTUATOR_FAULT_HOLD_S
+                self._fault("commands_sent", now)
         elif self.accel_port is not None and self.state.commanding and self.accel_port.due(now):
             accel = self.limiter.limit(now, self._requested_accel)
             send_errors_before = self.sender.send_errors
             if not self.accel_port.request(accel, context):
-                if self.sender.send_errors > send_errors_before:
-                    self._send_fault_until = now + ACTUATOR_FAULT_HOLD_S
-                else:
-                    self._actuator_fault_until = now + ACTUATOR_FAULT_HOLD_S
+                sent_error = self.sender.send_errors > send_errors_before
+                self._fault("commands_sent" if sent_error else "actuator_ok", now)
 
     # Telemetry --------------------------------------------------------------------------------
 
@@ -805,6 +802,14 @@ class Agent:
                 break
         self._upload_schedule.done(now, 1.0)
         return uploaded
+
+    def _fault(self, check: str, now: float) -> None:
+        """A fault: the engage check `check` fails from now for its hold (FAULT_HOLDS_S)."""
+        self._faults_until[check] = now + FAULT_HOLDS_S[check]
+
+    def _fault_clear(self, check: str, now: float) -> bool:
+        """True when no fault holds `check` failing at `now`."""
+        return now >= self._faults_until.get(check, -math.inf)
 
     def _fail_safe(self, reason: str) -> None:
         """Hand back and release any held button, trusting nothing of the failed pass."""

@@ -183,7 +183,7 @@ def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> D
         accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,
         gap_within_share=within,
-        unmeasured_by_baseline=unmeasured_paper_kpis(base),
+        unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
     )
 
 

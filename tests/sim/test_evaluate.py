@@ -14,7 +14,6 @@ import pytest
 from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.evaluate import (
     BASELINE,
-    UNMEASURED_COLUMN,
     ControllerVariant,
     Evaluation,
     OptimumFileError,

@@ -11,9 +11,10 @@ import pytest
 
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, uniform_plan
+from vehicle_agent.agent import FAULT_HOLDS_S
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers.microaccel import MicroAccelController
-from vehicle_agent.engage import Mode
+from vehicle_agent.engage import CHECKS, Mode
 from vehicle_agent.ports import GpioButtonBoard
 from vehicle_agent.safety import SafetyLayer
 
@@ -111,6 +112,10 @@ def test_can_loss_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) 
         sent = r.emulator.agent_frames
         r.run(1.0)
         assert r.emulator.agent_frames == sent  # no more requests: the stock ACC drives
+
+
+def test_every_fault_hold_holds_an_engage_check() -> None:
+    assert set(FAULT_HOLDS_S) <= {name for name, _ in CHECKS}
 
 
 def test_a_failing_controller_hands_back_within_one_period_and_says_so(
