@@ -20,10 +20,9 @@ from sim.evaluate import (
     RunResult,
     evaluate,
     load_optimum,
-    measured_mean,
 )
 from sim.gaps import GapKpis
-from sim.kpi import Kpis, fuel_economy_mpg
+from sim.kpi import UNMEASURED_COLUMN, Kpis, fuel_economy_mpg, measured_mean
 from sim.report import best_pair, markdown_table, write_csv, write_heatmap
 from sim.scenarios import Case
 from tests.support.servers import cli_env, run_cli
