@@ -101,6 +101,14 @@ MAX_BATCHES_PER_CALL = 5
 ACCEL_FILTER_S = 0.3
 
 
+def fix_is_current(fix: GpsFix | None, now_s: float) -> bool:
+    """Whether `fix` still says where the car is at monotonic `now_s`. A receiver gone quiet
+    (unplugged, no sky, gpsd stopped) or control passes that no longer run leave the last fix in
+    place; past GPS_MAX_AGE_S it neither engages the agent nor goes out as a position or as
+    "GPS fix" in the piStatus report, which clears the car for deployment."""
+    return fix is not None and fix.has_fix and now_s - fix.time_s <= GPS_MAX_AGE_S
+
+
 @dataclass(frozen=True)
 class Assignment:
     """What the server's config made of this vehicle: ready-to-use objects."""
@@ -279,7 +287,7 @@ class Agent:
         reading = car_state.reading
         measured_accel = self._estimate_accel(reading, now)
         fix = self.gps.latest()
-        gps_ok = fix is not None and fix.has_fix and now - fix.time_s <= GPS_MAX_AGE_S
+        gps_ok = fix_is_current(fix, now)
         assignment = self.assignment
         x_m, on_corridor = self._locate(fix, reading, now) if gps_ok else (None, False)
         lane_plan = self.lane_plan
@@ -508,16 +516,17 @@ class Agent:
         return True
 
     def ping(self) -> dict[str, Any] | None:
-        """The ping for the latest snapshot as `contract.vehicles.Ping` JSON (None without a GPS
-        fix: lat/lon are required)."""
+        """The ping for the latest snapshot as `contract.vehicles.Ping` JSON (None without a
+        current GPS fix: lat/lon are required, and an old fix is not where the car is)."""
         snapshot = self.snapshot
-        if snapshot is None or snapshot.fix is None or not snapshot.fix.has_fix:
+        fix = snapshot.fix if snapshot else None
+        if snapshot is None or fix is None or not fix_is_current(fix, self.clock.monotonic()):
             return None
         ts = self.clock.now()
         if self._last_ping_ts is not None and ts <= self._last_ping_ts:
             return None  # (vehicle_id, ts) is the ping's key: never two at one instant
         self._last_ping_ts = ts
-        reading, fix = snapshot.reading, snapshot.fix
+        reading = snapshot.reading
         ping: dict[str, Any] = {
             "vehicle_id": self.vehicle_id,
             "ts": ts.isoformat(timespec="milliseconds"),
@@ -559,7 +568,7 @@ class Agent:
         frames = self.reader.stats.frames
         rate = (frames - frames_then) / (now - since) if now > since else 0.0
         self._frames_at_status = (now, frames)
-        fix = snapshot.fix if snapshot else None
+        fix = snapshot.fix if snapshot and fix_is_current(snapshot.fix, now) else None
         reading = snapshot.reading if snapshot else None
         report: dict[str, Any] = {
             "ts": self.clock.now().isoformat(timespec="milliseconds"),
@@ -567,7 +576,7 @@ class Agent:
             "uptime_s": round(now - self.started_s, 1),
             "can_ok": snapshot is not None and snapshot.can_problem is None,
             "can_msgs_per_s": round(rate, 1),
-            "gps_fix": fix is not None and fix.has_fix,
+            "gps_fix": fix is not None,
             "gps_satellites": fix.satellites if fix else None,
             "acc_available": reading.acc_available if reading else None,
             "controller": snapshot.controller if snapshot else None,

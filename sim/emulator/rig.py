@@ -79,7 +79,9 @@ def uniform_plan(
 
 
 class EmulatorGps:
-    """GPS fixes from the emulated car's position; `offset_m` moves them sideways off the road."""
+    """GPS fixes from the emulated car's position; `offset_m` moves them sideways off the road;
+    `silent` stops new fixes as a receiver gone quiet does, the last one staying the latest (as
+    `vehicle_agent.gps.GpsdSource` keeps it)."""
 
     def __init__(self, emulator: CarEmulator, clock: ManualClock) -> None:
         self.emulator = emulator
@@ -87,8 +89,15 @@ class EmulatorGps:
         self.offset_m = 0.0
         self.heading_offset_deg = 0.0
         self.lane: int | None = None
+        self.silent = False
+        self._latest: GpsFix | None = None
 
     def latest(self) -> GpsFix | None:
+        if not self.silent:
+            self._latest = self._fix()
+        return self._latest
+
+    def _fix(self) -> GpsFix | None:
         fix = self.emulator.gps_fix(self.clock.monotonic())
         if fix is None:
             return None

@@ -4,6 +4,7 @@ taking over, reaching set points, handing back within one control period, bad in
 from __future__ import annotations
 
 from dataclasses import replace
+from datetime import datetime, timedelta
 from pathlib import Path
 
 import can
@@ -11,7 +12,7 @@ import pytest
 
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, uniform_plan
-from vehicle_agent.agent import FAULT_HOLDS_S
+from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import CHECKS, Mode
@@ -214,6 +215,10 @@ def test_a_can_interface_going_down_hands_back_at_once(
             with pytest.raises(can.CanOperationError):
                 r.run(CONTROL_PERIOD_S)
         assert not engaged(r)
+        # no pass renews the position: once older than a fix may be, it is no longer pinged
+        r.clock.advance(GPS_MAX_AGE_S)
+        assert r.agent.ping() is None
+        assert r.agent.status_report()["gps_fix"] is False
         # up again: the agent takes over by itself
         monkeypatch.undo()
         r.run(5.0, until=lambda: engaged(r))
@@ -268,6 +273,39 @@ def test_presses_the_car_does_not_take_hand_back_and_say_so(
         monkeypatch.undo()
         r.run(15.0, until=lambda: engaged(r))
         assert engaged(r), r.agent.state.reason
+
+
+def test_a_silent_gps_receiver_is_no_fix_in_pings_or_status(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A receiver gone quiet leaves its last fix the latest: that position is not where the car
+    is, so after GPS_MAX_AGE_S it is neither pinged nor reported as a fix (which keeps a car
+    cleared for deployment)."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        r.run(2.0)
+        assert r.agent.status_report()["gps_fix"] is True
+        r.gps.silent = True
+        quiet_at = r.clock.now()
+        r.run(GPS_MAX_AGE_S + CONTROL_PERIOD_S)
+        assert not engaged(r)
+        assert r.agent.state.reason == "no GPS fix"
+        spooled = r.agent.stats.pings_spooled
+        r.run(5.0)
+        assert r.agent.stats.pings_spooled == spooled
+        last_ping = r.agent.spool.oldest(100)[-1][1]
+        assert datetime.fromisoformat(last_ping["ts"]) <= quiet_at + timedelta(
+            seconds=GPS_MAX_AGE_S
+        )
+        status = r.agent.status_report()
+        assert status["gps_fix"] is False
+        assert "gps_satellites" not in status
+        # fixes again: pinged and engaged once more
+        r.gps.silent = False
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.ping() is not None
+        assert r.agent.status_report()["gps_fix"] is True
 
 
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
