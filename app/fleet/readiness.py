@@ -362,11 +362,14 @@ def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> 
             f"runs {name}, assigned {facts.assigned_controller}",
         )
     if not status.is_controller_running:
+        # the agent says why (its engage check that failed), so the operator is pointed at the
+        # part at fault: the driver, the GPS, the plan, the buttons, the CAN bus
+        why = f": {status.engage_reason}" if status.engage_reason else ""
         return Grade(
             "amber",
             f"{name} idle",
-            "the controller is not driving the car (not engaged)",
-            f"controller {name} not engaged",
+            f"the controller is not driving the car (not engaged{why})",
+            f"controller {name} not engaged{why}",
         )
     return Grade("green", f"{name} runs", "the assigned controller drives the car")
 

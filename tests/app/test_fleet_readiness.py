@@ -150,6 +150,19 @@ def test_each_check_grades_what_the_car_reported(
         assert readiness.problems == (result.reason,)
 
 
+def test_a_car_not_engaged_says_why_the_agent_gave() -> None:
+    idle = healthy_status(is_controller_running=False)
+    readiness = assess(healthy_facts(last_status=idle), NOW, LIMITS)
+    assert readiness.reasons == ("controller microaccel_acc not engaged",)
+    stalled = replace(idle, engage_reason="button presses not confirmed by the car")
+    readiness = assess(healthy_facts(last_status=stalled), NOW, LIMITS)
+    assert readiness.level_of("controller") == "amber"
+    assert readiness.reasons == (
+        "controller microaccel_acc not engaged: button presses not confirmed by the car",
+    )
+    assert readiness.is_cleared
+
+
 def test_agent_version_is_amber_only_when_a_version_is_required() -> None:
     facts = healthy_facts(last_status=healthy_status(agent_version="0.9.0"))
     assert assess(facts, NOW, LIMITS).level_of("agent") == "green"
