@@ -104,16 +104,33 @@ class CorridorGrid:
 
 @dataclass(frozen=True)
 class InrixHistory:
-    """INRIX snapshots of one corridor: speed (m/s, NaN = no reading) per snapshot and segment."""
+    """INRIX snapshots of one corridor: speed (m/s, NaN = no reading) per snapshot and segment.
+
+    `is_reading` says which speeds INRIX reported in that snapshot; by default every finite one.
+    A filled history (`planner.predict.usable_history`) has no NaN left, and its `is_reading`
+    keeps apart what was read from what was carried forward or interpolated, so that a trend is
+    fitted only on readings.
+    """
 
     measured_at_s: FloatArray
     speed_mps: FloatArray
     segment_center_x_m: FloatArray
+    is_reading: BoolArray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "measured_at_s", _floats(self.measured_at_s))
         object.__setattr__(self, "speed_mps", np.atleast_2d(_floats(self.speed_mps)))
         object.__setattr__(self, "segment_center_x_m", _floats(self.segment_center_x_m))
+        if self.is_reading is None:
+            object.__setattr__(self, "is_reading", np.isfinite(self.speed_mps))
+        else:
+            read = np.atleast_2d(np.asarray(self.is_reading, dtype=bool))
+            if read.shape != self.speed_mps.shape:
+                raise ValueError(
+                    f"INRIX history: reading mask of shape {read.shape} for speeds of shape "
+                    f"{self.speed_mps.shape}"
+                )
+            object.__setattr__(self, "is_reading", read)
         snapshots, segments = self.speed_mps.shape
         if snapshots != len(self.measured_at_s):
             raise ValueError(
@@ -137,7 +154,18 @@ class InrixHistory:
     def until(self, now_s: float) -> InrixHistory:
         """The snapshots measured at or before `now_s` (what a planner running then could see)."""
         keep = self.measured_at_s <= now_s
-        return InrixHistory(self.measured_at_s[keep], self.speed_mps[keep], self.segment_center_x_m)
+        return InrixHistory(
+            self.measured_at_s[keep],
+            self.speed_mps[keep],
+            self.segment_center_x_m,
+            self.readings[keep],
+        )
+
+    @property
+    def readings(self) -> BoolArray:
+        """`is_reading`, never None after construction."""
+        assert self.is_reading is not None
+        return self.is_reading
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,12 @@ class PlannerParams(BaseModel):
     predictor: str = "wave_trend"
     max_inrix_age_s: float = Field(600.0, gt=0, description="older INRIX is no estimate at all")
     inrix_history_s: float = Field(900.0, gt=0, description="how far back the history reaches")
+    min_inrix_coverage: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="share of the segments INRIX must have read within max_inrix_age_s",
+    )
     wave_speed_mps: float = Field(
         15 / 3.6, ge=0, le=15, description="speed at which changes travel upstream (15 km/h)"
     )

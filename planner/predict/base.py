@@ -44,16 +44,21 @@ def segment_profile(
 def usable_history(history: InrixHistory, now_s: float, params: PlannerParams) -> InrixHistory:
     """The snapshots a planner may use at `now_s`, with missing readings filled.
 
-    A segment without a reading keeps its previous snapshot's speed; one never read in the
-    window takes the speed interpolated from its neighbours in the same snapshot. Snapshots with
-    no reading at all are dropped. Raises NoInrixEstimate when the newest is too old.
+    A segment without a reading keeps its last reading for at most `max_inrix_age_s` (measured
+    at each snapshot, and at `now_s` for the newest, which the nowcast starts from); one without
+    a reading that recent takes the speed interpolated from its neighbours in the same snapshot.
+    Snapshots with no reading at all are dropped. Raises NoInrixEstimate when the newest is too
+    old, or when it reads too few segments (`min_inrix_coverage`): one fresh segment must not
+    carry the whole corridor, nor a reading kept from many minutes ago stand for now. The result
+    marks what was read (`is_reading`) apart from what was filled.
     """
     recent = history.until(now_s)
     keep = recent.measured_at_s >= now_s - params.inrix_history_s
     times = recent.measured_at_s[keep]
     speeds = recent.speed_mps[keep].copy()
-    has_reading = np.isfinite(speeds).any(axis=1)
-    times, speeds = times[has_reading], speeds[has_reading]
+    is_reading = recent.readings[keep] & np.isfinite(speeds)
+    has_reading = is_reading.any(axis=1)
+    times, speeds, is_reading = times[has_reading], speeds[has_reading], is_reading[has_reading]
     if len(times) == 0:
         raise NoInrixEstimate(f"no INRIX reading in the last {params.inrix_history_s:.0f} s")
     age_s = now_s - float(times[-1])
@@ -61,9 +66,24 @@ def usable_history(history: InrixHistory, now_s: float, params: PlannerParams) -
         raise NoInrixEstimate(
             f"newest INRIX is {age_s:.0f} s old (limit {params.max_inrix_age_s:.0f} s)"
         )
+    speeds[~is_reading] = np.nan
+    read_at_s = np.where(is_reading, times[:, None], np.nan)
     for row in range(1, len(speeds)):
-        missing = np.isnan(speeds[row])
+        missing = ~is_reading[row]
         speeds[row, missing] = speeds[row - 1, missing]
+        read_at_s[row, missing] = read_at_s[row - 1, missing]
+    as_of_s = times.copy()
+    as_of_s[-1] = now_s
+    with np.errstate(invalid="ignore"):
+        too_old = as_of_s[:, None] - read_at_s > params.max_inrix_age_s
+    speeds[too_old] = np.nan
+    segments = speeds.shape[1]
+    covered = int(np.isfinite(speeds[-1]).sum())
+    if covered < params.min_inrix_coverage * segments:
+        raise NoInrixEstimate(
+            f"INRIX read only {covered} of {segments} segments in the last "
+            f"{params.max_inrix_age_s:.0f} s (at least {params.min_inrix_coverage:.0%} needed)"
+        )
     centers = history.segment_center_x_m
     for row in range(len(speeds)):
         missing = np.isnan(speeds[row])
@@ -71,4 +91,4 @@ def usable_history(history: InrixHistory, now_s: float, params: PlannerParams) -
             speeds[row, missing] = np.interp(
                 centers[missing], centers[~missing], speeds[row, ~missing]
             )
-    return InrixHistory(times, speeds, centers)
+    return InrixHistory(times, speeds, centers, is_reading)

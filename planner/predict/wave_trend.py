@@ -21,15 +21,25 @@ from planner.predict.base import segment_profile
 
 
 def trend_mps2(history: InrixHistory, snapshots: int) -> FloatArray:
-    """Least-squares slope (m/s per s) of each segment's speed over the newest snapshots."""
-    times = history.measured_at_s[-snapshots:]
-    speeds = history.speed_mps[-snapshots:]
-    if len(times) < 2:
-        return np.zeros(speeds.shape[1])
-    centred = times - times.mean()
-    slope: FloatArray = (centred[:, None] * (speeds - speeds.mean(axis=0))).sum(axis=0) / (
-        centred**2
-    ).sum()
+    """Least-squares slope (m/s per s) of each segment's speed over the newest snapshots,
+    fitted on its readings only (`is_reading`): a speed carried forward or taken from the
+    neighbours is no measurement of change, and a segment read fewer than twice has no trend."""
+    times = history.measured_at_s[-snapshots:, None]
+    read = history.readings[-snapshots:]
+    speeds = np.where(read, history.speed_mps[-snapshots:], 0.0)
+    count = read.sum(axis=0)
+    enough = count >= 2
+    per_reading = np.maximum(count, 1)
+    mean_time = (read * times).sum(axis=0) / per_reading
+    mean_speed = speeds.sum(axis=0) / per_reading
+    centred = np.where(read, times - mean_time, 0.0)
+    spread = (centred**2).sum(axis=0)
+    fitted = enough & (spread > 0)
+    slope: FloatArray = np.where(
+        fitted,
+        (centred * (speeds - mean_speed)).sum(axis=0) / np.where(fitted, spread, 1.0),
+        0.0,
+    )
     return slope
 
 

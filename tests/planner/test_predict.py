@@ -73,3 +73,55 @@ def test_no_reading_at_all_is_no_estimate() -> None:
     history = InrixHistory([0.0], [[np.nan, np.nan, np.nan]], CENTERS)
     with pytest.raises(NoInrixEstimate, match="no INRIX reading"):
         usable_history(history, 10.0, PlannerParams())
+
+
+def test_a_reading_is_carried_forward_no_longer_than_inrix_may_be_old() -> None:
+    # segment 1 was last read 700 s before now: past max_inrix_age_s (600 s) its slowdown is no
+    # longer the road's, and it takes its neighbours' speed instead
+    history = InrixHistory([0.0, 500.0], [[30.0, 12.0, 20.0], [31.0, np.nan, 21.0]], CENTERS)
+    usable = usable_history(history, 700.0, PlannerParams(max_inrix_age_s=600))
+    assert usable.speed_mps[-1].tolist() == [31.0, 26.0, 21.0]
+    # at 550 s it was 550 s old and still stood for the segment
+    usable = usable_history(history, 550.0, PlannerParams(max_inrix_age_s=600))
+    assert usable.speed_mps[-1].tolist() == [31.0, 12.0, 21.0]
+    assert usable.readings.tolist() == [[True] * 3, [True, False, True]]
+
+
+def test_one_fresh_segment_cannot_carry_a_corridor_read_long_ago() -> None:
+    # every segment read 890 s before now with a slowdown in the middle; 60 s ago only the first
+    history = InrixHistory([0.0, 830.0], [[30.0, 5.0, 30.0], [30.0, np.nan, np.nan]], CENTERS)
+    with pytest.raises(NoInrixEstimate, match="INRIX read only 1 of 3 segments in the last 600 s"):
+        usable_history(history, 890.0, PlannerParams(max_inrix_age_s=600))
+    # half the corridor read is enough (the default share); here 2 of 3
+    history = InrixHistory([0.0, 830.0], [[30.0, 5.0, 30.0], [30.0, np.nan, 28.0]], CENTERS)
+    assert usable_history(history, 890.0, PlannerParams()).speed_mps[-1].tolist() == [
+        30.0,
+        29.0,
+        28.0,
+    ]
+
+
+def test_the_trend_is_fitted_on_readings_only() -> None:
+    # segment 2 is missing from the first two snapshots: filled from its neighbour (30 m/s),
+    # then read at a steady 12 m/s. Filled values are no change: it has no trend.
+    history = InrixHistory(
+        [0.0, 60.0, 120.0],
+        [[30.0, 30.0, np.nan], [30.0, 30.0, np.nan], [30.0, 30.0, 12.0]],
+        CENTERS,
+    )
+    usable = usable_history(history, 180.0, PlannerParams())
+    assert usable.speed_mps[:, 2].tolist() == [30.0, 30.0, 12.0]
+    predicted = PREDICTORS.get("wave_trend")(usable, CENTERS, 180.0, PlannerParams())
+    assert predicted.tolist() == [30.0, 30.0, 12.0]
+    # read at 0 s and 120 s only (the 60 s reading lost): the slope of those two, -0.05 m/s/s
+    history = InrixHistory(
+        [0.0, 60.0, 120.0],
+        [[30.0, 30.0, 24.0], [30.0, 30.0, np.nan], [30.0, 30.0, 18.0]],
+        CENTERS,
+    )
+    usable = usable_history(history, 120.0, PlannerParams())
+    predicted = PREDICTORS.get("wave_trend")(usable, CENTERS, 120.0, PlannerParams())
+    assert predicted[2] == pytest.approx(18.0)  # h = 0: no horizon to carry the trend over
+    params = PlannerParams(wave_speed_mps=0.0, trend_weight=1.0, trend_damping_s=1e9)
+    predicted = PREDICTORS.get("wave_trend")(usable, CENTERS, 180.0, params)
+    assert predicted[2] == pytest.approx(18.0 - 0.05 * 60.0, rel=1e-6)
