@@ -11,6 +11,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from contract.idm import I24_IDM
 from contract.units import MPS_PER_MPH
 
 
@@ -92,6 +93,20 @@ class PlannerParams(BaseModel):
             raise ValueError(
                 f"standing_required ({self.standing_required}) cannot exceed standing_cycles "
                 f"({self.standing_cycles})"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _buffer_below_free_flow(self) -> PlannerParams:
+        # a queue's slowest cell is at most slow_speed_mps, so its buffer drives at most this
+        # fast; at the IDM's desired speed the lane holds no queue (density 0), and a buffer
+        # there could hold none of the queue's vehicles (planner.buffers.queue_storage)
+        fastest_buffer = self.slow_speed_mps + self.buffer_speed_margin_mps
+        if fastest_buffer >= I24_IDM.desired_speed_mps:
+            raise ValueError(
+                f"slow_speed_mps + buffer_speed_margin_mps ({fastest_buffer:.1f} m/s) must be "
+                f"below the IDM's desired speed ({I24_IDM.desired_speed_mps:.1f} m/s), where a "
+                "lane holds no queue"
             )
         return self
 

@@ -114,3 +114,7 @@ def test_unknown_algorithm_and_bad_parameters_say_what_was_wrong() -> None:
         PlannerParams.parse({"colour": "red"})
     with pytest.raises(InvalidParams, match="standing_required"):
         PlannerParams.parse({"standing_required": 6, "standing_cycles": 5})
+    # a buffer at the IDM's desired speed could store no vehicle (density 0): every cycle with
+    # a standing queue would divide by zero
+    with pytest.raises(InvalidParams, match="buffer_speed_margin_mps .* must be below"):
+        PlannerParams.parse({"buffer_speed_margin_mps": 10})
