@@ -1,8 +1,10 @@
 """Every knob of the Speed Planner, validated, and stored with each plan (plan_run.params).
 
-Defaults follow the paper and ../shared/reference where they name a value (15 km/h congestion
-waves, 60 s ping window, 60 mph / 4 mph bottleneck test, 4 of the last 5 cycles, -0.1 m/s^2 ramp,
-0.8 floor); the rest were checked on the real drives of ../shared/data (docs/planner.md).
+Defaults: the paper gives the 60 s period and ping window and the uniform kernel; the planner's
+issue (issue 4) gives 15 km/h congestion waves, the 60 mph / 4 mph bottleneck test, 4 of the
+last 5 cycles, the -0.1 m/s^2 ramp and a floor, as examples; the rest are this project's choices,
+checked on the real drives of ../shared/data (docs/planner.md). The buffer step is not the
+paper's (an RL-designed target evaluated in a PDE-ODE model) but a closed-form stand-in.
 """
 
 from __future__ import annotations

@@ -1,6 +1,8 @@
 """`kernel_smooth_buffer`: the paper's second variant, all steps (the MVT's choice).
 
 Buffers are designed upstream of standing bottlenecks; elsewhere the smoothed TSE is the plan.
+The buffer designer is this project's closed-form stand-in for the paper's RL / PDE-ODE buffer
+design (docs/planner.md, step 5).
 """
 
 from __future__ import annotations
