@@ -39,7 +39,7 @@ STATUS_REPORTS = Counter(
 )
 INRIX_SEGMENTS = Counter(
     "smoothfleet_inrix_segments",
-    "INRIX segment readings received, by outcome (stored, duplicate, unknown).",
+    "INRIX segment readings received, by outcome (stored, duplicate, unknown, refused).",
     ["outcome"],
 )
 REQUEST_SECONDS = Histogram(

@@ -5,6 +5,11 @@ Accepted as is: `result.segmentspeeds[]` each with a `timestamp` and `segments[]
 real-time, 20 mixed, 10 historical), `c-Value` (0-100), `segmentClosed` and `subSegments`
 (ignored). Unknown fields are ignored. A set without a timestamp takes the response's
 `createdDate`; a timestamp without a zone is UTC (the provider's clock).
+
+Each segment is read on its own, as a batch's pings are: one the model refuses (a value out of
+range, no code) or a code read twice at one timestamp is refused with its place and reason, and
+the snapshot's other readings are kept. A provider that sends one bad segment must not cost the
+planner that minute of the whole corridor.
 """
 
 from __future__ import annotations
@@ -56,7 +61,12 @@ class InrixSegmentSet(BaseModel):
     model_config = ConfigDict(extra="ignore")
 
     timestamp: datetime | None = None
-    segments: list[InrixSegment]
+    # Each item is read on its own (InrixSegment): a bad one is refused with its place while the
+    # others are stored, so any item is acceptable here.
+    segments: list[Any] = Field(
+        description="segment readings (schema InrixSegment), each read on its own: one that is "
+        "not a valid reading is refused in the answer's `refused`, the others stored"
+    )
 
     _text = field_validator("timestamp", mode="before")(time_text)
     _utc = field_validator("timestamp")(_as_utc)
@@ -120,6 +130,24 @@ class SegmentReading:
     is_closed: bool
 
 
+@dataclass(frozen=True, slots=True)
+class RefusedReading:
+    """A segment of the response that is not a reading to store, and why."""
+
+    segment_set: int
+    segment: int
+    code: str | None
+    error: str
+
+
+@dataclass(frozen=True, slots=True)
+class SnapshotReadings:
+    """What a response holds: the readings to store and the segments refused."""
+
+    readings: list[SegmentReading]
+    refused: list[RefusedReading]
+
+
 def _mps(mph: float | None) -> float | None:
     return None if mph is None else mph * MPS_PER_MPH
 
@@ -136,21 +164,53 @@ def parse_response(document: Any) -> InrixResponse:
         ) from None
 
 
-def readings(document: Any) -> list[SegmentReading]:
+def readings(document: Any) -> SnapshotReadings:
     """The readings of a provider response (parsed JSON) in SI units."""
     return readings_of(parse_response(document))
 
 
-def readings_of(response: InrixResponse) -> list[SegmentReading]:
-    """The response's readings, converted from mph and minutes to SI units."""
+def _segment(item: Any) -> InrixSegment:
+    """One item of `segments[]` as a reading; ValueError saying what is wrong if it is none."""
+    try:
+        return InrixSegment.model_validate(item)
+    except ValidationError as error:
+        first = error.errors(include_url=False)[0]
+        where = ".".join(str(part) for part in first["loc"])
+        raise ValueError(f"{where}: {first['msg']}" if where else str(first["msg"])) from None
+
+
+def readings_of(response: InrixResponse) -> SnapshotReadings:
+    """The response's readings, converted from mph and minutes to SI units, and its segments
+    refused (not a reading, or a code already read at that timestamp)."""
     found: list[SegmentReading] = []
+    refused: list[RefusedReading] = []
     for number, segment_set in enumerate(response.result.segmentspeeds):
         measured_at = segment_set.timestamp or response.created_date
         if measured_at is None:
             raise InrixFormatError(
                 f"result.segmentspeeds.{number}: no timestamp (and no createdDate)"
             )
-        for segment in segment_set.segments:
+        first_of_code: dict[str, int] = {}
+        for index, item in enumerate(segment_set.segments):
+            code = item.get("code") if isinstance(item, dict) else None
+            named = code if isinstance(code, str) else None
+            try:
+                segment = _segment(item)
+            except ValueError as error:
+                refused.append(RefusedReading(number, index, named, str(error)))
+                continue
+            if segment.code in first_of_code:
+                refused.append(
+                    RefusedReading(
+                        number,
+                        index,
+                        segment.code,
+                        f"code {segment.code} already read at this timestamp (segment "
+                        f"{first_of_code[segment.code]}, which is kept)",
+                    )
+                )
+                continue
+            first_of_code[segment.code] = index
             found.append(
                 SegmentReading(
                     xd_code=segment.code,
@@ -168,4 +228,4 @@ def readings_of(response: InrixResponse) -> list[SegmentReading]:
                     is_closed=segment.segment_closed,
                 )
             )
-    return found
+    return SnapshotReadings(found, refused)

@@ -11,7 +11,7 @@ from app.core.config import Settings
 from app.core.errors import error_responses
 from app.core.sessions import SessionDep
 from app.feeds.inrix import InrixFormatError, InrixResponse, readings_of
-from app.feeds.schemas import InrixAnswer
+from app.feeds.schemas import InrixAnswer, RefusedSegment
 from app.feeds.service import store_readings
 
 router = APIRouter(prefix="/api/v1/feeds", tags=["feeds"])
@@ -24,7 +24,8 @@ async def post_inrix(
     """Store the snapshot's readings in SI units (feed or admin token).
 
     Codes not on any corridor are counted in `unknown_codes`, not stored; a resent snapshot
-    stores nothing twice. Answered after the commit. A snapshot timestamped more than
+    stores nothing twice; a segment that is no valid reading is refused on its own (`refused`)
+    and the others stored. Answered after the commit. A snapshot timestamped more than
     SMOOTHFLEET_PING_MAX_FUTURE_S ahead or SMOOTHFLEET_INRIX_MAX_AGE_DAYS back is refused (422).
     """
     received_at = datetime.now(UTC)
@@ -35,7 +36,7 @@ async def post_inrix(
     settings: Settings = request.app.state.settings
     earliest = received_at - timedelta(days=settings.inrix_max_age_days)
     latest = received_at + timedelta(seconds=settings.ping_max_future_s)
-    for moment in sorted({reading.measured_at for reading in found}):
+    for moment in sorted({reading.measured_at for reading in found.readings}):
         if moment > latest:
             raise HTTPException(
                 422,
@@ -56,4 +57,13 @@ async def post_inrix(
         unknown_codes=result.unknown_codes,
         unknown=result.unknown,
         measured_at=result.measured_at,
+        refused=[
+            RefusedSegment(
+                segment_set=refusal.segment_set,
+                segment=refusal.segment,
+                code=refusal.code,
+                error=refusal.error,
+            )
+            for refusal in result.refused
+        ],
     )

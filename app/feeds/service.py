@@ -3,11 +3,11 @@
 Shared by `POST /api/v1/feeds/inrix`, `smoothfleet inrix poll` and `smoothfleet inrix replay`.
 A code missing from dim_inrix_segment is counted and reported, not stored. A resent snapshot
 finds its (corridor, code, measured_at) keys taken and stores nothing (ON CONFLICT DO NOTHING).
+Segments the response's reading refused (app.feeds.inrix) are counted and passed on.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime, timedelta
 
@@ -16,11 +16,13 @@ from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.ext.asyncio import AsyncSession
 
 from app.core import metrics
-from app.feeds.inrix import SegmentReading
+from app.feeds.inrix import RefusedReading, SnapshotReadings
 from app.models import InrixEstimate, InrixSegment
 
 # Enough of the unknown codes to act on; the count covers them all.
 MAX_UNKNOWN_LISTED = 100
+# Readings per INSERT: 11 parameters each, and a statement takes at most 65,535 parameters.
+READINGS_PER_INSERT = 2000
 
 
 @dataclass(frozen=True)
@@ -32,12 +34,14 @@ class StoreResult:
     unknown_codes: int
     unknown: list[str]
     measured_at: list[datetime]
+    refused: list[RefusedReading]
 
 
 async def store_readings(
-    session: AsyncSession, readings: Sequence[SegmentReading], received_at: datetime
+    session: AsyncSession, snapshot: SnapshotReadings, received_at: datetime
 ) -> StoreResult:
     """Store the readings of known segments; count the rest. The caller commits."""
+    readings = snapshot.readings
     codes = sorted({reading.xd_code for reading in readings})
     found = await session.execute(
         select(InrixSegment.xd_code, InrixSegment.corridor_id).where(
@@ -48,7 +52,7 @@ async def store_readings(
     known = [reading for reading in readings if reading.xd_code in corridor_of]
     unknown = sorted({reading.xd_code for reading in readings} - set(corridor_of))
     accepted = 0
-    if known:
+    for start in range(0, len(known), READINGS_PER_INSERT):
         statement = (
             insert(InrixEstimate)
             .values(
@@ -66,26 +70,33 @@ async def store_readings(
                         "c_value": reading.c_value,
                         "is_closed": reading.is_closed,
                     }
-                    for reading in known
+                    for reading in known[start : start + READINGS_PER_INSERT]
                 ]
             )
             .on_conflict_do_nothing(index_elements=["corridor_id", "xd_code", "measured_at"])
             .returning(InrixEstimate.xd_code)
         )
-        accepted = len((await session.execute(statement)).all())
+        accepted += len((await session.execute(statement)).all())
     unknown_readings = len(readings) - len(known)
     metrics.INRIX_SEGMENTS.labels("stored").inc(accepted)
     metrics.INRIX_SEGMENTS.labels("duplicate").inc(len(known) - accepted)
     metrics.INRIX_SEGMENTS.labels("unknown").inc(unknown_readings)
+    metrics.INRIX_SEGMENTS.labels("refused").inc(len(snapshot.refused))
     return StoreResult(
         accepted=accepted,
         duplicates=len(known) - accepted,
         unknown_codes=unknown_readings,
         unknown=unknown[:MAX_UNKNOWN_LISTED],
         measured_at=sorted({reading.measured_at for reading in readings}),
+        refused=snapshot.refused,
     )
 
 
-def shifted(readings: Sequence[SegmentReading], by: timedelta) -> list[SegmentReading]:
+def shifted(snapshot: SnapshotReadings, by: timedelta) -> SnapshotReadings:
     """The readings with their provider timestamps moved by `by` (replaying old data as new)."""
-    return [replace(reading, measured_at=reading.measured_at + by) for reading in readings]
+    return replace(
+        snapshot,
+        readings=[
+            replace(reading, measured_at=reading.measured_at + by) for reading in snapshot.readings
+        ],
+    )

@@ -42,6 +42,12 @@ def _describe(result: StoreResult) -> str:
     )
     if result.unknown:
         line += f" ({', '.join(result.unknown)})"
+    if result.refused:
+        line += f", {len(result.refused)} refused: " + "; ".join(
+            f"segmentspeeds.{refusal.segment_set}.segments.{refusal.segment}"
+            f"{f' ({refusal.code})' if refusal.code else ''}: {refusal.error}"
+            for refusal in result.refused
+        )
     return line
 
 

@@ -7,16 +7,21 @@ the seed corridor, so the feed reports 3 codes we do not know.
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import Iterator
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import httpx
 import pytest
 from sqlalchemy import Engine, text
+from sqlalchemy.ext.asyncio import async_sessionmaker
 
+from app.core.db import make_async_engine
+from app.feeds.inrix import SegmentReading, SnapshotReadings
 from app.feeds.recording import read_recording, snapshots_from_drive
+from app.feeds.service import StoreResult, store_readings
 from tests.support.api import serving
 from tests.support.servers import cli_env, run_cli
 from tests.support.tokens import bearer, issue
@@ -153,12 +158,8 @@ def test_a_set_without_timestamp_takes_the_response_created_date(
     [
         ({"segmentspeeds": []}, "result"),
         (provider_response({"code": "SF-I24WB-07", "speed": 60}), "no timestamp"),
-        (
-            provider_response({"code": "SF-I24WB-07", "speed": -3}, timestamp="2026-11-23T08:00Z"),
-            "speed",
-        ),
     ],
-    ids=["no-result", "no-timestamp", "negative-speed"],
+    ids=["no-result", "no-timestamp"],
 )
 def test_a_body_that_is_not_a_segment_speed_response_is_422(
     api: httpx.Client,
@@ -171,6 +172,74 @@ def test_a_body_that_is_not_a_segment_speed_response_is_422(
     assert answer.status_code == 422
     assert expected in str(answer.json()["detail"])
     assert estimates(seeded_engine) == {}
+
+
+def test_a_bad_segment_is_refused_on_its_own_and_the_snapshot_kept(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    """One segment out of range, one without a code and a code read twice at one timestamp
+    are refused with their place and reason; the other readings of the minute are stored."""
+    response = provider_response(
+        {"code": "SF-I24WB-05", "speed": 45, "c-Value": 100.5},
+        {"code": "SF-I24WB-06", "speed": -3},
+        {"speed": 50},
+        "not a segment",
+        {"code": "SF-I24WB-07", "speed": 50},
+        {"code": "SF-I24WB-07", "speed": 20},
+        {"code": "SF-I24WB-08", "speed": 55},
+        timestamp="2026-11-23T08:00:00Z",
+    )
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=feed)
+
+    assert answer.status_code == 200
+    body = answer.json()
+    assert (body["accepted"], body["duplicates"], body["unknown_codes"]) == (2, 0, 0)
+    refused = {(r["segment"], r["code"]): r["error"] for r in body["refused"]}
+    assert list(refused) == [
+        (0, "SF-I24WB-05"),
+        (1, "SF-I24WB-06"),
+        (2, None),
+        (3, None),
+        (5, "SF-I24WB-07"),
+    ]
+    assert refused[0, "SF-I24WB-05"].startswith("c-Value: ")
+    assert refused[1, "SF-I24WB-06"].startswith("speed: ")
+    assert refused[2, None].startswith("code: ")
+    assert "already read at this timestamp (segment 4, which is kept)" in refused[5, "SF-I24WB-07"]
+    measured = datetime(2026, 11, 23, 8, 0, tzinfo=UTC)
+    stored = estimates(seeded_engine)
+    assert set(stored) == {("SF-I24WB-07", measured), ("SF-I24WB-08", measured)}
+    assert stored[("SF-I24WB-07", measured)]["speed_mps"] == pytest.approx(50 * MPH)
+
+
+def test_a_snapshot_larger_than_one_insert_is_stored_whole(
+    seeded_engine: Engine, seeded_database_url: str
+) -> None:
+    """One INSERT takes at most 65,535 parameters (5,957 readings of 11): a snapshot of a
+    larger network is stored in several, in one transaction."""
+    codes = [f"SF-I24WB-{seq:02d}" for seq in range(2, 20)]
+    moments = [datetime(2026, 11, 23, 8, 0, tzinfo=UTC) + timedelta(minutes=k) for k in range(400)]
+    snapshot = SnapshotReadings(
+        [
+            SegmentReading(code, moment, 20.0, None, None, None, 30, None, False)
+            for moment in moments
+            for code in codes
+        ],
+        [],
+    )
+    assert len(snapshot.readings) == 7200
+
+    async def store() -> StoreResult:
+        engine = make_async_engine(seeded_database_url, pool_size=1)
+        try:
+            async with async_sessionmaker(engine)() as session, session.begin():
+                return await store_readings(session, snapshot, datetime.now(UTC))
+        finally:
+            await engine.dispose()
+
+    result = asyncio.run(store())
+    assert (result.accepted, result.duplicates) == (7200, 0)
+    assert len(estimates(seeded_engine)) == 7200
 
 
 @pytest.mark.parametrize(("role", "status"), [("admin", 200), ("vehicle", 403), ("viewer", 403)])

@@ -19,7 +19,9 @@ def test_steady_traffic_reads_as_its_speed_in_mph() -> None:
     now = datetime(2026, 1, 5, 12, 0, tzinfo=UTC)
     document = traffic.inrix_response(600.0, now, SEGMENTS)
     response = parse_response(document)
-    readings = readings_of(response)
+    snapshot = readings_of(response)
+    assert snapshot.refused == []
+    readings = snapshot.readings
     assert [r.xd_code for r in readings] == ["SF-I24WB-02", "SF-I24WB-03"]
     # 26.8224 m/s = 60 mph; stamped with the end of the minute that ended 3 minutes ago
     assert document["result"]["segmentspeeds"][0]["segments"][0]["speed"] == 60.0
