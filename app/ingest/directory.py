@@ -3,8 +3,11 @@
 Every ping needs its vehicle's corridor (lanes, map-matching geometry); asking the database per
 ping would double the work of the hot path, so the directory is loaded once and refreshed every
 `roster_cache_ttl_s`. A vehicle added to the roster is seen at once: an unknown vehicle_id makes
-the next request reload the directory (at most once per `MIN_RELOAD_INTERVAL_S`, so a stream of
-bad ids cannot turn into a stream of queries). In the last `REFRESH_AHEAD_SHARE` of a snapshot's
+the request reload the directory, at most once per `MIN_RELOAD_INTERVAL_S` so that a stream of
+bad ids cannot turn into a stream of queries. A request that meets an unknown id sooner after a
+load waits for the next reload rather than answering "unknown vehicle" from a snapshot older
+than the car: the agent drops the pings the server rejects, so a car added just after a reload
+would lose its first ones. In the last `REFRESH_AHEAD_SHARE` of a snapshot's
 life the next request starts its reload in the background and goes on with the snapshot, so
 under traffic no request waits for a reload (every request in flight used to wait for one
 every `roster_cache_ttl_s`: a stall in the ingest tail, docs/performance.md).
@@ -106,12 +109,15 @@ class FleetDirectoryCache:
         now = self._clock()
         age = now - self._loaded_at
         if not reload and current is not None and age < self._ttl_s:
-            unknown = any(v not in current.vehicle_corridor for v in vehicle_ids)
-            if not unknown or age < MIN_RELOAD_INTERVAL_S:
-                if age > self._ttl_s * (1 - REFRESH_AHEAD_SHARE) and self._refresh is None:
-                    self._refresh = asyncio.create_task(self._reload(now))
-                    self._refresh.add_done_callback(self._refresh_done)
-                return current
+            if any(v not in current.vehicle_corridor for v in vehicle_ids):
+                if age < MIN_RELOAD_INTERVAL_S:
+                    await asyncio.sleep(MIN_RELOAD_INTERVAL_S - age)
+                    now = self._clock()
+                return await self._reload(now)
+            if age > self._ttl_s * (1 - REFRESH_AHEAD_SHARE) and self._refresh is None:
+                self._refresh = asyncio.create_task(self._reload(now))
+                self._refresh.add_done_callback(self._refresh_done)
+            return current
         return await self._reload(now)
 
     async def close(self, timeout_s: float) -> None:

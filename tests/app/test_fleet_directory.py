@@ -57,6 +57,53 @@ def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
     assert asyncio.run(scenario()) == (True, True, True, True)
 
 
+def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """The agent drops pings the server rejects: a car added to the roster within
+    MIN_RELOAD_INTERVAL_S of a reload must not be "unknown" to them. The request waits for the
+    next reload instead; a stream of bad ids still costs at most one reload per interval."""
+
+    async def scenario() -> tuple[bool, bool, int]:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            cache = FleetDirectoryCache(engine, ttl_s=30)
+            loads = 0
+            original = cache._load
+
+            async def counted() -> FleetDirectory:
+                nonlocal loads
+                loads += 1
+                return await original()
+
+            cache._load = counted  # type: ignore[method-assign]
+            await cache.directory(["SF-NOBODY"])  # a bad id: this reload is its answer
+            with seeded_engine.begin() as connection:
+                connection.execute(
+                    text(
+                        "INSERT INTO dim_vehicle (vehicle_id, vin, make, model, year, actuation, "
+                        "corridor_id, route, assigned_lane, controller_name, controller_params) "
+                        "SELECT 'SF-777', 'VIN-SF-777', make, model, year, actuation, "
+                        "corridor_id, route, assigned_lane, controller_name, controller_params "
+                        "FROM dim_vehicle WHERE vehicle_id = 'SF-001'"
+                    )
+                )
+            new_car = await cache.directory(["SF-777"])
+            bad_ids = await asyncio.gather(*(cache.directory(["SF-NOBODY"]) for _ in range(20)))
+            return (
+                new_car.corridor_of("SF-777") is not None,
+                all(directory.corridor_of("SF-NOBODY") is None for directory in bad_ids),
+                loads,
+            )
+        finally:
+            await engine.dispose()
+
+    known, still_unknown, loads = asyncio.run(scenario())
+    assert known
+    assert still_unknown
+    assert loads <= 3  # the bad id's, the new car's, and one for the 20 bad requests together
+
+
 def test_a_lone_fix_is_placed_where_the_vectorised_match_places_it(
     seeded_database_url: str,
 ) -> None:
