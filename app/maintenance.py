@@ -2,6 +2,11 @@
 
 Runs at server start-up, every hour inside the server, and on `smoothfleet db maintain`.
 The SQL functions it calls are defined in migration 0001.
+
+Retention also reaches the DEFAULT partition. Partitions are made from yesterday on, so a ping
+of an earlier day (a car's spool uploaded after a week offline, a server down for a week) waits
+there, and no partition of its day is ever made to move it into: without this, such rows would
+outlive every retention window.
 """
 
 from __future__ import annotations
@@ -17,6 +22,10 @@ ENSURE_SQL = text(
 RETENTION_SQL = text(
     "SELECT drop_ping_partitions_before(current_date - CAST(:keep_days AS integer))"
 )
+DEFAULT_RETENTION_SQL = text(
+    "DELETE FROM fact_vehicle_ping_default "
+    "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
+)
 
 
 @dataclass(frozen=True)
@@ -25,13 +34,16 @@ class MaintenanceResult:
 
     partitions_created: int
     partitions_dropped: int
+    default_rows_deleted: int
 
 
 def maintain(connection: Connection, *, ahead_days: int, retention_days: int) -> MaintenanceResult:
-    """Create the coming days' ping partitions and drop those past retention."""
+    """Create the coming days' ping partitions and drop those past retention, and the rows
+    past retention that wait in the default partition."""
     created = connection.execute(ENSURE_SQL, {"ahead": ahead_days}).scalar_one()
     dropped = connection.execute(RETENTION_SQL, {"keep_days": retention_days}).scalar_one()
-    return MaintenanceResult(int(created), int(dropped))
+    deleted = connection.execute(DEFAULT_RETENTION_SQL, {"keep_days": retention_days}).rowcount
+    return MaintenanceResult(int(created), int(dropped), int(deleted))
 
 
 async def maintain_async(

@@ -8,7 +8,8 @@ fact_vehicle_ping is range-partitioned by UTC day of ts. ensure_ping_partitions(
 daily partitions ahead of time (the server calls it at start-up and every hour, and this
 migration calls it once); a DEFAULT partition catches anything outside them so no insert ever
 fails for want of a partition, and the next ensure_ping_partitions() moves those rows into their
-day's partition. drop_ping_partitions_before() implements the retention setting.
+day's partition when it creates that day's (from yesterday on; app/maintenance.py deletes the
+older ones past retention). drop_ping_partitions_before() implements the retention setting.
 """
 
 from collections.abc import Sequence

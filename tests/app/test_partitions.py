@@ -76,6 +76,25 @@ def test_retention_drops_whole_days_past_the_window(seeded_engine: Engine) -> No
     assert remaining == 1
 
 
+def test_retention_reaches_pings_of_a_day_that_never_had_a_partition(
+    seeded_engine: Engine,
+) -> None:
+    """Partitions are made from yesterday on: a ping of ten days ago (a spool uploaded after a
+    week offline) waits in the default partition, and retention must reach it there too."""
+    old_ts = noon(datetime.now(UTC).date() - timedelta(days=10))
+    recent_ts = noon(datetime.now(UTC).date() - timedelta(days=3))
+    with seeded_engine.begin() as connection:
+        connection.execute(INSERT_PING, {"ts": old_ts})
+        connection.execute(INSERT_PING, {"ts": recent_ts})
+    assert partition_of(seeded_engine, old_ts) == "fact_vehicle_ping_default"
+    with seeded_engine.begin() as connection:
+        result = maintain(connection, ahead_days=7, retention_days=5)
+    assert result.default_rows_deleted == 1
+    with seeded_engine.connect() as connection:
+        kept = connection.execute(text("SELECT ts FROM fact_vehicle_ping")).scalars().all()
+    assert kept == [recent_ts]
+
+
 def test_a_duplicate_vehicle_and_ts_is_refused_by_the_database(seeded_engine: Engine) -> None:
     ts = noon(datetime.now(UTC).date())
     with seeded_engine.begin() as connection:
