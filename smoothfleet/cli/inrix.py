@@ -28,6 +28,7 @@ from app.feeds.recording import (
     to_line,
     write_recording,
 )
+from app.feeds.replay import live_offset
 from app.feeds.replay import replay as replay_snapshots
 from app.feeds.service import StoreResult, shifted, store_readings
 from contract.recorded import RecordingError
@@ -146,7 +147,8 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
 @click.option(
     "--shift-to-now",
     is_flag=True,
-    help="Move the provider timestamps so the first snapshot is stamped now (demos).",
+    help="Stamp the recording as live data: shifted so no snapshot is stamped after it is "
+    "stored (at --speed 1 the first is stamped now, at --speed 0 the last; demos).",
 )
 def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
     """Store a recording's snapshots in the order they were received."""
@@ -156,9 +158,7 @@ def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
         snapshots = read_recording(recording)
     except RecordingError as error:
         raise CliError(str(error)) from None
-    offset = (
-        datetime.now(UTC) - snapshots[0].recorded_at if shift_to_now and snapshots else timedelta(0)
-    )
+    offset = live_offset(snapshots, speed, datetime.now(UTC)) if shift_to_now else timedelta(0)
 
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
         return await replay_snapshots(

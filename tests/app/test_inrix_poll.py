@@ -17,7 +17,7 @@ from sqlalchemy import Engine, text
 
 from app.feeds.poller import InrixPoller
 from app.feeds.recording import RecordedSnapshot, read_recording, snapshots_from_drive
-from app.feeds.replay import replay
+from app.feeds.replay import live_offset, replay
 from tests.support.servers import cli_env, run_cli
 
 KEY = "inrix-key-7f3a9c"
@@ -199,3 +199,20 @@ def test_replay_keeps_the_recorded_spacing_divided_by_the_speed() -> None:
     fast = FakeClock()
     asyncio.run(replay(snapshots, handle, speed=0, sleep=fast.sleep, clock=fast))
     assert fast.sleeps == []
+
+
+@pytest.mark.parametrize("speed", [0.5, 1.0, 10.0, 0.0])
+def test_a_replay_shifted_to_now_never_stamps_a_snapshot_after_it_is_stored(speed: float) -> None:
+    """The planner ignores readings from its future: a live replay must not stamp any ahead of
+    the moment it stores it, and (for the largest such shift) one is stamped exactly then."""
+    start = datetime(2021, 3, 15, 13, 18, tzinfo=UTC)
+    snapshots = [RecordedSnapshot(start + timedelta(minutes=k), {}) for k in range(13)]
+    now = datetime(2026, 12, 2, 9, 0, tzinfo=UTC)
+    offset = live_offset(snapshots, speed, now)
+    lags = []
+    for snapshot in snapshots:
+        elapsed = (snapshot.recorded_at - start) / speed if speed else timedelta(0)
+        lags.append(now + elapsed - (snapshot.recorded_at + offset))
+    assert min(lags) == timedelta(0)
+    stamped_now = {1.0: 0, 0.5: 0, 10.0: 12, 0.0: 12}[speed]
+    assert lags[stamped_now] == timedelta(0)
