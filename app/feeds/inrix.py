@@ -152,15 +152,20 @@ def _mps(mph: float | None) -> float | None:
     return None if mph is None else mph * MPS_PER_MPH
 
 
+def _first_error(error: ValidationError) -> str:
+    """The first thing pydantic found wrong, as "where: what"."""
+    first = error.errors(include_url=False)[0]
+    where = ".".join(str(part) for part in first["loc"])
+    return f"{where}: {first['msg']}" if where else str(first["msg"])
+
+
 def parse_response(document: Any) -> InrixResponse:
     """The provider response in `document` (parsed JSON); InrixFormatError if it is not one."""
     try:
         return InrixResponse.model_validate(document)
     except ValidationError as error:
-        first = error.errors(include_url=False)[0]
-        where = ".".join(str(part) for part in first["loc"])
         raise InrixFormatError(
-            f"not an INRIX segment-speed response: {where}: {first['msg']}"
+            f"not an INRIX segment-speed response: {_first_error(error)}"
         ) from None
 
 
@@ -174,9 +179,7 @@ def _segment(item: Any) -> InrixSegment:
     try:
         return InrixSegment.model_validate(item)
     except ValidationError as error:
-        first = error.errors(include_url=False)[0]
-        where = ".".join(str(part) for part in first["loc"])
-        raise ValueError(f"{where}: {first['msg']}" if where else str(first["msg"])) from None
+        raise ValueError(_first_error(error)) from None
 
 
 def readings_of(response: InrixResponse) -> SnapshotReadings:

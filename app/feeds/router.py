@@ -58,12 +58,7 @@ async def post_inrix(
         unknown=result.unknown,
         measured_at=result.measured_at,
         refused=[
-            RefusedSegment(
-                segment_set=refusal.segment_set,
-                segment=refusal.segment,
-                code=refusal.code,
-                error=refusal.error,
-            )
+            RefusedSegment.model_validate(refusal, from_attributes=True)
             for refusal in result.refused
         ],
     )
