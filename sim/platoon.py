@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 from sim.drives import Drive
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
-from vehicle_agent.stopping import LEAD_ACCEL_FILTER_S, is_new_leader, required_braking_mps2
+from vehicle_agent.stopping import LEAD_ACCEL_FILTER_S, required_braking_mps2
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -257,7 +257,6 @@ class _AvState:
     lead_accel: LeadAccelEstimator = field(
         default_factory=lambda: LeadAccelEstimator(LEAD_ACCEL_FILTER_S)
     )
-    last_gap_m: float | None = None
 
 
 def simulate_platoon(
@@ -483,18 +482,14 @@ def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) ->
     policy = av.policy
     authority = policy.braking_authority_mps2  # type: ignore[attr-defined]
     if observation.gap_m <= hand_back.radar_range_m:
-        if is_new_leader(av.last_gap_m, observation.gap_m):
-            av.lead_accel.reset()
-        av.last_gap_m = observation.gap_m
         need = required_braking_mps2(
             observation.speed_mps,
             observation.gap_m,
             observation.lead_speed_mps,
-            av.lead_accel.update(observation.time_s, observation.lead_speed_mps),
+            av.lead_accel.update(observation.time_s, observation.lead_speed_mps, observation.gap_m),
         )
     else:
         av.lead_accel.reset()
-        av.last_gap_m = None
         need = 0.0
     if av.engaged:
         if need > authority:

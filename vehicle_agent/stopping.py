@@ -32,10 +32,6 @@ from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 STOCK_ACC_MAX_BRAKING_MPS2 = 3.5
 # Time constant (s) of the low-pass on the leader's finite-difference acceleration.
 LEAD_ACCEL_FILTER_S = 0.5
-# A gap that jumps by more than this between two readings (m) is a new leader (a cut-in or a
-# lane change), not a braking one: its speed step says nothing about its acceleration. The
-# lane-change recovery's own discontinuity threshold (`LaneChangeParams.gap_jump_m`).
-NEW_LEADER_GAP_JUMP_M = 4.0
 # A stop aims to end this far short of the leader's bumper (m): the I-24 IDM's standstill gap.
 STOP_MARGIN_M = 2.0
 
@@ -102,30 +98,18 @@ class StoppingCheck:
     def __init__(self, actuation: Actuation) -> None:
         self.authority = braking_authority_mps2(actuation)
         self.lead_accel = LeadAccelEstimator(LEAD_ACCEL_FILTER_S)
-        self._last_gap_m: float | None = None
 
     def needs_hand_back(self, time_s: float, reading: CarReading | None) -> bool:
         """True when the reading asks for a stop beyond the actuation's authority."""
         if reading is None or not reading.lead_present or reading.lead_rel_speed_mps is None:
             self.lead_accel.reset()
-            self._last_gap_m = None
             return False
         lead_speed = reading.speed_mps + reading.lead_rel_speed_mps
         gap = reading.lead_distance_m
-        if is_new_leader(self._last_gap_m, gap):
-            self.lead_accel.reset()
-        self._last_gap_m = gap
         return stop_exceeds_authority(
             reading.speed_mps,
             gap,
             lead_speed,
             self.authority,
-            self.lead_accel.update(time_s, lead_speed),
+            self.lead_accel.update(time_s, lead_speed, gap),
         )
-
-
-def is_new_leader(last_gap_m: float | None, gap_m: float | None) -> bool:
-    """True when the gap jumped as it does when another car becomes the leader."""
-    if last_gap_m is None or gap_m is None:
-        return False
-    return abs(gap_m - last_gap_m) > NEW_LEADER_GAP_JUMP_M

@@ -284,7 +284,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                 lead_accel = 0.0
                 if measured:
                     lead_accel = self.lead_accel[env].update(
-                        self._time_s(env), float(lead_speed[env])
+                        self._time_s(env), float(lead_speed[env]), float(gap[env])
                     )
                 else:
                     self.lead_accel[env].reset()

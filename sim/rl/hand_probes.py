@@ -162,7 +162,7 @@ class SmoothingFollower(Controller):
             return AccelCommand(bounded_request(request, speed, None, None, 0.0))
         gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
         rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
-        lead_accel = self.lead_accel.update(observation.time_s, speed + rel)
+        lead_accel = self.lead_accel.update(observation.time_s, speed + rel, gap)
         reference_gap = min(max(self.headway_s * speed, REFERENCE_GAP_MIN_M), REFERENCE_GAP_MAX_M)
         request = self.speed_gain * (
             self.reference_speed(observation, speed + rel) - speed

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
 from contract.controllers import CONTROLLER_SCHEMAS, ControllerConfigError, controller_actuations
+from contract.units import MPS_PER_MPH
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
@@ -184,3 +185,48 @@ def test_any_finite_observation_gives_a_bounded_action(
         else:
             assert 20 <= action.speed_setting_mph <= 73
             assert action.gap_setting in (1, 2, 3)
+
+
+@pytest.mark.parametrize(
+    ("name", "actuation"),
+    [
+        ("simple", "accel"),
+        ("microaccel", "accel"),
+        ("microaccel_acc", "acc"),
+        ("rl_accel", "accel"),
+    ],
+)
+def test_a_slower_car_cutting_in_far_ahead_is_no_leader_braking_hard(
+    name: str, actuation: str
+) -> None:
+    """A car cutting in at 60 m, 5 m/s slower (12 s to collision), replaces a leader at 100 m
+    holding the AV's speed. Its lower speed is not the old leader braking: the leader's
+    acceleration estimate starts afresh, and no controller brakes near its -3 m/s^2 limit for it
+    (with the old leader's history, simple and rl_accel asked for -3 for 0.6 s and more)."""
+    controller = build_controller(name, actuation)
+    time_s = 0.0
+    for _ in range(50):
+        controller.step(Observation(time_s, 25.0, 25.0, None, None, True, 100.0, 0.0))
+        time_s += 0.1
+    estimates = []
+    for step in range(10):
+        observation = Observation(time_s, 25.0, 25.0, None, None, True, 60.0 - 0.5 * step, -5.0)
+        action = controller.step(observation)
+        estimates.append(getattr(controller, "inner", controller).lead_accel.accel_mps2)
+        if isinstance(action, AccelCommand):
+            assert action.accel_mps2 > -2.0, (step, action)
+        time_s += 0.1
+    assert estimates == [0.0] * 10  # the new leader holds its speed
+
+
+def test_the_clip_window_is_the_last_second_even_across_a_hand_back() -> None:
+    """The clip's controller steps only while engaged: speeds from before a hand-back are no
+    part of "the last second" at the next take-over (paper: the last 1 s of ego speeds)."""
+    controller = build_controller("simple", "acc")
+    for step in range(10):
+        controller.step(Observation(step * 0.1, 30.0 * MPS_PER_MPH, 70.0 * MPS_PER_MPH))
+    controller.reset()  # handed back, taken over again ten minutes later at 70 mph
+    later = 600.0
+    action = controller.step(Observation(later, 70.0 * MPS_PER_MPH, 70.0 * MPS_PER_MPH))
+    assert isinstance(action, AccSetPoint)
+    assert action.speed_setting_mph == 70  # not clipped to 30 + 5 mph

@@ -17,6 +17,9 @@ from contract.units import mps_to_mph
 from vehicle_agent.controllers.base import AccSetPoint, Action, Controller, Observation
 
 CLIP_WINDOW_STEPS = 10  # the last 1 s at the 10 Hz control rate
+# The window is also the last second by time: speeds from before a hand-back are not "the last
+# second" at the next take-over (the controller steps only while it commands the car).
+CLIP_WINDOW_S = 1.0
 BELOW_MEAN_MPH = 15.0
 ABOVE_MEAN_MPH = 5.0
 MIN_SETTING_MPH = 20.0
@@ -43,11 +46,17 @@ class AccClip(Controller):
     def __init__(self, inner: Controller) -> None:
         super().__init__(inner.actuation)
         self.inner = inner
-        self.speeds_mph: deque[float | None] = deque(maxlen=CLIP_WINDOW_STEPS)
+        self._speeds: deque[tuple[float, float | None]] = deque(maxlen=CLIP_WINDOW_STEPS)
 
     def reset(self) -> None:
-        """Reset the wrapped controller (the speed history stays: it is a measurement)."""
+        """Reset the wrapped controller (the speed history ages out by itself: the window is
+        the last second of measurements, whenever they were taken)."""
         self.inner.reset()
+
+    @property
+    def speeds_mph(self) -> list[float | None]:
+        """The ego speeds of the clip's window, oldest first."""
+        return [speed for _, speed in self._speeds]
 
     @property
     def policy_sha256(self) -> str | None:
@@ -57,7 +66,10 @@ class AccClip(Controller):
     def step(self, observation: Observation) -> Action:
         """The inner controller's set point with the paper's clip applied."""
         speed = observation.speed_mps
-        self.speeds_mph.append(mps_to_mph(speed) if math.isfinite(speed) else None)
+        now = observation.time_s
+        while self._speeds and now - self._speeds[0][0] > CLIP_WINDOW_S + 1e-9:
+            self._speeds.popleft()
+        self._speeds.append((now, mps_to_mph(speed) if math.isfinite(speed) else None))
         action = self.inner.step(observation)
         if not isinstance(action, AccSetPoint):
             raise TypeError(f"controller {self.inner.name} returned {action!r} for actuation acc")

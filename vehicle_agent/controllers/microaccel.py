@@ -22,6 +22,10 @@ from vehicle_agent.controllers.lane_change import LaneChangeRecovery
 # Smallest gap margin h - s0 (m) and lead speed (m/s) used in divisions (see module docstring).
 MIN_GAP_MARGIN_M = 0.1
 MIN_LEAD_SPEED_MPS = 0.1
+# A gap that jumps by more than this between two readings (m) is a new leader (a cut-in or a
+# lane change), not a braking one: its speed step says nothing about its acceleration. The
+# lane-change recovery's own discontinuity threshold (`LaneChangeParams.gap_jump_m`).
+NEW_LEADER_GAP_JUMP_M = 4.0
 
 
 def safe_speed(
@@ -142,9 +146,20 @@ def anticipation_accel(
     return min(max_accel_mps2, lead_accel_mps2 * (1.0 + k2 * closing))
 
 
+def is_new_leader(last_gap_m: float | None, gap_m: float | None) -> bool:
+    """True when the gap jumped as it does when another car becomes the leader."""
+    if last_gap_m is None or gap_m is None:
+        return False
+    return abs(gap_m - last_gap_m) > NEW_LEADER_GAP_JUMP_M
+
+
 class LeadAccelEstimator:
     """The leader's acceleration from successive lead speeds: finite difference, then a first-order
-    low-pass with time constant `filter_s` (the cars report lead speed, not its acceleration)."""
+    low-pass with time constant `filter_s` (the cars report lead speed, not its acceleration).
+
+    One leader's: a gap that jumps (`is_new_leader`) starts the estimate afresh. Otherwise a car
+    cutting in slower than the old leader reads as that leader braking hard, and a_safe's rate
+    term brakes the AV for a car that is no threat."""
 
     def __init__(self, filter_s: float) -> None:
         self.filter_s = filter_s
@@ -154,10 +169,15 @@ class LeadAccelEstimator:
         """Forget the leader (a new one appeared or it was lost)."""
         self._last_time_s: float | None = None
         self._last_speed_mps = 0.0
+        self._last_gap_m: float | None = None
         self.accel_mps2 = 0.0
 
-    def update(self, time_s: float, lead_speed_mps: float) -> float:
-        """Fold in one lead speed sample; returns the filtered acceleration."""
+    def update(self, time_s: float, lead_speed_mps: float, gap_m: float | None) -> float:
+        """Fold in one sample of the leader's speed and gap (None: not measured); returns the
+        filtered acceleration."""
+        if is_new_leader(self._last_gap_m, gap_m):
+            self.reset()
+        self._last_gap_m = gap_m
         if self._last_time_s is not None and time_s > self._last_time_s:
             dt = time_s - self._last_time_s
             raw = (lead_speed_mps - self._last_speed_mps) / dt
@@ -232,7 +252,8 @@ class MicroAccelController(Controller):
             if self.recovery.is_gap_discontinuity(observation):
                 self.lead_accel.reset()
             lead_speed = observation.speed_mps + float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
-            lead_accel = self.lead_accel.update(observation.time_s, lead_speed)
+            gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
+            lead_accel = self.lead_accel.update(observation.time_s, lead_speed, gap)
         else:
             self.lead_accel.reset()
             lead_accel = 0.0

@@ -59,7 +59,8 @@ class MicroAccelAccController(Controller):
         lead_accel = 0.0
         if observation.has_lead_state:
             lead_speed = speed + float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
-            lead_accel = self.lead_accel.update(observation.time_s, lead_speed)
+            gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
+            lead_accel = self.lead_accel.update(observation.time_s, lead_speed, gap)
         else:
             self.lead_accel.reset()
         command = base_accel(observation, lead_accel, params.base)

@@ -99,7 +99,9 @@ class RlAccelController(Controller):
         if observation.has_lead_state:
             gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
             rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
-            lead_accel = self.lead_accel.update(observation.time_s, observation.speed_mps + rel)
+            lead_accel = self.lead_accel.update(
+                observation.time_s, observation.speed_mps + rel, gap
+            )
         else:
             self.lead_accel.reset()
         features = accel_features(

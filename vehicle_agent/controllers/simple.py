@@ -44,10 +44,11 @@ class SimpleController(Controller):
         if observation.has_lead_state:
             rel = float(observation.lead_rel_speed_mps)  # type: ignore[arg-type]
             lead_speed = max(observation.speed_mps + rel, 0.0)
-            lead_accel = self.lead_accel.update(observation.time_s, lead_speed)
+            gap = float(observation.lead_distance_m)  # type: ignore[arg-type]
+            lead_accel = self.lead_accel.update(observation.time_s, lead_speed, gap)
             safe = safety_term(
                 observation.speed_mps,
-                float(observation.lead_distance_m),  # type: ignore[arg-type]
+                gap,
                 rel,
                 lead_accel,
                 k=params.k,
