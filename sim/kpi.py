@@ -264,7 +264,7 @@ def platoon_kpis(
         accel_rms_mps2=accel_rms_mps2(speed, run.dt_s),
         jerk_rms_mps3=jerk_rms_mps3(speed, run.dt_s),
         min_gap_m=float(gaps.min()),
-        min_ttc_s=min_time_to_collision_s(gaps, speed, run.speed_mps[:, :-1]),
+        min_ttc_s=min_time_to_collision_s(gaps, speed, run.lead_speed_mps),
         collisions=run.collisions,
         gap_violations=run.gap_violations,
     )

@@ -99,6 +99,9 @@ class PlatoonRun:
     # Gap of each follower to whatever vehicle is ahead of it (a cut-in included); None: the
     # platoon's own order throughout (columns 1..N-1 behind 0..N-2).
     follower_gap_m: FloatArray | None = None
+    # Speed of the vehicle ahead of each follower at each step (the car it follows, a cut-in
+    # included); None: the platoon's own order throughout.
+    follower_lead_speed_mps: FloatArray | None = None
     # Cars that merged in from the next lane: NaN before they did (not part of the KPIs).
     cut_in_position_m: FloatArray | None = None
     cut_in_speed_mps: FloatArray | None = None
@@ -126,6 +129,14 @@ class PlatoonRun:
             return self.follower_gap_m
         gaps: FloatArray = self.position_m[:, :-1] - self.position_m[:, 1:] - self.vehicle_length_m
         return gaps
+
+    @property
+    def lead_speed_mps(self) -> FloatArray:
+        """Speed of the vehicle ahead of each follower (columns 1..N-1), paired with `gap_m`."""
+        if self.follower_lead_speed_mps is not None:
+            return self.follower_lead_speed_mps
+        ahead: FloatArray = self.speed_mps[:, :-1]
+        return ahead
 
     @property
     def cut_ins(self) -> int:
@@ -306,6 +317,7 @@ def simulate_platoon(
     # until a cut-in slips a car in ahead of an AV.
     lead_of = np.arange(-1, n - 1)
     gap_history = np.full((steps + 1, n), np.nan)
+    lead_speed_history = np.full((steps + 1, n), np.nan)
 
     # IDM constants and work buffers, so a step allocates nothing (until a cut-in adds a car).
     amax = idm.max_accel_mps2
@@ -347,6 +359,7 @@ def simulate_platoon(
                     position = np.hstack([position, room])
                     speed = np.hstack([speed, room])
                     gap_history = np.hstack([gap_history, room])
+                    lead_speed_history = np.hstack([lead_speed_history, room])
                 new = used
                 used += 1
                 position[k, new] = float(x[ahead]) - 0.5 * (gap_now + vehicle_length_m)
@@ -364,6 +377,7 @@ def simulate_platoon(
                 _gaps_into(gap, v_lead, x, v, lead_of, in_order, vehicle_length_m)
         v_follow = v[1:]
         gap_history[k, 1:used] = gap
+        lead_speed_history[k, 1:used] = v_lead
         # s* = s0 + v T + max(0, v dv) / (2 sqrt(ab))
         np.subtract(v_follow, v_lead, out=desired)
         desired *= v_follow
@@ -436,6 +450,7 @@ def simulate_platoon(
         np.maximum(v_next, 0.0, out=v_next)  # v + (-v/dt) dt can round to -1e-16
     last = position[steps, :used]
     gap_history[steps, 1:used] = last[lead_of[1:]] - last[1:] - vehicle_length_m
+    lead_speed_history[steps, 1:used] = speed[steps, lead_of[1:]]
 
     run = PlatoonRun(
         drive_name=drive.name,
@@ -446,6 +461,7 @@ def simulate_platoon(
         vehicle_length_m=vehicle_length_m,
         gap_violation_m=gap_violation_m,
         follower_gap_m=gap_history[:, 1:n],
+        follower_lead_speed_mps=lead_speed_history[:, 1:n],
         cut_in_position_m=position[:, n:used],
         cut_in_speed_mps=speed[:, n:used],
         takeovers=takeovers,

@@ -239,6 +239,28 @@ def test_dropping_back_invites_cut_ins() -> None:
     assert none.cut_ins == 0
 
 
+def test_each_gap_is_paired_with_the_speed_of_the_car_it_is_to() -> None:
+    """After a cut-in the AV follows the car that merged, not its old leader: the time to
+    collision must divide its gap by the closing speed on that car."""
+    leader = drive_from_speeds("steady", np.full(3000, 25.0))
+
+    class DropBack(Supervised):
+        def accel_mps2(self, observation: AvObservation) -> float:
+            return 0.5 * (15.0 - observation.speed_mps)
+
+    run = simulate_platoon(
+        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
+    )
+    assert run.cut_in_position_m is not None
+    assert run.cut_in_speed_mps is not None
+    first = int(np.argmax(np.isfinite(run.cut_in_position_m[:, 0])))
+    av = int(np.flatnonzero(run.is_av)[0])
+    # before the merge: the car ahead in the platoon; from it on: the merged car
+    np.testing.assert_array_equal(run.lead_speed_mps[:first, av - 1], run.speed_mps[:first, av - 1])
+    assert run.lead_speed_mps[first, av - 1] == run.cut_in_speed_mps[first, 0]
+    assert run.lead_speed_mps[first, av - 1] != run.speed_mps[first, av - 1]
+
+
 def test_cut_in_hazard_hand_worked() -> None:
     model = CutIns()
     # 25 m/s with 119 m: (119 - 19) / 25 = 4 s, 1 s beyond the threshold: 0.1 merges per
