@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from contract.controllers import RL_CONTROLLERS, RlParams
 from sim.av import StockAcc, agent_policy
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
@@ -42,6 +43,7 @@ from sim.plans import SimulatedPlanner
 from sim.platoon import CutIns, HandBack, PlatoonRun, platoon_roles, simulate_platoon
 from sim.runs import run_file_name, write_run, write_runs_index
 from sim.scenarios import Case
+from vehicle_agent.controllers.rl_acc import policy_path
 
 BASELINE = "baseline"
 NO_PLANNER = "-"
@@ -92,6 +94,20 @@ class ControllerVariant:
             if not isinstance(params, dict):
                 raise ValueError(f"controller variant {text!r}: params must be a JSON object")
         return cls(parts[0], parts[1], params)
+
+    def policy_training_dates(self) -> frozenset[str]:
+        """The dates the variant's trained policy was fitted on (its manifest's
+        `training_dates`, beside the policy file): no held-out score of it may come from a
+        drive of those dates. Empty for a controller without a policy, or a policy file with
+        no manifest beside it (`smoothfleet sim train` always writes one)."""
+        if self.controller not in RL_CONTROLLERS:
+            return frozenset()
+        params = RlParams.model_validate(dict(self.params))
+        manifest = policy_path(params, self.actuation).with_suffix(".json")  # type: ignore[arg-type]
+        if not manifest.is_file():
+            return frozenset()
+        recorded = json.loads(manifest.read_text(encoding="utf-8")).get("training_dates", ())
+        return frozenset(str(date) for date in recorded)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,12 @@ throughput and network speed no worse than -1 %. The chosen candidate is scored 
 held-out dates, which it never saw; the held-out scores of all folds are the result. The
 deployment choice is the same rule on every date (its own score is not a result).
 
-Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `candidate` key).
+A trained policy has seen the dates it was trained on (a row's `policy_training_dates`): its
+rows of those dates are used neither to choose nor to score, so an RL candidate is judged, on
+either side of a fold, only on drives its weights were not fitted to.
+
+Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `candidate` key
+and, for a candidate with a trained policy, `policy_training_dates`, ";"-joined).
 """
 
 from __future__ import annotations
@@ -105,6 +110,18 @@ def date_of(row: Row) -> str:
     return str(row["date"])
 
 
+def fitted_on(row: Row) -> bool:
+    """Whether the row's drive is of a date its candidate's trained policy was fitted on."""
+    dates = str(row.get("policy_training_dates") or "")
+    return date_of(row) in dates.split(";") if dates else False
+
+
+def unseen_rows(rows: Iterable[Row]) -> list[Row]:
+    """The rows whose drive its candidate's policy (if it has one) was not fitted on: the only
+    ones that may choose a candidate or score it."""
+    return [row for row in rows if not fitted_on(row)]
+
+
 def check_every_fold_can_choose(date_scenarios: Iterable[tuple[str, str]], folds: int) -> None:
     """Refuse folds whose training dates hold no shockwave drive: the choice is made on the
     shockwave drives' fuel saving (`standing`), so such a fold would choose on nothing.
@@ -132,12 +149,13 @@ def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
     The dates are dealt into folds as `sim.folds.date_folds` deals them (`held_out_dates`).
     """
     check_every_fold_can_choose(((date_of(row), str(row["scenario"])) for row in rows), folds)
+    unseen = unseen_rows(rows)
     result = []
     for held in held_out_dates((date_of(row) for row in rows), folds):
-        training = [row for row in rows if date_of(row) not in held]
+        training = [row for row in unseen if date_of(row) not in held]
         chosen = choose(training)
         scored = tuple(
-            row for row in rows if date_of(row) in held and row["candidate"] == chosen.candidate
+            row for row in unseen if date_of(row) in held and row["candidate"] == chosen.candidate
         )
         result.append(FoldChoice(tuple(sorted(held)), chosen, scored))
     return result

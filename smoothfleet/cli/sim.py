@@ -73,6 +73,7 @@ from sim.selection import (
     choose,
     cross_validate,
     held_out_summary,
+    unseen_rows,
 )
 from smoothfleet.cli.common import (
     FiniteFloatRange,
@@ -505,6 +506,7 @@ def select_command(
         ]
     )
     variants = list({variant.name: variant for variant in variants}.values())
+    fitted_dates = {variant.name: variant.policy_training_dates() for variant in variants}
     drives = _read_drives(drives_dir)
     cases = _scenario_cases(["shockwave", "freeflow"], drives)
     try:
@@ -542,6 +544,7 @@ def select_command(
         for row in evaluation.rows():
             if row["controller"] != BASELINE:
                 row["candidate"] = f"{row['planner']} x {row['controller']} @ {window:.0f} m"
+                row["policy_training_dates"] = ";".join(sorted(fitted_dates[row["controller"]]))
                 rows.append(row)
     choices = cross_validate(rows, folds)
     table = Table(title=f"{folds}-fold cross-validation over dates: choice on training dates")
@@ -564,10 +567,10 @@ def select_command(
     console.print(
         _summary_table(
             "Every candidate on every drive (what the folds choose from: context, not a result)",
-            candidate_summary(rows),
+            candidate_summary(unseen_rows(rows)),
         )
     )
-    deployed = choose(rows)
+    deployed = choose(unseen_rows(rows))
     console.print(
         f"chosen on every date (the deployment pair; its score here is not a result): "
         f"{deployed.candidate}"

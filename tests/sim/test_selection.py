@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 
 import pytest
 
 from sim.drives import load_drive
+from sim.evaluate import ControllerVariant
 from sim.kpi import UNMEASURED_COLUMN
 from sim.selection import (
     candidate_summary,
@@ -20,6 +22,7 @@ from sim.selection import (
 )
 from tests.sim.test_evaluate import short_drives, write_drive
 from tests.support.servers import cli_env, run_cli
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 WAVES_OF_03_15 = "trajectories/2021-03-15-12-46-38_masterArray_0_8314.csv"
 
@@ -134,6 +137,32 @@ def test_each_fold_is_scored_on_dates_it_did_not_choose_on() -> None:
     assert summary["drives"] == 4
     assert summary["fuel_saving_pct"] == pytest.approx(3.5)
     # the same rows scored in-sample would claim (30 + 30 + 1 + 1) / 4 = 15.5 for "tuned"
+
+
+def test_a_trained_policy_neither_chooses_nor_scores_on_the_dates_it_was_fitted_on() -> None:
+    """ "policy" was trained on 2021-03-08, where it looks best: those rows must neither help
+    choose it nor stand as its held-out score (its weights were fitted on that date)."""
+    fitted = {"policy_training_dates": "2021-03-08"}
+    rows = [
+        row("policy", "2021-03-08-a", fuel_saving_pct=30.0) | fitted,
+        row("policy", "2021-03-12-a", fuel_saving_pct=10.0) | fitted,
+        row("policy", "2021-03-15-a", fuel_saving_pct=10.0) | fitted,
+        row("steady", "2021-03-08-a", fuel_saving_pct=6.0),
+        row("steady", "2021-03-12-a", fuel_saving_pct=6.0),
+        row("steady", "2021-03-15-a", fuel_saving_pct=6.0),
+    ]
+    choices = cross_validate(rows, folds=3)
+    assert [c.chosen.candidate for c in choices] == ["policy"] * 3
+    # chosen on the other dates, "policy" has no held-out score on the date it was fitted on
+    assert choices[0].chosen.fuel_saving_pct == pytest.approx(10.0)
+    assert [[r["drive"] for r in c.held_out_rows] for c in choices] == [
+        [],
+        ["2021-03-12-a"],
+        ["2021-03-15-a"],
+    ]
+    [summary] = held_out_summary(choices)
+    assert summary["drives"] == 2
+    assert summary["fuel_saving_pct"] == pytest.approx(10.0)  # not (30 + 10 + 10) / 3
 
 
 def test_folds_need_enough_dates() -> None:
@@ -264,3 +293,11 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
     )
     assert too_wide.returncode != 0
     assert "--window: planner parameter window_m" in too_wide.stderr
+
+
+def test_a_variant_knows_the_dates_its_policy_was_trained_on() -> None:
+    manifest = json.loads((BUNDLED_POLICIES / "rl_accel.json").read_text(encoding="utf-8"))
+    dates = ControllerVariant("rl_accel", "accel").policy_training_dates()
+    assert dates == frozenset(manifest["training_dates"])
+    assert dates  # the shipped policy was trained on some of the dates
+    assert ControllerVariant("microaccel", "accel").policy_training_dates() == frozenset()
