@@ -37,6 +37,8 @@ from sim.kpi import (
     fuel_saving_pct,
     measured_mean,
     platoon_kpis,
+    run_throughput_vph,
+    throughput_points_m,
     unmeasured_paper_kpis,
 )
 from sim.plans import SimulatedPlanner
@@ -131,6 +133,10 @@ class RunResult:
     recommended: bool = False
     # Planner cycles without INRIX, skipped as the server skips them (the AVs kept their plan).
     plans_skipped: int = 0
+    # The baseline's throughput over the road locations this run shares with it (a variant's
+    # throughput and its baseline's are measured at the same points: `throughput_points_m`);
+    # None: the baseline's own KPI is the one to compare with.
+    baseline_throughput_vph: float | None = None
     # Times an AV was left to its stock ACC for want of a fresh plan (the feed had stopped, or
     # had not begun), summed over the AVs, and the AV-seconds it drove so.
     plan_hand_backs: int = 0
@@ -160,8 +166,11 @@ class Evaluation:
         return self._baselines[case_name]
 
     def change_pct(self, result: RunResult, kpi: str) -> float:
-        """Percentage change of a KPI against the case's baseline."""
+        """Percentage change of a KPI against the case's baseline (throughput against the
+        baseline's at the same road locations, where the run measured it there)."""
         base = getattr(self.baseline(result.case.name).kpis, kpi)
+        if kpi == "throughput_vph" and result.baseline_throughput_vph is not None:
+            base = result.baseline_throughput_vph
         return change_pct(float(getattr(result.kpis, kpi)), float(base))
 
     def fuel_saving_pct(self, result: RunResult) -> float:
@@ -325,14 +334,14 @@ class Evaluation:
         return out
 
 
-def case_kpis(case: Case, run: PlatoonRun) -> Kpis:
-    """A run's KPIs; the bottleneck's throughput is measured just downstream of its region."""
-    point = None
-    if case.bottleneck is not None:
-        # just downstream of the region, or, when the platoon's tail has not got that far by
-        # the drive's end (AVs that fell far behind), the furthest point every vehicle reached
-        point = min(case.bottleneck.measure_point_m, float(run.position_m[-1].min()))
-    return platoon_kpis(run, throughput_point_m=point)
+def baseline_run(case: Case, vehicles: int, realism: Realism) -> PlatoonRun:
+    """The case's all-human platoon of `vehicles` (its road and cut-ins are the AV runs')."""
+    return simulate_platoon(
+        case.drive,
+        platoon_roles(vehicles, 0),
+        speed_limit=case.bottleneck,
+        cut_ins=realism.cut_ins,
+    )
 
 
 @dataclass(frozen=True)
@@ -363,15 +372,12 @@ def run_case(
     """One simulation: the baseline (variant None, all humans+avs human) or the AVs, spread
     through the platoon, under planner x controller."""
     if variant is None:
-        roles = platoon_roles(humans + avs, 0)
-        run = simulate_platoon(
-            case.drive, roles, speed_limit=case.bottleneck, cut_ins=realism.cut_ins
-        )
+        run = baseline_run(case, humans + avs, realism)
         result = RunResult(
             case,
             NO_PLANNER,
             BASELINE,
-            case_kpis(case, run),
+            platoon_kpis(run, throughput_points_m=throughput_points_m([run], case.measure_point_m)),
             final_position_m=run.position_m[-1],
             cut_ins=run.cut_ins,
         )
@@ -401,11 +407,15 @@ def run_case(
         )
         av_columns = tuple(int(i) + 1 for i in np.flatnonzero(roles))
         av_index = [column - 1 for column in av_columns]
+        # the baseline again (a fraction of the AV run's cost), for the road locations both
+        # runs' throughput is measured at
+        baseline = baseline_run(case, humans + avs, realism)
+        points = throughput_points_m([run, baseline], case.measure_point_m)
         result = RunResult(
             case,
             planner,
             variant.name,
-            case_kpis(case, run),
+            platoon_kpis(run, throughput_points_m=points),
             schedule.plans_run,
             schedule.plans_buffered,
             avs=avs,
@@ -421,6 +431,9 @@ def run_case(
             plans_skipped=schedule.plans_skipped,
             plan_hand_backs=sum(policy.plan_hand_backs for policy in policies),
             seconds_without_plan=sum(policy.steps_without_plan for policy in policies) * run.dt_s,
+            baseline_throughput_vph=(
+                None if points is None else run_throughput_vph(baseline, points)
+            ),
         )
     if save is not None:
         save(result, run)

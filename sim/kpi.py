@@ -183,10 +183,20 @@ def shares_a_stretch(position_m: FloatArray) -> bool:
 
 def measurement_points_m(position_m: FloatArray, count: int = THROUGHPUT_POINTS) -> FloatArray:
     """`count` equi-spaced interior points of the stretch every vehicle drives through."""
-    if not shares_a_stretch(position_m):
+    return shared_points_m([position_m], count)
+
+
+def shared_points_m(
+    positions_m: Sequence[FloatArray], count: int = THROUGHPUT_POINTS
+) -> FloatArray:
+    """`count` equi-spaced interior points of the stretch every vehicle of every run drives
+    through. The paper's measurement locations are the road's: a run and its baseline are
+    measured at the same ones, or an AV that drops back would move its own points upstream and
+    its change would be taken between two stretches of road."""
+    if not all(shares_a_stretch(position_m) for position_m in positions_m):
         raise ValueError("the vehicles share no stretch of road: the drive is too short")
-    first = float(position_m[0].max())
-    last = float(position_m[-1].min())
+    first = max(float(position_m[0].max()) for position_m in positions_m)
+    last = min(float(position_m[-1].min()) for position_m in positions_m)
     points: FloatArray = np.linspace(first, last, count + 2)[1:-1]
     return points
 
@@ -235,14 +245,49 @@ def min_time_to_collision_s(
         return float((gap_m[approaching] / closing[approaching]).min())
 
 
+def throughput_points_m(
+    runs: Sequence[PlatoonRun], point_m: float | None = None
+) -> FloatArray | None:
+    """Where the runs' throughput is measured, the same road locations for all of them: the
+    five equi-spaced points of the stretch every vehicle of every run drives through
+    (`shared_points_m`), or the one point `point_m` (a bottleneck's, just downstream of its
+    region; where a platoon's tail has not got that far by the drive's end, the furthest
+    point every vehicle of every run reached). None when a run's vehicles share no stretch (a
+    stalled platoon: `platoon_kpis` gives it 0)."""
+    positions = [run.position_m for run in runs]
+    if not all(shares_a_stretch(position_m) for position_m in positions):
+        return None
+    if point_m is not None:
+        reach = min(float(position_m[-1].min()) for position_m in positions)
+        return np.array([min(point_m, reach)])
+    return shared_points_m(positions)
+
+
+def run_throughput_vph(run: PlatoonRun, points_m: FloatArray) -> float:
+    """The run's throughput averaged over `points_m`, every vehicle counted (the leader and
+    the cars that merged in included)."""
+    return float(
+        np.mean(
+            [
+                throughput_at_vph(run.position_m, run.dt_s, point, run.cut_in_position_m)
+                for point in points_m
+            ]
+        )
+    )
+
+
 def platoon_kpis(
-    run: PlatoonRun, model: FuelModel = RAV4_2019, *, throughput_point_m: float | None = None
+    run: PlatoonRun,
+    model: FuelModel = RAV4_2019,
+    *,
+    throughput_points_m: FloatArray | None = None,
 ) -> Kpis:
     """The KPIs of a platoon run: fuel, speed, comfort and safety over its simulated vehicles
     (columns 1..N-1), throughput over every vehicle, the leader and cars that merged in included.
 
-    Throughput is the average over five equi-spaced points, or, given `throughput_point_m`,
-    the flow over that one point (the bottleneck's: just downstream of the region). A platoon
+    Throughput is the average over five equi-spaced points of the stretch the run's vehicles
+    share, or over `throughput_points_m` (the points a run shares with its baseline,
+    `shared_points_m`; the bottleneck's one point just downstream of its region). A platoon
     whose tail never gets past where its leader started (AVs that stalled and held everyone
     behind them) carried no platoon past any point within the run: its throughput counts as 0,
     the only bound the run can prove, so a controller never gains by stranding traffic.
@@ -253,10 +298,10 @@ def platoon_kpis(
     merged = run.cut_in_position_m
     if not shares_a_stretch(run.position_m):
         throughput = 0.0
-    elif throughput_point_m is None:
+    elif throughput_points_m is None:
         throughput = throughput_vph(run.position_m, run.dt_s, merged_m=merged)
     else:
-        throughput = throughput_at_vph(run.position_m, run.dt_s, throughput_point_m, merged)
+        throughput = run_throughput_vph(run, throughput_points_m)
     return Kpis(
         fuel_economy_mpg=fuel_economy_mpg(position, speed, run.dt_s, model),
         throughput_vph=throughput,

@@ -110,6 +110,12 @@ class Case:
         """`scenario/drive`, as in the tables."""
         return f"{self.scenario}/{self.drive.name}"
 
+    @property
+    def measure_point_m(self) -> float | None:
+        """The one point throughput is measured at (the bottleneck's, just downstream of its
+        region); None: the paper's five equi-spaced points."""
+        return None if self.bottleneck is None else self.bottleneck.measure_point_m
+
 
 def shockwave_cases(drives: Sequence[Drive], recorded: Sequence[RecordedDrive]) -> list[Case]:
     """Every real stop-and-go drive."""

@@ -33,6 +33,8 @@ from sim.kpi import (
     measured_mean,
     measured_values,
     platoon_kpis,
+    run_throughput_vph,
+    throughput_points_m,
     unmeasured_paper_kpis,
 )
 from sim.plans import SimulatedPlanner
@@ -156,21 +158,38 @@ def score_drives(
     envelope = bounds or GapBounds()
     scores = []
     for drive in drives:
-        base = platoon_kpis(simulate_platoon(drive, platoon_roles(humans + 1, 0)))
+        base_run = simulate_platoon(drive, platoon_roles(humans + 1, 0))
+        base = platoon_kpis(base_run)
         for entry in controllers:
             run = simulate_one_av(
                 drive, entry, planner=planner, planner_params=planner_params, humans=humans
             )
-            kpis = platoon_kpis(run)
+            # both runs' throughput at the same road locations (`sim.kpi.shared_points_m`)
+            points = throughput_points_m([run, base_run])
+            kpis = platoon_kpis(run, throughput_points_m=points)
+            base_throughput = (
+                base.throughput_vph if points is None else run_throughput_vph(base_run, points)
+            )
             av = np.flatnonzero(run.is_av[1:])
             envelope_kpis = gap_kpis(run.gap_m[:, av], run.speed_mps[:, av + 1], run.dt_s, envelope)
-            scores.append(_score(drive, entry.label, base, kpis, envelope_kpis.within_bounds_share))
+            scores.append(
+                _score(
+                    drive,
+                    entry.label,
+                    base,
+                    kpis,
+                    envelope_kpis.within_bounds_share,
+                    base_throughput,
+                )
+            )
             if progress is not None:
                 progress(f"{drive.name} {entry.label}")
     return scores
 
 
-def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> DriveScore:
+def _score(
+    drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float, base_throughput: float
+) -> DriveScore:
     return DriveScore(
         drive=drive.name,
         date=drive_date(drive),
@@ -178,7 +197,7 @@ def _score(drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float) -> D
         stop_and_go=is_stop_and_go(drive),
         controller=label,
         fuel_saving_pct=fuel_saving_pct(base.fuel_economy_mpg, kpis.fuel_economy_mpg),
-        throughput_change_pct=change_pct(kpis.throughput_vph, base.throughput_vph),
+        throughput_change_pct=change_pct(kpis.throughput_vph, base_throughput),
         network_speed_change_pct=change_pct(kpis.network_speed_mps, base.network_speed_mps),
         accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,

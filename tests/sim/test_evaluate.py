@@ -78,6 +78,13 @@ def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_
         100 * (1 - base.kpis.fuel_economy_mpg / run.kpis.fuel_economy_mpg)
     )
     assert evaluation.change_pct(base, "throughput_vph") == 0.0
+    # the pair's throughput and the baseline's at the same road locations (the stretch both
+    # platoons' tails reached: the AV ends far behind), not each at its own five points
+    assert run.baseline_throughput_vph is not None
+    assert run.baseline_throughput_vph != base.kpis.throughput_vph
+    assert evaluation.change_pct(run, "throughput_vph") == pytest.approx(
+        100 * (run.kpis.throughput_vph / run.baseline_throughput_vph - 1)
+    )
     summary = evaluation.summary()
     assert len(summary) == 2
     assert summary[0]["collisions"] == 0

@@ -17,6 +17,7 @@ from sim.kpi import (
     min_time_to_collision_s,
     network_speed_mps,
     platoon_kpis,
+    shared_points_m,
     throughput_at_vph,
     throughput_vph,
 )
@@ -147,7 +148,7 @@ def test_a_platoon_whose_tail_never_passes_the_leaders_start_has_no_throughput()
     with pytest.raises(ValueError, match="share no stretch"):
         measurement_points_m(position)
     assert platoon_kpis(stalled).throughput_vph == 0.0
-    assert platoon_kpis(stalled, throughput_point_m=20.0).throughput_vph == 0.0
+    assert platoon_kpis(stalled, throughput_points_m=np.array([20.0])).throughput_vph == 0.0
 
 
 def test_a_car_that_merged_in_counts_where_it_crossed_in_the_lane() -> None:
@@ -177,3 +178,16 @@ def test_a_kpi_change_against_a_baseline_of_zero_is_undefined() -> None:
     assert change_pct(1900.0, 2000.0) == pytest.approx(-5.0)
     assert math.isnan(change_pct(0.0, 0.0))  # the throughput of a platoon that never moved
     assert math.isnan(change_pct(float("inf"), 2.0))
+
+
+def test_a_run_and_its_baseline_are_measured_at_the_same_road_locations() -> None:
+    """The paper's five points are the road's: a platoon whose tail ends short of the other's
+    is measured, with the other, over the stretch both tails reached."""
+    ahead = cruising_platoon(45.0)
+    behind_position = ahead.position_m.copy()
+    behind_position[:, 2] -= 15.0  # its last car 15 m further back throughout
+    points = shared_points_m([ahead.position_m, behind_position])
+    first = float(ahead.position_m[0].max())
+    last = float(behind_position[-1].min())
+    np.testing.assert_allclose(points, np.linspace(first, last, 7)[1:-1])
+    assert last < float(ahead.position_m[-1].min())  # not the points `ahead` alone would give

@@ -44,9 +44,9 @@ def test_bottleneck_queues_the_platoon_and_cuts_the_flow() -> None:
     inside = (held.position_m[:, 1:] >= 3000.0) & (held.position_m[:, 1:] < 4000.0)
     assert held.speed_mps[:, 1:][inside].mean() < 15.0
     assert held.speed_mps[:, 0].min() == 30.0  # the replayed leader is not held
-    point = region.measure_point_m
-    assert platoon_kpis(held, throughput_point_m=point).throughput_vph < 0.9 * (
-        platoon_kpis(free, throughput_point_m=point).throughput_vph
+    point = np.array([region.measure_point_m])
+    assert platoon_kpis(held, throughput_points_m=point).throughput_vph < 0.9 * (
+        platoon_kpis(free, throughput_points_m=point).throughput_vph
     )
     assert held.collisions == 0
 
