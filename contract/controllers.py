@@ -21,6 +21,10 @@ ACTUATIONS: tuple[Actuation, ...] = ("acc", "accel")
 # ACC gap settings: 1..3 bars (paper: roughly 1.2, 1.5 and 2.0 s time gaps).
 MIN_GAP_SETTING = 1
 MAX_GAP_SETTING = 3
+# The hardest braking the agent may request of an `accel` car (m/s^2; the issue's [-3, 1.5]
+# window, vehicle_agent.actuators.AccelLimits). a_safe's gap assumes the ego can brake this
+# hard, so no controller parameter may plan with harder braking than it can command.
+AGENT_MIN_ACCEL_MPS2 = -3.0
 
 # Parameters arrive as JSON: a number is a JSON number and a flag a JSON boolean, as the schema
 # (`controller_choice_schema`) says; lax coercion would take "0.5" or 1 and so accept what the
@@ -67,8 +71,9 @@ class MicroAccelParams(BaseModel):
     k: float = Field(0.5, gt=0, le=5)
     # s0: standstill safety distance (m).
     standstill_gap_m: float = Field(5.0, ge=0, le=50)
-    # a_min: the ego's hardest planned braking (m/s^2, negative), also the command floor.
-    min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
+    # a_min: the ego's hardest planned braking (m/s^2, negative), also the command floor; no
+    # harder than the agent may command.
+    min_accel_mps2: float = Field(AGENT_MIN_ACCEL_MPS2, lt=0, ge=AGENT_MIN_ACCEL_MPS2)
     # a_l,min: the leader's hardest possible braking (m/s^2, negative); harder than ours keeps
     # the equilibrium gap near 1.9 s at 25 m/s with the defaults.
     lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
@@ -89,11 +94,11 @@ class SimpleParams(BaseModel):
     # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
     k: float = Field(0.5, gt=0, le=5)
     max_accel_mps2: float = Field(1.0, gt=0, le=1.5)
-    min_accel_mps2: float = Field(-2.0, lt=0, ge=-3)
+    min_accel_mps2: float = Field(-2.0, lt=0, ge=AGENT_MIN_ACCEL_MPS2)
     # Safety term parameters (see MicroAccelParams).
     standstill_gap_m: float = Field(5.0, ge=0, le=50)
     lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
-    safety_min_accel_mps2: float = Field(-3.0, lt=0, ge=-8)
+    safety_min_accel_mps2: float = Field(AGENT_MIN_ACCEL_MPS2, lt=0, ge=AGENT_MIN_ACCEL_MPS2)
     # Added to the target on acc cars (mph), e.g. to offset a speedometer bias.
     speed_offset_mph: float = Field(0.0, ge=-10, le=10)
     gap_setting: GapSetting = MAX_GAP_SETTING

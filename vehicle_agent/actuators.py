@@ -19,7 +19,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-from contract.controllers import MAX_GAP_SETTING, MIN_GAP_SETTING
+from contract.controllers import AGENT_MIN_ACCEL_MPS2, MAX_GAP_SETTING, MIN_GAP_SETTING
 from vehicle_agent.cars import CruiseButton
 
 # One press of the gap button moves to the next shorter gap, from the shortest back to the
@@ -167,7 +167,7 @@ class ButtonSequencer:
 class AccelLimits:
     """Acceleration request limits: the issue's [-3, 1.5] m/s^2 and comfort jerk limits."""
 
-    min_accel_mps2: float = -3.0
+    min_accel_mps2: float = AGENT_MIN_ACCEL_MPS2
     max_accel_mps2: float = 1.5
     # Jerk (m/s^3): rising gently (ISO 15622 ACC comfort ~2.5), falling twice as fast so a
     # safety braking reaches -3 m/s^2 within 0.6 s.

@@ -304,6 +304,12 @@ class Agent:
                 enabled=self._enabled(assignment),
                 can_ok=car_state.valid,
                 acc_engaged=reading is not None and reading.acc_engaged,
+                set_point_reported=self.buttons is None
+                or (
+                    reading is not None
+                    and reading.acc_speed_setting_mph is not None
+                    and reading.acc_gap_setting is not None
+                ),
                 gps_ok=gps_ok,
                 on_corridor=on_corridor,
                 in_lane=self._in_lane(fix, assignment),

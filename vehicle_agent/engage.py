@@ -5,11 +5,12 @@ set points or acceleration requests), OVERRIDDEN (the driver touched the brake, 
 button: the agent keeps off until `override_holdoff_s` after the driver's last touch).
 
 Every step the inputs are checked in a fixed order; the first that fails hands the car back in
-that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged by
-the driver, GPS healthy, on the assigned corridor, in the assigned lane, plan fresh, controller
-working, actuator healthy, commands reaching the bus, button presses confirmed by the car, and
-the stop the leader ahead needs within the braking the agent may command. Taking over needs all
-of them to have held for `engage_after_s` without interruption, so a flickering input cannot
+that same step (so within one control period): configured and enabled, CAN healthy, ACC engaged
+by the driver, its set speed and gap reported (button cars), GPS healthy, on the assigned
+corridor, in the assigned lane, plan fresh, controller working, actuator healthy, commands
+reaching the bus, button presses confirmed by the car, and the stop the leader ahead needs
+within the braking the agent may command. Taking over needs all of them to have held for
+`engage_after_s` without interruption, so a flickering input cannot
 toggle control on and off at the loop rate.
 """
 
@@ -35,6 +36,9 @@ class EngageInputs:
     enabled: bool
     can_ok: bool
     acc_engaged: bool
+    # The car reports the ACC set speed and gap a button car's presses step from (always true
+    # where the agent requests accelerations): without them the sequencer cannot press.
+    set_point_reported: bool
     gps_ok: bool
     on_corridor: bool
     in_lane: bool
@@ -57,6 +61,7 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("enabled", "agent not enabled for this vehicle"),
     ("can_ok", "CAN inputs not healthy"),
     ("acc_engaged", "ACC not engaged by the driver"),
+    ("set_point_reported", "ACC set speed or gap not reported by the car"),
     ("gps_ok", "no GPS fix"),
     ("on_corridor", "off the assigned corridor"),
     ("in_lane", "not in the assigned lane"),

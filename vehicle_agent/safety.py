@@ -6,7 +6,8 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
 - values: finite, acceleration within [-3, 1.5] m/s^2 and within the jerk limits of the last
   request (or of the car's measured acceleration when taking over), no cancel request; only the
   plus, minus and gap buttons, one at a time, a new press no sooner than 0.45 s after the last,
-  no hold longer than 1.2 s;
+  no hold longer than 1.1 s (the sequencer holds 0.9 s for one 5 mph step; a button held
+  1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
 - rate: no faster than 0.8 x the make's command period;
 - the car: ACC engaged by the driver, the car state valid and fresh.
 """
@@ -39,7 +40,7 @@ class SafetyLimits:
     max_input_age_s: float = 0.25
     min_period_fraction: float = 0.8
     min_press_interval_s: float = 0.45
-    max_hold_s: float = 1.2
+    max_hold_s: float = 1.1
     allowed_buttons: frozenset[CruiseButton] = frozenset(
         {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP}
     )

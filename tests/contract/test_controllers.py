@@ -39,6 +39,21 @@ def test_defaults_are_a_runnable_config() -> None:
             "controller.params.lane_change.c",
             "less than or equal to 1",
         ),
+        # a_safe's gap assumes braking the agent may not command (it requests at most -3)
+        (
+            "microaccel",
+            "accel",
+            {"min_accel_mps2": -8.0},
+            "controller.params.min_accel_mps2",
+            "greater than or equal to -3",
+        ),
+        (
+            "simple",
+            "accel",
+            {"safety_min_accel_mps2": -5.0},
+            "controller.params.safety_min_accel_mps2",
+            "greater than or equal to -3",
+        ),
     ],
 )
 def test_a_refusal_names_the_field_and_the_reason(

@@ -468,3 +468,19 @@ def test_a_reading_outside_the_contract_costs_only_its_field(
         assert r.agent.stats.fields_dropped["ping"] == 1
         # a status report is always sent (only its ts is required)
         assert "ts" in r.agent.status_report()
+
+
+def test_a_button_car_that_does_not_report_its_gap_hands_back_and_says_so(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The Rogue's FOLLOW_DISTANCE 0 ("no follow distance") is no gap the sequencer can step
+    from: it pressed nothing, never stalled, and the agent stayed engaged commanding nothing."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)
+        r.emulator.acc.gap_setting = 0
+        r.run(1.0, until=lambda: not engaged(r))
+        assert not engaged(r)
+        assert r.agent.state.reason == "ACC set speed or gap not reported by the car"
+        r.emulator.acc.gap_setting = 3
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason

@@ -16,7 +16,7 @@ from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
-from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
+from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer, SafetyLimits
 
 _channels = itertools.count()
 READING = CarReading(
@@ -151,7 +151,7 @@ def test_no_button_frame_leaves_out_of_limits(
                 else:
                     assert pressed == held
                     assert press_started is not None
-                    assert now - press_started <= 1.2 + 1e-9
+                    assert now - press_started <= SafetyLimits().max_hold_s + 1e-9
             held = pressed
 
 
@@ -223,6 +223,25 @@ def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -
     board.hold(CruiseButton.GAP, SafetyContext(3.0, car_state(3.0)))
     assert writes == [(17, True), (17, False), (22, True)]
     assert safety.refused == {"press": 1, "button": 1, "ACC": 1}
+
+
+def test_a_held_button_is_let_go_before_the_car_takes_a_second_long_step(
+    dbc_cache: Path,
+) -> None:
+    """The fleet's cars step a held + or - by 5 mph every 0.6 s: held to 1.2 s, one hold would
+    move the setting 10 mph. The safety layer lets a hold last only up to 1.1 s."""
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    levels: dict[int, bool] = {}
+    board = GpioButtonBoard({CruiseButton.PLUS: 17}, levels.__setitem__, safety)
+    released_at = None
+    for step in range(26):  # 0 .. 1.25 s, every 0.05 s
+        now = step * 0.05
+        board.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
+        if released_at is None and not levels[17]:
+            released_at = now
+    assert released_at is not None
+    assert 0.9 < released_at < 2 * 0.6
 
 
 @settings(
