@@ -15,6 +15,7 @@ from sim.platoon import (
     AvObservation,
     CutIns,
     HandBack,
+    PlatoonRun,
     platoon_roles,
     roles_for_penetration,
     simulate_platoon,
@@ -207,17 +208,25 @@ def test_a_policy_without_a_driver_cannot_be_supervised() -> None:
         )
 
 
-def test_dropping_back_invites_cut_ins() -> None:
-    leader = drive_from_speeds("steady", np.full(3000, 25.0))
+class DropBack(Supervised):
+    """An AV that falls back to 15 m/s and holds it: its gap grows by 10 m every second."""
 
-    # an AV that falls back to 15 m/s and holds it: its gap grows by 10 m every second
-    class DropBack(Supervised):
-        def accel_mps2(self, observation: AvObservation) -> float:
-            return 0.5 * (15.0 - observation.speed_mps)
+    def accel_mps2(self, observation: AvObservation) -> float:
+        return 0.5 * (15.0 - observation.speed_mps)
 
-    run = simulate_platoon(
-        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
+
+STEADY_LEADER = drive_from_speeds("steady", np.full(3000, 25.0))
+
+
+def dropping_back(cut_ins: CutIns) -> PlatoonRun:
+    """Two humans and an AV that drops back behind a leader at a steady 25 m/s."""
+    return simulate_platoon(
+        STEADY_LEADER, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=cut_ins
     )
+
+
+def test_dropping_back_invites_cut_ins() -> None:
+    run = dropping_back(CutIns(seed=1))
     assert run.cut_ins >= 2
     assert run.cut_in_position_m is not None
     # each merging car took the middle of the gap: the AV's gap halves (less a car length)
@@ -226,31 +235,14 @@ def test_dropping_back_invites_cut_ins() -> None:
     assert after == pytest.approx((before - VEHICLE_LENGTH_M) / 2, abs=1.0)
     assert run.collisions == 0
     # the same seed gives the same merges; no rate, no merges
-    again = simulate_platoon(
-        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
-    )
-    assert again.cut_ins == run.cut_ins
-    none = simulate_platoon(
-        leader,
-        platoon_roles(humans=2, avs=1),
-        [DropBack(0.0)],
-        cut_ins=CutIns(rate_per_s_per_s=0.0),
-    )
-    assert none.cut_ins == 0
+    assert dropping_back(CutIns(seed=1)).cut_ins == run.cut_ins
+    assert dropping_back(CutIns(rate_per_s_per_s=0.0)).cut_ins == 0
 
 
 def test_each_gap_is_paired_with_the_speed_of_the_car_it_is_to() -> None:
     """After a cut-in the AV follows the car that merged, not its old leader: the time to
     collision must divide its gap by the closing speed on that car."""
-    leader = drive_from_speeds("steady", np.full(3000, 25.0))
-
-    class DropBack(Supervised):
-        def accel_mps2(self, observation: AvObservation) -> float:
-            return 0.5 * (15.0 - observation.speed_mps)
-
-    run = simulate_platoon(
-        leader, platoon_roles(humans=2, avs=1), [DropBack(0.0)], cut_ins=CutIns(seed=1)
-    )
+    run = dropping_back(CutIns(seed=1))
     assert run.cut_in_position_m is not None
     assert run.cut_in_speed_mps is not None
     first = int(np.argmax(np.isfinite(run.cut_in_position_m[:, 0])))
