@@ -3,7 +3,8 @@
 Runs at server start-up, every hour inside the server, and on `smoothfleet db maintain`.
 The SQL functions it calls are defined in migration 0001.
 
-Retention also reaches the DEFAULT partition. Partitions are made from yesterday on, so a ping
+Retention also reaches status reports (`fact_vehicle_status`, accepted only within the same
+window) and the DEFAULT partition. Partitions are made from yesterday on, so a ping
 of an earlier day (a car's spool uploaded after a week offline, a server down for a week) waits
 there, and no partition of its day is ever made to move it into: without this, such rows would
 outlive every retention window.
@@ -22,6 +23,10 @@ ENSURE_SQL = text(
 RETENTION_SQL = text(
     "SELECT drop_ping_partitions_before(current_date - CAST(:keep_days AS integer))"
 )
+STATUS_RETENTION_SQL = text(
+    "DELETE FROM fact_vehicle_status "
+    "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
+)
 DEFAULT_RETENTION_SQL = text(
     "DELETE FROM fact_vehicle_ping_default "
     "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
@@ -35,15 +40,18 @@ class MaintenanceResult:
     partitions_created: int
     partitions_dropped: int
     default_rows_deleted: int
+    status_reports_deleted: int
 
 
 def maintain(connection: Connection, *, ahead_days: int, retention_days: int) -> MaintenanceResult:
-    """Create the coming days' ping partitions and drop those past retention, and the rows
-    past retention that wait in the default partition."""
+    """Create the coming days' ping partitions and drop those past retention, and delete the
+    rows past retention that wait in the default partition and the status reports past it."""
+    keep = {"keep_days": retention_days}
     created = connection.execute(ENSURE_SQL, {"ahead": ahead_days}).scalar_one()
-    dropped = connection.execute(RETENTION_SQL, {"keep_days": retention_days}).scalar_one()
-    deleted = connection.execute(DEFAULT_RETENTION_SQL, {"keep_days": retention_days}).rowcount
-    return MaintenanceResult(int(created), int(dropped), int(deleted))
+    dropped = connection.execute(RETENTION_SQL, keep).scalar_one()
+    deleted = connection.execute(DEFAULT_RETENTION_SQL, keep).rowcount
+    reports = connection.execute(STATUS_RETENTION_SQL, keep).rowcount
+    return MaintenanceResult(int(created), int(dropped), int(deleted), int(reports))
 
 
 async def maintain_async(

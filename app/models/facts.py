@@ -80,7 +80,10 @@ class VehicleStatus(Base):
     """A piStatus report: the health of a car's computer, CAN, GPS and agent."""
 
     __tablename__ = "fact_vehicle_status"
-    __table_args__ = ({"comment": "One row per vehicle per status report (ts of the report)."},)
+    __table_args__ = (
+        Index("ix_fact_vehicle_status_ts", "ts"),
+        {"comment": "One row per vehicle per status report (ts of the report)."},
+    )
 
     vehicle_id: Mapped[str] = mapped_column(ForeignKey("dim_vehicle.vehicle_id"), primary_key=True)
     ts: Mapped[datetime] = mapped_column(DateTime(timezone=True), primary_key=True)

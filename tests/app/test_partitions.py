@@ -104,3 +104,21 @@ def test_a_duplicate_vehicle_and_ts_is_refused_by_the_database(seeded_engine: En
         seeded_engine.begin() as c,
     ):
         c.execute(INSERT_PING, {"ts": ts})
+
+
+def test_retention_deletes_status_reports_past_the_window(seeded_engine: Engine) -> None:
+    """A report every ~10 s from every car: kept for ever they would outgrow the pings."""
+    old_ts = noon(datetime.now(UTC).date() - timedelta(days=10))
+    recent_ts = noon(datetime.now(UTC).date() - timedelta(days=3))
+    with seeded_engine.begin() as connection:
+        for ts in (old_ts, recent_ts):
+            connection.execute(
+                text("INSERT INTO fact_vehicle_status (vehicle_id, ts) VALUES ('SF-001', :ts)"),
+                {"ts": ts},
+            )
+    with seeded_engine.begin() as connection:
+        result = maintain(connection, ahead_days=7, retention_days=5)
+    assert result.status_reports_deleted == 1
+    with seeded_engine.connect() as connection:
+        kept = connection.execute(text("SELECT ts FROM fact_vehicle_status")).scalars().all()
+    assert kept == [recent_ts]
