@@ -78,8 +78,9 @@ def bucket_window(
 ) -> tuple[datetime | str, datetime | str]:
     """The ping-time window of whole days or hours: rows with since <= bucket < until.
 
-    A day view keeps the days from since's date up to (not including) until's date; an hour
-    view the hours that start before `until`. Other views take the bounds as they are.
+    A day view keeps the days that start before `until`, an hour view the hours that start
+    before it: the partial last day or hour is kept whole, as the first one is. Other views
+    take the bounds as they are.
     """
     lower: datetime | str = "-infinity"
     upper: datetime | str = "infinity"
@@ -91,8 +92,8 @@ def bucket_window(
             lower = lower.replace(minute=0, second=0, microsecond=0)
     if until is not None:
         upper = _as_utc(until)
-        if column == "day":
-            upper = upper.replace(hour=0, minute=0, second=0, microsecond=0)
+        if column == "day" and upper != upper.replace(hour=0, minute=0, second=0, microsecond=0):
+            upper = upper.replace(hour=0, minute=0, second=0, microsecond=0) + timedelta(days=1)
         elif column == "hour" and upper != upper.replace(minute=0, second=0, microsecond=0):
             upper = upper.replace(minute=0, second=0, microsecond=0) + timedelta(hours=1)
     return lower, upper

@@ -474,9 +474,14 @@ def test_a_window_keeps_whole_days_and_hours(connection: Connection, store: Stor
     since = T0 + timedelta(minutes=20)
 
     days = analytics.read_view(connection, "engagement_daily", since=since)
+    # a window within one day keeps that day whole too (its end is no midnight)
+    within = analytics.read_view(
+        connection, "engagement_daily", since=since, until=since + timedelta(hours=1)
+    )
     hours = analytics.read_view(connection, "fleet_ping_hourly", since=since, until=since)
     none = analytics.read_view(connection, "fleet_ping_hourly", since=T0 + timedelta(hours=1))
 
     assert list(days["pings"]) == [20]
+    assert list(within["pings"]) == [20]
     assert list(hours["pings"]) == [20]
     assert none.empty
