@@ -92,7 +92,10 @@ class CorridorGeometry:
     def from_segments(
         cls, corridor_id: str, lanes: int, segments: Sequence[Mapping[str, Any]]
     ) -> CorridorGeometry:
-        """Build from ordered sub-segments with start/end x_m, lat and lon."""
+        """Build from ordered sub-segments with start/end x_m, lat and lon (ValueError for
+        none: a corridor whose sub-segments are not loaded yet has no geometry)."""
+        if not segments:
+            raise ValueError(f"corridor {corridor_id} has no sub-segments")
         ordered = sorted(segments, key=lambda segment: float(segment["start_x_m"]))
         x_m = [float(s["start_x_m"]) for s in ordered] + [float(ordered[-1]["end_x_m"])]
         lat = [float(s["start_lat"]) for s in ordered] + [float(ordered[-1]["end_lat"])]

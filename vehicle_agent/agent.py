@@ -294,7 +294,7 @@ class Agent:
         plan_fresh = (
             assignment is not None
             and lane_plan is not None
-            and lane_plan.is_fresh(wall, assignment.config.stale_plan_after_s)
+            and lane_plan.is_fresh(wall, assignment.config.stale_plan_after_s, now)
         )
         previous = self.state
         self.state = engage.step(
@@ -343,7 +343,7 @@ class Agent:
             mode=self.state.mode,
             reason=self.state.reason,
             plan_id=None if lane_plan is None else lane_plan.plan_id,
-            plan_age_s=None if lane_plan is None else lane_plan.age_s(wall),
+            plan_age_s=None if lane_plan is None else lane_plan.age_s(wall, now),
             controller=None if assignment is None else assignment.config.controller.name,
             accel_mps2=measured_accel,
             policy_sha256=None if assignment is None else assignment.controller.policy_sha256,
@@ -450,7 +450,7 @@ class Agent:
         lane_plan = self.lane_plan
         if running is None or reading is None or lane_plan is None or x_m is None:
             return
-        profile = lane_plan.profile(wall, self.wave_speed_mps)
+        profile = lane_plan.profile(wall, self.wave_speed_mps, now)
         observation = Observation(
             time_s=now,
             speed_mps=reading.speed_mps,
@@ -530,7 +530,11 @@ class Agent:
             return None
         ts = self.clock.now()
         if self._last_ping_ts is not None and ts <= self._last_ping_ts:
-            return None  # (vehicle_id, ts) is the ping's key: never two at one instant
+            if ts == self._last_ping_ts:
+                return None  # (vehicle_id, ts) is the ping's key: never two at one instant
+            # the wall clock stepped back (NTP): pings go on under the corrected times, rather
+            # than none until the clock passes the last one again
+            log.warning("wall clock stepped back %.1f s", (self._last_ping_ts - ts).total_seconds())
         self._last_ping_ts = ts
         reading = snapshot.reading
         ping: dict[str, Any] = {
@@ -753,7 +757,7 @@ class Agent:
         if config is None:
             return False
         try:
-            self.lane_plan = LanePlan(plan, config.assigned_lane, etag)
+            self.lane_plan = LanePlan(plan, config.assigned_lane, etag, self.clock.monotonic())
         except PlanError as error:
             self.stats.plans_refused += 1
             log.warning("%s", error)

@@ -53,6 +53,11 @@ class ManualClock:
         with self._lock:
             self._mono += seconds
 
+    def step_wall(self, seconds: float) -> None:
+        """Step the wall clock alone, as NTP does (backwards for negative seconds)."""
+        with self._lock:
+            self._start_wall += timedelta(seconds=seconds)
+
     def set(self, monotonic_s: float) -> None:
         """Jump to a monotonic time (never backwards)."""
         with self._lock:

@@ -9,7 +9,7 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 log = logging.getLogger(__name__)
 
@@ -63,22 +63,36 @@ class GpsdSource:
         return self._latest
 
     def handle(self, line: str) -> None:
-        """Fold in one gpsd JSON report."""
+        """Fold in one gpsd JSON report; one that is not the shape gpsd documents (a null
+        position, a list, text where a number belongs) is skipped, not allowed to end the
+        reader thread: a reader gone quiet leaves the car without a current fix."""
         try:
             report = json.loads(line)
         except json.JSONDecodeError:
             return
+        if not isinstance(report, dict):
+            return
+        try:
+            self._fold(report)
+        except (TypeError, ValueError, AttributeError) as error:
+            log.debug("gpsd: skipped a %s report (%s)", report.get("class"), error)
+
+    def _fold(self, report: dict[str, Any]) -> None:
         if report.get("class") == "SKY":
-            used = [s for s in report.get("satellites", []) if s.get("used")]
-            self._satellites = len(used)
+            # gpsd sends some SKY reports with the dilutions only: those say nothing of the
+            # satellites, and must not read as none
+            if isinstance(report.get("satellites"), list):
+                self._satellites = sum(1 for s in report["satellites"] if s.get("used"))
+            elif isinstance(report.get("uSat"), int):
+                self._satellites = int(report["uSat"])
         elif report.get("class") == "TPV" and "lat" in report and "lon" in report:
             self._latest = GpsFix(
                 time_s=self.clock(),
                 lat=float(report["lat"]),
                 lon=float(report["lon"]),
-                has_fix=int(report.get("mode", 0)) >= 2,
-                speed_mps=report.get("speed"),
-                heading_deg=report.get("track"),
+                has_fix=int(report.get("mode") or 0) >= 2,
+                speed_mps=_number(report.get("speed")),
+                heading_deg=_number(report.get("track")),
                 satellites=self._satellites,
             )
 
@@ -99,3 +113,10 @@ class GpsdSource:
             except OSError as error:
                 log.warning("gpsd at %s:%s: %s", *self.address, error)
             self._stop.wait(2.0)
+
+
+def _number(value: object) -> float | None:
+    """A JSON number as a float; None for anything else (gpsd leaves out what it lacks)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    return None

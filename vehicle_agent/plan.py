@@ -121,13 +121,18 @@ def parse_plan(body: bytes | str) -> Plan:
 class LanePlan:
     """One lane of a plan, ready for lookups, and what the agent knows about its freshness."""
 
-    def __init__(self, plan: Plan, lane: int, etag: str | None) -> None:
+    def __init__(
+        self, plan: Plan, lane: int, etag: str | None, received_s: float | None = None
+    ) -> None:
         lane_plan = plan.lane(lane)
         if lane_plan is None:
             raise PlanError(f"plan {plan.plan_id} has no lane {lane}")
         self.plan = plan
         self.lane = lane
         self.etag = etag
+        # The car's monotonic time when the plan arrived: its age by the car's own steady
+        # clock, which no wall-clock error or step can make younger.
+        self.received_s = received_s
         self.x_m, self.speeds = lane_plan.profile_points()
 
     @property
@@ -135,21 +140,29 @@ class LanePlan:
         """The plan being followed."""
         return self.plan.plan_id
 
-    def age_s(self, wall: datetime) -> float:
-        """Seconds since the plan was published."""
-        return (wall - self.plan.published_at).total_seconds()
+    def age_s(self, wall: datetime, now_s: float | None = None) -> float:
+        """Seconds since the plan was published, by the car's wall clock; given the monotonic
+        `now_s`, at least the seconds since it arrived. A car whose clock runs behind the
+        server's (a Pi without a real-time clock after boot) or steps back would otherwise
+        take an old plan for a young one."""
+        age = (wall - self.plan.published_at).total_seconds()
+        if now_s is not None and self.received_s is not None:
+            age = max(age, now_s - self.received_s)
+        return age
 
-    def is_fresh(self, wall: datetime, stale_after_s: float) -> bool:
-        """Before its own valid_until and published within `stale_after_s`.
+    def is_fresh(self, wall: datetime, stale_after_s: float, now_s: float | None = None) -> bool:
+        """Before its own valid_until and published within `stale_after_s` (`age_s`).
 
         Whether the server could be reached since does not matter: a plan stays right for as
         long as its publisher said, so a server restart or a network gap does not end it.
         """
         if self.plan.valid_until is not None and wall > self.plan.valid_until:
             return False
-        return self.age_s(wall) <= stale_after_s
+        return self.age_s(wall, now_s) <= stale_after_s
 
-    def profile(self, wall: datetime, wave_speed_mps: float) -> TargetProfile:
+    def profile(
+        self, wall: datetime, wave_speed_mps: float, now_s: float | None = None
+    ) -> TargetProfile:
         """Targets as seen now: the lookup moves downstream by -wave speed x plan age."""
-        shift = -wave_speed_mps * max(self.age_s(wall), 0.0)
+        shift = -wave_speed_mps * max(self.age_s(wall, now_s), 0.0)
         return TargetProfile(self.x_m, self.speeds, shift_m=shift)

@@ -211,11 +211,21 @@ class ServerClient:
         if response.status_code != 200:
             raise self._fail(response, "pings")
         try:
-            return PingAnswer.model_validate_json(response.content)
+            answer = PingAnswer.model_validate_json(response.content)
         except ValidationError as error:
             raise UnexpectedAnswer(
                 f"pings: unexpected answer ({error.errors()[0]['msg']})"
             ) from None
+        # the agent forgets the batch on this answer: it must account for every ping once
+        indexes = [rejection.index for rejection in answer.rejected]
+        if any(not 0 <= index < len(pings) for index in indexes) or len(set(indexes)) < len(
+            indexes
+        ):
+            raise UnexpectedAnswer(f"pings: rejections {indexes} for a batch of {len(pings)}")
+        counted = answer.accepted + answer.duplicates + len(indexes)
+        if counted != len(pings):
+            raise UnexpectedAnswer(f"pings: the answer accounts for {counted} of {len(pings)}")
+        return answer
 
     def post_status(self, report: Mapping[str, Any]) -> None:
         """Post a piStatus report."""

@@ -484,3 +484,16 @@ def test_a_button_car_that_does_not_report_its_gap_hands_back_and_says_so(
         r.emulator.acc.gap_setting = 3
         r.run(5.0, until=lambda: engaged(r))
         assert engaged(r), r.agent.state.reason
+
+
+def test_pings_go_on_after_the_wall_clock_steps_back(tmp_path: Path, dbc_cache: Path) -> None:
+    """NTP steps the wall clock back an hour: no ping may have the same (vehicle, ts) as the
+    last, but the car must not go silent for the hour until its clock passes that ts again."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        r.run(3.0)
+        spooled = r.agent.stats.pings_spooled
+        r.clock.step_wall(-3600.0)
+        r.run(5.0)
+        assert r.agent.stats.pings_spooled >= spooled + 4
+        assert engaged(r), r.agent.state.reason  # the plan's age is the car's steady clock's

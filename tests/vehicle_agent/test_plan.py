@@ -84,3 +84,17 @@ def test_freshness_is_the_plans_own_age_and_validity() -> None:
     # valid_until (published + 180 s) ends it even when stale_plan_after_s would not
     assert lane.is_fresh(PUBLISHED + timedelta(seconds=180), stale_after_s=600.0)
     assert not lane.is_fresh(PUBLISHED + timedelta(seconds=181), stale_after_s=600.0)
+
+
+def test_a_car_clock_behind_the_servers_cannot_make_an_old_plan_young() -> None:
+    """A Pi without a real-time clock can boot minutes behind: by its wall clock a plan it has
+    held for 9 minutes would be 'published a minute from now'. Its age is at least the time
+    since it arrived, on the car's steady clock."""
+    lane = LanePlan(parse_plan(body()), 2, None, received_s=1000.0)
+    behind = PUBLISHED - timedelta(minutes=1)  # the car's wall clock, 10 min slow, 9 min on
+    assert lane.age_s(behind) == -60.0
+    assert lane.age_s(behind, now_s=1000.0 + 540.0) == 540.0
+    assert lane.is_fresh(behind, 120.0, now_s=1000.0 + 60.0)
+    assert not lane.is_fresh(behind, 120.0, now_s=1000.0 + 540.0)
+    # and the lookup shifts by that age, not by none
+    assert lane.profile(behind, -4.0, now_s=1000.0 + 10.0).shift_m == 40.0

@@ -1,0 +1,85 @@
+"""What the agent makes of server answers that are not what the contract says, and of gpsd
+reports that are not what gpsd documents: refused with a reason, never a crash or a lost row."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import httpx
+import pytest
+
+from vehicle_agent.gps import GpsdSource
+from vehicle_agent.server import ServerClient, UnexpectedAnswer
+
+PINGS = [{"vehicle_id": "SF-001", "ts": f"2026-12-02T10:00:0{i}Z"} for i in range(3)]
+
+
+def client_answering(body: dict[str, Any]) -> ServerClient:
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, json=body)
+
+    http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(answer))
+    return ServerClient(http, "SF-001", "token")
+
+
+@pytest.mark.parametrize(
+    ("body", "reason"),
+    [
+        # an index beyond the batch: the agent looked it up and jammed its spool on IndexError
+        ({"accepted": 2, "duplicates": 0, "rejected": [{"index": 5, "error": "x"}]}, "for a batch"),
+        ({"accepted": 1, "duplicates": 0, "rejected": [{"index": 0, "error": "x"}] * 2}, "batch"),
+        # an answer that accounts for fewer pings than were sent: the rest would be forgotten
+        ({"accepted": 1, "duplicates": 0, "rejected": []}, "accounts for 1 of 3"),
+    ],
+)
+def test_a_ping_answer_that_does_not_account_for_the_batch_is_refused(
+    body: dict[str, Any], reason: str
+) -> None:
+    with pytest.raises(UnexpectedAnswer, match=reason):
+        client_answering(body).post_pings(PINGS)
+
+
+def test_a_ping_answer_for_every_ping_is_taken() -> None:
+    body = {"accepted": 1, "duplicates": 1, "rejected": [{"index": 2, "error": "lane"}]}
+    assert client_answering(body).post_pings(PINGS).accepted == 1
+
+
+def test_a_corridor_without_sub_segments_is_an_unexpected_answer() -> None:
+    """The server sends one for a corridor whose sub-segments are not loaded yet."""
+    with pytest.raises(UnexpectedAnswer, match="has no sub-segments"):
+        client_answering({"lanes": 4, "segments": []}).corridor("I-24-WB")
+
+
+def gpsd(*reports: object) -> GpsdSource:
+    source = GpsdSource(clock=lambda: 5.0)
+    for report in reports:
+        source.handle(json.dumps(report))
+    return source
+
+
+def test_a_sky_report_without_its_satellites_keeps_the_count() -> None:
+    tpv = {"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6}
+    used = [{"PRN": n, "used": True} for n in range(9)]
+    source = gpsd({"class": "SKY", "satellites": used}, {"class": "SKY", "hdop": 0.9}, tpv)
+    fix = source.latest()
+    assert fix is not None
+    assert fix.satellites == 9
+    assert gpsd({"class": "SKY", "uSat": 7}, tpv).latest().satellites == 7  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(
+    "report",
+    [
+        [],
+        {"class": "TPV", "mode": 3, "lat": None, "lon": -86.6},
+        {"class": "TPV", "mode": None, "lat": 36.0, "lon": -86.6, "speed": "fast"},
+        {"class": "SKY", "satellites": None},
+    ],
+    ids=["a list", "null lat", "null mode", "null satellites"],
+)
+def test_an_odd_gpsd_report_is_skipped_not_fatal(report: object) -> None:
+    source = gpsd(report, {"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6})
+    fix = source.latest()
+    assert fix is not None
+    assert fix.lat == 36.0
