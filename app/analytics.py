@@ -7,6 +7,7 @@ timezone-aware UTC timestamps.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from datetime import UTC, date, datetime, timedelta
 from typing import IO, Any
@@ -79,8 +80,9 @@ def bucket_window(
     """The ping-time window of whole days or hours: rows with since <= bucket < until.
 
     A day view keeps the days that start before `until`, an hour view the hours that start
-    before it: the partial last day or hour is kept whole, as the first one is. Other views
-    take the bounds as they are.
+    before it: the partial last day or hour is kept whole, as the first one is. The Edie boxes
+    (`t_start`) are widened to whole boxes as well: a box cut by the window would be divided by
+    its whole area and read too thin. Other views take the bounds as they are.
     """
     lower: datetime | str = "-infinity"
     upper: datetime | str = "infinity"
@@ -90,13 +92,26 @@ def bucket_window(
             lower = lower.replace(hour=0, minute=0, second=0, microsecond=0)
         elif column == "hour":
             lower = lower.replace(minute=0, second=0, microsecond=0)
+        elif column == "t_start":
+            lower = whole_boxes(lower, lower, EDIE_H_T_S)[0]
     if until is not None:
         upper = _as_utc(until)
         if column == "day" and upper != upper.replace(hour=0, minute=0, second=0, microsecond=0):
             upper = upper.replace(hour=0, minute=0, second=0, microsecond=0) + timedelta(days=1)
         elif column == "hour" and upper != upper.replace(minute=0, second=0, microsecond=0):
             upper = upper.replace(minute=0, second=0, microsecond=0) + timedelta(hours=1)
+        elif column == "t_start":
+            upper = whole_boxes(upper, upper, EDIE_H_T_S)[1]
     return lower, upper
+
+
+def whole_boxes(since: datetime, until: datetime, h_t_s: float) -> tuple[datetime, datetime]:
+    """[since, until) widened to whole h_t boxes, which start at multiples of h_t since the
+    epoch (as `analytics.edie_field` numbers them)."""
+    epoch = datetime(1970, 1, 1, tzinfo=UTC)
+    start = math.floor((since - epoch).total_seconds() / h_t_s) * h_t_s
+    end = math.ceil((until - epoch).total_seconds() / h_t_s) * h_t_s
+    return epoch + timedelta(seconds=start), epoch + timedelta(seconds=end)
 
 
 def view_query(
@@ -160,11 +175,13 @@ def edie_field(
     h_t_s: float = EDIE_H_T_S,
     h_x_m: float = EDIE_H_X_M,
 ) -> pd.DataFrame:
-    """Edie's fields of the pings in [since, until) on h_t x h_x boxes (paper, Results)."""
+    """Edie's fields of the pings in [since, until), widened to whole h_t boxes (`whole_boxes`),
+    on h_t x h_x boxes (paper, Results)."""
     if h_t_s <= 0 or h_x_m <= 0:
         raise ValueError("Edie boxes need h_t_s > 0 and h_x_m > 0")
     if until <= since:
         raise ValueError("until must be after since")
+    since, until = whole_boxes(_as_utc(since), _as_utc(until), h_t_s)
     return _frame(
         connection,
         "SELECT * FROM analytics.edie_field(:since, :until, :h_t_s, :h_x_m)"

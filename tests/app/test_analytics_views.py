@@ -127,6 +127,22 @@ def test_edie_box_with_two_vehicles(connection: Connection, store: Store) -> Non
     assert box["fuel_per_distance_g_per_m"] == pytest.approx(fuel_g / 300.0, rel=1e-9)
 
 
+def test_a_window_that_cuts_a_box_reads_the_whole_box(connection: Connection, store: Store) -> None:
+    """A box is divided by its whole area h_t x h_x: a window starting 5 s into it would halve
+    its density and flow, unless the window is widened to whole boxes (as MOTION's is)."""
+    store(drive("SF-001", T0, 1010.0, 20.0, 10, accel_mps2=0.0))
+    aligned = analytics.read_view(
+        connection, "edie_boxes", since=T0, until=T0 + timedelta(minutes=1)
+    )
+    cut = analytics.read_view(
+        connection, "edie_boxes", since=T0 + timedelta(seconds=5), until=T0 + timedelta(seconds=55)
+    )
+    direct = analytics.edie_field(connection, T0 + timedelta(seconds=5), T0 + timedelta(seconds=55))
+    for boxes in (cut, direct):
+        assert list(boxes["density_veh_per_m"]) == pytest.approx(list(aligned["density_veh_per_m"]))
+        assert list(boxes["flow_veh_per_s"]) == pytest.approx(list(aligned["flow_veh_per_s"]))
+
+
 def test_edie_splits_a_drive_across_boxes_in_time_and_space(
     connection: Connection, store: Store
 ) -> None:
