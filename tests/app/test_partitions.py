@@ -76,25 +76,6 @@ def test_retention_drops_whole_days_past_the_window(seeded_engine: Engine) -> No
     assert remaining == 1
 
 
-def test_retention_reaches_pings_of_a_day_that_never_had_a_partition(
-    seeded_engine: Engine,
-) -> None:
-    """Partitions are made from yesterday on: a ping of ten days ago (a spool uploaded after a
-    week offline) waits in the default partition, and retention must reach it there too."""
-    old_ts = noon(datetime.now(UTC).date() - timedelta(days=10))
-    recent_ts = noon(datetime.now(UTC).date() - timedelta(days=3))
-    with seeded_engine.begin() as connection:
-        connection.execute(INSERT_PING, {"ts": old_ts})
-        connection.execute(INSERT_PING, {"ts": recent_ts})
-    assert partition_of(seeded_engine, old_ts) == "fact_vehicle_ping_default"
-    with seeded_engine.begin() as connection:
-        result = maintain(connection, ahead_days=7, retention_days=5)
-    assert result.default_rows_deleted == 1
-    with seeded_engine.connect() as connection:
-        kept = connection.execute(text("SELECT ts FROM fact_vehicle_ping")).scalars().all()
-    assert kept == [recent_ts]
-
-
 def test_a_duplicate_vehicle_and_ts_is_refused_by_the_database(seeded_engine: Engine) -> None:
     ts = noon(datetime.now(UTC).date())
     with seeded_engine.begin() as connection:
@@ -106,19 +87,26 @@ def test_a_duplicate_vehicle_and_ts_is_refused_by_the_database(seeded_engine: En
         c.execute(INSERT_PING, {"ts": ts})
 
 
-def test_retention_deletes_status_reports_past_the_window(seeded_engine: Engine) -> None:
-    """A report every ~10 s from every car: kept for ever they would outgrow the pings."""
+def test_retention_reaches_old_pings_without_a_partition_and_old_status_reports(
+    seeded_engine: Engine,
+) -> None:
+    """Partitions are made from yesterday on: a ping of ten days ago (a spool uploaded after a
+    week offline) waits in the default partition, and retention must reach it there. Status
+    reports, one every ~10 s from every car, age out with the pings."""
     old_ts = noon(datetime.now(UTC).date() - timedelta(days=10))
     recent_ts = noon(datetime.now(UTC).date() - timedelta(days=3))
     with seeded_engine.begin() as connection:
         for ts in (old_ts, recent_ts):
+            connection.execute(INSERT_PING, {"ts": ts})
             connection.execute(
                 text("INSERT INTO fact_vehicle_status (vehicle_id, ts) VALUES ('SF-001', :ts)"),
                 {"ts": ts},
             )
+    assert partition_of(seeded_engine, old_ts) == "fact_vehicle_ping_default"
     with seeded_engine.begin() as connection:
         result = maintain(connection, ahead_days=7, retention_days=5)
-    assert result.status_reports_deleted == 1
+    assert (result.default_rows_deleted, result.status_reports_deleted) == (1, 1)
     with seeded_engine.connect() as connection:
-        kept = connection.execute(text("SELECT ts FROM fact_vehicle_status")).scalars().all()
-    assert kept == [recent_ts]
+        for table in ("fact_vehicle_ping", "fact_vehicle_status"):
+            kept = connection.execute(text(f"SELECT ts FROM {table}")).scalars().all()
+            assert kept == [recent_ts], table
