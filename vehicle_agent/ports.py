@@ -13,7 +13,7 @@ import can
 from vehicle_agent.cars import CarInterface, CruiseButton
 from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import Codec
-from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
+from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer
 
 # After a press, keep sending this many released frames so the car sees the release even if a
 # frame is lost.
@@ -142,7 +142,9 @@ class CanAccelPort:
         try:
             data = self.codec.encode(self.car.command_message, signals)
         except (ValueError, OverflowError) as error:
-            self.sender.safety.refuse(f"encode: {accel_mps2!r} does not encode ({error})")
+            self.sender.safety.refuse(
+                Refusal("encode", f"encode: {accel_mps2!r} does not encode ({error})")
+            )
             return False
         frame = can.Message(arbitration_id=self.frame_id, data=data, is_extended_id=False)
         sent = self.sender.send(frame, context)

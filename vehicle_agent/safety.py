@@ -49,6 +49,18 @@ class SafetyLimits:
 
 
 @dataclass(frozen=True, slots=True)
+class Refusal:
+    """Why the safety layer will not let a command through: a kind, which the refusals are
+    counted by, and the detail logged."""
+
+    kind: str
+    detail: str
+
+    def __str__(self) -> str:
+        return self.detail
+
+
+@dataclass(frozen=True, slots=True)
 class SafetyContext:
     """What the safety layer knows about the car when a frame is about to leave."""
 
@@ -74,48 +86,53 @@ class SafetyLayer:
         self._press_started_s: float | None = None
         self._log = ThrottledLog(log)
 
-    def check(self, frame: can.Message, context: SafetyContext) -> str | None:
+    def check(self, frame: can.Message, context: SafetyContext) -> Refusal | None:
         """Why `frame` must not be sent now, or None when it may."""
         now = context.time_s
         if frame.arbitration_id != self.command_id or frame.is_extended_id:
-            return f"id {frame.arbitration_id:#x} is not {self.car.command_message}"
+            return Refusal("id", f"id {frame.arbitration_id:#x} is not {self.car.command_message}")
         if len(frame.data) != self.command_length:
-            return f"{len(frame.data)} bytes, {self.car.command_message} has {self.command_length}"
+            return Refusal(
+                "length",
+                f"{len(frame.data)} bytes, {self.car.command_message} has {self.command_length}",
+            )
         try:
             _, signals = self.codec.decode(frame.arbitration_id, frame.data)
         except FrameError as error:
-            return f"does not decode: {error}"
+            return Refusal("decode", f"does not decode: {error}")
         if not all(math.isfinite(float(value)) for value in signals.values()):
-            return "non-finite signal value"
+            return Refusal("value", "non-finite signal value")
         minimum_gap = self.limits.min_period_fraction * self.car.command_period_s
         if self._last_sent_s is not None and now - self._last_sent_s < minimum_gap:
-            return f"rate: sent {now - self._last_sent_s:.3f} s after the previous frame"
+            return Refusal(
+                "rate", f"rate: sent {now - self._last_sent_s:.3f} s after the previous frame"
+            )
         if self.car.actuation == "accel":
             return self._check_car(context) or self._check_accel(
                 self.car.commanded_accel(signals), signals, context
             )
         return self.check_press(self.car.pressed_buttons(signals), context)
 
-    def _check_car(self, context: SafetyContext) -> str | None:
+    def _check_car(self, context: SafetyContext) -> Refusal | None:
         state = context.car_state
         if not state.valid or state.reading is None:
-            return f"car state invalid: {state.problem}"
+            return Refusal("car state", f"car state invalid: {state.problem}")
         age = context.time_s - state.time_s
         if age > self.limits.max_input_age_s:
-            return f"car state {age:.2f} s old"
+            return Refusal("car state", f"car state {age:.2f} s old")
         if not state.reading.acc_engaged:
-            return "ACC not engaged by the driver"
+            return Refusal("ACC", "ACC not engaged by the driver")
         return None
 
     def _check_accel(
         self, accel: float, signals: dict[str, float], context: SafetyContext
-    ) -> str | None:
+    ) -> Refusal | None:
         limits = self.limits.accel
         if not limits.min_accel_mps2 <= accel <= limits.max_accel_mps2:
             low, high = limits.min_accel_mps2, limits.max_accel_mps2
-            return f"acceleration {accel} m/s^2 outside [{low}, {high}]"
+            return Refusal("acceleration", f"acceleration {accel} m/s^2 outside [{low}, {high}]")
         if signals.get("CANCEL_REQ"):
-            return "cancel request"
+            return Refusal("cancel", "cancel request")
         now = context.time_s
         last = self._last_accel
         if last is not None and now - last[0] <= self.limits.jerk_reference_s:
@@ -133,10 +150,12 @@ class SafetyLayer:
             <= accel
             <= reference + limits.max_jerk_up_mps3 * dt + tolerance
         ):
-            return f"jerk: {reference:.3f} -> {accel:.3f} m/s^2 in {dt:.3f} s"
+            return Refusal("jerk", f"jerk: {reference:.3f} -> {accel:.3f} m/s^2 in {dt:.3f} s")
         return None
 
-    def check_press(self, pressed: frozenset[CruiseButton], context: SafetyContext) -> str | None:
+    def check_press(
+        self, pressed: frozenset[CruiseButton], context: SafetyContext
+    ) -> Refusal | None:
         """Why holding `pressed` now is not allowed (releasing always is), or None."""
         if not pressed:
             return None
@@ -146,24 +165,27 @@ class SafetyLayer:
             return problem
         if not pressed <= self.limits.allowed_buttons:
             names = ", ".join(sorted(b.value for b in pressed - self.limits.allowed_buttons))
-            return f"button {names} is not the agent's to press"
+            return Refusal("button", f"button {names} is not the agent's to press")
         if len(pressed) > 1:
-            return "buttons: more than one at once"
+            return Refusal("buttons", "buttons: more than one at once")
         started = self._press_started_s
         if not self._held:
             if started is not None and now - started < self.limits.min_press_interval_s:
-                return f"press rate: {now - started:.2f} s after the previous press"
+                return Refusal(
+                    "press", f"press rate: {now - started:.2f} s after the previous press"
+                )
         elif pressed != self._held:
-            return "buttons: switching without a release"
+            return Refusal("buttons", "buttons: switching without a release")
         elif started is not None and now - started > self.limits.max_hold_s:
-            return f"hold: button held {now - started:.2f} s"
+            return Refusal("hold", f"hold: button held {now - started:.2f} s")
         return None
 
-    def refuse(self, reason: str) -> None:
-        """Count and log a command refused before it became a frame."""
-        kind = reason.split(" ", 1)[0].rstrip(":")
-        self.refused[kind] += 1
-        self._log.warning(kind, f"safety refused {self.car.command_message}: {reason}")
+    def refuse(self, refusal: Refusal) -> None:
+        """Count (by kind) and log a command refused before it became a frame."""
+        self.refused[refusal.kind] += 1
+        self._log.warning(
+            refusal.kind, f"safety refused {self.car.command_message}: {refusal.detail}"
+        )
 
     def _record_press(self, pressed: frozenset[CruiseButton], now: float) -> None:
         if pressed and not self._held:
@@ -172,9 +194,9 @@ class SafetyLayer:
 
     def admit(self, frame: can.Message, context: SafetyContext) -> bool:
         """Check `frame`; remember it when it may be sent, count and log it when not."""
-        reason = self.check(frame, context)
-        if reason is not None:
-            self.refuse(reason)
+        refusal = self.check(frame, context)
+        if refusal is not None:
+            self.refuse(refusal)
             return False
         now = context.time_s
         self.sent += 1
@@ -188,9 +210,9 @@ class SafetyLayer:
 
     def admit_press(self, pressed: frozenset[CruiseButton], context: SafetyContext) -> bool:
         """The same checks for a button board that presses without CAN frames."""
-        reason = self.check_press(pressed, context)
-        if reason is not None:
-            self.refuse(reason)
+        refusal = self.check_press(pressed, context)
+        if refusal is not None:
+            self.refuse(refusal)
             return False
         self._record_press(pressed, context.time_s)
         return True

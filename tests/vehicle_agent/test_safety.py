@@ -16,7 +16,7 @@ from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
-from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer, SafetyLimits
+from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer, SafetyLimits
 
 _channels = itertools.count()
 READING = CarReading(
@@ -178,26 +178,23 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
         ),
     }
     for reason, frame in checks.items():
-        assert (safety.check(frame, context) or "").startswith(reason)
+        assert str(safety.check(frame, context)).startswith(reason)
+    # counted by kind, never by a word of the text ("4 bytes ..." is no kind "4")
+    for frame in checks.values():
+        assert not safety.admit(frame, context)
+    assert safety.refused == {"id": 1, "length": 1, "decode": 1}
     too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, {}))
-    assert (
-        safety.check(
-            can.Message(arbitration_id=frame_id, data=too_hard, is_extended_id=False), context
-        )
-        == "acceleration -3.5 m/s^2 outside [-3.0, 1.5]"
-    )
+    assert safety.check(
+        can.Message(arbitration_id=frame_id, data=too_hard, is_extended_id=False), context
+    ) == Refusal("acceleration", "acceleration -3.5 m/s^2 outside [-3.0, 1.5]")
     disengaged = SafetyContext(1.0, car_state(1.0, engaged=False), 0.0)
-    assert (
-        safety.check(
-            can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), disengaged
-        )
-        == "ACC not engaged by the driver"
-    )
+    assert safety.check(
+        can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), disengaged
+    ) == Refusal("ACC", "ACC not engaged by the driver")
     stale = SafetyContext(1.0, car_state(0.5), 0.0)
-    assert (
-        safety.check(can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), stale)
-        == "car state 0.50 s old"
-    )
+    assert safety.check(
+        can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), stale
+    ) == Refusal("car state", "car state 0.50 s old")
 
 
 def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -> None:
