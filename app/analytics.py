@@ -93,7 +93,7 @@ def bucket_window(
         elif column == "hour":
             lower = lower.replace(minute=0, second=0, microsecond=0)
         elif column == "t_start":
-            lower = whole_boxes(lower, lower, EDIE_H_T_S)[0]
+            lower = box_start(lower, EDIE_H_T_S)
     if until is not None:
         upper = _as_utc(until)
         if column == "day" and upper != upper.replace(hour=0, minute=0, second=0, microsecond=0):
@@ -101,17 +101,24 @@ def bucket_window(
         elif column == "hour" and upper != upper.replace(minute=0, second=0, microsecond=0):
             upper = upper.replace(minute=0, second=0, microsecond=0) + timedelta(hours=1)
         elif column == "t_start":
-            upper = whole_boxes(upper, upper, EDIE_H_T_S)[1]
+            upper = box_end(upper, EDIE_H_T_S)
     return lower, upper
 
 
-def whole_boxes(since: datetime, until: datetime, h_t_s: float) -> tuple[datetime, datetime]:
-    """[since, until) widened to whole h_t boxes, which start at multiples of h_t since the
-    epoch (as `analytics.edie_field` numbers them)."""
-    epoch = datetime(1970, 1, 1, tzinfo=UTC)
-    start = math.floor((since - epoch).total_seconds() / h_t_s) * h_t_s
-    end = math.ceil((until - epoch).total_seconds() / h_t_s) * h_t_s
-    return epoch + timedelta(seconds=start), epoch + timedelta(seconds=end)
+_EPOCH = datetime(1970, 1, 1, tzinfo=UTC)
+
+
+def box_start(moment: datetime, h_t_s: float) -> datetime:
+    """The start of the h_t box holding `moment`: boxes start at multiples of h_t since the
+    epoch, as `analytics.edie_field` numbers them."""
+    boxes = math.floor((moment - _EPOCH).total_seconds() / h_t_s)
+    return _EPOCH + timedelta(seconds=boxes * h_t_s)
+
+
+def box_end(moment: datetime, h_t_s: float) -> datetime:
+    """The end of the last h_t box a window ending at `moment` (excluded) touches."""
+    boxes = math.ceil((moment - _EPOCH).total_seconds() / h_t_s)
+    return _EPOCH + timedelta(seconds=boxes * h_t_s)
 
 
 def view_query(
@@ -175,13 +182,13 @@ def edie_field(
     h_t_s: float = EDIE_H_T_S,
     h_x_m: float = EDIE_H_X_M,
 ) -> pd.DataFrame:
-    """Edie's fields of the pings in [since, until), widened to whole h_t boxes (`whole_boxes`),
-    on h_t x h_x boxes (paper, Results)."""
+    """Edie's fields of the pings in [since, until), widened to whole h_t boxes, on
+    h_t x h_x boxes (paper, Results)."""
     if h_t_s <= 0 or h_x_m <= 0:
         raise ValueError("Edie boxes need h_t_s > 0 and h_x_m > 0")
     if until <= since:
         raise ValueError("until must be after since")
-    since, until = whole_boxes(_as_utc(since), _as_utc(until), h_t_s)
+    since, until = box_start(_as_utc(since), h_t_s), box_end(_as_utc(until), h_t_s)
     return _frame(
         connection,
         "SELECT * FROM analytics.edie_field(:since, :until, :h_t_s, :h_x_m)"

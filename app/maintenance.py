@@ -23,14 +23,14 @@ ENSURE_SQL = text(
 RETENTION_SQL = text(
     "SELECT drop_ping_partitions_before(current_date - CAST(:keep_days AS integer))"
 )
-STATUS_RETENTION_SQL = text(
-    "DELETE FROM fact_vehicle_status "
+# Rows past retention, deleted where whole days cannot be dropped: the status reports (one table)
+# and the pings that wait in the default partition.
+RETENTION_DELETE_SQL = (
+    "DELETE FROM {table} "
     "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
 )
-DEFAULT_RETENTION_SQL = text(
-    "DELETE FROM fact_vehicle_ping_default "
-    "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
-)
+STATUS_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_status"))
+DEFAULT_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_ping_default"))
 
 
 @dataclass(frozen=True)

@@ -105,7 +105,7 @@ class ControllerVariant:
         if self.controller not in RL_CONTROLLERS:
             return frozenset()
         params = RlParams.model_validate(dict(self.params))
-        manifest = policy_path(params, self.actuation).with_suffix(".json")  # type: ignore[arg-type]
+        manifest = policy_path(params, RL_CONTROLLERS[self.controller]).with_suffix(".json")
         if not manifest.is_file():
             return frozenset()
         recorded = json.loads(manifest.read_text(encoding="utf-8")).get("training_dates", ())

@@ -218,9 +218,8 @@ class ServerClient:
             ) from None
         # the agent forgets the batch on this answer: it must account for every ping once
         indexes = [rejection.index for rejection in answer.rejected]
-        if any(not 0 <= index < len(pings) for index in indexes) or len(set(indexes)) < len(
-            indexes
-        ):
+        outside = any(not 0 <= index < len(pings) for index in indexes)
+        if outside or len(set(indexes)) < len(indexes):
             raise UnexpectedAnswer(f"pings: rejections {indexes} for a batch of {len(pings)}")
         counted = answer.accepted + answer.duplicates + len(indexes)
         if counted != len(pings):
