@@ -176,7 +176,12 @@ class AccelLimits:
 
 
 class AccelLimiter:
-    """Clamp and jerk-limit acceleration requests; non-finite requests become 0 (coast)."""
+    """Clamp and jerk-limit acceleration requests.
+
+    A request that is not a number is a `ValueError`: the agent refuses one as its controller's
+    failure before it gets here (`require_finite`), and inventing a value for it here would
+    command the car with a figure no controller chose.
+    """
 
     def __init__(self, limits: AccelLimits | None = None) -> None:
         self.limits = limits or AccelLimits()
@@ -189,8 +194,9 @@ class AccelLimiter:
     def limit(self, now: float, requested_mps2: float) -> float:
         """The request as it may be sent now."""
         limits = self.limits
-        value = requested_mps2 if math.isfinite(requested_mps2) else 0.0
-        value = min(max(value, limits.min_accel_mps2), limits.max_accel_mps2)
+        if not math.isfinite(requested_mps2):
+            raise ValueError(f"acceleration request {requested_mps2} m/s^2 is not a number")
+        value = min(max(requested_mps2, limits.min_accel_mps2), limits.max_accel_mps2)
         if self._last is not None:
             last_time, last_value = self._last
             dt = max(now - last_time, 0.0)

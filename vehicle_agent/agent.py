@@ -47,6 +47,7 @@ from vehicle_agent.controllers import (
     Controller,
     Observation,
     build_controller,
+    require_finite,
 )
 from vehicle_agent.controllers.policy import PolicyFileError
 from vehicle_agent.gps import GpsFix, GpsSource
@@ -211,7 +212,7 @@ class Agent:
         self.codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
         self.reader = CarStateReader(car, self.codec)
         self.stopping = StoppingCheck(car.actuation)
-        self.safety = SafetyLayer(car, self.codec)
+        self.safety = SafetyLayer(car, self.codec, clock=self.clock.monotonic)
         self.sender = SafeSender(bus, self.safety)
         self.sequencer = ButtonSequencer()
         self.limiter = AccelLimiter()
@@ -464,7 +465,7 @@ class Agent:
             acc_gap_setting=reading.acc_gap_setting,
         )
         try:
-            action: Action = running.controller.step(observation)
+            action: Action = require_finite(running.controller.step(observation))
         except Exception as error:  # whatever a controller raises is the controller's failure
             self.stats.controller_errors += 1
             log.warning("controller %s failed: %s", running.config.controller.name, error)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -72,10 +73,21 @@ class SafetyContext:
 class SafetyLayer:
     """Checks outgoing frames of one make; remembers what it let through."""
 
-    def __init__(self, car: CarInterface, codec: Codec, limits: SafetyLimits | None = None) -> None:
+    def __init__(
+        self,
+        car: CarInterface,
+        codec: Codec,
+        limits: SafetyLimits | None = None,
+        clock: Callable[[], float] | None = None,
+    ) -> None:
+        """`clock`, the agent's monotonic clock, tells the car state's age at the instant a
+        frame is checked: the context's time is when the agent's pass began, and a pass that
+        stalled after reading the car (a slow controller, a paused process) must not act on
+        it. Without one, the context's time is taken as that instant."""
         self.car = car
         self.codec = codec
         self.limits = limits or SafetyLimits()
+        self._clock = clock
         self.command_id = codec.frame_id(car.command_message)
         self.command_length = codec.length(car.command_message)
         self.refused: Counter[str] = Counter()
@@ -117,7 +129,8 @@ class SafetyLayer:
         state = context.car_state
         if not state.valid or state.reading is None:
             return Refusal("car state", f"car state invalid: {state.problem}")
-        age = context.time_s - state.time_s
+        checked_at = context.time_s if self._clock is None else self._clock()
+        age = checked_at - state.time_s
         if age > self.limits.max_input_age_s:
             return Refusal("car state", f"car state {age:.2f} s old")
         if not state.reading.acc_engaged:

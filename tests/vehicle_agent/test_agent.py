@@ -3,6 +3,7 @@ taking over, reaching set points, handing back within one control period, bad in
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -14,6 +15,7 @@ from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
 from vehicle_agent.cars import CruiseButton
+from vehicle_agent.controllers import AccelCommand, Action, Observation
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import CHECKS, Mode
 from vehicle_agent.ports import GpioButtonBoard
@@ -152,6 +154,57 @@ def test_a_failing_controller_hands_back_within_one_period_and_says_so(
         monkeypatch.undo()
         r.run(5.0, until=lambda: engaged(r))
         assert engaged(r), r.agent.state.reason
+
+
+def test_a_controller_asking_for_nan_hands_back_and_commands_nothing(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        assignment = r.agent.assignment
+        assert assignment is not None
+        asked: list[float] = []
+
+        def not_a_number(observation: object) -> AccelCommand:
+            asked.append(r.clock.monotonic())
+            return AccelCommand(math.nan)
+
+        # before, the limiter turned NaN into a 0 m/s^2 request and the car stayed commanded
+        monkeypatch.setattr(assignment.controller, "step", not_a_number)
+        r.run(CONTROL_PERIOD_S, until=lambda: bool(asked))
+        assert asked
+        assert hand_back_time(r, asked[0]) <= CONTROL_PERIOD_S
+        assert r.agent.state.reason == "controller failed"
+        assert r.agent.stats.controller_errors == 1
+
+
+def test_a_pass_that_stalls_after_reading_the_car_sends_nothing_and_hands_back(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        assignment = r.agent.assignment
+        assert assignment is not None
+        step = assignment.controller.step
+        stalled: list[int] = []
+
+        def slow(observation: Observation) -> Action:
+            # the car was read at the start of this pass; the decision takes 0.3 s
+            stalled.append(r.agent.safety.sent)
+            r.clock.advance(0.3)
+            monkeypatch.setattr(assignment.controller, "step", step)
+            return step(observation)
+
+        monkeypatch.setattr(assignment.controller, "step", slow)
+        refused = r.agent.safety.refused["car state"]
+        r.run(CONTROL_PERIOD_S, until=lambda: bool(stalled))
+        assert stalled
+        stalled_at = r.clock.monotonic()
+        # before, the layer judged the state's age at the pass's start: 0 s, always fresh
+        assert r.agent.safety.refused["car state"] == refused + 1
+        assert hand_back_time(r, stalled_at) <= CONTROL_PERIOD_S
+        assert r.agent.safety.sent == stalled[0]  # nothing left after the stall
+        assert r.agent.state.reason == "actuator refused by the safety layer"
 
 
 @pytest.mark.parametrize(

@@ -16,6 +16,7 @@ from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
     AccSetPoint,
+    NonFiniteAction,
     Observation,
     TargetProfile,
     build_controller,
@@ -40,7 +41,13 @@ def test_clip_keeps_the_setting_within_20_and_73_mph() -> None:
     assert clip_speed_setting(76.0, [72.0] * 10) == 73
     # No valid speed at all: only the [20, 73] bounds apply.
     assert clip_speed_setting(35.4, [0.0, None]) == 35
-    assert clip_speed_setting(math.nan, []) == 20
+
+
+def test_the_clip_refuses_a_request_that_is_not_a_number() -> None:
+    # Before, NaN became the 20 mph floor: a setting no controller chose.
+    for request in (math.nan, math.inf):
+        with pytest.raises(NonFiniteAction, match="speed setting request"):
+            clip_speed_setting(request, [60.0] * 10)
 
 
 def test_registry_is_what_the_server_validates_against() -> None:

@@ -197,6 +197,21 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     ) == Refusal("car state", "car state 0.50 s old")
 
 
+def test_the_car_state_is_aged_when_the_command_leaves_not_when_the_pass_began(
+    dbc_cache: Path,
+) -> None:
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    sent_at = [0.1]
+    safety = SafetyLayer(car, codec, clock=lambda: sent_at[0])
+    context = SafetyContext(0.0, car_state(0.0))  # the pass read the car at 0 s
+    assert safety.check_press(frozenset({CruiseButton.PLUS}), context) is None
+    sent_at[0] = 0.3  # ... and reached the button 0.3 s later
+    assert safety.check_press(frozenset({CruiseButton.PLUS}), context) == Refusal(
+        "car state", "car state 0.30 s old"
+    )
+
+
 def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -> None:
     car = car_for("nissan_rogue")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))

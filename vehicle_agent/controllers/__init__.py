@@ -10,8 +10,10 @@ from vehicle_agent.controllers.base import (
     AccSetPoint,
     Action,
     Controller,
+    NonFiniteAction,
     Observation,
     TargetProfile,
+    require_finite,
 )
 from vehicle_agent.controllers.registry import (
     CONTROLLERS,
@@ -28,9 +30,11 @@ __all__ = [
     "Action",
     "Controller",
     "ControllerSpec",
+    "NonFiniteAction",
     "Observation",
     "TargetProfile",
     "build_controller",
     "clip_speed_setting",
+    "require_finite",
     "validate_params",
 ]

@@ -14,7 +14,13 @@ from collections import deque
 from collections.abc import Iterable
 
 from contract.units import mps_to_mph
-from vehicle_agent.controllers.base import AccSetPoint, Action, Controller, Observation
+from vehicle_agent.controllers.base import (
+    AccSetPoint,
+    Action,
+    Controller,
+    NonFiniteAction,
+    Observation,
+)
 
 CLIP_WINDOW_STEPS = 10  # the last 1 s at the 10 Hz control rate
 # The window is also the last second by time: speeds from before a hand-back are not "the last
@@ -28,9 +34,15 @@ MAX_SETTING_MPH = 73.0
 
 
 def clip_speed_setting(action_mph: float, recent_speeds_mph: Iterable[float | None]) -> int:
-    """v_final for a requested speed setting, given the last second of ego speeds (paper eq.)."""
+    """v_final for a requested speed setting, given the last second of ego speeds (paper eq.).
+
+    A request that is not a number raises `NonFiniteAction`: the clip bounds a decision, it does
+    not make one up.
+    """
+    if not math.isfinite(action_mph):
+        raise NonFiniteAction(f"speed setting request {action_mph} mph")
     valid = [s for s in recent_speeds_mph if s is not None and math.isfinite(s) and s != 0.0]
-    value = action_mph if math.isfinite(action_mph) else MIN_SETTING_MPH
+    value = action_mph
     if valid:
         mean = sum(valid) / len(valid)
         value = min(max(value, mean - BELOW_MEAN_MPH), mean + ABOVE_MEAN_MPH)

@@ -89,6 +89,25 @@ class AccSetPoint:
 Action = AccelCommand | AccSetPoint
 
 
+class NonFiniteAction(ValueError):
+    """A controller asked for a speed or an acceleration that is not a number.
+
+    That is the controller's failure, and the agent hands the car back for it, as for any error a
+    controller raises: no clip or limiter may turn it into a setting (the paper's clip would make
+    NaN its 20 mph floor, a limiter 0 m/s^2), because nothing decided that value.
+    """
+
+
+def require_finite(action: Action) -> Action:
+    """`action`, when every value it asks the car for is a number; else `NonFiniteAction`."""
+    if isinstance(action, AccelCommand):
+        if not math.isfinite(action.accel_mps2):
+            raise NonFiniteAction(f"acceleration request {action.accel_mps2} m/s^2")
+    elif not math.isfinite(action.requested_speed_mph):
+        raise NonFiniteAction(f"speed setting request {action.requested_speed_mph} mph")
+    return action
+
+
 class Controller(ABC):
     """A vehicle controller: stateful across steps, reset when the agent (re-)engages."""
 
