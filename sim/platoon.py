@@ -27,7 +27,11 @@ from numpy.typing import NDArray
 from contract.idm import I24_IDM, MIN_MODEL_GAP_M, IdmParams, equilibrium_gap_m
 from sim.drives import Drive
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
-from vehicle_agent.stopping import LEAD_ACCEL_FILTER_S, required_braking_mps2
+from vehicle_agent.stopping import (
+    LEAD_ACCEL_FILTER_S,
+    STOCK_ACC_MAX_BRAKING_MPS2,
+    required_braking_mps2,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -179,9 +183,16 @@ def roles_for_penetration(followers: int, penetration: float) -> BoolArray:
 class HandBack:
     """What happens when an AV's stop needs more braking than its actuation has.
 
-    The agent hands the car back at once (`vehicle_agent.stopping`); then the driver, alerted by
-    the car's forward-collision warning, drives: the I-24 IDM human, braking as hard as the stop
-    needs up to the tyres' limit (`MAX_BRAKING_MPS2`). The agent takes over again once the stop
+    The need is judged on the radar's gap and leader speed (`vehicle_agent.stopping`): on a
+    RAV4 the agent reads them and hands the car back at once; on a button car (Rogue, XT5) the
+    agent cannot, and the same rule stands for the car's own forward-collision warning, which
+    reads that radar. Either way the driver then needs `reaction_time_s` to brake: 1.25 s,
+    Green's (2000, "How long does it take to stop?") brake reaction to an unexpected but common
+    signal, for an attentive test driver alerted by the warning. Meanwhile the car's stock ACC
+    drives (a RAV4's resumes when the agent stops requesting; a button car's was driving all
+    along), braking at most `STOCK_ACC_MAX_BRAKING_MPS2`: the I-24 IDM's acceleration bounded
+    below there. Then the driver drives: the IDM human, braking as hard as the stop needs up to
+    the tyres' limit (`MAX_BRAKING_MPS2`). The agent takes over again once the stop
     need has stayed below `release_share` of its authority for `reengage_after_s`: the agent's
     own override hold-off (3 s after the driver's last touch) plus its engage delay (1 s),
     `vehicle_agent.engage.EngagePolicy`. Every hand-back is a takeover in the KPIs.
@@ -194,6 +205,14 @@ class HandBack:
     radar_range_m: float = 100.0
     release_share: float = 0.5
     reengage_after_s: float = 4.0
+    reaction_time_s: float = 1.25
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.reaction_time_s < self.reengage_after_s:
+            raise ValueError(
+                f"reaction time {self.reaction_time_s} s must be >= 0 and shorter than the "
+                f"{self.reengage_after_s} s before the agent takes over again"
+            )
 
 
 @dataclass(frozen=True)
@@ -264,6 +283,7 @@ class _AvState:
     policy: AvPolicy
     engaged: bool = True
     calm_since_s: float | None = None
+    handed_back_s: float = -math.inf
     # The leader's braking as the radar's successive speeds show it (as the agent estimates it).
     lead_accel: LeadAccelEstimator = field(
         default_factory=lambda: LeadAccelEstimator(LEAD_ACCEL_FILTER_S)
@@ -424,6 +444,9 @@ def simulate_platoon(
                 if not av.engaged:
                     driver_steps += 1
                     av.policy.driver_drives(observation)  # type: ignore[attr-defined]
+                    if observation.time_s - av.handed_back_s < hand_back.reaction_time_s:
+                        # the driver has not yet reacted: the stock ACC brakes what it may
+                        accel[i] = max(accel[i], -STOCK_ACC_MAX_BRAKING_MPS2)
                     continue  # the driver: the IDM acceleration already in `accel`
             request = av.policy.accel_mps2(observation)
             if not math.isfinite(request):
@@ -511,6 +534,7 @@ def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) ->
         if need > authority:
             av.engaged = False
             av.calm_since_s = None
+            av.handed_back_s = observation.time_s
         return
     if need > hand_back.release_share * authority:
         av.calm_since_s = None

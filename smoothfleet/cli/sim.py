@@ -40,6 +40,7 @@ from sim.evaluate import (
     ControllerVariant,
     Evaluation,
     OptimumFileError,
+    Realism,
     RunResult,
     default_workers,
     evaluate,
@@ -47,7 +48,7 @@ from sim.evaluate import (
     run_case,
 )
 from sim.folds import drive_date
-from sim.platoon import PlatoonRun
+from sim.platoon import HandBack, PlatoonRun
 from sim.recommended import (
     RECOMMENDED_CONTROLLER,
     RECOMMENDED_PLANNER,
@@ -315,6 +316,15 @@ def _drives_option(what: str) -> Callable[[Callable[..., Any]], Callable[..., An
     help="CSV of `smoothfleet sim optimum`: each drive's optimal bound, for the share column.",
 )
 @click.option(
+    "--reaction-time",
+    "reaction_time_s",
+    type=click.FloatRange(0.0, 3.9),
+    default=HandBack().reaction_time_s,
+    show_default=True,
+    help="Seconds a driver takes to brake after a hand-back, the stock ACC braking meanwhile "
+    "(sim.platoon.HandBack).",
+)
+@click.option(
     "--save-runs",
     "runs_dir",
     type=click.Path(path_type=Path, file_okay=False),
@@ -346,6 +356,7 @@ def evaluate_command(
     followers: int,
     avs: list[int],
     optimum_csv: Path | None,
+    reaction_time_s: float,
     runs_dir: Path | None,
     workers: int,
     out_dir: Path,
@@ -398,6 +409,7 @@ def evaluate_command(
                 avs=avs,
                 planner_params=params,
                 recommended=(RECOMMENDED_PLANNER, RECOMMENDED_CONTROLLER),
+                realism=Realism(hand_back=HandBack(reaction_time_s=reaction_time_s)),
                 save_dir=runs_dir,
                 workers=workers,
                 progress=advance,

@@ -159,9 +159,11 @@ class Supervised(Constant):
 
 
 def queue_ahead() -> Drive:
-    """28 m/s, then a stopped queue: the leader stops within a second and stands."""
+    """28 m/s, then a stopped queue: the leader brakes at 8 m/s^2, near the tyres' limit, to a
+    stand. (It once stopped within a second, 28 m/s^2, which no tyre gives: behind it at the
+    IDM's 1.24 s no driver with a reaction time stops in time, human or AV.)"""
     return drive_from_speeds(
-        "queue", np.concatenate([np.full(200, 28.0), np.linspace(28.0, 0.0, 10), np.zeros(600)])
+        "queue", np.concatenate([np.full(200, 28.0), np.linspace(28.0, 0.0, 36), np.zeros(600)])
     )
 
 
@@ -177,6 +179,31 @@ def test_a_stop_beyond_the_authority_is_handed_back_and_the_driver_stops_in_time
     # the same policy unsupervised drives into the queue
     unsupervised = simulate_platoon(queue_ahead(), platoon_roles(humans=3, avs=1), [Constant(0.0)])
     assert unsupervised.collisions >= 1
+
+
+def test_the_driver_brakes_hard_only_after_the_reaction_time_the_stock_acc_before() -> None:
+    def braking_times(reaction_time_s: float) -> tuple[float, float]:
+        run = simulate_platoon(
+            queue_ahead(),
+            platoon_roles(humans=0, avs=1),
+            [Supervised(0.0)],  # holds 28 m/s until it is handed back
+            hand_back=HandBack(reaction_time_s=reaction_time_s),
+        )
+        assert run.takeovers == 1
+        assert run.collisions == 0
+        accel = np.diff(run.speed_mps[:, 1]) / run.dt_s
+        handed_back = run.time_s[np.flatnonzero(accel < -0.01)[0]]
+        beyond_acc = run.time_s[np.flatnonzero(accel < -3.5 - 1e-9)[0]]
+        return float(handed_back), float(beyond_acc)
+
+    handed_back, beyond_acc = braking_times(1.25)
+    # the stock ACC's 3.5 m/s^2 until the driver reacts, 12 or 13 steps of 0.1 s later
+    assert 1.2 - 1e-9 <= beyond_acc - handed_back <= 1.3 + 1e-9
+    # a driver without one brakes harder half a second after the hand-back
+    instant_handed_back, instant_beyond_acc = braking_times(0.0)
+    assert instant_beyond_acc - instant_handed_back == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="reaction time 5.0 s"):
+        HandBack(reaction_time_s=5.0)
 
 
 def test_the_agent_takes_over_again_once_calm() -> None:
