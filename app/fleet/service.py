@@ -238,18 +238,24 @@ async def _ingest_clock(
     limits: Thresholds,
     rows: Sequence[Any] | None,
 ) -> datetime:
-    """The time the age checks measure against: the newest ping the server has stored from any
-    car, but never more than `limits.server_lag_s` behind now.
+    """The time the age checks measure against: now, less how far behind the server stores
+    what the cars send, never more than `limits.server_lag_s`.
 
-    A server that falls behind (a loaded machine, a slow page, a database wait) stores every
-    car's pings late alike: measured against what it has stored, no car ages, while a car silent
-    among reporting ones still does. A fleet silent for longer than the allowance (the night
-    before, the feed down) ages against the wall clock."""
+    A server that falls behind (a loaded machine, a database wait) stores every car's pings
+    late alike; measured against the wall clock, every car would age. How far behind it is, is
+    what its freshest path shows: the least, over the cars' newest pings, of the time from a
+    ping's measurement to its storing (`received_at - ts`). A car gone silent does not change
+    that (its last ping was stored as promptly as ever), so it ages, alone or with the whole
+    fleet; measured against the newest ping stored instead, a car reporting alone aged not at
+    all until the allowance ran out. A car whose clock runs ahead makes the lag 0, the wall
+    clock: the safe side."""
     if rows is None:
         rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, None))).all()
-    newest = max((row[3].ts for row in rows if row[3] is not None), default=None)
-    floor = now - timedelta(seconds=limits.server_lag_s)
-    return now if newest is None else max(min(now, newest), floor)
+    delays = [
+        (row[3].received_at - row[3].ts).total_seconds() for row in rows if row[3] is not None
+    ]
+    lag = min(max(min(delays, default=0.0), 0.0), limits.server_lag_s)
+    return now - timedelta(seconds=lag)
 
 
 VERDICT_ORDER = {"not cleared": 0, "maintenance": 1, "inactive": 2, "cleared": 3}

@@ -10,7 +10,7 @@ from typing import Any
 
 import httpx
 import pytest
-from sqlalchemy import Engine
+from sqlalchemy import Engine, text
 
 from app.fleet.schemas import WHITE_SPACE
 from tests.support.fleet import drive, healthy_status, post_pings, post_status
@@ -320,3 +320,27 @@ def test_a_server_behind_its_fleet_ages_no_car_but_a_silent_car_among_reporting_
     caught_up = api.get("/api/v1/fleet").json()
     assert checks(vehicle(caught_up, "SF-002"))["ping"] == "red"
     assert re.fullmatch(r"no ping for (8\d|9\d) s", vehicle(caught_up, "SF-002")["problems"][0])
+
+
+def test_a_car_reporting_alone_ages_once_it_falls_silent(api: Api, seeded_engine: Engine) -> None:
+    """6 a.m., one car on: it reported promptly until 100 s ago, then fell silent. Measured
+    against the newest ping stored (its own), it read "0 s" and cleared for 2 minutes."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=102), 0, 25, 3)
+    )
+    post_status(
+        api.client, api.tokens["admin"], "SF-001", **healthy_status(now - timedelta(seconds=100))
+    )
+    with seeded_engine.begin() as connection:  # stored as promptly as they were sent
+        for table in ("fact_vehicle_ping", "fact_vehicle_status"):
+            connection.execute(
+                text(
+                    f"UPDATE {table} SET received_at = ts + interval '0.5 s'"
+                    " WHERE vehicle_id = 'SF-001'"
+                )
+            )
+    silent = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert checks(silent)["ping"] == "red"
+    assert re.fullmatch(r"no ping for (9\d|10\d) s", silent["problems"][0])
+    assert silent["verdict"] == "not cleared"
