@@ -247,6 +247,12 @@ def _unknown(label: str, what: str) -> Grade:
     return Grade("unknown", "—", f"the car did not report {what}", f"{label} not reported")
 
 
+def _unreported(label: str, what: str) -> Grade:
+    """A status report that leaves out what a car needs to drive (its GPS fix, its CAN bus, its
+    ACC): red, since a car is cleared on what it said, not on what it did not."""
+    return Grade("red", "—", f"the car's status did not report {what}", f"{label} not reported")
+
+
 def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest ping (the car's GPS time)."""
     if facts.last_ping is None:
@@ -280,8 +286,10 @@ def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grad
 def check_gps(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """GPS fix and satellites in view."""
     status = facts.last_status
-    if status is None or status.has_gps_fix is None:
+    if status is None:
         return _unknown("GPS", "its GPS fix")
+    if status.has_gps_fix is None:
+        return _unreported("GPS", "its GPS fix")
     satellites = status.gps_satellites
     shown = f"{satellites} sat" if satellites is not None else ""
     if not status.has_gps_fix:
@@ -306,8 +314,10 @@ def check_gps(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
 def check_can(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """CAN bus readable, and the rate of frames received against the make's own schedule."""
     status = facts.last_status
-    if status is None or (status.is_can_ok is None and status.can_msgs_per_s is None):
+    if status is None:
         return _unknown("CAN", "its CAN bus")
+    if status.is_can_ok is None and status.can_msgs_per_s is None:
+        return _unreported("CAN", "its CAN bus")
     if status.is_can_ok is False:
         return Grade("red", "down", "the agent cannot read the car's CAN bus", "CAN down")
     if status.can_msgs_per_s is None:
@@ -336,8 +346,11 @@ def check_can(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
 def check_acc(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """The car's adaptive cruise control is available to the controller."""
     status = facts.last_status
-    if status is None or status.is_acc_available is None:
+    if status is None or (status.is_acc_available is None and status.is_can_ok is False):
+        # no report, or no CAN to read it from: the status or CAN check says why
         return _unknown("ACC", "ACC availability")
+    if status.is_acc_available is None:
+        return _unreported("ACC", "ACC availability")
     if status.is_acc_available:
         return Grade("green", "yes", "ACC available")
     return Grade("red", "no", "ACC not available: the controller cannot act", "ACC not available")
@@ -349,10 +362,22 @@ def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> 
     The agent reports its controller as running only while it drives the car (engaged:
     vehicle_agent/agent.py `controller_running`), so "not running" is every parked car at
     6 a.m. and every car its driver has not engaged yet: a warning, never a reason to withhold
-    clearance."""
+    clearance. An agent that reports no controller at all built none from its assignment (a
+    policy it refused or could not fetch, no config yet): that car cannot be driven, and is red.
+    """
     status = facts.last_status
     if status is None or status.is_controller_running is None:
         return _unknown("controller", "its controller")
+    if status.controller is None and not status.is_controller_running:
+        # The agent built no controller from its assignment (a policy refused or not fetched,
+        # no config yet): it cannot drive the car, however healthy the rest.
+        why = f": {status.engage_reason}" if status.engage_reason else ""
+        return Grade(
+            "red",
+            "none",
+            f"the agent runs no controller (assigned {facts.assigned_controller}{why})",
+            f"no controller built for {facts.assigned_controller}{why}",
+        )
     name = status.controller or facts.assigned_controller
     if status.controller is not None and status.controller != facts.assigned_controller:
         return Grade(

@@ -122,6 +122,12 @@ def test_a_stale_status_turns_amber_then_red_and_blocks_clearance(age_s: int, le
         ({"is_acc_available": False}, "acc", "red"),
         ({"is_controller_running": False}, "controller", "amber"),
         ({"controller": "simple"}, "controller", "amber"),
+        # the agent built no controller from its assignment (say, a policy it refused)
+        ({"controller": None, "is_controller_running": False}, "controller", "red"),
+        # a report that leaves out what the car needs to drive clears nothing
+        ({"has_gps_fix": None, "gps_satellites": None}, "gps", "red"),
+        ({"is_can_ok": None, "can_msgs_per_s": None}, "can", "red"),
+        ({"is_acc_available": None}, "acc", "red"),
         ({"plan_age_s": None}, "plan", "amber"),
         ({"plan_age_s": 95.0}, "plan", "amber"),
         ({"plan_age_s": 200.0}, "plan", "red"),
