@@ -178,6 +178,8 @@ class AgentStats:
     controller_errors: int = 0
     policy_downloads: int = 0
     policies_refused: int = 0
+    # Assigned policies downloaded whole but not kept: the car could not write them (OSError).
+    policies_not_kept: int = 0
 
 
 class Agent:
@@ -687,7 +689,9 @@ class Agent:
             self._server_failed("corridor", error)
             self._config_schedule.failed(now, 2.0)
             return
-        self._config_schedule.done(now, CONFIG_REFRESH_S)
+        # The schedule is settled after the config is adopted, not before: a policy that fails
+        # again and again then backs off (2 s doubling to MAX_BACKOFF_S) instead of counting
+        # each time as a first failure and downloading every 2 s.
         try:
             self.configure(config, corridor)
         except ServerError as error:
@@ -695,16 +699,27 @@ class Agent:
             self._server_failed("policy", error)
             self.assignment = None
             self._config_schedule.failed(now, 2.0)
+            return
         except PolicyFileError as error:
             # a download (or kept file) that is not the policy assigned: never run, retried
             log.error("vehicle %s: policy refused: %s", self.vehicle_id, error)
             self.stats.policies_refused += 1
             self.assignment = None
             self._config_schedule.failed(now, 2.0)
+            return
+        except OSError as error:
+            # a good download the car could not keep (a full or read-only SD card): the
+            # assigned policy cannot run, and the one before it is no longer assigned
+            log.error("vehicle %s: policy not kept on disk: %s", self.vehicle_id, error)
+            self.stats.policies_not_kept += 1
+            self.assignment = None
+            self._config_schedule.failed(now, 2.0)
+            return
         except (ControllerConfigError, ValueError) as error:
             log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
             self.stats.server_errors["config"] += 1
             self.assignment = None
+        self._config_schedule.done(now, CONFIG_REFRESH_S)
 
     def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:
         """Adopt a config (building its controller); raises ValueError when it cannot apply to

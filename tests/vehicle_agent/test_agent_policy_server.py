@@ -217,3 +217,50 @@ def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
             assert store.holds(small_sha256)
             assert store.holds(ACC_SHA256)
             assert r.agent.stats.policy_downloads == 3  # acc once, small damaged, small good
+
+
+def test_a_policy_the_car_cannot_keep_hands_back_and_backs_off(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    publish_free_flow_plan(seeded_database_url, seeded_engine)
+    operator = issue(seeded_engine, "operator")
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    store = PolicyStore(tmp_path / "policies")
+    small, small_sha256 = small_acc_policy(tmp_path)
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+    ):
+        manifest = json.loads(ACC_FILE.with_suffix(".json").read_text())
+        upload(http, operator, ACC_FILE.read_bytes(), manifest)
+        upload(http, operator, small, {"sha256": small_sha256, "actuation": "acc"})
+        assign(http, operator, ACC_SHA256)
+        with car_of_sf001(http, token, tmp_path, dbc_cache, store) as r:
+            r.run(1.0, network=True)
+            r.emulator.driver_engage(set_speed_mph=54)
+            r.run(20.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+            assert r.agent.state.mode is Mode.ENGAGED, r.agent.state.reason
+
+            def full_card(sha256: str, content: bytes, actuation: object) -> Path:
+                raise OSError(28, "No space left on device")
+
+            # the SD card is full when the next policy arrives (before, the error escaped the
+            # network pass and the car drove the old, no longer assigned policy)
+            monkeypatch.setattr(store, "keep", full_card)
+            assign(http, operator, small_sha256)
+            r.run(65.0, network=True, until=lambda: r.agent.stats.policies_not_kept > 0)
+            assert r.agent.stats.policies_not_kept == 1
+            assert r.agent.assignment is None
+            r.run(1.0, network=True)
+            assert r.agent.state.mode is not Mode.ENGAGED
+            # retried after 2, 4, 8, 16 s: 4 more tries in 31 s, not 15 every 2 s
+            r.run(31.5, network=True)
+            assert r.agent.stats.policies_not_kept == 5
+            monkeypatch.undo()
+            r.run(40.0, network=True, until=lambda: r.agent.assignment is not None)
+            assert r.agent.assignment is not None
+            assert r.agent.assignment.controller.policy_sha256 == small_sha256
