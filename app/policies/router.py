@@ -74,6 +74,8 @@ async def post_policy(
         document: Any = json.loads(await manifest.read())
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise _rejected("manifest", f"not JSON ({error})") from None
+    except RecursionError:
+        raise _rejected("manifest", "nested too deeply to read") from None
     try:
         checked = check_policy(content, document, controller)
         stored, created = await store_policy(session, checked, f"token {principal.token_id}")

@@ -161,6 +161,16 @@ def test_a_manifest_naming_another_hash_is_refused(api: Api) -> None:
     assert stored_rows(api.engine) == 0
 
 
+def test_a_manifest_nested_too_deeply_to_read_is_refused_not_a_server_error(api: Api) -> None:
+    deep = b"[" * 200_000 + b"]" * 200_000  # under the body limit; json.loads recurses out
+
+    loc, msg = rejected(api.upload(ACC_FILE.read_bytes(), deep))
+
+    assert loc == ["body", "manifest"]
+    assert "nested too deeply" in msg
+    assert stored_rows(api.engine) == 0
+
+
 def test_a_corrupted_file_is_refused_by_its_hash(api: Api) -> None:
     content = bytearray(ACC_FILE.read_bytes())
     content[len(content) // 2] ^= 0xFF

@@ -14,10 +14,12 @@ from contract.controllers import RlParams
 from tests.support.policies import acc_policy_bytes
 from vehicle_agent.controllers import AccelCommand, AccSetPoint, Observation, TargetProfile
 from vehicle_agent.controllers.policy import (
+    ACC_SPEED_ACTION,
     PolicyFileError,
     acc_features,
     accel_features,
     load_policy,
+    read_policy,
     requested_accel_mps2,
     requested_gap_setting,
     requested_speed_mph,
@@ -272,3 +274,43 @@ def test_a_time_margin_never_loosens_the_bound(
     assert bounded_request(request, speed, gap, rel, 0.0, margin) <= bounded_request(
         request, speed, gap, rel, 0.0
     )
+
+
+def zip_with_header_field(content: bytes, local_offset: int, value: int) -> bytes:
+    """`content` (a zip archive) with one 2-byte field of every member's headers set: at
+    `local_offset` in each local header, 2 bytes further on in each central one."""
+    data = bytearray(content)
+    for signature, offset in ((b"PK\x03\x04", local_offset), (b"PK\x01\x02", local_offset + 2)):
+        found = data.find(signature)
+        while found >= 0:
+            data[found + offset : found + offset + 2] = value.to_bytes(2, "little")
+            found = data.find(signature, found + 4)
+    return bytes(data)
+
+
+def test_archives_no_policy_could_be_are_refused_as_policy_files(tmp_path: Path) -> None:
+    """Each once escaped as another error: a 500 on upload, a crashed download on the car."""
+    good = acc_policy_bytes(ACC_SPEED_ACTION)
+    read_policy(good, "acc", "good")  # itself a policy
+    deflate64 = zip_with_header_field(good, 8, 9)  # compression method 9: Deflate64
+    encrypted = zip_with_header_field(good, 6, 1)  # general-purpose flag bit 0: encrypted
+    bomb = tmp_path / "bomb.npz"
+    np.savez_compressed(bomb, actuation=np.array("acc"), layer_0_weight=np.zeros((4096, 1024)))
+    structured = tmp_path / "structured.npz"
+    np.savez(
+        structured,
+        actuation=np.array("acc"),
+        speed_action=np.array(ACC_SPEED_ACTION),
+        layer_0_weight=np.zeros(6, dtype=[("a", "f8"), ("b", "f8")]),
+        layer_0_bias=np.zeros(2),
+    )
+    assert bomb.stat().st_size < 100_000  # 32 MiB of zeros, packed small
+    cases = {
+        "deflate64": (deflate64, "not a policy file"),
+        "encrypted": (encrypted, "not a policy file"),
+        "bomb": (bomb.read_bytes(), "unpacks to 33554[0-9]+ bytes, more than a policy's"),
+        "structured": (structured.read_bytes(), "not a policy file"),
+    }
+    for name, (content, message) in cases.items():
+        with pytest.raises(PolicyFileError, match=message):
+            read_policy(content, "acc", name)

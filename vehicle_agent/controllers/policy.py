@@ -73,6 +73,9 @@ ACC_SPEED_ACTION = "around_plan_closing_lost_lead"
 TIME_MARGIN_MIN_S = 0.0
 TIME_MARGIN_MAX_S = 1.5
 
+# What a policy file may unpack to (bytes): a 64 x 64 network is about 40 kB, and a small
+# archive that unpacks to a gigabyte (a zip bomb) must be refused before it is read.
+MAX_POLICY_UNPACKED_BYTES = 16 * 1024 * 1024
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
 # Outputs of an `acc` policy (speed setting, gap bars), and of an `accel` one per action.
@@ -263,6 +266,16 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     if not zipfile.is_zipfile(io.BytesIO(content)):
         raise PolicyFileError(f"{label}: not a policy file (not an .npz archive)")
     try:
+        with zipfile.ZipFile(io.BytesIO(content)) as listing:
+            unpacked = sum(member.file_size for member in listing.infolist())
+    except (OSError, ValueError, zipfile.BadZipFile) as error:
+        raise PolicyFileError(f"{label}: not a policy file ({error})") from None
+    if unpacked > MAX_POLICY_UNPACKED_BYTES:
+        raise PolicyFileError(
+            f"{label}: unpacks to {unpacked} bytes, more than a policy's "
+            f"{MAX_POLICY_UNPACKED_BYTES}"
+        )
+    try:
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
             speed_action = str(archive["speed_action"]) if "speed_action" in archive.files else None
@@ -276,7 +289,19 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             biases = tuple(
                 np.asarray(archive[f"layer_{i}_bias"], dtype=np.float64) for i in range(layers)
             )
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as error:
+    except (
+        OSError,
+        ValueError,
+        KeyError,
+        EOFError,
+        zipfile.BadZipFile,
+        zlib.error,
+        # zipfile: a member compressed by a method it does not read (Deflate64), or encrypted
+        NotImplementedError,
+        RuntimeError,
+        # numpy: an array of a structured dtype, which is no weight matrix
+        TypeError,
+    ) as error:
         raise PolicyFileError(f"{label}: not a policy file ({error})") from None
     if stored != actuation:
         raise PolicyFileError(f"{label}: a policy for actuation {stored}, not {actuation}")
