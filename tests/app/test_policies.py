@@ -324,6 +324,17 @@ def test_the_documented_query_compares_two_policies_on_two_halves_of_the_fleet(a
                     for ping in pings
                 ],
             )
+    # SF-003 falls back to its stock ACC for 5 s, which brakes harder: that is not the policy's
+    # driving, and must count in the engaged share only
+    fallback = drive("SF-003", now + timedelta(seconds=1), 2250.0, 25.0, 5)
+    post_pings(
+        api.client,
+        api.tokens["admin"],
+        [
+            {**ping, "policy_sha256": other, "accel_mps2": 2.0, "controller_engaged": False}
+            for ping in fallback
+        ],
+    )
     post_pings(api.client, api.tokens["admin"], drive("SF-005", now, 2000.0, 25.0, 3))
 
     with api.engine.connect() as connection:
@@ -332,12 +343,13 @@ def test_the_documented_query_compares_two_policies_on_two_halves_of_the_fleet(a
     assert [row["policy_sha256"] for row in rows] == sorted(halves)  # SF-005 ran no policy
     by_policy = {row["policy_sha256"]: row for row in rows}
     assert (by_policy[ACC_SHA256]["vehicles"], by_policy[ACC_SHA256]["pings"]) == (2, 20)
-    assert (by_policy[other]["vehicles"], by_policy[other]["pings"]) == (2, 20)
+    assert (by_policy[other]["vehicles"], by_policy[other]["pings"]) == (2, 25)
     assert by_policy[ACC_SHA256]["controller"] == "rl_acc"
     assert by_policy[other]["controller"] is None
     assert by_policy[ACC_SHA256]["accel_rms_mps2"] == pytest.approx(0.1, abs=1e-6)
     assert by_policy[other]["accel_rms_mps2"] == pytest.approx(0.5, abs=1e-6)
-    assert float(by_policy[other]["engaged_pct"]) == 100.0
+    assert float(by_policy[other]["engaged_pct"]) == 80.0
+    assert float(by_policy[ACC_SHA256]["engaged_pct"]) == 100.0
 
 
 def test_a_wrong_method_names_every_method_the_path_serves(api: Api) -> None:
