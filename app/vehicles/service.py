@@ -5,9 +5,10 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 from pydantic import ValidationError
-from sqlalchemy import select
+from sqlalchemy import case, select, tuple_
 from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.orm import Session
 
@@ -115,11 +116,16 @@ def upsert_vehicles(
         return 0
     statement = insert(Vehicle).values([row.model_dump() for row in rows])
     if update_existing:
-        columns = {
-            name: statement.excluded[name]
-            for name in RosterRow.model_fields
-            if name != "vehicle_id"
-        }
+        names = [name for name in RosterRow.model_fields if name != "vehicle_id"]
+        columns: dict[str, Any] = {name: statement.excluded[name] for name in names}
+        # A row that changes what the car is told is a new config, as an assignment through
+        # the API is: the version the agent echoes then says whether it has picked it up.
+        changed = tuple_(*(getattr(Vehicle, name) for name in names)).is_distinct_from(
+            tuple_(*(statement.excluded[name] for name in names))
+        )
+        columns["config_version"] = case(
+            (changed, Vehicle.config_version + 1), else_=Vehicle.config_version
+        )
         statement = statement.on_conflict_do_update(index_elements=["vehicle_id"], set_=columns)
     else:
         statement = statement.on_conflict_do_nothing(index_elements=["vehicle_id"])

@@ -63,6 +63,29 @@ def test_import_with_a_bad_row_names_it_and_writes_nothing(
     assert vehicle_count(seeded_engine) == 100
 
 
+def test_a_reimport_that_changes_a_cars_assignment_is_a_new_config_version(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+
+    def version_after_import(lane: int) -> int:
+        row = f"SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,{lane},microaccel_acc,{{}}"
+        result = run_cli("vehicles", "import", str(write_roster(tmp_path / "f.csv", row)), env=env)
+        assert result.returncode == 0, result.stderr
+        with seeded_engine.connect() as connection:
+            return int(
+                connection.execute(
+                    text("SELECT config_version FROM dim_vehicle WHERE vehicle_id = 'SF-201'")
+                ).scalar_one()
+            )
+
+    assert version_after_import(1) == 1
+    assert version_after_import(1) == 1  # the same row again: nothing for the car to pick up
+    # another lane: before, the version stayed, so the status could not tell whether the car
+    # had picked the change up
+    assert version_after_import(2) == 2
+
+
 def test_import_refused_by_the_database_is_one_transaction(
     seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
 ) -> None:
