@@ -139,6 +139,7 @@ class LastStatus:
     server_rtt_ms: float | None = None
     policy_sha256: str | None = None
     engage_reason: str | None = None
+    config_version: int | None = None
 
 
 @dataclass(frozen=True)
@@ -155,6 +156,8 @@ class VehicleFacts:
     model: str = ""
     # The reports before last_status in the hysteresis window, oldest first.
     earlier_statuses: tuple[LastStatus, ...] = ()
+    # The roster's config version: the agent echoes the one it runs (None: not compared).
+    config_version: int | None = None
 
 
 @dataclass(frozen=True)
@@ -379,6 +382,21 @@ def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> 
             f"no controller built for {facts.assigned_controller}{why}",
         )
     name = status.controller or facts.assigned_controller
+    if (
+        status.config_version is not None
+        and facts.config_version is not None
+        and status.config_version != facts.config_version
+    ):
+        # the car still runs an assignment it was given before (a lane, a controller, a
+        # policy): the agent reads its config every 60 s, so this lasts a minute at most
+        # unless the new one cannot be adopted
+        return Grade(
+            "amber",
+            f"{name} {'runs' if status.is_controller_running else 'idle'}",
+            f"runs config v{status.config_version}, assigned v{facts.config_version}",
+            f"runs config v{status.config_version}, assigned v{facts.config_version}"
+            " (not picked up yet?)",
+        )
     if status.controller is not None and status.controller != facts.assigned_controller:
         return Grade(
             "amber",

@@ -298,6 +298,7 @@ async def fleet(
             last_status=last_status,
             make=vehicle.make,
             model=vehicle.model,
+            config_version=vehicle.config_version,
             earlier_statuses=tuple(
                 status
                 for status in history.get(vehicle.vehicle_id, ())

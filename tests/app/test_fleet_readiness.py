@@ -169,6 +169,17 @@ def test_a_car_not_engaged_says_why_the_agent_gave() -> None:
     assert readiness.is_cleared
 
 
+def test_a_car_still_on_an_earlier_config_is_amber_and_says_which() -> None:
+    # the operator moved the car to another policy (v4); its agent still runs v3
+    facts = healthy_facts(config_version=4, last_status=healthy_status(config_version=3))
+    readiness = assess(facts, NOW, LIMITS)
+    assert readiness.level_of("controller") == "amber"
+    assert readiness.reasons == ("runs config v3, assigned v4 (not picked up yet?)",)
+    assert readiness.is_cleared  # the config it runs was a valid one
+    caught_up = healthy_facts(config_version=4, last_status=healthy_status(config_version=4))
+    assert assess(caught_up, NOW, LIMITS).level_of("controller") == "green"
+
+
 def test_agent_version_is_amber_only_when_a_version_is_required() -> None:
     facts = healthy_facts(last_status=healthy_status(agent_version="0.9.0"))
     assert assess(facts, NOW, LIMITS).level_of("agent") == "green"
