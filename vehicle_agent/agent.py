@@ -138,6 +138,9 @@ class Snapshot:
     accel_mps2: float | None
     # The sha256 of the trained policy the assigned controller evaluates (RL controllers).
     policy_sha256: str | None = None
+    # The version of the config the assignment came with: reported beside the controller and
+    # policy of the same pass, so a status never pairs a new version with the old policy.
+    config_version: int | None = None
 
 
 @dataclass
@@ -329,7 +332,7 @@ class Agent:
         if previous.commanding and not self.state.commanding:
             self._hand_back(self.state.reason)
         if self.state.commanding and not previous.commanding:
-            self._take_over(now, measured_accel)
+            self._take_over(now, measured_accel, assignment)
         if self.state.commanding and now >= self._next_control_s:
             late = now - self._next_control_s > CONTROL_PERIOD_S
             self._next_control_s = (now if late else self._next_control_s) + CONTROL_PERIOD_S
@@ -350,6 +353,7 @@ class Agent:
             controller=None if assignment is None else assignment.config.controller.name,
             accel_mps2=measured_accel,
             policy_sha256=None if assignment is None else assignment.controller.policy_sha256,
+            config_version=None if assignment is None else assignment.config.config_version,
         )
 
     def _enabled(self, assignment: Assignment | None) -> bool:
@@ -425,9 +429,13 @@ class Agent:
         self._accel_estimate = (now, reading.speed_mps, accel)
         return accel
 
-    def _take_over(self, now: float, measured_accel: float | None) -> None:
-        assert self.assignment is not None  # enabled only with an assignment
-        self._running = self.assignment
+    def _take_over(
+        self, now: float, measured_accel: float | None, assignment: Assignment | None
+    ) -> None:
+        """Start commanding with `assignment`, the one this pass judged the engage checks on
+        (the network thread may replace or drop `self.assignment` meanwhile)."""
+        assert assignment is not None  # enabled only with an assignment
+        self._running = assignment
         self._running.controller.reset()
         self.limiter.reset(measured_accel or 0.0, now)
         # until the controller's first command: what the car does now, never the last request of
@@ -435,7 +443,7 @@ class Agent:
         self._requested_accel = measured_accel or 0.0
         self.safety.idle()
         self._next_control_s = now
-        log.info("agent takes over (%s)", self.assignment.config.controller.name)
+        log.info("agent takes over (%s)", assignment.config.controller.name)
 
     def _hand_back(self, reason: str) -> None:
         self._running = None
@@ -604,7 +612,7 @@ class Agent:
             "server_rtt_ms": round(self.server.last_rtt_ms, 1)
             if self.server and self.server.last_rtt_ms is not None
             else None,
-            "config_version": self.config.config_version if self.config else None,
+            "config_version": snapshot.config_version if snapshot else None,
             "policy_sha256": snapshot.policy_sha256 if snapshot else None,
             "engage_reason": snapshot.reason if snapshot else None,
         }

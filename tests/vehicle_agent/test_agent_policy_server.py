@@ -257,6 +257,11 @@ def test_a_policy_the_car_cannot_keep_hands_back_and_backs_off(
             assert r.agent.assignment is None
             r.run(1.0, network=True)
             assert r.agent.state.mode is not Mode.ENGAGED
+            # its status names no config it runs, beside no controller and no policy
+            status = r.agent.status_report()
+            assert "config_version" not in status
+            assert "controller" not in status
+            assert "policy_sha256" not in status
             # retried after 2, 4, 8, 16 s: 4 more tries in 31 s, not 15 every 2 s
             r.run(31.5, network=True)
             assert r.agent.stats.policies_not_kept == 5
