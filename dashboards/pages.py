@@ -835,7 +835,13 @@ async def vehicle_assignment(
             saved=None,
             error=f"Not saved: {error}",
             field_error=error,
-            **{**context, "params_json": params},
+            # the form again as the operator filled it in, not as stored: fixing one field
+            # must not silently put the others back
+            **{
+                **context,
+                "params_json": params,
+                "form": {"lane": lane, "route": route, "controller": controller},
+            },
         )
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=assignment", status_code=303)
 

@@ -223,7 +223,7 @@ def test_an_operator_changes_an_assignment_from_the_vehicle_page(site: str) -> N
 def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
     site: str, fields: dict[str, str], message: str
 ) -> None:
-    form = {"lane": "2", "route": "A", "controller": "simple", "params": "{}", **fields}
+    form = {"lane": "2", "route": "B", "controller": "simple", "params": "{}", **fields}
     with logged_in(site, "operator") as client:
         response = post_form(client, "/vehicles/SF-001", "/vehicles/SF-001/assignment", **form)
         assert response.status_code == 422
@@ -233,6 +233,12 @@ def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
             response.text
         )
         assert message.replace("'", "&#39;") in response.text
+        # the form as the operator filled it in, every field it can show (before, only the
+        # parameters: the route went back to A, the lane and controller to the stored ones)
+        assert f'name="route" value="{form["route"]}"' in response.text
+        for name in ("lane", "controller"):
+            if f'<option value="{form[name]}" ' in response.text:  # one the form offers
+                assert f'<option value="{form[name]}" selected>' in response.text
         # and nothing saved
         page = client.get("/vehicles/SF-001")
         assert '<strong data-field="route">A</strong>' in page.text
