@@ -87,8 +87,11 @@ class FleetEntry:
 
     def has_problem(self, problem: str) -> bool:
         """Whether the vehicle matches a problem filter (see PROBLEM_FILTERS)."""
+        # "not cleared" is the verdict the count above the table counts: a car in maintenance
+        # or inactive is listed under its own filter, not among the faults
+        not_cleared = self.readiness.verdict == "not cleared"
         if problem == "not-cleared":
-            return not self.readiness.is_cleared
+            return not_cleared
         if problem == "maintenance":
             return self.vehicle.is_in_maintenance
         if problem == "amber":
@@ -96,7 +99,7 @@ class FleetEntry:
         if problem in CHECK_NAMES:
             return self.readiness.level_of(problem) in ("amber", "red")
         if problem.endswith("-red") and problem[:-4] in CHECK_NAMES:
-            return self.readiness.level_of(problem[:-4]) == "red"
+            return not_cleared and self.readiness.level_of(problem[:-4]) == "red"
         raise ValueError(f"unknown problem filter {problem!r}")
 
 

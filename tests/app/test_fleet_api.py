@@ -118,6 +118,16 @@ def test_fleet_filters_by_route_make_and_problem(api: Api) -> None:
     not_cleared = api.get("/api/v1/fleet", problem="not-cleared").json()
     assert not_cleared["counts"]["vehicles"] == 99
     assert "SF-001" not in {v["vehicle_id"] for v in not_cleared["vehicles"]}
+    # a car in maintenance is counted under maintenance, and listed there only: the filters
+    # behind the counts list as many cars as the counts say (before, it was among both)
+    assert api.put("/api/v1/vehicles/SF-003/maintenance", {"in_maintenance": True}).is_success
+    fleet = api.get("/api/v1/fleet").json()
+    listed = api.get("/api/v1/fleet", problem="not-cleared").json()["vehicles"]
+    assert len(listed) == fleet["counts"]["not_cleared"] == 98
+    assert "SF-003" not in {v["vehicle_id"] for v in listed}
+    # the dashboard's "not cleared because of" counts: red checks of cars not cleared
+    red_status = [v for v in listed if checks(v)["status"] == "red"]
+    assert len(api.get("/api/v1/fleet", problem="status-red").json()["vehicles"]) == len(red_status)
     bad = api.get("/api/v1/fleet", problem="everything")
     assert bad.status_code == 422
     assert "problem must be one of" in bad.json()["detail"]
