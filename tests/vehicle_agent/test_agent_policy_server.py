@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 
 import httpx
@@ -167,16 +168,18 @@ def test_the_car_downloads_its_policy_once_runs_it_and_reports_its_hash(
     assert statuses[1] == statuses[0]  # every status with the controller names its policy
 
 
-def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
-    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
-) -> None:
-    publish_free_flow_plan(seeded_database_url, seeded_engine)
-    operator = issue(seeded_engine, "operator")
-    token = issue(seeded_engine, "vehicle", "SF-001")
-    store = PolicyStore(tmp_path / "policies")
+@contextmanager
+def engaged_on_the_shipped_policy(
+    database_url: str, engine: Engine, tmp_path: Path, dbc_cache: Path, store: PolicyStore
+) -> Iterator[tuple[Rig, str, Callable[[], None]]]:
+    """SF-001 engaged on the shipped acc policy, the small one stored beside it on the server:
+    the rig, the small one's sha256, and a call that assigns it."""
+    publish_free_flow_plan(database_url, engine)
+    operator = issue(engine, "operator")
+    token = issue(engine, "vehicle", "SF-001")
     small, small_sha256 = small_acc_policy(tmp_path)
     with (
-        live_server(seeded_database_url, planner_enabled=False) as base,
+        live_server(database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base) as http,
     ):
         manifest = json.loads(ACC_FILE.with_suffix(".json").read_text())
@@ -188,35 +191,45 @@ def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
             r.emulator.driver_engage(set_speed_mph=54)
             r.run(20.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
             assert r.agent.state.mode is Mode.ENGAGED, r.agent.state.reason
-            # the operators assign the small policy, whose bytes the server now serves damaged
-            flip_stored_byte(seeded_engine, small_sha256)
-            assign(http, operator, small_sha256)
-            r.run(65.0, network=True, until=lambda: r.agent.stats.policies_refused > 0)
+            yield r, small_sha256, lambda: assign(http, operator, small_sha256)
 
-            assert r.agent.stats.policies_refused == 1
-            assert r.agent.assignment is None
-            r.run(1.0, network=True)
-            assert r.agent.state.mode is not Mode.ENGAGED
-            assert sum(r.agent.stats.handbacks.values()) == 1
-            assert store.holds(ACC_SHA256)  # the good policy is kept, untouched
-            assert not store.path(small_sha256).exists()  # the bad download was never kept
-            assert r.agent.snapshot is not None
-            assert r.agent.snapshot.policy_sha256 is None  # and its pings say no policy runs
-            # repaired on the server: the car's next try (back-off) gets the good bytes
-            flip_stored_byte(seeded_engine, small_sha256)
-            r.run(
-                40.0,
-                network=True,
-                until=lambda: (
-                    r.agent.assignment is not None
-                    and r.agent.assignment.controller.policy_sha256 == small_sha256
-                ),
-            )
-            assert r.agent.assignment is not None
-            assert r.agent.assignment.controller.policy_sha256 == small_sha256
-            assert store.holds(small_sha256)
-            assert store.holds(ACC_SHA256)
-            assert r.agent.stats.policy_downloads == 3  # acc once, small damaged, small good
+
+def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    store = PolicyStore(tmp_path / "policies")
+    with engaged_on_the_shipped_policy(
+        seeded_database_url, seeded_engine, tmp_path, dbc_cache, store
+    ) as (r, small_sha256, assign_small):
+        # the operators assign the small policy, whose bytes the server now serves damaged
+        flip_stored_byte(seeded_engine, small_sha256)
+        assign_small()
+        r.run(65.0, network=True, until=lambda: r.agent.stats.policies_refused > 0)
+
+        assert r.agent.stats.policies_refused == 1
+        assert r.agent.assignment is None
+        r.run(1.0, network=True)
+        assert r.agent.state.mode is not Mode.ENGAGED
+        assert sum(r.agent.stats.handbacks.values()) == 1
+        assert store.holds(ACC_SHA256)  # the good policy is kept, untouched
+        assert not store.path(small_sha256).exists()  # the bad download was never kept
+        assert r.agent.snapshot is not None
+        assert r.agent.snapshot.policy_sha256 is None  # and its pings say no policy runs
+        # repaired on the server: the car's next try (back-off) gets the good bytes
+        flip_stored_byte(seeded_engine, small_sha256)
+        r.run(
+            40.0,
+            network=True,
+            until=lambda: (
+                r.agent.assignment is not None
+                and r.agent.assignment.controller.policy_sha256 == small_sha256
+            ),
+        )
+        assert r.agent.assignment is not None
+        assert r.agent.assignment.controller.policy_sha256 == small_sha256
+        assert store.holds(small_sha256)
+        assert store.holds(ACC_SHA256)
+        assert r.agent.stats.policy_downloads == 3  # acc once, small damaged, small good
 
 
 def test_a_policy_the_car_cannot_keep_hands_back_and_backs_off(
@@ -226,46 +239,32 @@ def test_a_policy_the_car_cannot_keep_hands_back_and_backs_off(
     dbc_cache: Path,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    publish_free_flow_plan(seeded_database_url, seeded_engine)
-    operator = issue(seeded_engine, "operator")
-    token = issue(seeded_engine, "vehicle", "SF-001")
     store = PolicyStore(tmp_path / "policies")
-    small, small_sha256 = small_acc_policy(tmp_path)
-    with (
-        live_server(seeded_database_url, planner_enabled=False) as base,
-        httpx.Client(base_url=base) as http,
-    ):
-        manifest = json.loads(ACC_FILE.with_suffix(".json").read_text())
-        upload(http, operator, ACC_FILE.read_bytes(), manifest)
-        upload(http, operator, small, {"sha256": small_sha256, "actuation": "acc"})
-        assign(http, operator, ACC_SHA256)
-        with car_of_sf001(http, token, tmp_path, dbc_cache, store) as r:
-            r.run(1.0, network=True)
-            r.emulator.driver_engage(set_speed_mph=54)
-            r.run(20.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
-            assert r.agent.state.mode is Mode.ENGAGED, r.agent.state.reason
+    with engaged_on_the_shipped_policy(
+        seeded_database_url, seeded_engine, tmp_path, dbc_cache, store
+    ) as (r, small_sha256, assign_small):
 
-            def full_card(sha256: str, content: bytes, actuation: object) -> Path:
-                raise OSError(28, "No space left on device")
+        def full_card(sha256: str, content: bytes, actuation: object) -> Path:
+            raise OSError(28, "No space left on device")
 
-            # the SD card is full when the next policy arrives (before, the error escaped the
-            # network pass and the car drove the old, no longer assigned policy)
-            monkeypatch.setattr(store, "keep", full_card)
-            assign(http, operator, small_sha256)
-            r.run(65.0, network=True, until=lambda: r.agent.stats.policies_not_kept > 0)
-            assert r.agent.stats.policies_not_kept == 1
-            assert r.agent.assignment is None
-            r.run(1.0, network=True)
-            assert r.agent.state.mode is not Mode.ENGAGED
-            # its status names no config it runs, beside no controller and no policy
-            status = r.agent.status_report()
-            assert "config_version" not in status
-            assert "controller" not in status
-            assert "policy_sha256" not in status
-            # retried after 2, 4, 8, 16 s: 4 more tries in 31 s, not 15 every 2 s
-            r.run(31.5, network=True)
-            assert r.agent.stats.policies_not_kept == 5
-            monkeypatch.undo()
-            r.run(40.0, network=True, until=lambda: r.agent.assignment is not None)
-            assert r.agent.assignment is not None
-            assert r.agent.assignment.controller.policy_sha256 == small_sha256
+        # the SD card is full when the next policy arrives (before, the error escaped the
+        # network pass and the car drove the old, no longer assigned policy)
+        monkeypatch.setattr(store, "keep", full_card)
+        assign_small()
+        r.run(65.0, network=True, until=lambda: r.agent.stats.policies_not_kept > 0)
+        assert r.agent.stats.policies_not_kept == 1
+        assert r.agent.assignment is None
+        r.run(1.0, network=True)
+        assert r.agent.state.mode is not Mode.ENGAGED
+        # its status names no config it runs, beside no controller and no policy
+        status = r.agent.status_report()
+        assert "config_version" not in status
+        assert "controller" not in status
+        assert "policy_sha256" not in status
+        # retried after 2, 4, 8, 16 s: 4 more tries in 31 s, not 15 every 2 s
+        r.run(31.5, network=True)
+        assert r.agent.stats.policies_not_kept == 5
+        monkeypatch.undo()
+        r.run(40.0, network=True, until=lambda: r.agent.assignment is not None)
+        assert r.agent.assignment is not None
+        assert r.agent.assignment.controller.policy_sha256 == small_sha256
