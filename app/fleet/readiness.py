@@ -256,11 +256,18 @@ def _unreported(label: str, what: str) -> Grade:
     return Grade("red", "—", f"the car's status did not report {what}", f"{label} not reported")
 
 
+def _age_s(ts: datetime, received_at: datetime, now: datetime) -> float:
+    """How long ago a message was sent: by the car's time, but never later than the server
+    received it. A car whose clock runs ahead (the server accepts up to 300 s) would otherwise
+    show a negative age, green, and stay green that much longer after it fell silent."""
+    return max((now - min(ts, received_at)).total_seconds(), 0.0)
+
+
 def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest ping (the car's GPS time)."""
     if facts.last_ping is None:
         return Grade("red", "never", "no ping received", "never pinged")
-    age = (now - facts.last_ping.ts).total_seconds()
+    age = _age_s(facts.last_ping.ts, facts.last_ping.received_at, now)
     level = grade_rising(age, limits.ping_age_s)
     amber, red = limits.ping_age_s
     return Grade(
@@ -275,7 +282,7 @@ def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grad
     """Age of the newest status report (sent every ~10 s by a healthy agent)."""
     if facts.last_status is None:
         return Grade("red", "never", "no status report received", "never reported its status")
-    age = (now - facts.last_status.ts).total_seconds()
+    age = _age_s(facts.last_status.ts, facts.last_status.received_at, now)
     level = grade_rising(age, limits.status_age_s)
     amber, red = limits.status_age_s
     return Grade(

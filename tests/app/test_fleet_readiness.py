@@ -110,6 +110,20 @@ def test_a_stale_status_turns_amber_then_red_and_blocks_clearance(age_s: int, le
     assert readiness.is_cleared == (level != "red")
 
 
+def test_a_car_whose_clock_runs_ahead_ages_from_when_its_messages_arrived() -> None:
+    # its clock is 250 s fast; its last ping and status arrived 70 s ago
+    ahead = NOW + timedelta(seconds=180)
+    arrived = NOW - timedelta(seconds=70)
+    facts = healthy_facts(
+        last_ping=replace(healthy_facts().last_ping, ts=ahead, received_at=arrived),
+        last_status=healthy_status(ts=ahead, received_at=arrived),
+    )
+    readiness = assess(facts, NOW, LIMITS)
+    # before: "-180 s", green, and cleared for 250 s more than a car with a true clock
+    assert (readiness.level_of("ping"), readiness.level_of("status")) == ("red", "red")
+    assert not readiness.is_cleared
+
+
 @pytest.mark.parametrize(
     ("change", "check", "level"),
     [
