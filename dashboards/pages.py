@@ -799,6 +799,7 @@ async def vehicle_assignment(
     route: Annotated[str, Form()] = "",
     controller: Annotated[str, Form()] = "",
     params: Annotated[str, Form()] = "{}",
+    config_version: Annotated[str, Form()] = "",
     csrf_token: Annotated[str, Form()] = "",
 ) -> Response:
     """Change the vehicle's lane, route and controller (operators and admins)."""
@@ -823,6 +824,7 @@ async def vehicle_assignment(
             controller_name=controller,
             controller_params=controller_params,
             changed_by=f"dashboard user {user.username}",
+            expected_config_version=int(config_version) if config_version.isdigit() else None,
         )
     except AssignmentError as error:
         context = await _vehicle_context(request, session, vehicle_id)

@@ -366,9 +366,21 @@ async def change_assignment(
     controller_name: str,
     controller_params: dict[str, Any],
     changed_by: str,
+    expected_config_version: int | None = None,
 ) -> Vehicle:
-    """Give a vehicle a new lane, route and controller (the car picks it up with its config)."""
+    """Give a vehicle a new lane, route and controller (the car picks it up with its config).
+
+    With `expected_config_version` (the version the operator's form was filled in against),
+    a vehicle changed since by someone else is a conflict: two operators on one car's page
+    must not silently overwrite each other."""
     vehicle = await _vehicle_for_update(session, vehicle_id)
+    if expected_config_version is not None and expected_config_version != vehicle.config_version:
+        raise AssignmentConflict(
+            "config_version",
+            f"the vehicle was changed since this page was opened (config v"
+            f"{expected_config_version}, now v{vehicle.config_version}): check the assignment "
+            "shown and save again",
+        )
     # What is wrong with the assignment itself first (AssignmentError), then what does not fit
     # this vehicle (AssignmentConflict), so a bad request is never answered as a conflict.
     route = route.strip()

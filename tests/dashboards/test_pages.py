@@ -244,6 +244,40 @@ def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
         assert '<strong data-field="route">A</strong>' in page.text
 
 
+def test_two_operators_on_one_car_do_not_overwrite_each_other(site: str) -> None:
+    with logged_in(site, "operator") as first, logged_in(site, "operator") as second:
+        # both open SF-002's page, on the same config
+        versions = [
+            re.search(r'name="config_version" value="(\d+)"', c.get("/vehicles/SF-002").text)
+            for c in (first, second)
+        ]
+        assert versions[0] is not None
+        assert versions[1] is not None
+        form = {"lane": "2", "controller": "simple", "params": "{}"}
+        saved = post_form(
+            first,
+            "/vehicles/SF-002",
+            "/vehicles/SF-002/assignment",
+            route="B",
+            config_version=versions[0].group(1),
+            **form,
+        )
+        assert saved.status_code == 303
+        # the second saves what it filled in against the page it opened before that
+        stale = post_form(
+            second,
+            "/vehicles/SF-002",
+            "/vehicles/SF-002/assignment",
+            route="C",
+            config_version=versions[1].group(1),
+            **form,
+        )
+        assert stale.status_code == 422
+        assert "the vehicle was changed since this page was opened" in stale.text
+        page = second.get("/vehicles/SF-002").text
+        assert '<strong data-field="route">B</strong>' in page  # the first's change stands
+
+
 def test_a_form_without_the_session_token_is_refused(site: str) -> None:
     with logged_in(site, "admin") as client:
         response = client.post(
