@@ -789,6 +789,30 @@ async def vehicle_history_live(
     return _render(request, "_vehicle_history_live.html", user, **context)
 
 
+async def _not_saved(
+    request: Request,
+    session: SessionDep,
+    user: UserDep,
+    vehicle_id: str,
+    error: AssignmentError,
+    **shown: Any,
+) -> Response:
+    """The car's page again (422), saying what was not saved and why, beside its field;
+    `shown` overrides what the page would show from the database."""
+    context = await _vehicle_context(request, session, vehicle_id)
+    return _render(
+        request,
+        "vehicle.html",
+        user,
+        status_code=422,
+        page="fleet",
+        saved=None,
+        error=f"Not saved: {error}",
+        field_error=error,
+        **{**context, **shown},
+    )
+
+
 @router.post("/vehicles/{vehicle_id}/assignment")
 async def vehicle_assignment(
     request: Request,
@@ -827,23 +851,16 @@ async def vehicle_assignment(
             expected_config_version=int(config_version) if config_version.isdigit() else None,
         )
     except AssignmentError as error:
-        context = await _vehicle_context(request, session, vehicle_id)
-        return _render(
+        # the form again as the operator filled it in, not as stored: fixing one field must
+        # not silently put the others back
+        return await _not_saved(
             request,
-            "vehicle.html",
+            session,
             user,
-            status_code=422,
-            page="fleet",
-            saved=None,
-            error=f"Not saved: {error}",
-            field_error=error,
-            # the form again as the operator filled it in, not as stored: fixing one field
-            # must not silently put the others back
-            **{
-                **context,
-                "params_json": params,
-                "form": {"lane": lane, "route": route, "controller": controller},
-            },
+            vehicle_id,
+            error,
+            params_json=params,
+            form={"lane": lane, "route": route, "controller": controller},
         )
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=assignment", status_code=303)
 
@@ -861,13 +878,16 @@ async def vehicle_maintenance(
     """Take the vehicle out of service or put it back (operators and admins)."""
     check_form(user, csrf_token, needs_operator=True)
     await _entry_or_404(request, session, vehicle_id)
-    await set_maintenance(
-        session,
-        vehicle_id,
-        in_maintenance=in_maintenance in ("on", "true", "1"),
-        note=note,
-        changed_by=f"dashboard user {user.username}",
-    )
+    try:
+        await set_maintenance(
+            session,
+            vehicle_id,
+            in_maintenance=in_maintenance in ("on", "true", "1"),
+            note=note,
+            changed_by=f"dashboard user {user.username}",
+        )
+    except AssignmentError as error:
+        return await _not_saved(request, session, user, vehicle_id, error)
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=maintenance", status_code=303)
 
 

@@ -34,6 +34,7 @@ from contract.controllers import (
     validate_controller,
 )
 from contract.units import METRES_PER_MILE
+from contract.values import storable_text
 
 log = logging.getLogger(__name__)
 
@@ -357,6 +358,18 @@ async def _check_policy_held(session: AsyncSession, controller_name: str, sha256
         )
 
 
+# The API schema's bounds (app.fleet.schemas), which the dashboard's forms reach only here.
+MAX_ROUTE_LENGTH = 64
+MAX_NOTE_LENGTH = 500
+
+
+def _storable(field: str, text: str) -> None:
+    try:
+        storable_text(text)
+    except ValueError as error:
+        raise AssignmentError(field, str(error)) from None
+
+
 async def change_assignment(
     session: AsyncSession,
     vehicle_id: str,
@@ -386,6 +399,10 @@ async def change_assignment(
     route = route.strip()
     if not route:
         raise AssignmentError("route", "must not be empty")
+    # what the API's schema refuses, refused here for every caller (the dashboard's form too)
+    if len(route) > MAX_ROUTE_LENGTH:
+        raise AssignmentError("route", f"at most {MAX_ROUTE_LENGTH} characters, not {len(route)}")
+    _storable("route", route)
     if lane < 1:
         raise AssignmentError("lane", f"lanes are numbered from 1, not {lane}")
     try:
@@ -429,6 +446,10 @@ async def set_maintenance(
     changed_by: str,
 ) -> Vehicle:
     """Take a vehicle out of (or back into) service; a note says why."""
+    if note is not None:
+        _storable("note", note)
+        if len(note) > MAX_NOTE_LENGTH:
+            raise AssignmentError("note", f"at most {MAX_NOTE_LENGTH} characters, not {len(note)}")
     vehicle = await _vehicle_for_update(session, vehicle_id)
     vehicle.is_in_maintenance = in_maintenance
     vehicle.maintenance_note = (note or "").strip() or None

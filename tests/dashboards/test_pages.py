@@ -218,6 +218,9 @@ def test_an_operator_changes_an_assignment_from_the_vehicle_page(site: str) -> N
         ({"params": '{"bogus": 1}'}, "controller.params.bogus: Extra inputs are not permitted"),
         ({"params": '{"k": -0.5}'}, "controller.params.k: Input should be greater than 0"),
         ({"params": '{"k": "fast"}'}, "controller.params.k: Input should be a valid number"),
+        # what the API's schema refuses (before, a JSON error page, or a 65-character route saved)
+        ({"route": "A\x00B"}, "route: text must not contain the NUL character"),
+        ({"route": "R" * 65}, "route: at most 64 characters, not 65"),
     ],
 )
 def test_an_assignment_the_car_cannot_take_is_shown_and_not_saved(
@@ -253,29 +256,41 @@ def test_two_operators_on_one_car_do_not_overwrite_each_other(site: str) -> None
         ]
         assert versions[0] is not None
         assert versions[1] is not None
-        form = {"lane": "2", "controller": "simple", "params": "{}"}
-        saved = post_form(
-            first,
-            "/vehicles/SF-002",
-            "/vehicles/SF-002/assignment",
-            route="B",
-            config_version=versions[0].group(1),
-            **form,
-        )
-        assert saved.status_code == 303
+
+        def save(client: httpx.Client, route: str, version: str) -> httpx.Response:
+            return post_form(
+                client,
+                "/vehicles/SF-002",
+                "/vehicles/SF-002/assignment",
+                lane="2",
+                controller="simple",
+                params="{}",
+                route=route,
+                config_version=version,
+            )
+
+        assert save(first, "B", versions[0].group(1)).status_code == 303
         # the second saves what it filled in against the page it opened before that
-        stale = post_form(
-            second,
-            "/vehicles/SF-002",
-            "/vehicles/SF-002/assignment",
-            route="C",
-            config_version=versions[1].group(1),
-            **form,
-        )
+        stale = save(second, "C", versions[1].group(1))
         assert stale.status_code == 422
         assert "the vehicle was changed since this page was opened" in stale.text
         page = second.get("/vehicles/SF-002").text
         assert '<strong data-field="route">B</strong>' in page  # the first's change stands
+
+
+def test_a_maintenance_note_the_database_cannot_store_is_shown_and_not_saved(site: str) -> None:
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-004",
+            "/vehicles/SF-004/maintenance",
+            in_maintenance="on",
+            note="UPS\x00battery",
+        )
+        assert response.status_code == 422
+        assert "note: text must not contain the NUL character" in response.text
+        fleet = client.get("/fleet", params={"problem": "maintenance"}).text
+        assert "SF-004" not in fleet
 
 
 def test_a_form_without_the_session_token_is_refused(site: str) -> None:
