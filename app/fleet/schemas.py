@@ -11,7 +11,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictBool, WithJsonSchema
 
-from app.fleet.service import FleetCounts, FleetEntry
+from app.fleet.service import MAX_NOTE_LENGTH, MAX_ROUTE_LENGTH, FleetCounts, FleetEntry
 from contract.controllers import controller_choice_schema
 from contract.values import StorableText, storable_text
 
@@ -55,7 +55,7 @@ class AssignmentIn(BaseModel):
         "lanes of the vehicle's corridor (409 otherwise).",
     )
     route: Annotated[str, AfterValidator(storable_text)] = Field(
-        min_length=1, max_length=64, pattern=ROUTE_PATTERN
+        min_length=1, max_length=MAX_ROUTE_LENGTH, pattern=ROUTE_PATTERN
     )
     controller: Annotated[
         ControllerAssignment, WithJsonSchema(controller_choice_schema(), mode="validation")
@@ -80,7 +80,7 @@ class MaintenanceIn(BaseModel):
 
     # strict: the document says boolean, so 0 or "yes" is refused, not read as a guess
     in_maintenance: StrictBool
-    note: StorableText | None = Field(None, max_length=500)
+    note: StorableText | None = Field(None, max_length=MAX_NOTE_LENGTH)
 
 
 class MaintenanceOut(MaintenanceIn):

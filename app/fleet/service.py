@@ -358,7 +358,8 @@ async def _check_policy_held(session: AsyncSession, controller_name: str, sha256
         )
 
 
-# The API schema's bounds (app.fleet.schemas), which the dashboard's forms reach only here.
+# A route's and a maintenance note's bounds: the API's schema (app.fleet.schemas) states them,
+# and the service keeps them for every caller (the dashboard's forms reach only the service).
 MAX_ROUTE_LENGTH = 64
 MAX_NOTE_LENGTH = 500
 
