@@ -11,9 +11,11 @@ checks are warnings an operator should look at. A check that is not green says w
 Hysteresis: the checks graded from status reports change level only when the new level has held
 over every report for `hold_s` (SMOOTHFLEET_READINESS_HOLD_S), so one slow report from a busy
 server or a loaded car never flips a verdict. The level is replayed from the reports of the last
-few hold periods, so every server process and every restart agree. The two age checks (last
+few hold periods (from the worst of the oldest period, `hold_levels`), so every server process and
+every restart agree. The two age checks (last
 ping, last status) need no hold: an age is itself a time held; they are measured against the
-newest ping the server has stored (app.fleet.service), so a server that falls behind ages no car.
+wall clock less the server's own ingest lag (app.fleet.service), so a server that falls behind
+ages no car.
 
 Adding a check is one function and one entry in CHECKS.
 """
@@ -30,6 +32,10 @@ from vehicle_agent.cars import CARS
 
 Level = Literal["green", "amber", "red", "unknown"]
 Verdict = Literal["cleared", "not cleared", "maintenance", "inactive"]
+
+# Status reports replayed for hysteresis: this many hold periods back from the newest report;
+# all but the last two only settle the level to start from (hold_levels).
+HOLD_PERIODS_REPLAYED = 3
 
 # Levels from best to worst; hysteresis compares levels by this order.
 SEVERITY: dict[Level, int] = {"green": 0, "unknown": 1, "amber": 2, "red": 3}
@@ -549,18 +555,31 @@ class HeldLevel(NamedTuple):
 def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float) -> HeldLevel:
     """The level a check holds after its reports (oldest first), with hysteresis.
 
-    The first report sets the level. Later reports on one side of it (all better, or all worse)
-    form a run; once a run spans `hold_s` seconds the level becomes the mildest level of the run
-    (the one that held over all of it), so a car whose rate dips for one report, or flickers
-    between amber and red, keeps its level until the change has lasted.
+    Later reports on one side of the held level (all better, or all worse) form a run; once a run
+    spans `hold_s` seconds the level becomes the mildest level of the run (the one that held over
+    all of it), so a car whose rate dips for one report, or flickers between amber and red, keeps
+    its level until the change has lasted.
+
+    The level to start from is the worst of the settled reports, those more than
+    `HOLD_PERIODS_REPLAYED - 1` hold periods older than the newest (the first report when none
+    is). Starting from the oldest report alone made the answer depend on which report the
+    replayed window happened to begin with, so a check whose reports alternate flipped each time
+    the window slid by one report. From the worst, a check that changes and lasts settles as
+    before (its run spans the newer hold periods), one bad report is outlasted by the good ones
+    after it, and reports that keep changing without any level holding show, once they have
+    lasted past the newer periods, the worst of them: a car is not cleared on evidence that
+    never settled.
     """
     if not levels:
         raise ValueError("hold_levels needs at least one report")
-    held, held_index = levels[0], 0
+    settled_until = times_s[-1] - (HOLD_PERIODS_REPLAYED - 1) * hold_s
+    settled = [i for i in range(len(levels)) if times_s[i] <= settled_until] or [0]
+    held_index = max(settled, key=lambda i: (SEVERITY[levels[i]], i))
+    held = levels[held_index]
     run_start: int | None = None
     run_side = 0
     mildest = 0
-    for index in range(1, len(levels)):
+    for index in range(held_index + 1, len(levels)):
         step = SEVERITY[levels[index]] - SEVERITY[held]
         if step == 0:
             run_start, held_index = None, index

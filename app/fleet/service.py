@@ -18,6 +18,7 @@ from sqlalchemy.orm import aliased
 from app.fleet.readiness import (
     CHECK_NAMES,
     CHECKS,
+    HOLD_PERIODS_REPLAYED,
     LastPing,
     LastStatus,
     Readiness,
@@ -41,8 +42,6 @@ log = logging.getLogger(__name__)
 # The newest ping is looked for in this window first, so the query touches only the last days'
 # ping partitions; vehicles silent for longer are looked up again without the bound.
 RECENT_PING_WINDOW = timedelta(days=2)
-# Status reports replayed for hysteresis: this many hold periods back (readiness.hold_levels).
-HOLD_PERIODS_REPLAYED = 3
 
 STATUS_FIELDS = tuple(
     name for name in LastStatus.__dataclass_fields__ if name not in ("ts", "received_at")

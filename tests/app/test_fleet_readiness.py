@@ -10,6 +10,7 @@ import pytest
 from app.core.config import load_settings
 from app.fleet.readiness import (
     CHECK_NAMES,
+    HOLD_PERIODS_REPLAYED,
     CanSchedule,
     LastPing,
     LastStatus,
@@ -299,6 +300,41 @@ def test_a_car_flickering_between_amber_and_red_settles_at_amber() -> None:
 def test_a_red_car_comes_back_only_after_holding_green() -> None:
     assert not assess(reports(10, 150, 150, 150), NOW, HOLD).is_cleared
     assert assess(reports(10, *[150] * 7), NOW, HOLD).is_cleared
+
+
+def replayed_verdicts(rates: list[float], every_s: float = 10.0) -> list[str]:
+    """The verdict after each report, replayed as the server does: from the reports of the last
+    HOLD_PERIODS_REPLAYED hold periods only (app.fleet.service)."""
+    window = int(HOLD_PERIODS_REPLAYED * HOLD.hold_s / every_s) + 1
+    verdicts = []
+    for end in range(1, len(rates) + 1):
+        facts = reports(*rates[max(0, end - window) : end], every_s=every_s)
+        verdicts.append(assess(facts, NOW, HOLD).verdict)
+    return verdicts
+
+
+def test_reports_that_alternate_settle_at_the_worst_and_never_flip_back() -> None:
+    # CAN down on every other report for 10 minutes: no level holds 60 s. The car keeps its
+    # level until the flicker has lasted past the two newer hold periods, then shows the worst,
+    # whichever report the replayed window begins with
+    verdicts = replayed_verdicts([150.0] * 12 + [10.0, 150.0] * 30)
+    flipped = verdicts.index("not cleared")
+    assert 12 + 12 <= flipped <= 12 + 18
+    assert verdicts == ["cleared"] * flipped + ["not cleared"] * (len(verdicts) - flipped)
+    verdicts = replayed_verdicts([10.0] * 12 + [150.0, 10.0] * 30)
+    assert set(verdicts) == {"not cleared"}
+
+
+def test_a_flicker_between_amber_and_red_shows_amber_then_settles_at_red() -> None:
+    verdicts = replayed_verdicts([150.0] * 12 + [10.0, 60.0] * 30)
+    flipped = verdicts.index("not cleared")
+    assert flipped >= 12 + 12
+    assert verdicts == ["cleared"] * flipped + ["not cleared"] * (len(verdicts) - flipped)
+
+
+def test_a_lasting_change_flips_the_verdict_once_and_keeps_it() -> None:
+    verdicts = replayed_verdicts([150.0] * 30 + [10.0] * 30 + [150.0] * 30)
+    assert verdicts == ["cleared"] * 36 + ["not cleared"] * 30 + ["cleared"] * 24
 
 
 @pytest.mark.parametrize(
