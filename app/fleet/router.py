@@ -103,7 +103,8 @@ async def put_assignment(
     The car picks the change up the next time it fetches its config. The body's schema is the
     one the agent builds its controller from (contract.controllers): 422 names the field and the
     reason when the body breaks it; 409, in the same shape, when a valid assignment does not fit
-    this vehicle (a lane beyond its corridor's, a controller for the other actuation).
+    this vehicle (a lane beyond its corridor's, a controller for the other actuation, or a
+    `config_version` the vehicle has moved on from).
     """
     try:
         vehicle = await change_assignment(
@@ -114,6 +115,7 @@ async def put_assignment(
             controller_name=body.controller.name,
             controller_params=body.controller.params,
             changed_by=_who(principal.token_id),
+            expected_config_version=body.config_version,
         )
     except VehicleNotFound:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}") from None
@@ -133,6 +135,7 @@ async def put_assignment(
         controller=ControllerAssignment(
             name=vehicle.controller_name, params=dict(vehicle.controller_params)
         ),
+        config_version=vehicle.config_version,
         updated_at=vehicle.updated_at,
     )
 

@@ -60,6 +60,14 @@ class AssignmentIn(BaseModel):
     controller: Annotated[
         ControllerAssignment, WithJsonSchema(controller_choice_schema(), mode="validation")
     ]
+    config_version: int | None = Field(
+        default=None,
+        ge=1,
+        description="The vehicle's `config_version` this change was made against (as `GET "
+        "/api/v1/fleet` lists it). When given, a vehicle changed since is refused with 409 on "
+        "this field and nothing is saved, so two operators never silently overwrite each other. "
+        "Left out, the change applies to whatever the vehicle holds.",
+    )
 
 
 class AssignmentOut(AssignmentIn):
@@ -68,6 +76,7 @@ class AssignmentOut(AssignmentIn):
     model_config = ConfigDict(extra="forbid")
 
     controller: ControllerAssignment
+    config_version: int = Field(description="the vehicle's config version after this change")
     vehicle_id: str
     corridor_id: str
     updated_at: datetime
@@ -158,6 +167,10 @@ class FleetVehicleOut(BaseModel):
     route: str
     assigned_lane: int
     controller: ControllerAssignment
+    config_version: int = Field(
+        description="bumped by every change of the assignment or maintenance; send it with a "
+        "change of assignment to refuse one made since"
+    )
     active: bool
     in_maintenance: bool
     maintenance_note: str | None
@@ -206,6 +219,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
         controller=ControllerAssignment(
             name=vehicle.controller_name, params=dict(vehicle.controller_params)
         ),
+        config_version=vehicle.config_version,
         active=vehicle.is_active,
         in_maintenance=vehicle.is_in_maintenance,
         maintenance_note=vehicle.maintenance_note,

@@ -390,9 +390,8 @@ async def change_assignment(
     if expected_config_version is not None and expected_config_version != vehicle.config_version:
         raise AssignmentConflict(
             "config_version",
-            f"the vehicle was changed since this page was opened (config v"
-            f"{expected_config_version}, now v{vehicle.config_version}): check the assignment "
-            "shown and save again",
+            f"the vehicle was changed since its config v{expected_config_version} was read "
+            f"(now v{vehicle.config_version}): check its assignment and save again",
         )
     # What is wrong with the assignment itself first (AssignmentError), then what does not fit
     # this vehicle (AssignmentConflict), so a bad request is never answered as a conflict.

@@ -165,6 +165,29 @@ def test_an_operator_changes_an_assignment_and_the_car_gets_it_in_its_config(api
     assert listed["assigned_lane"] == 3
 
 
+def test_a_change_made_against_an_older_config_version_is_refused(api: Api) -> None:
+    # two operators read the fleet at v1; the first saves, the second's change would undo it
+    read = vehicle(api.get("/api/v1/fleet").json(), "SF-001")["config_version"]
+    first = api.put("/api/v1/vehicles/SF-001/assignment", {**ASSIGNMENT, "config_version": read})
+    assert first.status_code == 200, first.text
+    assert first.json()["config_version"] == read + 1
+
+    second = api.put(
+        "/api/v1/vehicles/SF-001/assignment",
+        {**ASSIGNMENT, "route": "C", "config_version": read},
+    )
+    assert second.status_code == 409
+    (error,) = second.json()["detail"]
+    assert error["loc"] == ["body", "config_version"]
+    assert f"changed since its config v{read} was read (now v{read + 1})" in error["msg"]
+    listed = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert (listed["route"], listed["config_version"]) == ("B", read + 1)  # the first stands
+
+    # without a version the change applies, as before
+    third = api.put("/api/v1/vehicles/SF-001/assignment", {**ASSIGNMENT, "route": "C"})
+    assert (third.status_code, third.json()["config_version"]) == (200, read + 2)
+
+
 def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
     response = api.put("/api/v1/vehicles/SF-001/assignment", ASSIGNMENT, role="viewer")
     assert response.status_code == 403

@@ -273,7 +273,7 @@ def test_two_operators_on_one_car_do_not_overwrite_each_other(site: str) -> None
         # the second saves what it filled in against the page it opened before that
         stale = save(second, "C", versions[1].group(1))
         assert stale.status_code == 422
-        assert "the vehicle was changed since this page was opened" in stale.text
+        assert "the vehicle was changed since its config v" in stale.text
         page = second.get("/vehicles/SF-002").text
         assert '<strong data-field="route">B</strong>' in page  # the first's change stands
 
