@@ -13,6 +13,7 @@ import inspect
 import json
 import logging
 import math
+from collections.abc import Mapping
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -21,6 +22,7 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 from fastapi import APIRouter, FastAPI, Form, Query, Request
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import (
     HTMLResponse,
     JSONResponse,
@@ -199,6 +201,27 @@ def install(app: FastAPI) -> None:
             path=request.url.path,
         )
 
+    api_invalid_request = app.exception_handlers[RequestValidationError]
+
+    async def on_invalid_request(request: Request, error: Exception) -> Response:
+        """A page asked for with a parameter it refuses (`/timespace?hours=100`): the page says
+        which and why, as the API's 422 does for its clients."""
+        assert isinstance(error, RequestValidationError)
+        if not wants_page(request):
+            answer = api_invalid_request(request, error)
+            return await answer if inspect.isawaitable(answer) else answer
+        return _render(
+            request,
+            "error.html",
+            navigating_user(request),
+            status_code=422,
+            title="Not a valid address",
+            message="This page cannot show that: "
+            + "; ".join(f"{_field_of(item)}: {item['msg']}" for item in error.errors())
+            + ".",
+            path=request.url.path,
+        )
+
     async def on_server_error(request: Request, error: Exception) -> Response:
         log.error("page %s failed", request.url.path, exc_info=error)
         if not wants_page(request):
@@ -217,6 +240,7 @@ def install(app: FastAPI) -> None:
     app.add_exception_handler(LoginRequired, on_login_required)
     app.add_exception_handler(PageError, on_page_error)
     app.add_exception_handler(StarletteHTTPException, on_http_error)
+    app.add_exception_handler(RequestValidationError, on_invalid_request)
     app.add_exception_handler(Exception, on_server_error)
 
 
@@ -227,6 +251,12 @@ ERROR_PAGES = {
     403: ("Not allowed", "Your role does not allow this page."),
     405: ("Not allowed", "This page cannot be used that way."),
 }
+
+
+def _field_of(error: Mapping[str, Any]) -> str:
+    """The parameter a validation error is about, as the address or form names it."""
+    location = [str(part) for part in error.get("loc", ()) if part not in ("query", "body")]
+    return ".".join(location) or "request"
 
 
 def wants_page(request: Request) -> bool:

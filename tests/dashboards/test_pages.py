@@ -349,6 +349,22 @@ def test_an_unknown_page_is_an_html_page_with_the_menu(site: str) -> None:
         assert visitor.get("/no-such-page").json() == {"detail": "Not Found"}  # not a browser
 
 
+def test_a_parameter_a_page_refuses_is_an_html_page_that_names_it(site: str) -> None:
+    page = {"Accept": "text/html"}
+    with logged_in(site, "viewer") as client:
+        response = client.get("/timespace", params={"hours": "100", "lane": "x"}, headers=page)
+        assert response.status_code == 422
+        assert response.headers["content-type"].startswith("text/html")
+        assert "<h1>Not a valid address</h1>" in response.text
+        assert "hours: Input should be less than or equal to 24" in response.text
+        assert "lane: Input should be a valid integer" in response.text
+        assert '<a href="/fleet"' in response.text  # the menu, to go on from
+        # a client that is not a browser keeps FastAPI's JSON answer
+        api = client.get("/timespace", params={"hours": "100"})
+        assert api.status_code == 422
+        assert api.json()["detail"][0]["loc"] == ["query", "hours"]
+
+
 def test_a_failing_page_is_a_500_page_and_the_api_keeps_its_answer(database_url: str) -> None:
     from smoothfleet.server import create_app
 
