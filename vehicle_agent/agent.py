@@ -864,6 +864,11 @@ class Agent:
             # telemetry reads the snapshot, which the failed pass did not renew: it must not go
             # on reporting the car as commanded
             self.snapshot = replace(self.snapshot, mode=self.state.mode, reason=reason)
+        self._release_own_button(now)
+
+    def _release_own_button(self, now: float) -> None:
+        """Let go of the button the agent holds. A GPIO line stays high until written low, and
+        no later pass may come to release it (a failed pass, a stopping agent)."""
         if self.buttons is None or self._own_button is None:
             return
         self._own_released = (now, self._own_button)
@@ -874,8 +879,11 @@ class Agent:
             log.exception("releasing the %s button failed", self._own_released[1].name)
 
     def shutdown(self) -> None:
-        """Stop commanding (the stock ACC keeps driving) and close the spool."""
+        """Stop commanding (the stock ACC keeps driving), let go of any held button and close
+        the spool."""
+        now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back("agent stopping")
-        self.state = engage.EngageState(engage.Mode.STOCK, self.clock.monotonic(), None, "stopped")
+        self.state = engage.EngageState(engage.Mode.STOCK, now, None, "stopped")
+        self._release_own_button(now)
         self.spool.close()

@@ -4,6 +4,8 @@ Everything goes through the safety layer first; releasing a button is always all
 
 from __future__ import annotations
 
+import logging
+import threading
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Protocol
@@ -14,6 +16,8 @@ from vehicle_agent.cars import CarInterface, CruiseButton
 from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import Codec
 from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer
+
+log = logging.getLogger(__name__)
 
 # After a press, keep sending this many released frames so the car sees the release even if a
 # frame is lost.
@@ -81,7 +85,14 @@ class CanButtonPort:
 class GpioButtonBoard:
     """A button board on GPIO lines (one line per button, active high), as the field team's
     mattHAT spoofed the Rogue's steering-wheel buttons. `write_line(line, level)` is injected:
-    on a Raspberry Pi `sysfs_gpio_writer()`, in tests a recorder."""
+    on a Raspberry Pi `sysfs_gpio_writer()`, in tests a recorder.
+
+    A line stays high until written low, and the safety layer's longest hold (`max_hold_s`) is
+    checked only when the control loop next calls `hold`. So every raised line also gets a
+    deadman: a timer thread writes it low once it has been held that long. A control loop that
+    stalls (a blocked call, a paused process) then cannot hold + or - for good and walk the set
+    speed to the car's maximum; the release is counted in `deadman_releases`. The timer runs on
+    the machine's monotonic time, as the car's agent does (`SystemClock`)."""
 
     def __init__(
         self,
@@ -93,6 +104,11 @@ class GpioButtonBoard:
         self.write_line = write_line
         self.safety = safety
         self.held: CruiseButton | None = None
+        self.deadman_releases = 0
+        self._lock = threading.Lock()
+        self._deadman: threading.Timer | None = None
+        # the button whose hold the deadman ended, until the loop asks for something else
+        self._cut: CruiseButton | None = None
 
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Release the previous line, raise the new one if the safety layer allows it."""
@@ -101,13 +117,45 @@ class GpioButtonBoard:
             button = None
         elif button is None:
             self.safety.admit_press(pressed, context)
-        if button == self.held:
-            return
-        if self.held is not None:
-            self.write_line(self.lines[self.held], False)
-        if button is not None:
-            self.write_line(self.lines[button], True)
-        self.held = button
+        with self._lock:
+            if button is not None and button is self._cut:
+                button = None  # the same hold the deadman ended: not pressed again
+            else:
+                self._cut = None
+            if button == self.held:
+                return
+            self._cancel_deadman()
+            if self.held is not None:
+                self.write_line(self.lines[self.held], False)
+            self.held = None
+            if button is not None:
+                self.write_line(self.lines[button], True)
+                self.held = button
+                self._deadman = threading.Timer(
+                    self.safety.limits.max_hold_s, self._release_held_too_long, (button,)
+                )
+                self._deadman.daemon = True
+                self._deadman.start()
+
+    def _cancel_deadman(self) -> None:
+        if self._deadman is not None:
+            self._deadman.cancel()
+            self._deadman = None
+
+    def _release_held_too_long(self, button: CruiseButton) -> None:
+        with self._lock:
+            if self.held is not button:
+                return  # released or replaced meanwhile
+            self.write_line(self.lines[button], False)
+            self.held = None
+            self._deadman = None
+            self._cut = button
+            self.deadman_releases += 1
+        log.warning(
+            "the %s line was held %.1f s with no release from the control loop: written low",
+            button.name,
+            self.safety.limits.max_hold_s,
+        )
 
 
 def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bool], None]:

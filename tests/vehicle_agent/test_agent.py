@@ -284,6 +284,26 @@ def test_a_failed_pass_lets_go_of_the_button_a_gpio_board_holds(
         assert r.agent.state.reason == "agent step failed"
 
 
+def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The line would stay high after the process exits: a + held for good walks the set speed
+    up to the car's maximum with nobody pressing."""
+    lines = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
+    levels: dict[int, bool] = {}
+
+    def board(safety: SafetyLayer) -> GpioButtonBoard:
+        return GpioButtonBoard(lines, levels.__setitem__, safety)
+
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple", button_port=board) as r:
+        engage_and_settle(r, set_speed_mph=50)
+        r.run(2.0, until=lambda: any(levels.values()))
+        assert any(levels.values()), "no button held"
+        r.agent.shutdown()
+        assert not any(levels.values())
+        assert r.agent.state.reason == "stopped"
+
+
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

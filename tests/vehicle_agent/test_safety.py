@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -61,6 +62,36 @@ accel_requests = st.one_of(
     st.floats(min_value=-4.0, max_value=2.0),
 )
 car_conditions = st.tuples(st.booleans(), st.booleans(), st.floats(0.0, 0.5))
+
+
+def test_a_line_the_control_loop_stops_releasing_is_written_low_by_the_deadman(
+    dbc_cache: Path,
+) -> None:
+    """A stalled loop never calls `hold` again to end a press: the board's own timer does, at
+    the safety layer's longest hold, and the same hold is not raised again when the loop
+    comes back; a new press after a release is."""
+    car = car_for("nissan_rogue")
+    limits = SafetyLimits(max_hold_s=0.2)
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache), limits)
+    levels: dict[int, bool] = {}
+    board = GpioButtonBoard({CruiseButton.PLUS: 17}, levels.__setitem__, safety)
+    board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    assert levels[17]
+    deadline = time.monotonic() + 5.0
+    while levels[17] and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not levels[17]
+    assert board.deadman_releases == 1
+    # the loop comes back still asking for the hold it began: not pressed again
+    board.hold(CruiseButton.PLUS, SafetyContext(0.15, car_state(0.15)))
+    assert not levels[17]
+    # released, then a new press after the press interval: raised, and let go in time
+    board.hold(None, SafetyContext(0.3, car_state(0.3)))
+    board.hold(CruiseButton.PLUS, SafetyContext(0.8, car_state(0.8)))
+    assert levels[17]
+    board.hold(None, SafetyContext(0.9, car_state(0.9)))
+    time.sleep(0.3)
+    assert board.deadman_releases == 1  # a press the loop ended is no deadman release
 
 
 @settings(
