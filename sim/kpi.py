@@ -282,8 +282,10 @@ def platoon_kpis(
     *,
     throughput_points_m: FloatArray | None = None,
 ) -> Kpis:
-    """The KPIs of a platoon run: fuel, speed, comfort and safety over its simulated vehicles
-    (columns 1..N-1), throughput over every vehicle, the leader and cars that merged in included.
+    """The KPIs of a platoon run: fuel, speed and comfort over its simulated vehicles (columns
+    1..N-1); safety (least gap, time to collision, collisions) over every gap someone drove,
+    the gaps of the cars that merged in included; throughput over every vehicle, the leader and
+    cars that merged in included.
 
     Throughput is the average over five equi-spaced points of the stretch the run's vehicles
     share, or over `throughput_points_m` (the points a run shares with its baseline,
@@ -294,7 +296,7 @@ def platoon_kpis(
     """
     position = run.position_m[:, 1:]
     speed = run.speed_mps[:, 1:]
-    gaps = run.gap_m
+    every_gap = run.every_gap_m
     merged = run.cut_in_position_m
     if not shares_a_stretch(run.position_m):
         throughput = 0.0
@@ -308,8 +310,10 @@ def platoon_kpis(
         network_speed_mps=network_speed_mps(position, run.dt_s),
         accel_rms_mps2=accel_rms_mps2(speed, run.dt_s),
         jerk_rms_mps3=jerk_rms_mps3(speed, run.dt_s),
-        min_gap_m=float(gaps.min()),
-        min_ttc_s=min_time_to_collision_s(gaps, speed, run.lead_speed_mps),
+        min_gap_m=float(np.nanmin(every_gap)),
+        min_ttc_s=min_time_to_collision_s(
+            every_gap, run.every_follower_speed_mps, run.every_lead_speed_mps
+        ),
         collisions=run.collisions,
         gap_violations=run.gap_violations,
     )

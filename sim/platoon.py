@@ -80,7 +80,8 @@ class SpeedLimit(Protocol):
 
 @dataclass(frozen=True)
 class GapEvent:
-    """A follower that touched its leader (collision) or came closer than the violation gap."""
+    """A follower that touched its leader (collision) or came closer than the violation gap.
+    `vehicle` numbers the platoon's columns 1..N-1, then the cars that merged in, N on."""
 
     kind: str
     vehicle: int
@@ -106,9 +107,13 @@ class PlatoonRun:
     # Speed of the vehicle ahead of each follower at each step (the car it follows, a cut-in
     # included); None: the platoon's own order throughout.
     follower_lead_speed_mps: FloatArray | None = None
-    # Cars that merged in from the next lane: NaN before they did (not part of the KPIs).
+    # Cars that merged in from the next lane: NaN before they did. Their gaps to the car ahead
+    # and its speed count in the safety KPIs, like every follower's; fuel, speed and comfort are
+    # the platoon's own.
     cut_in_position_m: FloatArray | None = None
     cut_in_speed_mps: FloatArray | None = None
+    cut_in_gap_m: FloatArray | None = None
+    cut_in_lead_speed_mps: FloatArray | None = None
     # Hand-backs of the AVs to their drivers, and the seconds the drivers then drove.
     takeovers: int = 0
     driver_seconds: float = 0.0
@@ -141,6 +146,28 @@ class PlatoonRun:
             return self.follower_lead_speed_mps
         ahead: FloatArray = self.speed_mps[:, :-1]
         return ahead
+
+    @property
+    def every_gap_m(self) -> FloatArray:
+        """`gap_m`, then each car that merged in (NaN before it did): every gap someone drove."""
+        if self.cut_in_gap_m is None or not self.cut_in_gap_m.shape[1]:
+            return self.gap_m
+        return np.hstack([self.gap_m, self.cut_in_gap_m])
+
+    @property
+    def every_follower_speed_mps(self) -> FloatArray:
+        """Speed of the vehicle behind each gap of `every_gap_m`."""
+        own = self.speed_mps[:, 1:]
+        if self.cut_in_speed_mps is None or not self.cut_in_speed_mps.shape[1]:
+            return own
+        return np.hstack([own, self.cut_in_speed_mps])
+
+    @property
+    def every_lead_speed_mps(self) -> FloatArray:
+        """Speed of the vehicle ahead of each gap of `every_gap_m`."""
+        if self.cut_in_lead_speed_mps is None or not self.cut_in_lead_speed_mps.shape[1]:
+            return self.lead_speed_mps
+        return np.hstack([self.lead_speed_mps, self.cut_in_lead_speed_mps])
 
     @property
     def cut_ins(self) -> int:
@@ -487,10 +514,12 @@ def simulate_platoon(
         follower_lead_speed_mps=lead_speed_history[:, 1:n],
         cut_in_position_m=position[:, n:used],
         cut_in_speed_mps=speed[:, n:used],
+        cut_in_gap_m=gap_history[:, n:used],
+        cut_in_lead_speed_mps=lead_speed_history[:, n:used],
         takeovers=takeovers,
         driver_seconds=driver_steps * dt,
     )
-    run.events.extend(gap_events(run.gap_m, dt, gap_violation_m))
+    run.events.extend(gap_events(run.every_gap_m, dt, gap_violation_m))
     return run
 
 
@@ -546,9 +575,10 @@ def _supervise(av: _AvState, observation: AvObservation, hand_back: HandBack) ->
 
 
 def gap_events(gaps: FloatArray, dt_s: float, gap_violation_m: float) -> list[GapEvent]:
-    """One event per follower whose gap ever reached 0 (collision) or fell below the limit."""
+    """One event per follower whose gap ever reached 0 (collision) or fell below the limit
+    (a column is NaN where its car was not yet in the lane)."""
     events: list[GapEvent] = []
-    smallest = gaps.min(axis=0)
+    smallest = np.nanmin(gaps, axis=0)
     for follower in np.flatnonzero(smallest < gap_violation_m):
         column = gaps[:, follower]
         collided = column <= 0.0

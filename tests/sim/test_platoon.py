@@ -10,12 +10,14 @@ import pytest
 
 from contract.idm import I24_IDM, equilibrium_gap_m
 from sim.drives import Drive, drive_from_speeds, load_drive
+from sim.kpi import platoon_kpis
 from sim.platoon import (
     VEHICLE_LENGTH_M,
     AvObservation,
     CutIns,
     HandBack,
     PlatoonRun,
+    gap_events,
     platoon_roles,
     roles_for_penetration,
     simulate_platoon,
@@ -278,6 +280,30 @@ def test_each_gap_is_paired_with_the_speed_of_the_car_it_is_to() -> None:
     np.testing.assert_array_equal(run.lead_speed_mps[:first, av - 1], run.speed_mps[:first, av - 1])
     assert run.lead_speed_mps[first, av - 1] == run.cut_in_speed_mps[first, 0]
     assert run.lead_speed_mps[first, av - 1] != run.speed_mps[first, av - 1]
+
+
+def test_the_gaps_of_cars_that_merged_in_are_recorded_and_count_in_the_safety_kpis() -> None:
+    """A car that merged in drives a gap like any follower: a collision of its own, its least
+    gap and its time to collision must count, or a controller that invites cut-ins hides them."""
+    run = dropping_back(CutIns(seed=1))
+    assert run.cut_in_position_m is not None
+    assert run.cut_in_gap_m is not None
+    assert run.cut_in_speed_mps is not None
+    assert run.cut_in_lead_speed_mps is not None
+    first = int(np.argmax(np.isfinite(run.cut_in_position_m[:, 0])))
+    # NaN until it merged; then its gap to the leader it took (the platoon's leader here)
+    assert np.isnan(run.cut_in_gap_m[:first, 0]).all()
+    expected = run.position_m[first:, 0] - run.cut_in_position_m[first:, 0] - VEHICLE_LENGTH_M
+    np.testing.assert_allclose(run.cut_in_gap_m[first:, 0], expected)
+    np.testing.assert_array_equal(run.cut_in_lead_speed_mps[first:, 0], run.speed_mps[first:, 0])
+    assert run.every_gap_m.shape[1] == run.gap_m.shape[1] + run.cut_ins
+    kpis = platoon_kpis(run)
+    assert kpis.min_gap_m == pytest.approx(float(np.nanmin(run.every_gap_m)))
+    # an event per car that came too close, a merged car's numbered after the platoon's
+    nan = np.nan
+    gaps = np.array([[30.0, nan], [20.0, 6.0], [25.0, -0.2], [25.0, 1.0]])
+    (event,) = gap_events(gaps, 0.1, 2.0)
+    assert (event.kind, event.vehicle, event.first_time_s) == ("collision", 2, pytest.approx(0.2))
 
 
 def test_cut_in_hazard_hand_worked() -> None:
