@@ -557,8 +557,9 @@ def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float
 
     Later reports on one side of the held level (all better, or all worse) form a run; once a run
     spans `hold_s` seconds the level becomes the mildest level of the run (the one that held over
-    all of it), so a car whose rate dips for one report, or flickers between amber and red, keeps
-    its level until the change has lasted.
+    all of it), so a car whose rate dips for one report keeps its level, and one that turns to
+    flicker between amber and red keeps it until the flicker has lasted (then, below, it shows
+    the flicker's worst).
 
     The level to start from is the worst of the settled reports, those more than
     `HOLD_PERIODS_REPLAYED - 1` hold periods older than the newest (the first report when none

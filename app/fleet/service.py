@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import Select, select, true
+from sqlalchemy import Select, and_, or_, select, true
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import aliased
 
@@ -217,14 +217,22 @@ def _latest_query(
 
 
 async def _earlier_statuses(
-    session: AsyncSession, vehicle_ids: Sequence[str], since: datetime
+    session: AsyncSession, since: Mapping[str, datetime]
 ) -> dict[str, list[LastStatus]]:
-    """Each vehicle's status reports since `since`, oldest first (the primary key's order)."""
-    if not vehicle_ids:
+    """Each vehicle's status reports since its own `since[vehicle_id]`, oldest first (the
+    primary key's order)."""
+    if not since:
         return {}
     rows = await session.scalars(
         select(VehicleStatus)
-        .where(VehicleStatus.vehicle_id.in_(vehicle_ids), VehicleStatus.ts >= since)
+        .where(
+            or_(
+                *(
+                    and_(VehicleStatus.vehicle_id == vehicle_id, VehicleStatus.ts >= start)
+                    for vehicle_id, start in since.items()
+                )
+            )
+        )
         .order_by(VehicleStatus.vehicle_id, VehicleStatus.ts)
     )
     history: dict[str, list[LastStatus]] = {}
@@ -280,10 +288,11 @@ async def fleet(
     if silent:
         for row in (await session.execute(_latest_query(None, silent))).all():
             older[row[0].vehicle_id] = row[3]
+    # the hold periods replayed run back from each car's newest report, not from now: a server
+    # behind its fleet (or a car whose clock is behind) must replay as many as a prompt one
+    replayed = timedelta(seconds=HOLD_PERIODS_REPLAYED * limits.hold_s)
     history = await _earlier_statuses(
-        session,
-        [row[0].vehicle_id for row in rows if row[4] is not None],
-        now - timedelta(seconds=HOLD_PERIODS_REPLAYED * limits.hold_s),
+        session, {row[0].vehicle_id: row[4].ts - replayed for row in rows if row[4] is not None}
     )
     clock = await _ingest_clock(session, now, limits, rows if vehicle_id is None else None)
     entries = []
@@ -387,12 +396,6 @@ async def change_assignment(
     a vehicle changed since by someone else is a conflict: two operators on one car's page
     must not silently overwrite each other."""
     vehicle = await _vehicle_for_update(session, vehicle_id)
-    if expected_config_version is not None and expected_config_version != vehicle.config_version:
-        raise AssignmentConflict(
-            "config_version",
-            f"the vehicle was changed since its config v{expected_config_version} was read "
-            f"(now v{vehicle.config_version}): check its assignment and save again",
-        )
     # What is wrong with the assignment itself first (AssignmentError), then what does not fit
     # this vehicle (AssignmentConflict), so a bad request is never answered as a conflict.
     route = route.strip()
@@ -411,6 +414,12 @@ async def change_assignment(
         raise AssignmentConflict(error.field, error.reason) from None
     except ControllerConfigError as error:
         raise AssignmentError(error.field, error.reason) from None
+    if expected_config_version is not None and expected_config_version != vehicle.config_version:
+        raise AssignmentConflict(
+            "config_version",
+            f"the vehicle was changed since its config v{expected_config_version} was read "
+            f"(now v{vehicle.config_version}): check its assignment and save again",
+        )
     lanes = await session.scalar(
         select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
     )

@@ -182,6 +182,17 @@ def test_a_change_made_against_an_older_config_version_is_refused(api: Api) -> N
     assert f"changed since its config v{read} was read (now v{read + 1})" in error["msg"]
     listed = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
     assert (listed["route"], listed["config_version"]) == ("B", read + 1)  # the first stands
+    # a body that is wrong in itself is a 422 naming what is wrong, stale version or not
+    bad = api.put(
+        "/api/v1/vehicles/SF-001/assignment",
+        {
+            **ASSIGNMENT,
+            "controller": {"name": "simple", "params": {"k": -1}},
+            "config_version": read,
+        },
+    )
+    assert bad.status_code == 422
+    assert bad.json()["detail"][0]["loc"] == ["body", "controller", "params", "k"]
 
     # without a version the change applies, as before
     third = api.put("/api/v1/vehicles/SF-001/assignment", {**ASSIGNMENT, "route": "C"})
@@ -353,6 +364,27 @@ def test_a_server_behind_its_fleet_ages_no_car_but_a_silent_car_among_reporting_
     caught_up = api.get("/api/v1/fleet").json()
     assert checks(vehicle(caught_up, "SF-002"))["ping"] == "red"
     assert re.fullmatch(r"no ping for (8\d|9\d) s", vehicle(caught_up, "SF-002")["problems"][0])
+
+
+def test_a_server_behind_its_fleet_replays_the_whole_hold_window(api: Api) -> None:
+    """Everything stored is 65 s old. The reports replayed for hysteresis run back three hold
+    periods from the car's newest one: counted back from now, the window held only the last
+    two, began with whichever report came first and let a CAN that has flickered for four
+    minutes clear the car."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=67), 0, 25, 3)
+    )
+    for back in range(25):  # every 10 s up to 65 s ago: down on even, up on odd reports back
+        rate = 5.0 if back % 2 == 0 else 150.0
+        ts = now - timedelta(seconds=65 + 10 * back)
+        post_status(
+            api.client, api.tokens["admin"], "SF-001", **healthy_status(ts, can_msgs_per_s=rate)
+        )
+    flickering = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert checks(flickering)["status"] == "green"  # the server's lag ages no one
+    assert checks(flickering)["can"] == "red"
+    assert flickering["verdict"] == "not cleared"
 
 
 def test_a_car_reporting_alone_ages_once_it_falls_silent(api: Api, seeded_engine: Engine) -> None:
