@@ -864,11 +864,6 @@ class Agent:
             # telemetry reads the snapshot, which the failed pass did not renew: it must not go
             # on reporting the car as commanded
             self.snapshot = replace(self.snapshot, mode=self.state.mode, reason=reason)
-        self._release_own_button(now)
-
-    def _release_own_button(self, now: float) -> None:
-        """Let go of the button the agent holds. A GPIO line stays high until written low, and
-        no later pass may come to release it (a failed pass, a stopping agent)."""
         if self.buttons is None or self._own_button is None:
             return
         self._own_released = (now, self._own_button)
@@ -885,5 +880,10 @@ class Agent:
         if self.state.commanding:
             self._hand_back("agent stopping")
         self.state = engage.EngageState(engage.Mode.STOCK, now, None, "stopped")
-        self._release_own_button(now)
+        if self.buttons is not None:
+            # every line, whatever the control thread (which may not have stopped) last held
+            try:
+                self.buttons.close()
+            except Exception:
+                log.exception("letting go of the buttons failed")
         self.spool.close()

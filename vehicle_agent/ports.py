@@ -32,6 +32,9 @@ class ButtonPort(Protocol):
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Hold `button` from now on (None: release)."""
 
+    def close(self) -> None:
+        """Let go of every button for good: the agent is stopping."""
+
 
 class CanButtonPort:
     """Holds a button by sending the make's button frame every command period."""
@@ -51,11 +54,12 @@ class CanButtonPort:
         self._counter = 0
         self._last_sent_s: float | None = None
         self._release_frames = 0
+        self._closed = False
 
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Send this period's frame for `button` if one is due."""
         now = context.time_s
-        if button is None and self._release_frames == 0:
+        if self._closed or (button is None and self._release_frames == 0):
             return
         if (
             self._last_sent_s is not None
@@ -81,6 +85,10 @@ class CanButtonPort:
             # Refused: fall back to releasing (always allowed) on the next period.
             self._release_frames = RELEASE_FRAMES
 
+    def close(self) -> None:
+        """Send nothing more: a button frame the car stops receiving is a released button."""
+        self._closed = True
+
 
 class GpioButtonBoard:
     """A button board on GPIO lines (one line per button, active high), as the field team's
@@ -92,7 +100,8 @@ class GpioButtonBoard:
     deadman: a timer thread writes it low once it has been held that long. A control loop that
     stalls (a blocked call, a paused process) then cannot hold + or - for good and walk the set
     speed to the car's maximum; the release is counted in `deadman_releases`. The timer runs on
-    the machine's monotonic time, as the car's agent does (`SystemClock`)."""
+    the machine's monotonic time, as the car's agent does (`SystemClock`). `close` writes every
+    line low and refuses every later press, from whichever thread stops the agent."""
 
     def __init__(
         self,
@@ -105,47 +114,64 @@ class GpioButtonBoard:
         self.safety = safety
         self.held: CruiseButton | None = None
         self.deadman_releases = 0
+        # the control loop, the deadman's timer and a stopping agent all reach the lines
         self._lock = threading.Lock()
         self._deadman: threading.Timer | None = None
         # the button whose hold the deadman ended, until the loop asks for something else
         self._cut: CruiseButton | None = None
+        self._closed = False
 
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Release the previous line, raise the new one if the safety layer allows it."""
-        pressed = frozenset() if button is None else frozenset({button})
-        if button is not None and not self.safety.admit_press(pressed, context):
-            button = None
-        elif button is None:
-            self.safety.admit_press(pressed, context)
         with self._lock:
+            if self._closed:
+                return
+            pressed = frozenset() if button is None else frozenset({button})
+            if button is not None and not self.safety.admit_press(pressed, context):
+                button = None
+            elif button is None:
+                self.safety.admit_press(pressed, context)
             if button is not None and button is self._cut:
                 button = None  # the same hold the deadman ended: not pressed again
             else:
                 self._cut = None
             if button == self.held:
                 return
-            self._cancel_deadman()
             if self.held is not None:
                 self.write_line(self.lines[self.held], False)
-            self.held = None
+                self._cancel_deadman()  # only once the line is low: a failed write keeps it
+                self.held = None
             if button is not None:
                 self.write_line(self.lines[button], True)
                 self.held = button
-                self._deadman = threading.Timer(
-                    self.safety.limits.max_hold_s, self._release_held_too_long, (button,)
-                )
+                self._deadman = threading.Timer(self.safety.limits.max_hold_s, self._expire)
+                self._deadman.args = (self._deadman,)
                 self._deadman.daemon = True
                 self._deadman.start()
+
+    def close(self) -> None:
+        """Write every line low and refuse every later press (the agent is stopping)."""
+        with self._lock:
+            self._closed = True
+            self._cancel_deadman()
+            self.held = None
+            for button, line in self.lines.items():
+                try:
+                    self.write_line(line, False)
+                except OSError:
+                    log.exception("writing the %s line low failed", button.name)
 
     def _cancel_deadman(self) -> None:
         if self._deadman is not None:
             self._deadman.cancel()
             self._deadman = None
 
-    def _release_held_too_long(self, button: CruiseButton) -> None:
+    def _expire(self, timer: threading.Timer) -> None:
+        """The deadman: end the hold `timer` was started for, if it still stands."""
         with self._lock:
-            if self.held is not button:
-                return  # released or replaced meanwhile
+            button = self.held
+            if self._deadman is not timer or button is None:
+                return  # released, replaced or closed meanwhile
             self.write_line(self.lines[button], False)
             self.held = None
             self._deadman = None

@@ -302,6 +302,8 @@ def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
         r.agent.shutdown()
         assert not any(levels.values())
         assert r.agent.state.reason == "stopped"
+        assert isinstance(r.agent.buttons, GpioButtonBoard)
+        assert r.agent.buttons.deadman_releases == 0  # let go by the shutdown, not the timer
 
 
 def test_presses_the_car_does_not_take_hand_back_and_say_so(

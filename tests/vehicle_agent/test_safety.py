@@ -94,6 +94,22 @@ def test_a_line_the_control_loop_stops_releasing_is_written_low_by_the_deadman(
     assert board.deadman_releases == 1  # a press the loop ended is no deadman release
 
 
+def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache: Path) -> None:
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    writes: list[tuple[int, bool]] = []
+    board = GpioButtonBoard(
+        {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27},
+        lambda line, level: writes.append((line, level)),
+        safety,
+    )
+    board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    board.close()
+    board.hold(CruiseButton.MINUS, SafetyContext(1.0, car_state(1.0)))
+    assert writes == [(17, True), (17, False), (27, False)]
+    assert board.held is None
+
+
 @settings(
     max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
