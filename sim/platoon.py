@@ -89,6 +89,13 @@ class GapEvent:
     min_gap_m: float
 
 
+def _with_merged_cars(own: FloatArray, merged: FloatArray | None) -> FloatArray:
+    """The platoon's own columns, then those of the cars that merged in (if any did)."""
+    if merged is None or not merged.shape[1]:
+        return own
+    return np.hstack([own, merged])
+
+
 @dataclass(frozen=True)
 class PlatoonRun:
     """Everything a run recorded: one row per time step, one column per vehicle (0 = leader)."""
@@ -150,24 +157,17 @@ class PlatoonRun:
     @property
     def every_gap_m(self) -> FloatArray:
         """`gap_m`, then each car that merged in (NaN before it did): every gap someone drove."""
-        if self.cut_in_gap_m is None or not self.cut_in_gap_m.shape[1]:
-            return self.gap_m
-        return np.hstack([self.gap_m, self.cut_in_gap_m])
+        return _with_merged_cars(self.gap_m, self.cut_in_gap_m)
 
     @property
     def every_follower_speed_mps(self) -> FloatArray:
         """Speed of the vehicle behind each gap of `every_gap_m`."""
-        own = self.speed_mps[:, 1:]
-        if self.cut_in_speed_mps is None or not self.cut_in_speed_mps.shape[1]:
-            return own
-        return np.hstack([own, self.cut_in_speed_mps])
+        return _with_merged_cars(self.speed_mps[:, 1:], self.cut_in_speed_mps)
 
     @property
     def every_lead_speed_mps(self) -> FloatArray:
         """Speed of the vehicle ahead of each gap of `every_gap_m`."""
-        if self.cut_in_lead_speed_mps is None or not self.cut_in_lead_speed_mps.shape[1]:
-            return self.lead_speed_mps
-        return np.hstack([self.lead_speed_mps, self.cut_in_lead_speed_mps])
+        return _with_merged_cars(self.lead_speed_mps, self.cut_in_lead_speed_mps)
 
     @property
     def cut_ins(self) -> int:

@@ -4,6 +4,7 @@ taking over, reaching set points, handing back within one control period, bad in
 from __future__ import annotations
 
 import math
+from contextlib import AbstractContextManager
 from dataclasses import replace
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -260,18 +261,25 @@ def test_a_can_interface_going_down_hands_back_at_once(
         assert engaged(r), r.agent.state.reason
 
 
+def gpio_rig(
+    tmp_path: Path, dbc_cache: Path, levels: dict[int, bool]
+) -> AbstractContextManager[Rig]:
+    """A Rogue whose buttons are pressed by a GPIO board; `levels` records each line's level."""
+    lines = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
+
+    def board(safety: SafetyLayer) -> GpioButtonBoard:
+        return GpioButtonBoard(lines, levels.__setitem__, safety)
+
+    return rig("nissan_rogue", tmp_path, dbc_cache, controller="simple", button_port=board)
+
+
 def test_a_failed_pass_lets_go_of_the_button_a_gpio_board_holds(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """A GPIO line stays high until written low: without the release, a failing control loop
     would hold the button for good (SET- walking the set speed down to the car's minimum)."""
-    lines = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
     levels: dict[int, bool] = {}
-
-    def board(safety: SafetyLayer) -> GpioButtonBoard:
-        return GpioButtonBoard(lines, levels.__setitem__, safety)
-
-    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple", button_port=board) as r:
+    with gpio_rig(tmp_path, dbc_cache, levels) as r:
         # set at 50 mph under a 60 mph plan: the agent presses to raise it
         engage_and_settle(r, set_speed_mph=50)
         r.run(2.0, until=lambda: any(levels.values()))
@@ -289,13 +297,8 @@ def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
 ) -> None:
     """The line would stay high after the process exits: a + held for good walks the set speed
     up to the car's maximum with nobody pressing."""
-    lines = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
     levels: dict[int, bool] = {}
-
-    def board(safety: SafetyLayer) -> GpioButtonBoard:
-        return GpioButtonBoard(lines, levels.__setitem__, safety)
-
-    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple", button_port=board) as r:
+    with gpio_rig(tmp_path, dbc_cache, levels) as r:
         engage_and_settle(r, set_speed_mph=50)
         r.run(2.0, until=lambda: any(levels.values()))
         assert any(levels.values()), "no button held"
