@@ -843,6 +843,16 @@ async def _not_saved(
     )
 
 
+def _config_version_read(config_version: str) -> int | None:
+    """The config version the form was filled in against (its hidden field); none from a
+    client that sends none, which saves without the check, as the API does."""
+    if not config_version:
+        return None
+    if not (config_version.isascii() and config_version.isdigit()):
+        raise AssignmentError("config_version", f"{config_version!r} is not a config version")
+    return int(config_version)
+
+
 @router.post("/vehicles/{vehicle_id}/assignment")
 async def vehicle_assignment(
     request: Request,
@@ -870,6 +880,7 @@ async def vehicle_assignment(
             raise AssignmentError("controller.params", f"not valid JSON ({error.msg})") from None
         if not isinstance(controller_params, dict):
             raise AssignmentError("controller.params", "must be a JSON object")
+        read_version = _config_version_read(config_version)
         await change_assignment(
             session,
             vehicle_id,
@@ -878,11 +889,16 @@ async def vehicle_assignment(
             controller_name=controller,
             controller_params=controller_params,
             changed_by=f"dashboard user {user.username}",
-            expected_config_version=int(config_version) if config_version.isdigit() else None,
+            expected_config_version=read_version,
         )
     except AssignmentError as error:
         # the form again as the operator filled it in, not as stored: fixing one field must
-        # not silently put the others back
+        # not silently put the others back. It keeps the version the operator read, too, so
+        # a change someone else saved meanwhile is still a conflict when the fix is sent;
+        # only the conflict itself hands over the new version, to save again against.
+        shown: dict[str, Any] = {}
+        if error.field != "config_version":
+            shown["config_version_read"] = config_version
         return await _not_saved(
             request,
             session,
@@ -891,6 +907,7 @@ async def vehicle_assignment(
             error,
             params_json=params,
             form={"lane": lane, "route": route, "controller": controller},
+            **shown,
         )
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=assignment", status_code=303)
 

@@ -278,6 +278,65 @@ def test_two_operators_on_one_car_do_not_overwrite_each_other(site: str) -> None
         assert '<strong data-field="route">B</strong>' in page  # the first's change stands
 
 
+def test_a_form_sent_back_for_a_mistake_still_knows_which_config_its_operator_read(
+    site: str,
+) -> None:
+    """The redrawn form carried the version now stored: an operator who fixed a typo saved over
+    a change someone else made meanwhile, never told of it."""
+    with logged_in(site, "operator") as first, logged_in(site, "operator") as second:
+        opened = re.search(
+            r'name="config_version" value="(\d+)"', second.get("/vehicles/SF-003").text
+        )
+        assert opened is not None
+
+        def save(client: httpx.Client, route: str, version: str, params: str) -> httpx.Response:
+            return post_form(
+                client,
+                "/vehicles/SF-003",
+                "/vehicles/SF-003/assignment",
+                lane="1",
+                controller="simple",
+                params=params,
+                route=route,
+                config_version=version,
+            )
+
+        assert save(first, "B", opened.group(1), "{}").status_code == 303
+        typo = save(second, "C", opened.group(1), "{")
+        assert typo.status_code == 422
+        assert "controller.params: not valid JSON" in typo.text
+        kept = re.search(r'name="config_version" value="(\d+)"', typo.text)
+        assert kept is not None
+        assert kept.group(1) == opened.group(1)
+        fixed = save(second, "C", kept.group(1), "{}")
+        assert fixed.status_code == 422
+        assert "the vehicle was changed since its config v" in fixed.text
+        # the conflict hands over the version now stored, to save against once checked
+        now = re.search(r'name="config_version" value="(\d+)"', fixed.text)
+        assert now is not None
+        assert int(now.group(1)) == int(opened.group(1)) + 1
+        assert save(second, "C", now.group(1), "{}").status_code == 303
+
+
+@pytest.mark.parametrize("version", ["²", "v3", "-1"])
+def test_a_config_version_that_is_no_number_is_refused_by_name(site: str, version: str) -> None:
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-001",
+            "/vehicles/SF-001/assignment",
+            lane="1",
+            controller="simple",
+            params="{}",
+            route="Z",
+            config_version=version,
+        )
+        assert response.status_code == 422
+        assert "config_version:" in response.text
+        assert "is not a config version" in response.text
+        assert '<strong data-field="route">Z</strong>' not in client.get("/vehicles/SF-001").text
+
+
 def test_a_maintenance_note_the_database_cannot_store_is_shown_and_not_saved(site: str) -> None:
     with logged_in(site, "operator") as client:
         response = post_form(
