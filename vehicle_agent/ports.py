@@ -142,12 +142,14 @@ class GpioButtonBoard:
                 self._cancel_deadman()  # only once the line is low: a failed write keeps it
                 self.held = None
             if button is not None:
-                self.write_line(self.lines[button], True)
+                # held and deadman first: a write that fails once the level has changed (sysfs
+                # can) leaves a line high that the next `hold` or the timer must still lower
                 self.held = button
                 self._deadman = threading.Timer(self.safety.limits.max_hold_s, self._expire)
                 self._deadman.args = (self._deadman,)
                 self._deadman.daemon = True
                 self._deadman.start()
+                self.write_line(self.lines[button], True)
 
     def close(self) -> None:
         """Write every line low and refuse every later press (the agent is stopping)."""

@@ -94,6 +94,40 @@ def test_a_line_the_control_loop_stops_releasing_is_written_low_by_the_deadman(
     assert board.deadman_releases == 1  # a press the loop ended is no deadman release
 
 
+def test_a_line_whose_raise_failed_after_it_went_high_is_still_written_low(
+    dbc_cache: Path,
+) -> None:
+    """A write can fail after the level changed (sysfs reports an error the pin has already
+    taken). The board cannot tell, so it treats the line as held: the loop's release lowers it,
+    and so does the deadman when the loop never comes back."""
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    levels: dict[int, bool] = {}
+
+    def write_that_fails_going_high(line: int, level: bool) -> None:
+        levels[line] = level
+        if level:
+            raise OSError("EIO")
+
+    board = GpioButtonBoard({CruiseButton.PLUS: 17}, write_that_fails_going_high, safety)
+    with pytest.raises(OSError, match="EIO"):
+        board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    board.hold(None, SafetyContext(0.05, car_state(0.05)))
+    assert not levels[17]
+
+    stalled_safety = SafetyLayer(
+        car, codec_for(car.dbc_name, car.checksums, dbc_cache), SafetyLimits(max_hold_s=0.2)
+    )
+    stalled = GpioButtonBoard({CruiseButton.PLUS: 27}, write_that_fails_going_high, stalled_safety)
+    with pytest.raises(OSError, match="EIO"):
+        stalled.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    deadline = time.monotonic() + 5.0
+    while levels[27] and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not levels[27]
+    assert stalled.deadman_releases == 1
+
+
 def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache: Path) -> None:
     car = car_for("nissan_rogue")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
