@@ -3,6 +3,7 @@ and unsafe driving is reported, never hidden."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -297,8 +298,27 @@ def test_the_gaps_of_cars_that_merged_in_are_recorded_and_count_in_the_safety_kp
     np.testing.assert_allclose(run.cut_in_gap_m[first:, 0], expected)
     np.testing.assert_array_equal(run.cut_in_lead_speed_mps[first:, 0], run.speed_mps[first:, 0])
     assert run.every_gap_m.shape[1] == run.gap_m.shape[1] + run.cut_ins
-    kpis = platoon_kpis(run)
-    assert kpis.min_gap_m == pytest.approx(float(np.nanmin(run.every_gap_m)))
+    # the least gap is a merged car's once it is the least: here the platoon's is 20.9 m
+    # (a follower's), so a merged car's 2 m must be what the KPI reads
+    closer = run.cut_in_gap_m.copy()
+    closer[first + 5, 0] = 2.0
+    kpis = platoon_kpis(replace(run, cut_in_gap_m=closer))
+    assert float(np.nanmin(run.gap_m)) > 20.0
+    assert kpis.min_gap_m == pytest.approx(2.0)
+    # a car that merged in and came within the violation distance has its own event, numbered
+    # after the platoon's followers (the merged cars keep at least 31 m here, so 32 m is
+    # crossed only by the one whose least gap is 31.3 m and by the followers)
+    strict = simulate_platoon(
+        STEADY_LEADER,
+        platoon_roles(humans=2, avs=1),
+        [DropBack(0.0)],
+        cut_ins=CutIns(seed=1),
+        gap_violation_m=32.0,
+    )
+    followers = strict.gap_m.shape[1]
+    merged_events = [event for event in strict.events if event.vehicle > followers]
+    assert len(merged_events) == 1
+    assert merged_events[0].kind == "gap_violation"
     # an event per car that came too close, a merged car's numbered after the platoon's
     nan = np.nan
     gaps = np.array([[30.0, nan], [20.0, 6.0], [25.0, -0.2], [25.0, 1.0]])
