@@ -72,10 +72,16 @@ class PingBatch(BaseModel):
 
 
 class Rejection(BaseModel):
-    """A ping refused on its own (the others of its batch are kept)."""
+    """A ping refused on its own (the others of its batch are kept).
+
+    `retryable` marks a refusal the same ping may pass unchanged later, because what it was
+    judged against can change: the server's clock (a `ts` "in the future" from a server whose
+    clock is behind) or its roster (a vehicle not on it yet). The car keeps such a ping and
+    sends it again; every other rejection is final. Absent (an older server): final."""
 
     index: int
     error: str
+    retryable: bool = False
 
 
 class PingAnswer(BaseModel):

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
@@ -34,7 +34,7 @@ from contract.controllers import (
     validate_controller,
 )
 from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
-from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
+from contract.vehicles import Ping, Rejection, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
@@ -98,8 +98,22 @@ MAX_RETRY_AFTER_S = 300.0
 MAX_PINGS_PER_BATCH = 1000
 # Upload at most this many batches per network() call, so status and plan polls stay timely.
 MAX_BATCHES_PER_CALL = 5
+# A ping the server refused for now (its clock or roster behind, `Rejection.retryable`) is sent
+# again for this long after its own time, a day's deployment: long enough for an operator to
+# mend the server's clock or add the car to the roster before it is given up.
+RETRYABLE_PING_KEEP_S = 12 * 3600.0
 # Low-pass time constant of the acceleration estimated from the speed (s).
 ACCEL_FILTER_S = 0.3
+
+
+def _age_s(ts: object, now: datetime) -> float:
+    """Seconds from a spooled ping's `ts` to `now`; infinite for one that does not read as a
+    time with its zone (the spool holds only what the contract built, so never in practice)."""
+    try:
+        stamped = datetime.fromisoformat(str(ts))
+        return (now - stamped).total_seconds()
+    except (ValueError, TypeError):
+        return math.inf
 
 
 def fix_is_current(fix: GpsFix | None, now_s: float) -> bool:
@@ -173,6 +187,8 @@ class AgentStats:
     control_steps: int = 0
     pings_spooled: int = 0
     pings_uploaded: int = 0
+    # Pings the server refused for now (`Rejection.retryable`) and the spool keeps to send again.
+    pings_held_back: int = 0
     # Fields left out of a ping or status report because they broke the contract, per message.
     fields_dropped: Counter[str] = field(default_factory=Counter)
     handbacks: Counter[str] = field(default_factory=Counter)
@@ -835,16 +851,38 @@ class Agent:
                 self._server_failed("pings", error)
                 self._upload_schedule.failed(now, 1.0)
                 return uploaded
-            for rejection in answer.rejected:
-                ts = rows[rejection.index][1].get("ts")
-                log.warning("server rejected ping %s: %s", ts, rejection.error)
-            self.spool.remove([row_id for row_id, _ in rows], rejected=len(answer.rejected))
-            uploaded += len(rows)
-            self.stats.pings_uploaded += len(rows)
+            kept = self._held_back(rows, answer.rejected)
+            gone = [row_id for row_id, _ in rows if row_id not in kept]
+            self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
+            uploaded += len(gone)
+            self.stats.pings_uploaded += len(gone)
+            if kept:
+                # the server cannot take them yet: try again later, backing off, not in a loop
+                self.stats.pings_held_back += len(kept)
+                self._upload_schedule.failed(now, 1.0)
+                return uploaded
             if len(rows) < MAX_PINGS_PER_BATCH:
                 break
         self._upload_schedule.done(now, 1.0)
         return uploaded
+
+    def _held_back(
+        self, rows: Sequence[tuple[int, dict[str, Any]]], rejected: Sequence[Rejection]
+    ) -> set[int]:
+        """The spool rows of the pings refused for now and young enough to send again; a
+        final refusal, or a ping older than RETRYABLE_PING_KEEP_S, leaves the spool."""
+        kept: set[int] = set()
+        now = self.clock.now()
+        for rejection in rejected:
+            row_id, ping = rows[rejection.index]
+            ts = ping.get("ts")
+            again = rejection.retryable and _age_s(ts, now) <= RETRYABLE_PING_KEEP_S
+            log.warning(
+                "server rejected ping %s: %s%s", ts, rejection.error, " (kept)" if again else ""
+            )
+            if again:
+                kept.add(row_id)
+        return kept
 
     def _fault(self, check: str, now: float) -> None:
         """A fault: the engage check `check` fails from now for its hold (FAULT_HOLDS_S)."""

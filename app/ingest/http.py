@@ -101,6 +101,8 @@ async def reply_to_pings(state: State, authorization: str | None, body: bytes) -
     answer = {
         "accepted": result.accepted,
         "duplicates": result.duplicates,
-        "rejected": [{"index": r.index, "error": r.error} for r in result.rejected],
+        "rejected": [
+            {"index": r.index, "error": r.error, "retryable": r.retryable} for r in result.rejected
+        ],
     }
     return Reply(200, orjson.dumps(answer), {})

@@ -65,6 +65,8 @@ class Rejected:
 
     index: int
     error: str
+    # the same ping may pass later: the clock or the roster it was judged against may change
+    retryable: bool = False
 
 
 @dataclass(frozen=True)
@@ -203,7 +205,7 @@ def check_in_context(
     for index, ping in pings:
         corridor = directory.corridor_of(ping.vehicle_id)
         if corridor is None:
-            rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}"))
+            rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}", retryable=True))
             continue
         if ping.lane is not None and ping.lane > corridor.lanes:
             rejected.append(
@@ -216,7 +218,11 @@ def check_in_context(
             continue
         if ping.ts > window.latest:
             rejected.append(
-                Rejected(index, f"ts is more than {window.max_future_s:g} s in the future")
+                Rejected(
+                    index,
+                    f"ts is more than {window.max_future_s:g} s in the future",
+                    retryable=True,
+                )
             )
             continue
         if ping.ts < window.earliest:

@@ -238,3 +238,58 @@ def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes
         assert (r.agent.lane_plan.lane, r.agent.lane_plan.plan_id) == (3, plan_id)
         assert r.agent.stats.plans_refused == 0
         assert "has no lane" not in caplog.text
+
+
+def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A server whose clock is behind refuses every ping as "in the future". The agent deleted
+    each refused ping from its spool: a server clock 6 minutes slow lost every car's pings."""
+    token = issue(seeded_engine, "vehicle", "SF-002")
+    ahead = datetime.now(UTC).replace(microsecond=0) + timedelta(minutes=10)
+
+    def stored() -> int:
+        with seeded_engine.connect() as connection:
+            return int(
+                connection.execute(
+                    text("SELECT count(*) FROM fact_vehicle_ping WHERE vehicle_id = 'SF-002'")
+                ).scalar_one()
+            )
+
+    before = stored()
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as slow,
+        httpx.Client(base_url=slow) as http,
+        rig(
+            "nissan_rogue",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-002",
+            server=ServerClient(http, "SF-002", token),
+            start=ahead,
+        ) as r,
+    ):
+        r.run(5.0)
+        backlog = r.agent.spool.backlog()
+        assert backlog >= 5
+        assert r.agent.upload() == 0
+        assert r.agent.spool.backlog() == backlog
+        assert r.agent.stats.pings_held_back == backlog
+        assert r.agent.spool.counter("rejected") == 0
+        # the server's clock mended (here: it allows the car's 10 minutes): they all go
+        with (
+            live_server(seeded_database_url, planner_enabled=False, ping_max_future_s=3600) as ok,
+            httpx.Client(base_url=ok) as http_ok,
+        ):
+            r.agent.server = ServerClient(http_ok, "SF-002", token)
+            assert r.agent.upload() == backlog
+        assert stored() == before + backlog
+        # a ping refused for now is given up a day's deployment after its own time
+        r.agent.server = ServerClient(http, "SF-002", token)
+        r.run(3.0)
+        held = r.agent.spool.backlog()
+        r.clock.step_wall(13 * 3600.0)
+        assert r.agent.upload() == held
+        assert r.agent.spool.backlog() == 0
+        assert r.agent.spool.counter("rejected") == held
