@@ -149,11 +149,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         except KeyboardInterrupt:
             return 0
         try:
-            spool = PingSpool(settings.spool_path, settings.spool_max_rows)
+            spool = PingSpool(settings.spool_file, settings.spool_max_rows)
         except (OSError, sqlite3.Error) as error:
             bus.shutdown()
             sys.stderr.write(
-                f"smoothfleet-agent: cannot open the ping spool {settings.spool_path}: {error}\n"
+                f"smoothfleet-agent: cannot open the ping spool {settings.spool_file}: {error}\n"
             )
             return 1
         board = None

@@ -46,11 +46,10 @@ class AgentSettings(BaseSettings):
     make: str | None = None
     # gpsd:<host>:<port>, or none (no GPS: the agent reports but never takes over).
     gps: str = f"gpsd:{GPSD_HOST}:{GPSD_PORT}"
-    spool_path: Path = Field(
-        default_factory=lambda: (
-            Path(platformdirs.user_data_dir("smoothfleet-agent")) / "spool.sqlite"
-        )
-    )
+    # Unset: one file per vehicle (`spool_file`), so a computer moved to another car never
+    # sends the first car's pings with the second's token (refused whole, they would block
+    # every later upload).
+    spool_path: Path | None = None
     spool_max_rows: int = Field(100_000, ge=100)
     # Where downloaded policies are kept, by sha256 (vehicle_agent/policies.py).
     policy_dir: Path = Field(
@@ -62,6 +61,14 @@ class AgentSettings(BaseSettings):
     # GPIO button board instead of CAN button frames, e.g. "plus=17,minus=27,gap=22".
     button_board: str | None = None
     log_level: str = "INFO"
+
+    @property
+    def spool_file(self) -> Path:
+        """The ping spool: `spool_path`, or this vehicle's file in the agent's data folder."""
+        if self.spool_path is not None:
+            return self.spool_path
+        data = Path(platformdirs.user_data_dir("smoothfleet-agent"))
+        return data / f"spool-{self.vehicle_id}.sqlite"
 
     @field_validator("server_url")
     @classmethod

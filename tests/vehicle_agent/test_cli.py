@@ -212,3 +212,17 @@ def test_sequencer_gives_up_after_unconfirmed_presses() -> None:
     assert presses[-1] is None
     sequencer.request(61, 3)  # a new request tries again
     assert sequencer.step(time_s, 55.0, 3) is CruiseButton.PLUS
+
+
+def test_each_car_has_its_own_ping_spool_unless_one_is_named(tmp_path: Path) -> None:
+    """One file for every car: a computer moved from SF-001 to SF-002 sent SF-001's pings with
+    SF-002's token, which the server refuses whole (403), so no ping of SF-002 ever left."""
+    first = load_agent_settings(server_url="http://x", token="abc", vehicle_id="SF-001")
+    second = load_agent_settings(server_url="http://x", token="abc", vehicle_id="SF-002")
+    assert first.spool_file.name == "spool-SF-001.sqlite"
+    assert second.spool_file.name == "spool-SF-002.sqlite"
+    assert first.spool_file.parent == second.spool_file.parent
+    named = load_agent_settings(
+        server_url="http://x", token="abc", vehicle_id="SF-001", spool_path=tmp_path / "p.sqlite"
+    )
+    assert named.spool_file == tmp_path / "p.sqlite"
