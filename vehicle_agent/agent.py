@@ -20,7 +20,7 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -75,6 +75,10 @@ AGENT_VERSION = "0.1.0"
 CONTROL_PERIOD_S = 0.1
 # A GPS fix older than this is no fix (s).
 GPS_MAX_AGE_S = 2.0
+# The wall clock may differ this much from the GPS receiver's time of a fix before the agent
+# stamps no ping with it (s): a receiver reports up to a second late, a Pi without a real-time
+# clock boots at its last shutdown's time, hours or days off, until NTP sets it.
+MAX_CLOCK_SKEW_S = 5.0
 # The car's button message echoes the agent's own presses for a moment after release (s).
 ECHO_GRACE_S = 0.3
 # How long a fault keeps its engage check failing (s), per check. A controller that raised, the
@@ -187,6 +191,8 @@ class AgentStats:
     control_steps: int = 0
     pings_spooled: int = 0
     pings_uploaded: int = 0
+    # Pings not stamped because the wall clock disagreed with the GPS time (MAX_CLOCK_SKEW_S).
+    pings_clock_unset: int = 0
     # Pings the server refused for now (`Rejection.retryable`) and the spool keeps to send again.
     pings_held_back: int = 0
     # Fields left out of a ping or status report because they broke the contract, per message.
@@ -269,6 +275,7 @@ class Agent:
         self._upload_schedule = Schedule()
         self._next_ping_s = 0.0
         self._last_ping_ts: datetime | None = None
+        self._clock_off = False
         self._frames_at_status = (self.started_s, 0)
 
     # Periods the caller needs -----------------------------------------------------------------
@@ -556,6 +563,9 @@ class Agent:
         if snapshot is None or fix is None or not fix_is_current(fix, self.clock.monotonic()):
             return None
         ts = self.clock.now()
+        if not self._clock_agrees_with_gps(fix, ts):
+            self.stats.pings_clock_unset += 1
+            return None
         if self._last_ping_ts is not None and ts <= self._last_ping_ts:
             if ts == self._last_ping_ts:
                 return None  # (vehicle_id, ts) is the ping's key: never two at one instant
@@ -596,6 +606,23 @@ class Agent:
         if "heading_deg" in ping:
             ping["heading_deg"] = ping["heading_deg"] % 360.0
         return self._message(Ping, ping, "ping")
+
+    def _clock_agrees_with_gps(self, fix: GpsFix, ts: datetime) -> bool:
+        """Whether the wall clock, read when `fix` arrived, is within MAX_CLOCK_SKEW_S of the
+        receiver's time of it (True with no receiver time). A ping stamped by a clock not yet
+        set would be stored at another moment of the drive, inside the server's window."""
+        if fix.utc is None:
+            return True
+        arrived = ts - timedelta(seconds=self.clock.monotonic() - fix.time_s)
+        skew_s = (arrived - fix.utc).total_seconds()
+        agrees = abs(skew_s) <= MAX_CLOCK_SKEW_S
+        if agrees == self._clock_off:  # log the change, not every second
+            self._clock_off = not agrees
+            if agrees:
+                log.warning("wall clock agrees with the GPS time again: pings resume")
+            else:
+                log.warning("wall clock %+.0f s off the GPS time: no pings until it is set", skew_s)
+        return agrees
 
     def status_report(self) -> dict[str, Any]:
         """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON."""

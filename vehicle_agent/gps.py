@@ -9,6 +9,7 @@ import socket
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any, Protocol
 
 log = logging.getLogger(__name__)
@@ -27,6 +28,9 @@ class GpsFix:
     satellites: int | None = None
     # The lane, where a lane source exists (a simulation); GPS alone cannot tell lanes apart.
     lane: int | None = None
+    # The receiver's time of the fix (UTC, from the satellites): what the agent's own wall
+    # clock is checked against before it stamps a ping (a Pi has no real-time clock).
+    utc: datetime | None = None
 
 
 class GpsSource(Protocol):
@@ -94,6 +98,7 @@ class GpsdSource:
                 speed_mps=_number(report.get("speed")),
                 heading_deg=_number(report.get("track")),
                 satellites=self._satellites,
+                utc=_utc(report.get("time")),
             )
 
     def _run(self) -> None:
@@ -113,6 +118,18 @@ class GpsdSource:
             except OSError as error:
                 log.warning("gpsd at %s:%s: %s", *self.address, error)
             self._stop.wait(2.0)
+
+
+def _utc(value: object) -> datetime | None:
+    """gpsd's ISO 8601 `time` ("2026-12-03T07:30:00.000Z") as an aware datetime; None where it
+    is absent (no fix time yet) or not such a time."""
+    if not isinstance(value, str):
+        return None
+    try:
+        stamped = datetime.fromisoformat(value)
+    except ValueError:
+        return None
+    return stamped if stamped.tzinfo is not None else None
 
 
 def _number(value: object) -> float | None:

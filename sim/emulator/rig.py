@@ -90,6 +90,8 @@ class EmulatorGps:
         self.heading_offset_deg = 0.0
         self.lane: int | None = None
         self.silent = False
+        # where set, fixes carry the receiver's time: the agent's wall clock plus this many s
+        self.utc_ahead_of_wall_s: float | None = None
         self._latest: GpsFix | None = None
 
     def latest(self) -> GpsFix | None:
@@ -108,6 +110,8 @@ class EmulatorGps:
             fix = replace(fix, heading_deg=(fix.heading_deg + self.heading_offset_deg) % 360.0)
         if self.lane is not None:
             fix = replace(fix, lane=self.lane)
+        if self.utc_ahead_of_wall_s is not None:
+            fix = replace(fix, utc=self.clock.now() + timedelta(seconds=self.utc_ahead_of_wall_s))
         return fix
 
 

@@ -546,6 +546,28 @@ def test_a_button_car_that_does_not_report_its_gap_hands_back_and_says_so(
         assert engaged(r), r.agent.state.reason
 
 
+def test_no_ping_is_stamped_by_a_wall_clock_the_gps_time_contradicts(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A Pi has no real-time clock: booted, it reads its last shutdown's time until NTP sets
+    it, and its pings were stamped hours off, which the server stores (inside its window)."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        r.gps.utc_ahead_of_wall_s = 3 * 3600.0  # the clock is three hours behind
+        r.run(3.0)
+        assert r.agent.stats.pings_spooled == 0
+        assert r.agent.stats.pings_clock_unset >= 2
+        # a receiver a second late is within what the check allows
+        r.gps.utc_ahead_of_wall_s = -1.0
+        r.run(3.0)
+        assert r.agent.stats.pings_spooled >= 2
+        # NTP sets the clock: pings carry the GPS's time, within the allowance
+        r.clock.step_wall(3 * 3600.0 - 0.5)
+        r.gps.utc_ahead_of_wall_s = 0.5
+        spooled = r.agent.stats.pings_spooled
+        r.run(3.0)
+        assert r.agent.stats.pings_spooled >= spooled + 2
+
+
 def test_pings_go_on_after_the_wall_clock_steps_back(tmp_path: Path, dbc_cache: Path) -> None:
     """NTP steps the wall clock back an hour: no ping may have the same (vehicle, ts) as the
     last, but the car must not go silent for the hour until its clock passes that ts again."""

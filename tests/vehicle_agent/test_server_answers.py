@@ -4,6 +4,7 @@ reports that are not what gpsd documents: refused with a reason, never a crash o
 from __future__ import annotations
 
 import json
+from datetime import UTC, datetime
 from typing import Any
 
 import httpx
@@ -66,6 +67,18 @@ def test_a_sky_report_without_its_satellites_keeps_the_count() -> None:
     assert fix is not None
     assert fix.satellites == 9
     assert gpsd({"class": "SKY", "uSat": 7}, tpv).latest().satellites == 7  # type: ignore[union-attr]
+
+
+def test_a_fix_carries_the_receivers_time_where_gpsd_gives_one() -> None:
+    tpv = {"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6}
+    timed = gpsd(tpv | {"time": "2026-12-03T07:30:00.250Z"}).latest()
+    assert timed is not None
+    assert timed.utc == datetime(2026, 12, 3, 7, 30, 0, 250000, tzinfo=UTC)
+    # no time, or one that is no time with its zone: the fix stands, with no receiver time
+    for time in (None, "soon", "2026-12-03T07:30:00"):
+        fix = gpsd(tpv | {"time": time}).latest()
+        assert fix is not None
+        assert fix.utc is None
 
 
 @pytest.mark.parametrize(
