@@ -31,6 +31,11 @@ class AgentSettingsError(Exception):
     """A setting is missing or wrong; the message names it in one line."""
 
 
+def agent_data_dir() -> Path:
+    """Where the agent keeps its state by default (the spool, the policies)."""
+    return Path(platformdirs.user_data_dir("smoothfleet-agent"))
+
+
 class AgentSettings(BaseSettings):
     """Everything the agent can be told."""
 
@@ -52,9 +57,7 @@ class AgentSettings(BaseSettings):
     spool_path: Path | None = None
     spool_max_rows: int = Field(100_000, ge=100)
     # Where downloaded policies are kept, by sha256 (vehicle_agent/policies.py).
-    policy_dir: Path = Field(
-        default_factory=lambda: Path(platformdirs.user_data_dir("smoothfleet-agent")) / "policies"
-    )
+    policy_dir: Path = Field(default_factory=lambda: agent_data_dir() / "policies")
     dbc_cache_dir: Path | None = None
     http_timeout_s: float = Field(3.0, gt=0, le=60)
     wave_speed_mps: float = Field(DEFAULT_WAVE_SPEED_MPS, le=0, ge=-20)
@@ -67,8 +70,7 @@ class AgentSettings(BaseSettings):
         """The ping spool: `spool_path`, or this vehicle's file in the agent's data folder."""
         if self.spool_path is not None:
             return self.spool_path
-        data = Path(platformdirs.user_data_dir("smoothfleet-agent"))
-        return data / f"spool-{self.vehicle_id}.sqlite"
+        return agent_data_dir() / f"spool-{self.vehicle_id}.sqlite"
 
     @field_validator("server_url")
     @classmethod
