@@ -898,18 +898,21 @@ class Agent:
     ) -> set[int]:
         """The spool rows of the pings refused for now and young enough to send again; a
         final refusal, or a ping older than RETRYABLE_PING_KEEP_S, leaves the spool."""
-        kept: set[int] = set()
         now = self.clock.now()
+        kept: list[tuple[int, object, str]] = []
         for rejection in rejected:
             row_id, ping = rows[rejection.index]
             ts = ping.get("ts")
-            again = rejection.retryable and _age_s(ts, now) <= RETRYABLE_PING_KEEP_S
-            log.warning(
-                "server rejected ping %s: %s%s", ts, rejection.error, " (kept)" if again else ""
-            )
-            if again:
-                kept.add(row_id)
-        return kept
+            if rejection.retryable and _age_s(ts, now) <= RETRYABLE_PING_KEEP_S:
+                kept.append((row_id, ts, rejection.error))
+            else:
+                log.warning("server rejected ping %s: %s", ts, rejection.error)
+        if kept:
+            # one line a retry, not one a ping: a server clock behind refuses every ping, again
+            # every back-off, and each line lands on the car's SD card
+            _, ts, error = kept[0]
+            log.warning("server refused %d pings for now (%s: %s): kept", len(kept), ts, error)
+        return {row_id for row_id, _, _ in kept}
 
     def _fault(self, check: str, now: float) -> None:
         """A fault: the engage check `check` fails from now for its hold (FAULT_HOLDS_S)."""

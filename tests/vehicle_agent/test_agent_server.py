@@ -3,6 +3,7 @@ and status reports out, and store-and-forward through a server outage and an age
 
 from __future__ import annotations
 
+import logging
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -241,7 +242,11 @@ def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes
 
 
 def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
-    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     """A server whose clock is behind refuses every ping as "in the future". The agent deleted
     each refused ping from its spool: a server clock 6 minutes slow lost every car's pings."""
@@ -273,8 +278,15 @@ def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
         r.run(5.0)
         backlog = r.agent.spool.backlog()
         assert backlog >= 5
-        assert r.agent.upload() == 0
+        with caplog.at_level(logging.WARNING, logger="vehicle_agent.agent"):
+            assert r.agent.upload() == 0
         assert r.agent.spool.backlog() == backlog
+        # one line for the batch, not one a ping, every retry, on the car's SD card
+        refusals = [
+            m for m in caplog.messages if "ping" in m and ("refused" in m or "rejected" in m)
+        ]
+        assert refusals == [refusals[0]]
+        assert f"refused {backlog} pings for now" in refusals[0]
         assert r.agent.stats.pings_held_back == backlog
         assert r.agent.spool.counter("rejected") == 0
         # the server's clock mended (here: it allows the car's 10 minutes): they all go
