@@ -37,6 +37,7 @@ from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
 from contract.vehicles import Ping, Rejection, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
+from vehicle_agent.batching import PingBatchSize
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
 from vehicle_agent.clock import Clock
 from vehicle_agent.codec import codec_for
@@ -60,6 +61,7 @@ from vehicle_agent.server import (
     NewPlan,
     NotAuthorized,
     NoValidPlan,
+    RequestRefused,
     ServerClient,
     ServerError,
     ServerUnavailable,
@@ -99,7 +101,6 @@ CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
 # The longest Retry-After honoured (s): a server asking for more is polled again after this.
 MAX_RETRY_AFTER_S = 300.0
-MAX_PINGS_PER_BATCH = 1000
 # Upload at most this many batches per network() call, so status and plan polls stay timely.
 MAX_BATCHES_PER_CALL = 5
 # A ping the server refused for now (its clock or roster behind, `Rejection.retryable`) is sent
@@ -273,6 +274,7 @@ class Agent:
         self._plan_schedule = Schedule()
         self._status_schedule = Schedule()
         self._upload_schedule = Schedule()
+        self._ping_batch = PingBatchSize()
         self._next_ping_s = 0.0
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
@@ -869,15 +871,21 @@ class Agent:
         now = self.clock.monotonic() if now is None else now
         uploaded = 0
         for _ in range(MAX_BATCHES_PER_CALL):
-            rows = self.spool.oldest(MAX_PINGS_PER_BATCH)
+            batch_size = self._ping_batch.size
+            rows = self.spool.oldest(batch_size)
             if not rows:
                 break
             try:
                 answer = self.server.post_pings([ping for _, ping in rows])
+            except RequestRefused as error:
+                self._server_failed("pings", error)
+                uploaded += self._split_refused_batch(rows, error)
+                continue
             except ServerError as error:
                 self._server_failed("pings", error)
                 self._upload_schedule.failed(now, 1.0)
                 return uploaded
+            self._ping_batch.taken()
             kept = self._held_back(rows, answer.rejected)
             gone = [row_id for row_id, _ in rows if row_id not in kept]
             self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
@@ -888,10 +896,24 @@ class Agent:
                 self.stats.pings_held_back += len(kept)
                 self._upload_schedule.failed(now, 1.0)
                 return uploaded
-            if len(rows) < MAX_PINGS_PER_BATCH:
+            if len(rows) < batch_size:
                 break
         self._upload_schedule.done(now, 1.0)
         return uploaded
+
+    def _split_refused_batch(
+        self, rows: Sequence[tuple[int, dict[str, Any]]], error: RequestRefused
+    ) -> int:
+        """After a batch refused whole (vehicle_agent/batching.py): the next batch is half as
+        large, and a lone ping refused whole leaves the spool as rejected, so that no ping
+        blocks the ones behind it. How many pings left the spool."""
+        if len(rows) > 1:
+            self._ping_batch.refused(len(rows), too_large=error.too_large)
+            return 0
+        [(row_id, ping)] = rows
+        log.warning("server refused ping %s on its own: given up", ping.get("ts"))
+        self.spool.remove([row_id], rejected=1)
+        return 1
 
     def _held_back(
         self, rows: Sequence[tuple[int, dict[str, Any]]], rejected: Sequence[Rejection]

@@ -12,6 +12,7 @@ A failed call raises one `ServerError` subclass per cause, each with one effect 
 | `ServerUnavailable` | 5xx, 503 `database_unavailable` | keep the plan, retry after Retry-After |
 | `NotAuthorized` | 401 / 403 | keep the plan, log an error, retry (a token to fix) |
 | `UnexpectedAnswer` | another status, or a body not in the contract | keep the plan, retry |
+| `RequestRefused` | 409, 413 or 422: this request refused as a whole | a ping batch is split |
 
 A plan poll answers one of three outcomes instead: `NewPlan` (200), `PlanUnchanged` (304) and
 `NoValidPlan` (503 with code `no_valid_plan`), the only answer that ends the plan the car follows
@@ -64,6 +65,16 @@ class NotAuthorized(ServerError):
 
 class UnexpectedAnswer(ServerError):
     """Any other status, or a body that is not what the contract says."""
+
+
+class RequestRefused(UnexpectedAnswer):
+    """409, 413 or 422: the server refused this request as a whole, and would refuse the same
+    bytes again (`too_large` for 413, the body over a size limit)."""
+
+    @property
+    def too_large(self) -> bool:
+        """True when the body was refused for its size (413)."""
+        return self.status == 413
 
 
 @dataclass(frozen=True)
@@ -151,6 +162,8 @@ class ServerClient:
             return NotAuthorized(message, status)
         if status >= 500:
             return ServerUnavailable(message, status, _retry_after(response))
+        if status in (409, 413, 422):
+            return RequestRefused(message, status)
         return UnexpectedAnswer(message, status)
 
     def config(self) -> VehicleConfig:

@@ -3,6 +3,7 @@ and status reports out, and store-and-forward through a server outage and an age
 
 from __future__ import annotations
 
+import json
 import logging
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -88,11 +89,12 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
     assert statuses[3] == config.config_version == 1  # the version it runs, echoed
 
 
-def ping_keys(engine: Engine) -> list[datetime]:
+def ping_keys(engine: Engine, vehicle_id: str = "SF-001") -> list[datetime]:
     with engine.connect() as connection:
         return list(
             connection.execute(
-                text("SELECT ts FROM fact_vehicle_ping WHERE vehicle_id = 'SF-001' ORDER BY ts")
+                text("SELECT ts FROM fact_vehicle_ping WHERE vehicle_id = :v ORDER BY ts"),
+                {"v": vehicle_id},
             ).scalars()
         )
 
@@ -305,3 +307,43 @@ def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
         assert r.agent.upload() == held
         assert r.agent.spool.backlog() == 0
         assert r.agent.spool.counter("rejected") == held
+
+
+def test_a_backlog_over_the_servers_body_limit_reaches_it_in_smaller_batches(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A server (or a proxy before it) with a smaller body limit refuses a car's backlog whole
+    with 413. The agent sent the same batch again at every back-off: its spool never drained,
+    and every later ping waited behind it until the spool's bound dropped them."""
+    token = issue(seeded_engine, "vehicle", "SF-003")
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    with (
+        live_server(seeded_database_url, planner_enabled=False, max_body_bytes=8192) as base,
+        httpx.Client(base_url=base) as http,
+        rig(
+            "nissan_rogue",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-003",
+            server=ServerClient(http, "SF-003", token),
+            start=start,
+        ) as r,
+    ):
+        r.run(60.0)
+        backlog = [ping for _, ping in r.agent.spool.oldest(100)]
+        assert len(backlog) == 60
+        assert len(json.dumps({"pings": backlog})) > 8192  # over the limit in one batch
+        uploads = [r.agent.upload() for _ in range(3)]
+        assert sum(uploads) == 60, uploads
+        assert r.agent.spool.backlog() == 0
+        assert r.agent.spool.counter("rejected") == 0
+        refused = r.agent.stats.server_errors["pings"]
+        assert refused >= 1
+        # the limit is remembered: the next minute's pings go without a refused request
+        r.run(60.0)
+        assert r.agent.upload() == 60
+        assert r.agent.stats.server_errors["pings"] == refused
+    stored = ping_keys(seeded_engine, "SF-003")
+    assert len(stored) == 120
+    assert [datetime.fromisoformat(ping["ts"]) for ping in backlog] == stored[:60]

@@ -1,0 +1,83 @@
+"""A ping batch the server refuses as a whole is split until no ping blocks the ones behind it
+(vehicle_agent/batching.py); the server over its body limit is in test_agent_server.py."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import httpx
+import pytest
+
+from sim.emulator.rig import rig
+from vehicle_agent.batching import PingBatchSize
+from vehicle_agent.server import ServerClient
+
+
+def test_a_refused_batch_halves_and_the_size_grows_back_to_its_ceiling() -> None:
+    batch = PingBatchSize(1000)
+    batch.refused(1000, too_large=False)
+    assert (batch.size, batch.ceiling) == (500, 1000)
+    batch.refused(500, too_large=False)
+    batch.taken()
+    batch.taken()
+    assert batch.size == 1000
+    batch.refused(1000, too_large=True)  # over a size limit: it will not move by itself
+    batch.taken()
+    assert (batch.size, batch.ceiling) == (500, 500)
+    batch.refused(1, too_large=False)
+    assert batch.size == 1
+    with pytest.raises(ValueError, match="at least 1 ping"):
+        PingBatchSize(0)
+
+
+def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A server whose schema no longer takes one of the spooled pings answers the batch 422.
+    The agent sent that batch again at every back-off, so none of its pings, nor any later
+    one, ever arrived."""
+    stored: list[str] = []
+    requests = 0
+    refused_ts: list[str] = []
+
+    def newer_server(request: httpx.Request) -> httpx.Response:
+        nonlocal requests
+        requests += 1
+        pings = json.loads(request.content)["pings"]
+        if any(ping["ts"] in refused_ts for ping in pings):
+            return httpx.Response(422, json={"detail": "pings.3.lane: not a lane"})
+        stored.extend(ping["ts"] for ping in pings)
+        return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
+
+    transport = httpx.MockTransport(newer_server)
+    with (
+        httpx.Client(base_url="http://server.test", transport=transport) as http,
+        rig(
+            "nissan_rogue",
+            tmp_path,
+            dbc_cache,
+            controller="unused",
+            vehicle_id="SF-001",
+            server=ServerClient(http, "SF-001", "token"),
+        ) as r,
+    ):
+        r.run(40.0)
+        spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(100)]
+        assert len(spooled) == 40
+        refused_ts.append(spooled[7])
+        for _ in range(10):
+            r.agent.upload()
+            if not r.agent.spool.backlog():
+                break
+        assert r.agent.spool.backlog() == 0
+        assert stored == [ts for ts in spooled if ts != spooled[7]]  # each once, in order
+        assert r.agent.spool.counter("rejected") == 1
+        assert r.agent.stats.pings_uploaded == 39
+        assert requests < 40  # split by halves, not sent one by one
+        # once past the refused ping, batches grow back
+        r.run(40.0)
+        sent = requests
+        r.agent.upload()
+        assert r.agent.spool.backlog() == 0
+        assert requests - sent <= 3
