@@ -19,7 +19,8 @@ from __future__ import annotations
 import json
 import sqlite3
 import threading
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +63,7 @@ class PingSpool:
         """Append a ping (committed to disk before returning); drop the oldest past the bound."""
         body = json.dumps(ping, separators=(",", ":"))
         with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
+            with self._transaction():
                 self._db.execute("INSERT INTO ping (body) VALUES (?)", (body,))
                 backlog = self._backlog + 1
                 excess = backlog - self.max_rows
@@ -73,11 +73,23 @@ class PingSpool:
                         (excess,),
                     ).rowcount
                     self._bump("dropped", excess)
-                self._db.execute("COMMIT")
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
             self._backlog = backlog
+
+    @contextmanager
+    def _transaction(self) -> Iterator[None]:
+        """One write transaction, committed on success and rolled back on error.
+
+        SQLite itself rolls back on some errors (a full disk); a ROLLBACK then fails with "no
+        transaction is active", which would replace the error that says what went wrong.
+        """
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield
+            self._db.execute("COMMIT")
+        except BaseException:
+            if self._db.in_transaction:
+                self._db.execute("ROLLBACK")
+            raise
 
     def _bump(self, name: str, amount: int) -> None:
         self._db.execute(
@@ -99,18 +111,13 @@ class PingSpool:
         if not ids:
             return
         with self._lock:
-            self._db.execute("BEGIN IMMEDIATE")
-            try:
+            with self._transaction():
                 # Ids the bound already dropped delete nothing, and are not counted.
                 removed = self._db.executemany(
                     "DELETE FROM ping WHERE id = ?", [(i,) for i in ids]
                 ).rowcount
                 if rejected:
                     self._bump("rejected", rejected)
-                self._db.execute("COMMIT")
-            except BaseException:
-                self._db.execute("ROLLBACK")
-                raise
             self._backlog -= removed
 
     def backlog(self) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
 import pytest
@@ -71,3 +72,23 @@ def test_the_backlog_matches_the_file_through_drops_removals_and_a_restart(
     assert smaller.backlog() == 1
     assert [ping["n"] for _, ping in smaller.oldest(10)] == [7]
     assert smaller.counter("dropped") == 5
+
+
+def test_a_full_disk_is_the_error_raised_and_the_spool_goes_on_after(tmp_path: Path) -> None:
+    """SQLite rolls a transaction back itself when the disk is full; the spool's own ROLLBACK
+    then failed with "no transaction is active", and that was the error the agent logged."""
+    spool = PingSpool(tmp_path / "spool.sqlite")
+    connection = spool._db  # the file's limit, as SQLite sees a full SD card
+    (pages,) = connection.execute("PRAGMA page_count").fetchone()
+    connection.execute(f"PRAGMA max_page_count = {pages + 2}")
+    def fill() -> None:
+        for index in range(1000):
+            spool.add({"n": index, "pad": "x" * 500})
+
+    with pytest.raises(sqlite3.OperationalError, match="full"):
+        fill()
+    written = spool.backlog()
+    assert written == len(spool.oldest(1000)) > 0
+    connection.execute("PRAGMA max_page_count = 1000000")  # space freed
+    spool.add({"n": "after"})
+    assert spool.backlog() == written + 1
