@@ -81,6 +81,7 @@ def test_a_full_disk_is_the_error_raised_and_the_spool_goes_on_after(tmp_path: P
     connection = spool._db  # the file's limit, as SQLite sees a full SD card
     (pages,) = connection.execute("PRAGMA page_count").fetchone()
     connection.execute(f"PRAGMA max_page_count = {pages + 2}")
+
     def fill() -> None:
         for index in range(1000):
             spool.add({"n": index, "pad": "x" * 500})
