@@ -6,8 +6,10 @@ download the file over the authenticated API (`ServerClient.policy`). Nothing re
 before it is checked: the bytes must hash to the name and load as a policy of the car's
 actuation; then they are written to a temporary file and renamed into place, so a bad or
 interrupted download never replaces a good file, and a policy once kept stays (files are tens of
-kB; none is ever deleted by the agent). A copy on disk that no longer hashes to its name (a
-damaged SD card) is not good: it is downloaded again, and replaced only by verified bytes.
+kB; none is ever deleted by the agent). What a power cut leaves of a write in progress (a
+`.part` file) is removed when the store next opens, once older than any write could be. A copy
+on disk that no longer hashes to its name (a damaged SD card) is not good: it is downloaded
+again, and replaced only by verified bytes.
 """
 
 from __future__ import annotations
@@ -15,10 +17,15 @@ from __future__ import annotations
 import hashlib
 import os
 import tempfile
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 from vehicle_agent.controllers.policy import PolicyActuation, PolicyFileError, read_policy
+
+# A `.part` file older than this (s) is no write in progress but one a crash cut short: a write
+# takes milliseconds, and another agent sharing the folder may be in the middle of one.
+STALE_PART_S = 3600.0
 
 
 class PolicyDigestMismatch(PolicyFileError):
@@ -30,6 +37,17 @@ class PolicyStore:
 
     def __init__(self, directory: Path) -> None:
         self.directory = directory
+        self._remove_stale_parts()
+
+    def _remove_stale_parts(self) -> None:
+        """Remove what crashed writes left (STALE_PART_S)."""
+        now = time.time()
+        for part in self.directory.glob("*.part"):
+            try:
+                if now - part.stat().st_mtime > STALE_PART_S:
+                    part.unlink()
+            except FileNotFoundError:
+                continue  # another agent removed it first
 
     def path(self, sha256: str) -> Path:
         """Where the policy with this sha256 is kept."""

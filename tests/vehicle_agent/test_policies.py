@@ -4,6 +4,8 @@ download only what it does not hold; and the controller refuses a file other tha
 from __future__ import annotations
 
 import hashlib
+import os
+import time
 from pathlib import Path
 
 import pytest
@@ -111,3 +113,19 @@ def test_the_controller_runs_only_the_policy_its_params_name(tmp_path: Path) -> 
 def test_a_policy_sha256_must_be_lowercase_hex() -> None:
     with pytest.raises(ValueError, match="String should match pattern"):
         RlParams(policy_sha256="../../etc/passwd")
+
+
+def test_what_a_crash_left_of_a_write_is_removed_when_the_store_opens(tmp_path: Path) -> None:
+    """A power cut during a write left its `.part` file in the folder for good."""
+    store = PolicyStore(tmp_path)
+    kept = store.keep(ACC_SHA256, ACC, "acc")
+    crashed = tmp_path / "tmpa1b2c3.part"
+    crashed.write_bytes(ACC[:1000])
+    yesterday = time.time() - 86400
+    os.utime(crashed, (yesterday, yesterday))
+    in_progress = tmp_path / "tmpd4e5f6.part"  # another agent sharing the folder, writing now
+    in_progress.write_bytes(ACCEL[:1000])
+
+    PolicyStore(tmp_path)
+
+    assert sorted(tmp_path.iterdir()) == sorted([kept, in_progress])
