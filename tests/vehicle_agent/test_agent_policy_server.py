@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from sqlalchemy import Engine, text
 
-from sim.emulator.rig import Rig, rig
+from sim.emulator.rig import Rig
+from tests.support.cars import car_served_by
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 from tests.vehicle_agent.test_agent_server import publish_free_flow_plan
@@ -23,7 +24,6 @@ from vehicle_agent.controllers.policy import save_policy
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 from vehicle_agent.engage import Mode
 from vehicle_agent.policies import PolicyStore
-from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 
 pytestmark = pytest.mark.slow
@@ -41,16 +41,8 @@ def car_of_sf001(
     spool: PingSpool | None = None,
 ) -> AbstractContextManager[Rig]:
     """SF-001 (a Rogue in lane 1) driven by its agent against the live server."""
-    return rig(
-        "nissan_rogue",
-        tmp_path,
-        dbc_cache,
-        controller="unused",
-        vehicle_id="SF-001",
-        server=ServerClient(http, "SF-001", token),
-        speed_mps=24.0,
-        spool=spool,
-        policies=store,
+    return car_served_by(
+        http, "SF-001", token, tmp_path, dbc_cache, speed_mps=24.0, spool=spool, policies=store
     )
 
 

@@ -14,8 +14,8 @@ from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
-from sim.emulator.rig import rig
 from tests.planner.facts import INRIX_CODES, inrix_snapshot
+from tests.support.cars import car_served_by
 from tests.support.servers import live_server
 from tests.support.tokens import issue
 from vehicle_agent.engage import Mode
@@ -43,14 +43,8 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base) as http,
-        rig(
-            "toyota_rav4",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-098",
-            server=ServerClient(http, "SF-098", token),
-            speed_mps=24.0,
+        car_served_by(
+            http, "SF-098", token, tmp_path, dbc_cache, make="toyota_rav4", speed_mps=24.0
         ) as r,
     ):
         r.run(1.0, network=True)
@@ -111,15 +105,8 @@ def test_every_spooled_ping_reaches_the_database_once_across_outage_and_restart(
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base) as http,
-        rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(http, "SF-001", token),
-            start=start,
-            spool=PingSpool(spool_path),
+        car_served_by(
+            http, "SF-001", token, tmp_path, dbc_cache, start=start, spool=PingSpool(spool_path)
         ) as first,
     ):
         first.run(9.95)
@@ -132,13 +119,13 @@ def test_every_spooled_ping_reaches_the_database_once_across_outage_and_restart(
     # 2. Server down. The restarted agent keeps spooling; uploads fail and are retried later.
     with (
         httpx.Client(base_url=base) as dead,
-        rig(
-            "nissan_rogue",
+        car_served_by(
+            dead,
+            "SF-001",
+            token,
             tmp_path,
             dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(dead, "SF-001", token, timeout_s=0.5),
+            timeout_s=0.5,
             start=start + timedelta(seconds=30),
             spool=PingSpool(spool_path),
         ) as second,
@@ -169,14 +156,8 @@ def test_without_a_plan_the_car_stays_on_its_acc_until_one_is_published(
     with (
         live_server(seeded_database_url, planner_enabled=False, planner_period_s=60) as base,
         httpx.Client(base_url=base) as http,
-        rig(
-            "toyota_rav4",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-099",
-            server=ServerClient(http, "SF-099", token),
-            speed_mps=24.0,
+        car_served_by(
+            http, "SF-099", token, tmp_path, dbc_cache, make="toyota_rav4", speed_mps=24.0
         ) as r,
     ):
         r.emulator.driver_engage(set_speed_mph=54)
@@ -212,14 +193,8 @@ def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base) as http,
-        rig(
-            "toyota_rav4",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-098",
-            server=ServerClient(http, "SF-098", token),
-            speed_mps=24.0,
+        car_served_by(
+            http, "SF-098", token, tmp_path, dbc_cache, make="toyota_rav4", speed_mps=24.0
         ) as r,
     ):
         r.emulator.driver_engage(set_speed_mph=54)
@@ -267,15 +242,7 @@ def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
     with (
         live_server(seeded_database_url, planner_enabled=False) as slow,
         httpx.Client(base_url=slow) as http,
-        rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-002",
-            server=ServerClient(http, "SF-002", token),
-            start=ahead,
-        ) as r,
+        car_served_by(http, "SF-002", token, tmp_path, dbc_cache, start=ahead) as r,
     ):
         r.run(5.0)
         backlog = r.agent.spool.backlog()
@@ -320,15 +287,7 @@ def test_a_backlog_over_the_servers_body_limit_reaches_it_in_smaller_batches(
     with (
         live_server(seeded_database_url, planner_enabled=False, max_body_bytes=8192) as base,
         httpx.Client(base_url=base) as http,
-        rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-003",
-            server=ServerClient(http, "SF-003", token),
-            start=start,
-        ) as r,
+        car_served_by(http, "SF-003", token, tmp_path, dbc_cache, start=start) as r,
     ):
         r.run(60.0)
         backlog = [ping for _, ping in r.agent.spool.oldest(100)]

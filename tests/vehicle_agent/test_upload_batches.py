@@ -9,9 +9,8 @@ from pathlib import Path
 import httpx
 import pytest
 
-from sim.emulator.rig import rig
+from tests.support.cars import car_served_by
 from vehicle_agent.batching import PingBatchSize
-from vehicle_agent.server import ServerClient
 
 
 def test_a_refused_batch_halves_and_the_size_grows_back_to_its_ceiling() -> None:
@@ -53,14 +52,7 @@ def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
     transport = httpx.MockTransport(newer_server)
     with (
         httpx.Client(base_url="http://server.test", transport=transport) as http,
-        rig(
-            "nissan_rogue",
-            tmp_path,
-            dbc_cache,
-            controller="unused",
-            vehicle_id="SF-001",
-            server=ServerClient(http, "SF-001", "token"),
-        ) as r,
+        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
     ):
         r.run(40.0)
         spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(100)]
