@@ -69,8 +69,10 @@ def view(name: str) -> AnalyticsView:
 
 
 def _as_utc(value: datetime | date) -> datetime:
+    """The moment in UTC (naive: read as UTC), so a window cut to whole days or hours is cut
+    where the views' UTC buckets begin, whatever zone the bound was written in."""
     if isinstance(value, datetime):
-        return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+        return value.astimezone(UTC) if value.tzinfo is not None else value.replace(tzinfo=UTC)
     return datetime(value.year, value.month, value.day, tzinfo=UTC)
 
 

@@ -501,3 +501,25 @@ def test_a_window_keeps_whole_days_and_hours(connection: Connection, store: Stor
     assert list(within["pings"]) == [20]
     assert list(hours["pings"]) == [20]
     assert none.empty
+
+
+@pytest.mark.parametrize(
+    ("column", "since", "until", "window"),
+    [
+        # midnight in Nashville's winter is 06:00 UTC, in the middle of the view's UTC day
+        ("day", "2022-11-16T00:00-06:00", "2022-11-17T00:00-06:00", ("16T00:00", "18T00:00")),
+        # a half-hour zone: 10:00+05:30 is 04:30 UTC, in the middle of the 04:00 hour
+        ("hour", "2022-11-16T10:00+05:30", "2022-11-16T11:00+05:30", ("16T04:00", "16T06:00")),
+        ("day", "2022-11-16T00:00", "2022-11-17T00:00", ("16T00:00", "17T00:00")),  # UTC
+    ],
+)
+def test_a_window_in_another_zone_is_cut_at_the_views_utc_days_and_hours(
+    column: str, since: str, until: str, window: tuple[str, str]
+) -> None:
+    """A bound written in local time was cut at local midnight: the first UTC day came back
+    holding only the pings after 06:00 UTC, labelled as the whole day."""
+    lower, upper = analytics.bucket_window(
+        column, datetime.fromisoformat(since), datetime.fromisoformat(until)
+    )
+    expected = tuple(datetime.fromisoformat(f"2022-11-{end}+00:00") for end in window)
+    assert (lower, upper) == expected
