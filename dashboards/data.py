@@ -174,17 +174,19 @@ async def map_segments(
 async def fleet_trajectories(
     session: AsyncSession, corridor: Corridor, since: datetime, until: datetime, bucket_s: float
 ) -> list[Trajectory]:
-    """Every car's path along the corridor between since and until: its last position in each
-    `bucket_s` window (a car re-entering at the start is not averaged across the corridor), and
-    whether its controller was engaged then."""
+    """Every car's path along the corridor between since and until: its last ping in each
+    `bucket_s` window, drawn at that ping's own time and place (a car re-entering at the start
+    is not averaged across the corridor; at the bucket's start it would be drawn up to a bucket
+    ahead of where it was, 3 km at a day's 120 s), and whether its controller was engaged then."""
     rows = await _rows(
         session,
-        "SELECT p.vehicle_id, floor(extract(epoch FROM p.ts) / :bucket) * :bucket AS t, "
+        "SELECT p.vehicle_id, floor(extract(epoch FROM p.ts) / :bucket) AS bucket, "
+        "extract(epoch FROM max(p.ts)) AS t, "
         "(array_agg(p.x_m ORDER BY p.ts DESC))[1] AS x_m, "
         "(array_agg(coalesce(p.is_controller_engaged, false) ORDER BY p.ts DESC))[1] AS engaged "
         "FROM fact_vehicle_ping p JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
         "WHERE v.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
-        "AND p.x_m IS NOT NULL GROUP BY p.vehicle_id, t ORDER BY p.vehicle_id, t",
+        "AND p.x_m IS NOT NULL GROUP BY p.vehicle_id, bucket ORDER BY p.vehicle_id, bucket",
         corridor=corridor.corridor_id,
         since=since,
         until=until,
