@@ -313,13 +313,18 @@ def test_inrix_latency_per_snapshot(
     connection: Connection, api: tuple[httpx.Client, str], seeded_engine: Engine
 ) -> None:
     # One snapshot of three segments measured 180 s ago (the paper's ~3 min INRIX delay), at
-    # 44.7, 49.2 and 53.7 mph = 19.98, 21.99, 24.01 m/s (1 mph = 0.44704 m/s): mean 21.99 m/s.
+    # 44.7, 49.2 and 53.7 mph = 19.98, 21.99, 24.01 m/s (1 mph = 0.44704 m/s). Their mean speed
+    # is the space-mean speed, length over travel time: the seed's first three segments are
+    # 717.17, 824.46 and 998.17 m long (2539.80 m), driven in 35.89 + 37.49 + 41.58 = 114.95 s,
+    # so 22.094 m/s; the plain mean of the three speeds, 21.99 m/s, gives the 717 m segment the
+    # weight of the 998 m one (and reads a congested road fast: the migration's example).
     client, token = api
     with seeded_engine.connect() as reader:
-        codes = list(
-            reader.execute(
-                text("SELECT xd_code FROM dim_inrix_segment ORDER BY seq LIMIT 3")
-            ).scalars()
+        codes, lengths = zip(
+            *reader.execute(
+                text("SELECT xd_code, length_m FROM dim_inrix_segment ORDER BY seq LIMIT 3")
+            ).all(),
+            strict=True,
         )
     measured = datetime.now(UTC).replace(microsecond=0) - timedelta(seconds=180)
     before = datetime.now(UTC)
@@ -334,7 +339,16 @@ def test_inrix_latency_per_snapshot(
     assert row["realtime_segments"] == 3
     assert (before - measured).total_seconds() <= row["latency_s"]
     assert row["latency_s"] <= (after - measured).total_seconds()
-    assert row["mean_speed_mps"] == pytest.approx((44.7 + 49.2 + 53.7) / 3 * 0.44704, rel=1e-6)
+    assert [round(length, 2) for length in lengths] == [717.17, 824.46, 998.17]
+    assert row["mean_speed_mps"] == pytest.approx(22.094, abs=1e-3)
+    # a closed segment is counted as closed and left out of the open road's mean speed
+    closed = measured + timedelta(minutes=1)
+    post_inrix(
+        client, token, closed, dict(zip(codes, [44.7, 49.2, 53.7], strict=True)), closed=codes[2]
+    )
+    row = analytics.read_view(connection, "inrix_latency").iloc[-1]
+    assert (row["segments"], row["closed_segments"]) == (3, 1)
+    assert row["mean_speed_mps"] == pytest.approx(1541.63 / (35.89 + 37.49), rel=1e-3)
 
 
 # --- plan adherence ----------------------------------------------------------------------------

@@ -87,16 +87,27 @@ def post_status(client: httpx.Client, token: str, vehicle_id: str, **report: Any
 
 
 def post_inrix(
-    client: httpx.Client, token: str, measured_at: datetime, speeds_mph: dict[str, float]
+    client: httpx.Client,
+    token: str,
+    measured_at: datetime,
+    speeds_mph: dict[str, float],
+    closed: str | None = None,
 ) -> None:
-    """Post one INRIX snapshot (segment code -> speed in mph, real-time score) via the feed API."""
+    """Post one INRIX snapshot (segment code -> speed in mph, real-time score) via the feed API;
+    the segment `closed` is reported closed."""
     document = {
         "result": {
             "segmentspeeds": [
                 {
                     "timestamp": measured_at.isoformat(),
                     "segments": [
-                        {"code": code, "type": "XDS", "speed": speed, "score": 30}
+                        {
+                            "code": code,
+                            "type": "XDS",
+                            "speed": speed,
+                            "score": 30,
+                            "segmentClosed": code == closed,
+                        }
                         for code, speed in speeds_mph.items()
                     ],
                 }
