@@ -229,6 +229,18 @@ class Settings(BaseSettings):
         return self
 
     @model_validator(mode="after")
+    def _a_plan_outlives_its_period(self) -> Settings:
+        # Each plan must still be valid when the next one is published: one that expires first
+        # leaves every car without a plan (503, back on its stock ACC) for the rest of each period.
+        if self.plan_valid_for_s <= self.planner_period_s:
+            raise ValueError(
+                f"SMOOTHFLEET_PLAN_VALID_FOR_S {self.plan_valid_for_s:g} must be longer than "
+                f"SMOOTHFLEET_PLANNER_PERIOD_S {self.planner_period_s:g}: each plan would expire "
+                "before the next is published, and the cars go without one in between"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _a_real_database_in_production(self) -> Settings:
         # the embedded server is the development default: in production a misspelt or lost
         # SMOOTHFLEET_DATABASE_URL would quietly take the fleet's pings into a local database

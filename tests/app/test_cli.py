@@ -143,6 +143,11 @@ def test_tokens_are_printed_once_and_stored_hashed(
             {"SMOOTHFLEET_PING_MAX_FUTURE_S": "inf"},
             "SMOOTHFLEET_PING_MAX_FUTURE_S: Input should be a finite number",
         ),
+        # each valid alone: every plan would expire two minutes before the next
+        (
+            {"SMOOTHFLEET_PLANNER_PERIOD_S": "300", "SMOOTHFLEET_PLAN_VALID_FOR_S": "180"},
+            "SMOOTHFLEET_PLAN_VALID_FOR_S 180 must be longer than SMOOTHFLEET_PLANNER_PERIOD_S 300",
+        ),
     ],
 )
 def test_a_wrong_setting_is_one_line_naming_it(env: dict[str, str], expected: str) -> None:

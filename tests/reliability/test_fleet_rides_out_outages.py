@@ -110,7 +110,9 @@ def publish_plan(database_url: str, engine: Engine, valid_for_s: float) -> datet
     now = datetime.now(UTC)
     for minute in range(11, 1, -1):
         inrix_snapshot(engine, now - timedelta(minutes=minute), [25.0] * len(INRIX_CODES))
-    settings = load_settings(database_url=database_url, plan_valid_for_s=valid_for_s)
+    settings = load_settings(
+        database_url=database_url, plan_valid_for_s=valid_for_s, planner_period_s=valid_for_s / 2
+    )
     (outcome,) = run_planner(engine, settings, now=now)
     assert outcome.status == "published", outcome.reason
     return now + timedelta(seconds=valid_for_s)
