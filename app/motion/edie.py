@@ -125,7 +125,8 @@ def to_grid(field: pd.DataFrame, window: EdieWindow, column: str) -> EdieGrid:
 
 
 def day_window(store: Path, day: date, lane: int | None = None) -> EdieWindow:
-    """The extent in time and space of the MOTION trajectories of one UTC day (paper's boxes)."""
+    """The extent in time and space of the MOTION trajectories of one UTC day (paper's boxes),
+    at least one box each way: a day of one-point fragments spans no time and no road."""
     with connect(store) as connection:
         row = connection.execute(
             "SELECT min(first_t_s), max(last_t_s), min(least(first_x_m, last_x_m)),"
@@ -138,7 +139,7 @@ def day_window(store: Path, day: date, lane: int | None = None) -> EdieWindow:
     first_s, last_s, x_from_m, x_to_m = (float(value) for value in row)
     return EdieWindow(
         since=datetime.fromtimestamp(first_s, UTC),
-        until=datetime.fromtimestamp(last_s, UTC),
+        until=datetime.fromtimestamp(max(last_s, first_s + H_T_S), UTC),
         x_from_m=x_from_m,
         x_to_m=max(x_to_m, x_from_m + H_X_M),
         lane=lane,

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
 
-from app.motion.edie import EdieWindow, EdieWindowError, edie_field
+from app.motion.edie import EdieWindow, EdieWindowError, day_window, edie_field
 from app.motion.importer import import_motion_file
 from app.motion.store import connect
 from tests.app.motion.conftest import METRIC_FRAME, document, write
@@ -127,3 +128,22 @@ def test_cells_and_points_give_the_same_field(store: Path) -> None:
     assert len(by_points) == len(by_cells) == 1
     # float32 point columns against float64 cell sums: equal to single precision.
     assert list(by_points[0]) == pytest.approx(list(by_cells[0]), rel=1e-6)
+
+
+def test_a_day_of_one_point_fragments_still_has_a_window(tmp_path: Path) -> None:
+    """The importer takes a one-point document; a day holding only such fragments spans no
+    time, and its window raised EdieWindowError: a 500 on the MOTION page, a traceback in
+    `smoothfleet motion plot`."""
+    target = tmp_path / "store"
+    import_motion_file(
+        write(tmp_path / "m.json", [document("a", [T0], [100.0])]), target, METRIC_FRAME
+    )
+
+    window = day_window(target, SINCE.date())
+
+    assert (window.since, window.until) == (SINCE, UNTIL)
+    assert window.x_to_m - window.x_from_m == 200.0
+    (box,) = edie_field(target, window).itertuples()
+    # a point drives no distance in no time: no density, no flow, no speed to read
+    assert (box.vehicles, box.time_s, box.distance_m, box.density_veh_per_m) == (1, 0, 0, 0)
+    assert math.isnan(box.speed_mps)
