@@ -188,9 +188,10 @@ def edie_field(
     h_t x h_x boxes (paper, Results)."""
     if h_t_s <= 0 or h_x_m <= 0:
         raise ValueError("Edie boxes need h_t_s > 0 and h_x_m > 0")
+    since, until = _as_utc(since), _as_utc(until)  # a naive bound is UTC, as everywhere here
     if until <= since:
         raise ValueError("until must be after since")
-    since, until = box_start(_as_utc(since), h_t_s), box_end(_as_utc(until), h_t_s)
+    since, until = box_start(since, h_t_s), box_end(until, h_t_s)
     return _frame(
         connection,
         "SELECT * FROM analytics.edie_field(:since, :until, :h_t_s, :h_x_m)"

@@ -207,6 +207,11 @@ def test_edie_field_function_takes_other_box_sizes_and_a_window(
     assert field.iloc[0]["density_veh_per_m"] == pytest.approx(10.0 / (60.0 * 1000.0))
     with pytest.raises(ValueError, match="h_t_s > 0"):
         analytics.edie_field(connection, T0, T0 + timedelta(minutes=1), h_t_s=0.0)
+    # a naive bound is UTC, as in every other window here (it raised TypeError beside an aware one)
+    naive = analytics.edie_field(
+        connection, T0.replace(tzinfo=None), T0 + timedelta(minutes=30), h_t_s=60.0, h_x_m=1000.0
+    )
+    pd.testing.assert_frame_equal(naive, field)
 
 
 # --- engagement --------------------------------------------------------------------------------
