@@ -559,7 +559,9 @@ def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float
     spans `hold_s` seconds the level becomes the mildest level of the run (the one that held over
     all of it), so a car whose rate dips for one report keeps its level, and one that turns to
     flicker between amber and red keeps it until the flicker has lasted (then, below, it shows
-    the flicker's worst).
+    the flicker's worst). The reports after the run's mildest one then count towards the next
+    change, so a check falling green -> amber -> red turns red once red has held `hold_s`, not
+    a hold after the amber step was taken.
 
     The level to start from is the worst of the settled reports, those more than
     `HOLD_PERIODS_REPLAYED - 1` hold periods older than the newest (the first report when none
@@ -580,10 +582,12 @@ def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float
     run_start: int | None = None
     run_side = 0
     mildest = 0
-    for index in range(held_index + 1, len(levels)):
+    index = held_index + 1
+    while index < len(levels):
         step = SEVERITY[levels[index]] - SEVERITY[held]
         if step == 0:
             run_start, held_index = None, index
+            index += 1
             continue
         side = 1 if step > 0 else -1
         if run_start is None or side != run_side:
@@ -592,6 +596,11 @@ def hold_levels(times_s: Sequence[float], levels: Sequence[Level], hold_s: float
             mildest = index
         if times_s[index] - times_s[run_start] >= hold_s:
             held, held_index, run_start = levels[mildest], mildest, None
+            # the reports after the mildest one count for the next change from its level: a
+            # check falling green -> amber -> red turns red once red has held, not a hold later
+            index = mildest + 1
+            continue
+        index += 1
     if run_start is None:
         return HeldLevel(held, held_index)
     pending_for = times_s[-1] - times_s[run_start]

@@ -291,6 +291,17 @@ def test_a_fault_that_holds_for_the_hold_time_flips_the_car() -> None:
     assert assess(reports(150, *[10] * 6), NOW, HOLD).is_cleared  # 50 s: not yet
 
 
+def test_a_fault_that_falls_through_amber_turns_red_once_red_has_held() -> None:
+    """CAN falling to red through one amber report: red from -60 s on has held the hold, but the
+    level went to amber when the run spanned 60 s, and the red reports before that were not
+    counted towards red: the car stayed cleared up to 50 s longer."""
+    can = assess(reports(150, 60, *[10] * 7), NOW, HOLD).checks[CHECK_NAMES.index("can")]
+    assert (can.level, can.pending) == ("red", "")
+    held = assess(reports(150, 60, *[10] * 6), NOW, HOLD)  # red for 50 s: amber, red pending
+    assert held.level_of("can") == "amber"
+    assert held.checks[CHECK_NAMES.index("can")].pending.startswith("red for 50 s")
+
+
 def test_a_car_flickering_between_amber_and_red_settles_at_amber() -> None:
     readiness = assess(reports(150, 10, 60, 10, 60, 10, 60, 10), NOW, HOLD)
     assert readiness.level_of("can") == "amber"
