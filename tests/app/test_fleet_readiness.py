@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import random
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 
@@ -362,6 +363,22 @@ def test_a_lasting_change_flips_the_verdict_once_and_keeps_it() -> None:
 def test_hold_levels_by_hand(levels: list[Level], held: Level) -> None:
     times = [30.0 * i for i in range(len(levels))]
     assert hold_levels(times, levels, 60.0).level == held
+
+
+def test_a_level_every_report_of_the_last_hold_shares_is_the_level_held() -> None:
+    """Random report sequences (fixed seed): whenever the newest reports all share one level
+    over at least the hold, that is the level held, whatever came before."""
+    rng = random.Random(1)
+    levels: list[Level] = ["green", "unknown", "amber", "red"]
+    for _ in range(20_000):
+        count = rng.randint(1, 20)
+        times = [float(t) for t in sorted(rng.sample(range(200), count))]
+        drawn = [rng.choice(levels) for _ in range(count)]
+        first = count - 1
+        while first > 0 and drawn[first - 1] == drawn[-1]:
+            first -= 1
+        if times[-1] - times[first] >= 60.0:
+            assert hold_levels(times, drawn, 60.0).level == drawn[-1], (times, drawn)
 
 
 def test_without_a_hold_the_newest_report_decides() -> None:
