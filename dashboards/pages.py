@@ -920,9 +920,11 @@ async def vehicle_maintenance(
     vehicle_id: str,
     in_maintenance: Annotated[str, Form()] = "",
     note: Annotated[str, Form()] = "",
+    config_version: Annotated[str, Form()] = "",
     csrf_token: Annotated[str, Form()] = "",
 ) -> Response:
-    """Take the vehicle out of service or put it back (operators and admins)."""
+    """Take the vehicle out of service or put it back (operators and admins); a page read
+    before someone else changed the car saves nothing (its checkbox would undo their change)."""
     check_form(user, csrf_token, needs_operator=True)
     await _entry_or_404(request, session, vehicle_id)
     try:
@@ -932,6 +934,7 @@ async def vehicle_maintenance(
             in_maintenance=in_maintenance in ("on", "true", "1"),
             note=note,
             changed_by=f"dashboard user {user.username}",
+            expected_config_version=_config_version_read(config_version),
         )
     except AssignmentError as error:
         return await _not_saved(request, session, user, vehicle_id, error)

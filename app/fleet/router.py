@@ -120,12 +120,7 @@ async def put_assignment(
     except VehicleNotFound:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}") from None
     except AssignmentError as error:
-        # FastAPI's own shape for a rejected field (docs/interfaces.md, "Errors")
-        where = ["body", *error.field.split(".")]
-        status = 409 if isinstance(error, AssignmentConflict) else 422
-        raise HTTPException(
-            status, [{"loc": where, "msg": error.reason, "type": "value_error"}]
-        ) from None
+        raise _field_refused(error) from None
     await session.refresh(vehicle, ["updated_at"])
     return AssignmentOut(
         vehicle_id=vehicle.vehicle_id,
@@ -140,11 +135,22 @@ async def put_assignment(
     )
 
 
-@router.put("/vehicles/{vehicle_id}/maintenance", responses=error_responses(401, 403, 404, 503))
+def _field_refused(error: AssignmentError) -> HTTPException:
+    """FastAPI's own shape for a rejected field (docs/interfaces.md, "Errors"): 409 for a
+    conflict with what the vehicle holds, 422 for a body wrong in itself."""
+    where = ["body", *error.field.split(".")]
+    status = 409 if isinstance(error, AssignmentConflict) else 422
+    return HTTPException(status, [{"loc": where, "msg": error.reason, "type": "value_error"}])
+
+
+@router.put(
+    "/vehicles/{vehicle_id}/maintenance", responses=error_responses(401, 403, 404, 409, 503)
+)
 async def put_maintenance(
     vehicle_id: VehicleId, body: MaintenanceIn, principal: OperatorDep, session: SessionDep
 ) -> MaintenanceOut:
-    """Take a vehicle out of service for maintenance, or put it back (operator or admin)."""
+    """Take a vehicle out of service for maintenance, or put it back (operator or admin);
+    409 when `config_version` is given and the vehicle has moved on from it."""
     try:
         vehicle = await set_maintenance(
             session,
@@ -152,11 +158,15 @@ async def put_maintenance(
             in_maintenance=body.in_maintenance,
             note=body.note,
             changed_by=_who(principal.token_id),
+            expected_config_version=body.config_version,
         )
     except VehicleNotFound:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}") from None
+    except AssignmentError as error:
+        raise _field_refused(error) from None
     return MaintenanceOut(
         vehicle_id=vehicle.vehicle_id,
         in_maintenance=vehicle.is_in_maintenance,
         note=vehicle.maintenance_note,
+        config_version=vehicle.config_version,
     )

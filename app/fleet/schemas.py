@@ -90,11 +90,19 @@ class MaintenanceIn(BaseModel):
     # strict: the document says boolean, so 0 or "yes" is refused, not read as a guess
     in_maintenance: StrictBool
     note: StorableText | None = Field(None, max_length=MAX_NOTE_LENGTH)
+    config_version: int | None = Field(
+        default=None,
+        ge=1,
+        description="The vehicle's `config_version` this change was made against, as for an "
+        "assignment: a vehicle changed since is refused with 409 on this field and nothing is "
+        "saved. Left out, the change applies to whatever the vehicle holds.",
+    )
 
 
 class MaintenanceOut(MaintenanceIn):
     """The vehicle's maintenance state after the change."""
 
+    config_version: int = Field(description="the vehicle's config version after this change")
     vehicle_id: str
 
 

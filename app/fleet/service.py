@@ -414,12 +414,7 @@ async def change_assignment(
         raise AssignmentConflict(error.field, error.reason) from None
     except ControllerConfigError as error:
         raise AssignmentError(error.field, error.reason) from None
-    if expected_config_version is not None and expected_config_version != vehicle.config_version:
-        raise AssignmentConflict(
-            "config_version",
-            f"the vehicle was changed since its config v{expected_config_version} was read "
-            f"(now v{vehicle.config_version}): check its assignment and save again",
-        )
+    _check_unchanged_since(vehicle, expected_config_version, "assignment")
     lanes = await session.scalar(
         select(Corridor.lanes).where(Corridor.corridor_id == vehicle.corridor_id)
     )
@@ -445,6 +440,19 @@ async def change_assignment(
     return vehicle
 
 
+def _check_unchanged_since(
+    vehicle: Vehicle, expected_config_version: int | None, what: str
+) -> None:
+    """AssignmentConflict when the operator's form was filled in against an older config: two
+    operators on one car's page must not silently overwrite each other."""
+    if expected_config_version is not None and expected_config_version != vehicle.config_version:
+        raise AssignmentConflict(
+            "config_version",
+            f"the vehicle was changed since its config v{expected_config_version} was read "
+            f"(now v{vehicle.config_version}): check its {what} and save again",
+        )
+
+
 async def set_maintenance(
     session: AsyncSession,
     vehicle_id: str,
@@ -452,13 +460,19 @@ async def set_maintenance(
     in_maintenance: bool,
     note: str | None,
     changed_by: str,
+    expected_config_version: int | None = None,
 ) -> Vehicle:
-    """Take a vehicle out of (or back into) service; a note says why."""
+    """Take a vehicle out of (or back into) service; a note says why.
+
+    With `expected_config_version`, as for an assignment: a stale page that shows the car in
+    service must not put back in service a car someone has since taken out, nor erase their
+    note."""
     if note is not None:
         _storable("note", note)
         if len(note) > MAX_NOTE_LENGTH:
             raise AssignmentError("note", f"at most {MAX_NOTE_LENGTH} characters, not {len(note)}")
     vehicle = await _vehicle_for_update(session, vehicle_id)
+    _check_unchanged_since(vehicle, expected_config_version, "maintenance")
     vehicle.is_in_maintenance = in_maintenance
     vehicle.maintenance_note = (note or "").strip() or None
     vehicle.config_version += 1

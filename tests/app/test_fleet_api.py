@@ -199,6 +199,26 @@ def test_a_change_made_against_an_older_config_version_is_refused(api: Api) -> N
     assert (third.status_code, third.json()["config_version"]) == (200, read + 2)
 
 
+def test_maintenance_made_against_an_older_config_version_is_refused(api: Api) -> None:
+    """The maintenance switch had no version: an operator's stale page put back in service a car
+    another had taken out, and erased their note."""
+    read = vehicle(api.get("/api/v1/fleet").json(), "SF-002")["config_version"]
+    out = api.put(
+        "/api/v1/vehicles/SF-002/maintenance",
+        {"in_maintenance": True, "note": "brake fault", "config_version": read},
+    )
+    assert (out.status_code, out.json()["config_version"]) == (200, read + 1)
+    stale = api.put(
+        "/api/v1/vehicles/SF-002/maintenance", {"in_maintenance": False, "config_version": read}
+    )
+    assert stale.status_code == 409
+    (error,) = stale.json()["detail"]
+    assert error["loc"] == ["body", "config_version"]
+    assert "check its maintenance and save again" in error["msg"]
+    listed = vehicle(api.get("/api/v1/fleet").json(), "SF-002")
+    assert (listed["verdict"], listed["maintenance_note"]) == ("maintenance", "brake fault")
+
+
 def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
     response = api.put("/api/v1/vehicles/SF-001/assignment", ASSIGNMENT, role="viewer")
     assert response.status_code == 403

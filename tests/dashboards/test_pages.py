@@ -278,6 +278,36 @@ def test_two_operators_on_one_car_do_not_overwrite_each_other(site: str) -> None
         assert '<strong data-field="route">B</strong>' in page  # the first's change stands
 
 
+def test_a_stale_maintenance_form_does_not_put_a_car_back_in_service(site: str) -> None:
+    """The maintenance form carried no version: an operator whose page still showed the car in
+    service saved it back into service over another's "do not deploy", note and all."""
+    with logged_in(site, "operator") as first, logged_in(site, "operator") as second:
+        opened = re.search(
+            r'name="config_version" value="(\d+)"', second.get("/vehicles/SF-004").text
+        )
+        assert opened is not None
+        taken_out = post_form(
+            first,
+            "/vehicles/SF-004",
+            "/vehicles/SF-004/maintenance",
+            in_maintenance="on",
+            note="brake fault: do not deploy",
+            config_version=opened.group(1),
+        )
+        assert taken_out.status_code == 303
+        stale = post_form(
+            second,
+            "/vehicles/SF-004",
+            "/vehicles/SF-004/maintenance",
+            note="",
+            config_version=opened.group(1),
+        )
+        assert stale.status_code == 422
+        assert "the vehicle was changed since its config v" in stale.text
+        page = second.get("/vehicles/SF-004").text
+        assert "in maintenance: brake fault: do not deploy" in page
+
+
 def test_a_form_sent_back_for_a_mistake_still_knows_which_config_its_operator_read(
     site: str,
 ) -> None:
