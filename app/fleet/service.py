@@ -259,11 +259,16 @@ async def _ingest_clock(
     that (its last ping was stored as promptly as ever), so it ages, alone or with the whole
     fleet; measured against the newest ping stored instead, a car reporting alone aged not at
     all until the allowance ran out. A car whose clock runs ahead makes the lag 0, the wall
-    clock: the safe side."""
+    clock: the safe side. Only pings received within the allowance count: a car parked since
+    last night was stored promptly then, and says nothing of how far behind the server is now
+    (counted, it cancelled the allowance for the whole fleet every morning)."""
     if rows is None:
         rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, None))).all()
+    received_since = now - timedelta(seconds=limits.server_lag_s)
     delays = [
-        (row[3].received_at - row[3].ts).total_seconds() for row in rows if row[3] is not None
+        (row[3].received_at - row[3].ts).total_seconds()
+        for row in rows
+        if row[3] is not None and row[3].received_at >= received_since
     ]
     lag = min(max(min(delays, default=0.0), 0.0), limits.server_lag_s)
     return now - timedelta(seconds=lag)

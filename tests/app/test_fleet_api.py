@@ -386,6 +386,32 @@ def test_a_server_behind_its_fleet_ages_no_car_but_a_silent_car_among_reporting_
     assert re.fullmatch(r"no ping for (8\d|9\d) s", vehicle(caught_up, "SF-002")["problems"][0])
 
 
+def test_a_car_parked_since_last_night_does_not_cancel_the_servers_lag_allowance(
+    api: Api, seeded_engine: Engine
+) -> None:
+    """Its newest ping, stored promptly 20 h ago, was the least delay of the fleet: with the
+    server 90 s behind, every driving car aged to red at 6 a.m."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    parked = drive("SF-003", now - timedelta(hours=20), 0, 25, 3)
+    post_pings(api.client, api.tokens["admin"], parked)
+    with seeded_engine.begin() as connection:  # stored as promptly as it was sent, back then
+        connection.execute(
+            text(
+                "UPDATE fact_vehicle_ping SET received_at = ts + interval '0.3 s'"
+                " WHERE vehicle_id = 'SF-003'"
+            )
+        )
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=92), 0, 25, 3)
+    )
+    post_status(
+        api.client, api.tokens["admin"], "SF-001", **healthy_status(now - timedelta(seconds=90))
+    )
+    driving = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+    assert checks(driving)["ping"] == "green"
+    assert driving["verdict"] == "cleared"
+
+
 def test_a_server_behind_its_fleet_replays_the_whole_hold_window(api: Api) -> None:
     """Everything stored is 65 s old. The reports replayed for hysteresis run back three hold
     periods from the car's newest one: counted back from now, the window held only the last
