@@ -1017,10 +1017,12 @@ async def _plans_context(
 ) -> dict[str, Any]:
     """A plan run (None: the corridor's latest) with its charts, and the recent runs."""
     corridors = await data.corridors(session)
-    corridor = next(
-        (c for c in corridors if c.corridor_id == (plan.corridor_id if plan else corridor_id)),
-        corridors[0] if corridors else None,
-    )
+    wanted = plan.corridor_id if plan else corridor_id
+    corridor = next((c for c in corridors if c.corridor_id == wanted), None)
+    if corridor is None and wanted is not None:
+        # another corridor's plans under a mistyped or old link would read as this one's
+        raise PageError(404, "Unknown corridor", f"There is no corridor {wanted}.")
+    corridor = corridor or (corridors[0] if corridors else None)
     context: dict[str, Any] = {
         "page": "plans",
         "corridors": corridors,
@@ -1152,6 +1154,13 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
         "inrix_chart": None,
         "ping_chart": None,
         "last_minute": minutes[-1] if minutes else None,
+        # how long ago the newest whole minute with pings ended: a fleet silent for 50 minutes
+        # must not read as a live feed
+        "last_minute_age_s": (
+            (now - minutes[-1]["minute"] - timedelta(minutes=1)).total_seconds()
+            if minutes
+            else None
+        ),
         "generated_at": now,
         "refresh_s": _figure_refresh_s(request),
     }

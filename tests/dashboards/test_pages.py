@@ -487,6 +487,30 @@ def test_an_unknown_plan_is_a_404_page(site: str) -> None:
         assert "There is no plan 424242" in response.text
 
 
+def test_plans_of_an_unknown_corridor_are_a_404_page(site: str) -> None:
+    """They were the first corridor's plans, under a heading that alone told them apart."""
+    with logged_in(site, "viewer") as client:
+        for path in ("/plans", "/plans/live"):
+            response = client.get(path, params={"corridor": "I-24-EB"})
+            assert response.status_code == 404, path
+            assert "There is no corridor I-24-EB" in response.text
+
+
+def test_the_feeds_page_says_when_its_newest_minute_of_pings_was(
+    site: str, seeded_engine: Engine
+) -> None:
+    """It read "last minute: 1.0 pings/s" for a fleet silent for the last 50 minutes."""
+    start = datetime.now(UTC).replace(second=0, microsecond=0) - timedelta(minutes=51)
+    with httpx.Client(base_url=site, timeout=30) as api:
+        post_pings(api, issue(seeded_engine, "admin"), drive("SF-001", start, 3000.0, 25.0, 60))
+    with logged_in(site, "viewer") as client:
+        feeds = client.get("/feeds/live").text
+    age = re.search(r'data-field="pings-minute-age">(\d+) min<', feeds)
+    assert age is not None, feeds
+    assert 49 <= int(age.group(1)) <= 51
+    assert "1.0 pings/s from 1 vehicle(s)" in feeds
+
+
 def test_an_unknown_filter_is_explained(site: str) -> None:
     with logged_in(site, "viewer") as client:
         response = client.get("/fleet", params={"problem": "everything"})
