@@ -61,6 +61,10 @@ KPI_DIRECTION: dict[str, int] = {
 }
 
 
+class PolicyDatesUnknown(ValueError):
+    """A trained policy whose training dates cannot be read from its manifest."""
+
+
 @dataclass(frozen=True)
 class ControllerVariant:
     """A controller as the roster assigns it: registry name, actuation and params."""
@@ -100,15 +104,24 @@ class ControllerVariant:
     def policy_training_dates(self) -> frozenset[str]:
         """The dates the variant's trained policy was fitted on (its manifest's
         `training_dates`, beside the policy file): no held-out score of it may come from a
-        drive of those dates. Empty for a controller without a policy, or a policy file with
-        no manifest beside it (`smoothfleet sim train` always writes one)."""
+        drive of those dates. Empty for a controller without a policy.
+
+        PolicyDatesUnknown for a policy whose manifest is missing or names no
+        `training_dates` (`smoothfleet sim train` always writes them): read as "fitted on no
+        date", such a policy would be chosen and scored on the very drives it was fitted on.
+        A hand-built policy fitted on no drive says so with an empty list."""
         if self.controller not in RL_CONTROLLERS:
             return frozenset()
         params = RlParams.model_validate(dict(self.params))
         manifest = policy_path(params, RL_CONTROLLERS[self.controller]).with_suffix(".json")
-        if not manifest.is_file():
-            return frozenset()
-        recorded = json.loads(manifest.read_text(encoding="utf-8")).get("training_dates", ())
+        try:
+            recorded = json.loads(manifest.read_text(encoding="utf-8"))["training_dates"]
+        except (OSError, ValueError, KeyError, TypeError):
+            raise PolicyDatesUnknown(
+                f"{self.name}: {manifest} names no training_dates, so which drives this policy "
+                "was fitted on is unknown; write its manifest (smoothfleet sim train does), with "
+                '"training_dates": [] for a policy fitted on no drive'
+            ) from None
         return frozenset(str(date) for date in recorded)
 
 

@@ -10,8 +10,10 @@ held-out dates, which it never saw; the held-out scores of all folds are the res
 deployment choice is the same rule on every date (its own score is not a result).
 
 A trained policy has seen the dates it was trained on (a row's `policy_training_dates`): its
-rows of those dates are used neither to choose nor to score, so an RL candidate is judged, on
-either side of a fold, only on drives its weights were not fitted to.
+rows of those dates are used neither to choose nor to score its fuel, throughput and speed, so
+an RL candidate is judged, on either side of a fold, only on drives its weights were not fitted
+to. Its collisions and takeovers count on every drive, those dates too: a policy that crashes
+on its own training drives is not safe for having seen them.
 
 Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `candidate` key
 and, for a candidate with a trained policy, `policy_training_dates`, ";"-joined).
@@ -20,7 +22,7 @@ and, for a candidate with a trained policy, `policy_training_dates`, ";"-joined)
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,19 +61,30 @@ class Standing:
         return self.shortfall_pct == 0.0
 
 
-def standing(candidate: str, rows: Sequence[Row]) -> Standing:
-    """The candidate's shockwave fuel saving and its total shortfall against the aims (a
-    collision, or a KPI left undefined, counts UNMET_POINTS)."""
-    shock = [row for row in rows if row["scenario"] == "shockwave"]
-    free = [row for row in rows if row["scenario"] == "freeflow"]
+def standing(
+    candidate: str, rows: Sequence[Row], scenarios: Collection[str] | None = None
+) -> Standing:
+    """The candidate's shockwave fuel saving and its total shortfall against the aims, on the
+    drives it may be judged on (`unseen_rows`). A collision on any of its drives, a KPI left
+    undefined (the saving itself included), or one of `scenarios` (default: those of its own
+    rows) with no drive to judge it on counts UNMET_POINTS: no evidence is no pass."""
+    required = {str(row["scenario"]) for row in rows} if scenarios is None else set(scenarios)
+    judged = unseen_rows(rows)
+    shock = [row for row in judged if row["scenario"] == "shockwave"]
+    free = [row for row in judged if row["scenario"] == "freeflow"]
+    fuel_saving = measured_mean(shock, "fuel_saving_pct")
     shortfall = UNMET_POINTS * sum(int(row["collisions"]) for row in rows)
-    for key in ("throughput_change_pct", "network_speed_change_pct"):
-        shortfall += (
-            _loss_beyond(SHOCKWAVE_MAX_LOSS_PCT, measured_mean(shock, key)) if shock else 0.0
-        )
-    for key in FREEFLOW_KPIS:
-        shortfall += _loss_beyond(FREEFLOW_MAX_LOSS_PCT, measured_mean(free, key)) if free else 0.0
-    return Standing(candidate, measured_mean(shock, "fuel_saving_pct"), shortfall)
+    if math.isnan(fuel_saving):
+        shortfall += UNMET_POINTS
+    if shock:
+        for key in ("throughput_change_pct", "network_speed_change_pct"):
+            shortfall += _loss_beyond(SHOCKWAVE_MAX_LOSS_PCT, measured_mean(shock, key))
+    if free:
+        for key in FREEFLOW_KPIS:
+            shortfall += _loss_beyond(FREEFLOW_MAX_LOSS_PCT, measured_mean(free, key))
+    elif "freeflow" in required:
+        shortfall += UNMET_POINTS
+    return Standing(candidate, fuel_saving, shortfall)
 
 
 def _fuel_rank(standing: Standing) -> float:
@@ -86,7 +99,11 @@ def choose(rows: Sequence[Row]) -> Standing:
     by_candidate: dict[str, list[Row]] = {}
     for row in rows:
         by_candidate.setdefault(str(row["candidate"]), []).append(row)
-    standings = [standing(name, candidate_rows) for name, candidate_rows in by_candidate.items()]
+    # every candidate is judged in every scenario any of them was run in
+    scenarios = {str(row["scenario"]) for row in rows}
+    standings = [
+        standing(name, candidate_rows, scenarios) for name, candidate_rows in by_candidate.items()
+    ]
     if not standings:
         raise ValueError("no candidate rows to choose from")
     meeting = [s for s in standings if s.meets_aims]
@@ -118,7 +135,7 @@ def fitted_on(row: Row) -> bool:
 
 def unseen_rows(rows: Iterable[Row]) -> list[Row]:
     """The rows whose drive its candidate's policy (if it has one) was not fitted on: the only
-    ones that may choose a candidate or score it."""
+    ones whose fuel, throughput and speed may choose a candidate or score it."""
     return [row for row in rows if not fitted_on(row)]
 
 
@@ -149,13 +166,12 @@ def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
     The dates are dealt into folds as `sim.folds.date_folds` deals them (`held_out_dates`).
     """
     check_every_fold_can_choose(((date_of(row), str(row["scenario"])) for row in rows), folds)
-    unseen = unseen_rows(rows)
     result = []
     for held in held_out_dates((date_of(row) for row in rows), folds):
-        training = [row for row in unseen if date_of(row) not in held]
+        training = [row for row in rows if date_of(row) not in held]
         chosen = choose(training)
         scored = tuple(
-            row for row in unseen if date_of(row) in held and row["candidate"] == chosen.candidate
+            row for row in rows if date_of(row) in held and row["candidate"] == chosen.candidate
         )
         result.append(FoldChoice(tuple(sorted(held)), chosen, scored))
     return result
@@ -163,11 +179,13 @@ def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
 
 def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
     """Per scenario, the held-out rows of every fold pooled: each drive scored once, by the
-    candidate chosen without its date."""
+    candidate chosen without its date (the KPIs over the drives it may be scored on,
+    `unseen_rows`; collisions and takeovers over all of them)."""
     pooled = [row for choice in choices for row in choice.held_out_rows]
     summary = []
     for scenario in dict.fromkeys(str(row["scenario"]) for row in pooled):
-        rows = [row for row in pooled if row["scenario"] == scenario]
+        every = [row for row in pooled if row["scenario"] == scenario]
+        rows = unseen_rows(every)
         summary.append(
             {
                 "scenario": scenario,
@@ -176,8 +194,8 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
                 "throughput_change_pct": measured_mean(rows, "throughput_change_pct"),
                 "network_speed_change_pct": measured_mean(rows, "network_speed_change_pct"),
                 "fuel_economy_mpg_change_pct": measured_mean(rows, "fuel_economy_mpg_change_pct"),
-                "collisions": sum(int(row["collisions"]) for row in rows),
-                "takeovers": sum(int(row["takeovers"]) for row in rows),
+                "collisions": sum(int(row["collisions"]) for row in every),
+                "takeovers": sum(int(row["takeovers"]) for row in every),
                 "cut_ins": sum(int(row["cut_ins"]) for row in rows),
                 "within_bounds_share": measured_mean(rows, "within_bounds_share"),
                 "distance_lost_m": measured_mean(rows, "distance_lost_m"),
@@ -189,10 +207,12 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
 def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
     """Every candidate on every drive, what each fold chooses from: per candidate the mean KPIs
     on the shockwave and on the freeflow drives. Context for the held-out result, not a result
-    itself (the figures and any choice made from them share their drives)."""
+    itself (the figures and any choice made from them share their drives). As in `standing`:
+    the KPIs over the drives a candidate may be judged on, collisions and takeovers over all."""
     summary = []
     for candidate in sorted({str(row["candidate"]) for row in rows}):
-        own = [row for row in rows if row["candidate"] == candidate]
+        every = [row for row in rows if row["candidate"] == candidate]
+        own = unseen_rows(every)
         shock = [row for row in own if row["scenario"] == "shockwave"]
         free = [row for row in own if row["scenario"] == "freeflow"]
         summary.append(
@@ -208,8 +228,8 @@ def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
                 "freeflow_network_speed_change_pct": measured_mean(
                     free, "network_speed_change_pct"
                 ),
-                "collisions": sum(int(row["collisions"]) for row in own),
-                "takeovers": sum(int(row["takeovers"]) for row in own),
+                "collisions": sum(int(row["collisions"]) for row in every),
+                "takeovers": sum(int(row["takeovers"]) for row in every),
                 "within_bounds_share": measured_mean(own, "within_bounds_share"),
                 "shockwave_distance_lost_m": measured_mean(shock, "distance_lost_m"),
             }

@@ -40,6 +40,7 @@ from sim.evaluate import (
     ControllerVariant,
     Evaluation,
     OptimumFileError,
+    PolicyDatesUnknown,
     Realism,
     RunResult,
     default_workers,
@@ -74,7 +75,6 @@ from sim.selection import (
     choose,
     cross_validate,
     held_out_summary,
-    unseen_rows,
 )
 from smoothfleet.cli.common import (
     FiniteFloatRange,
@@ -518,7 +518,10 @@ def select_command(
         ]
     )
     variants = list({variant.name: variant for variant in variants}.values())
-    fitted_dates = {variant.name: variant.policy_training_dates() for variant in variants}
+    try:
+        fitted_dates = {variant.name: variant.policy_training_dates() for variant in variants}
+    except PolicyDatesUnknown as error:
+        raise click.BadParameter(str(error), param_hint="--controller") from None
     drives = _read_drives(drives_dir)
     cases = _scenario_cases(["shockwave", "freeflow"], drives)
     try:
@@ -579,10 +582,10 @@ def select_command(
     console.print(
         _summary_table(
             "Every candidate on every drive (what the folds choose from: context, not a result)",
-            candidate_summary(unseen_rows(rows)),
+            candidate_summary(rows),
         )
     )
-    deployed = choose(unseen_rows(rows))
+    deployed = choose(rows)
     console.print(
         f"chosen on every date (the deployment pair; its score here is not a result): "
         f"{deployed.candidate}"

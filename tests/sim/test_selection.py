@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from sim.drives import load_drive
-from sim.evaluate import ControllerVariant
+from sim.evaluate import ControllerVariant, PolicyDatesUnknown
 from sim.kpi import UNMEASURED_COLUMN
 from sim.selection import (
     candidate_summary,
@@ -19,6 +19,7 @@ from sim.selection import (
     cross_validate,
     held_out_summary,
     standing,
+    unseen_rows,
 )
 from tests.sim.test_evaluate import short_drives, write_drive
 from tests.support.servers import cli_env, run_cli
@@ -155,7 +156,7 @@ def test_a_trained_policy_neither_chooses_nor_scores_on_the_dates_it_was_fitted_
     assert [c.chosen.candidate for c in choices] == ["policy"] * 3
     # chosen on the other dates, "policy" has no held-out score on the date it was fitted on
     assert choices[0].chosen.fuel_saving_pct == pytest.approx(10.0)
-    assert [[r["drive"] for r in c.held_out_rows] for c in choices] == [
+    assert [[r["drive"] for r in unseen_rows(c.held_out_rows)] for c in choices] == [
         [],
         ["2021-03-12-a"],
         ["2021-03-15-a"],
@@ -163,6 +164,47 @@ def test_a_trained_policy_neither_chooses_nor_scores_on_the_dates_it_was_fitted_
     [summary] = held_out_summary(choices)
     assert summary["drives"] == 2
     assert summary["fuel_saving_pct"] == pytest.approx(10.0)  # not (30 + 10 + 10) / 3
+
+
+def test_a_policy_that_crashes_or_hands_back_on_its_own_training_dates_is_not_safe() -> None:
+    """The rows of a policy's training dates were dropped before anything was counted: its
+    collisions there did not stop it being chosen, and its takeovers there went unreported
+    (the docs' context table showed rl_acc with 0 takeovers where selection.csv holds 1 and 3)."""
+    fitted = {"policy_training_dates": "2021-03-08"}
+    rows = [
+        row("policy", "2021-03-08-a", fuel_saving_pct=9.0, collisions=1, takeovers=2) | fitted,
+        row("policy", "2021-03-12-a", fuel_saving_pct=9.0) | fitted,
+        row("policy", "2021-03-15-a", fuel_saving_pct=9.0) | fitted,
+        row("steady", "2021-03-08-a", fuel_saving_pct=6.0),
+        row("steady", "2021-03-12-a", fuel_saving_pct=6.0),
+        row("steady", "2021-03-15-a", fuel_saving_pct=6.0),
+    ]
+    assert choose(rows).candidate == "steady"
+    assert standing("policy", rows[:3]).shortfall_pct == 100.0
+    summary = {line["candidate"]: line for line in candidate_summary(rows)}
+    assert (summary["policy"]["collisions"], summary["policy"]["takeovers"]) == (1, 2)
+    assert summary["policy"]["shockwave_fuel_saving_pct"] == pytest.approx(9.0)  # unseen only
+    choices = cross_validate([r for r in rows if r["candidate"] == "policy"], folds=3)
+    [held_out] = held_out_summary(choices)
+    assert (held_out["drives"], held_out["collisions"], held_out["takeovers"]) == (2, 1, 2)
+
+
+def test_a_candidate_with_no_drive_to_be_judged_on_meets_no_aim() -> None:
+    """With its training dates' rows set aside, a policy may have no freeflow drive left (or
+    no shockwave drive): it passed those aims on no evidence, ahead of any candidate that
+    missed one by a tenth of a point."""
+    fitted = {"policy_training_dates": "2021-03-09"}
+    rows = [
+        row("policy", "2021-03-08-a", fuel_saving_pct=9.0) | fitted,
+        row("policy", "2021-03-09-a", "freeflow") | fitted,
+        row("steady", "2021-03-08-a", fuel_saving_pct=5.0, throughput_change_pct=-2.1),
+        row("steady", "2021-03-09-a", "freeflow"),
+    ]
+    assert not standing("policy", rows[:2]).meets_aims
+    assert choose(rows).candidate == "steady"
+    untested = [row("untested", "2021-03-09-a", "freeflow")]
+    assert not standing("untested", untested, {"shockwave", "freeflow"}).meets_aims
+    assert choose([*untested, *rows[2:]]).candidate == "steady"
 
 
 def test_folds_need_enough_dates() -> None:
@@ -301,3 +343,15 @@ def test_a_variant_knows_the_dates_its_policy_was_trained_on() -> None:
     assert dates == frozenset(manifest["training_dates"])
     assert dates  # the shipped policy was trained on some of the dates
     assert ControllerVariant("microaccel", "accel").policy_training_dates() == frozenset()
+
+
+def test_a_policy_without_its_training_dates_is_refused(tmp_path: Path) -> None:
+    """Without a manifest the policy read as fitted on no date, so it was chosen and scored on
+    the drives it was fitted on."""
+    bare = tmp_path / "rl_accel.npz"
+    bare.write_bytes((BUNDLED_POLICIES / "rl_accel.npz").read_bytes())
+    variant = ControllerVariant("rl_accel", "accel", {"policy": str(bare)})
+    with pytest.raises(PolicyDatesUnknown, match="names no training_dates"):
+        variant.policy_training_dates()
+    bare.with_suffix(".json").write_text('{"training_dates": []}')  # fitted on no drive
+    assert variant.policy_training_dates() == frozenset()
