@@ -27,7 +27,10 @@ COMMENT ON VIEW analytics.inrix_latency IS
     'received.';
 """
 
-PLAIN_MEAN = """
+# One definition, two means: the columns and grouping are 0002's.
+VIEW = """
+-- INRIX speeds arrive minutes after the time they describe (paper: the planner predicts past
+-- this latency). One provider snapshot = all segments with the same measured_at.
 CREATE OR REPLACE VIEW analytics.inrix_latency AS
     SELECT e.corridor_id,
            e.measured_at,
@@ -36,30 +39,20 @@ CREATE OR REPLACE VIEW analytics.inrix_latency AS
            count(*) FILTER (WHERE e.is_closed) AS closed_segments,
            min(e.received_at) AS received_at,
            extract(epoch FROM min(e.received_at) - e.measured_at)::double precision AS latency_s,
-           avg(e.speed_mps)::double precision AS mean_speed_mps
+           ({mean})::double precision AS mean_speed_mps
     FROM fact_inrix_estimate e
+    {join}
     GROUP BY e.corridor_id, e.measured_at;
 """
 
-SPACE_MEAN = """
--- INRIX speeds arrive minutes after the time they describe (paper: the planner predicts past
--- this latency). One provider snapshot = all segments with the same measured_at. The mean speed
--- is the space-mean speed of the open segments with a speed: length over travel time.
-CREATE OR REPLACE VIEW analytics.inrix_latency AS
-    SELECT e.corridor_id,
-           e.measured_at,
-           count(*) AS segments,
-           count(*) FILTER (WHERE e.score = 30) AS realtime_segments,
-           count(*) FILTER (WHERE e.is_closed) AS closed_segments,
-           min(e.received_at) AS received_at,
-           extract(epoch FROM min(e.received_at) - e.measured_at)::double precision AS latency_s,
-           (sum(s.length_m) FILTER (WHERE NOT e.is_closed AND e.speed_mps > 0)
-            / sum(s.length_m / e.speed_mps) FILTER (WHERE NOT e.is_closed AND e.speed_mps > 0)
-           )::double precision AS mean_speed_mps
-    FROM fact_inrix_estimate e
-    JOIN dim_inrix_segment s ON s.xd_code = e.xd_code
-    GROUP BY e.corridor_id, e.measured_at;
-"""
+PLAIN_MEAN = VIEW.format(mean="avg(e.speed_mps)", join="")
+
+# The space-mean speed of the open segments with a speed: their length over their travel time.
+OPEN = "FILTER (WHERE NOT e.is_closed AND e.speed_mps > 0)"
+SPACE_MEAN = VIEW.format(
+    mean=f"sum(s.length_m) {OPEN} / sum(s.length_m / e.speed_mps) {OPEN}",
+    join="JOIN dim_inrix_segment s ON s.xd_code = e.xd_code",
+)
 
 
 def upgrade() -> None:
