@@ -54,7 +54,7 @@ from app.fleet.service import (
     set_maintenance,
     vehicle_entry,
 )
-from app.models import PlanRun
+from app.models import Corridor, PlanRun
 from app.users.service import log_in
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
@@ -557,6 +557,7 @@ async def _time_space_context(
     }
     if corridor is None:
         return context
+    _check_lane(corridor, lane)
     context["lanes"] = list(range(1, corridor.lanes + 1))
     since = now - timedelta(hours=hours)
     bucket_s = max(1.0, hours * 3600.0 / 720.0)
@@ -1008,6 +1009,17 @@ def _time_space_chart(
     )
 
 
+def _check_lane(corridor: Corridor, lane: int) -> None:
+    """A lane the corridor does not have is refused by name: the lane menu would show its first
+    lane while the page drew the asked one, and its next refresh would switch lanes unasked."""
+    if lane > corridor.lanes:
+        raise PageError(
+            422,
+            "Unknown lane",
+            f"{corridor.corridor_id} has lanes 1 to {corridor.lanes}, not {lane}.",
+        )
+
+
 async def _plans_context(
     request: Request,
     session: AsyncSession,
@@ -1045,6 +1057,7 @@ async def _plans_context(
         plan = await data.latest_plan(session, corridor.corridor_id)
         context["plan"] = plan
     context["runs"] = await data.plan_runs(session, corridor.corridor_id)
+    _check_lane(corridor, lane)
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
         return context

@@ -496,6 +496,18 @@ def test_plans_of_an_unknown_corridor_are_a_404_page(site: str) -> None:
             assert "There is no corridor I-24-EB" in response.text
 
 
+def test_a_lane_or_window_the_menus_do_not_offer_is_refused_or_offered(site: str) -> None:
+    """A lane beyond the corridor's drew that lane under a menu showing lane 1, and hours not
+    in the menu drew under a menu showing 0.5 h: the next automatic refresh switched views."""
+    with logged_in(site, "viewer") as client:
+        for path in ("/timespace", "/plans"):
+            response = client.get(path, params={"lane": 7})
+            assert response.status_code == 422, path
+            assert "I-24-WB has lanes 1 to 4, not 7" in response.text
+        page = client.get("/timespace", params={"hours": 3}).text
+        assert '<option value="3.0" selected>3.0 h</option>' in page
+
+
 def test_the_feeds_page_says_when_its_newest_minute_of_pings_was(
     site: str, seeded_engine: Engine
 ) -> None:
