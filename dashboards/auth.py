@@ -102,6 +102,15 @@ class SessionClaims:
     fingerprint: str
 
 
+def same_secret(expected: str, given: str) -> bool:
+    """Compare in constant time whatever text a client sent: `hmac.compare_digest` refuses
+    non-ASCII strings with TypeError (a 500 for a forged cookie), so both are compared as
+    bytes, any lone surrogate included."""
+    return hmac.compare_digest(
+        expected.encode("utf-8", "surrogatepass"), given.encode("utf-8", "surrogatepass")
+    )
+
+
 def read_session_cookie(settings: Settings, value: str, now: float) -> SessionClaims | None:
     """The claims of a cookie signed by us and not expired, else None."""
     try:
@@ -109,7 +118,7 @@ def read_session_cookie(settings: Settings, value: str, now: float) -> SessionCl
         payload = base64.urlsafe_b64decode(encoded.encode())
     except (ValueError, TypeError):
         return None
-    if not hmac.compare_digest(_sign(_key(settings), payload), signature):
+    if not same_secret(_sign(_key(settings), payload), signature):
         return None
     try:
         data = json.loads(payload)
@@ -176,7 +185,7 @@ def remember_login_csrf(request: Request, response: Response, token: str) -> Non
 def check_login_csrf(request: Request, submitted: str) -> None:
     """Refuse a login form that did not come from our login page."""
     expected = request.cookies.get(LOGIN_CSRF_COOKIE, "")
-    if not expected or not hmac.compare_digest(expected.encode(), submitted.encode()):
+    if not expected or not same_secret(expected, submitted):
         raise PageError(
             403,
             "Form expired",
@@ -221,7 +230,7 @@ def navigating_user(request: Request) -> PageUser | None:
 
 def check_form(user: PageUser, submitted_token: str, *, needs_operator: bool) -> None:
     """Refuse a form without this session's CSRF token, or an action beyond the user's role."""
-    if not hmac.compare_digest(user.csrf_token.encode(), submitted_token.encode()):
+    if not same_secret(user.csrf_token, submitted_token):
         raise PageError(
             403,
             "Form expired",

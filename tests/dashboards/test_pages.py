@@ -159,6 +159,17 @@ def test_a_new_password_ends_old_sessions(site: str, seeded_engine: Engine) -> N
         assert client.get("/fleet").status_code == 303
 
 
+def test_a_forged_cookie_with_any_text_is_sent_to_the_login(site: str) -> None:
+    """A signature with a non-ASCII character made hmac.compare_digest raise: a 500 with a
+    traceback on every page, for anyone, the error page itself included."""
+    for signature in ("def", "d\xe9f"):
+        cookie = f"sf_session=YWJj.{signature}".encode("latin-1")
+        with httpx.Client(base_url=site, timeout=30) as client:
+            response = client.get("/fleet", headers={"Cookie": cookie})
+        assert response.status_code == 303, signature
+        assert response.headers["location"].startswith("/login")
+
+
 def test_logout_ends_the_session(site: str) -> None:
     with logged_in(site, "viewer") as client:
         response = post_form(client, "/fleet", "/logout")
