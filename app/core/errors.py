@@ -20,6 +20,7 @@ from sqlalchemy.exc import DataError, DBAPIError, InterfaceError, OperationalErr
 from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.core.body_limit import BodyTooLarge
 from app.core.logs import RepeatedMessages
 from contract.errors import DATABASE_UNAVAILABLE, ErrorCode, ErrorResponse
 
@@ -119,6 +120,10 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def on_http_error(request: Request, error: Exception) -> Response:
         assert isinstance(error, StarletteHTTPException)
+        if isinstance(error.__cause__, BodyTooLarge):
+            # FastAPI wraps what stopped it reading the body in a 400: a chunked body cut off
+            # at the limit is the body-size middleware's 413, as a declared length over it is
+            raise error.__cause__
         if error.status_code == 400 and error.detail == UNREADABLE_BODY:
             return JSONResponse({"detail": "request body is not valid JSON text"}, 422)
         if error.status_code == 400:

@@ -341,6 +341,28 @@ def test_a_body_over_the_limit_is_413_declared_or_streamed(
     assert stored(seeded_engine) == []
 
 
+def test_a_streamed_body_over_the_limit_is_413_on_every_route(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """FastAPI wraps what stops it reading a body in its own 400, which the API answers 422
+    ("not valid JSON"): a car or feed told its too-large upload was malformed content."""
+    admin = bearer(issue(seeded_engine, "admin"))
+
+    def chunks() -> Iterator[bytes]:
+        yield b'{"ts": "2026-01-01T00:00:00Z", "padding": "'
+        for _ in range(100):
+            yield b"x" * 100
+        yield b'"}'
+
+    with serving(seeded_database_url, max_body_bytes=4096) as client:
+        for path in ("/api/v1/vehicles/SF-001/status", "/api/v1/feeds/inrix"):
+            answer = client.post(
+                path, content=chunks(), headers={**admin, "Content-Type": "application/json"}
+            )
+            assert answer.status_code == 413, (path, answer.text)
+            assert answer.json()["detail"] == "request body over the limit of 4096 bytes"
+
+
 def test_counters_count_accepted_duplicate_and_rejected_pings(
     api: httpx.Client, car: dict[str, str]
 ) -> None:
