@@ -777,7 +777,8 @@ class Agent:
     def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:
         """Adopt a config (building its controller); raises ValueError when it cannot apply to
         this car (PolicyFileError: the policy it names is not good) and ServerError when the
-        policy it names could not be downloaded. A new lane drops the plan held for the old one.
+        policy it names could not be downloaded. A new lane or corridor drops the plan held for
+        the old one.
         """
         if config.actuation != self.car.actuation:
             raise ValueError(
@@ -793,7 +794,12 @@ class Agent:
         )
         previous = self.assignment
         self.assignment = Assignment(config, corridor, controller)
-        if previous is None or previous.config.assigned_lane != config.assigned_lane:
+        if (
+            previous is None
+            or previous.config.assigned_lane != config.assigned_lane
+            or previous.config.corridor_id != config.corridor_id
+        ):
+            # another lane's or corridor's targets at this car's positions are no plan for it
             self.lane_plan = None
             self._plan_schedule = Schedule()
 
@@ -821,11 +827,17 @@ class Agent:
         return {**params, "policy": str(path)}
 
     def accept_plan(self, plan: Plan, etag: str | None = None) -> bool:
-        """Hold `plan` for the assigned lane; False (and no plan held) when it has no such lane."""
+        """Hold `plan` for the assigned lane; False (and no plan held) when it has no such lane
+        or is another corridor's (an answer for the assignment before a reassignment)."""
         config = self.config
         if config is None:
             return False
         try:
+            if plan.corridor != config.corridor_id:
+                raise PlanError(
+                    f"plan {plan.plan_id} is of corridor {plan.corridor}, the car is assigned "
+                    f"{config.corridor_id}: not followed"
+                )
             self.lane_plan = LanePlan(plan, config.assigned_lane, etag, self.clock.monotonic())
         except PlanError as error:
             self.stats.plans_refused += 1

@@ -12,8 +12,9 @@ from pathlib import Path
 import can
 import pytest
 
+from contract.corridor import CorridorGeometry
 from sim.emulator.leaders import ConstantSpeedLeader
-from sim.emulator.rig import Rig, rig, uniform_plan
+from sim.emulator.rig import Rig, rig, seed_corridor_document, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers import AccelCommand, Action, Observation
@@ -445,6 +446,32 @@ def test_a_plan_without_our_lane_leaves_the_car_to_its_acc(tmp_path: Path, dbc_c
         assert r.agent.state.mode is Mode.STOCK
         assert r.agent.state.reason == "no fresh plan"
         assert r.emulator.agent_frames == 0
+
+
+def test_a_car_moved_to_another_corridor_follows_no_plan_of_the_old_one(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """Only a new lane dropped the plan held: a car moved to another corridor in the same lane
+    followed the old corridor's targets at its new positions until the next poll, or until the
+    old plan's valid_until when the poll failed; and a plan of another corridor was taken."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        assert r.agent.lane_plan is not None
+        config = r.agent.config
+        assert config is not None
+        document = seed_corridor_document()
+        elsewhere = CorridorGeometry.from_segments(
+            "I-24-EB", document["corridor"]["lanes"], document["i24_segments"]
+        )
+        r.agent.configure(config.model_copy(update={"corridor_id": "I-24-EB"}), elsewhere)
+        assert r.agent.lane_plan is None
+        r.run(2.0)
+        assert not engaged(r)
+        assert r.agent.state.reason == "no fresh plan"
+        # the answer to a poll sent before the move is the old corridor's: not followed
+        assert not r.agent.accept_plan(uniform_plan(25.0, published=r.clock.now()))
+        assert r.agent.lane_plan is None
+        assert r.agent.stats.plans_refused == 1
 
 
 def test_lane_change_recovery_engages_on_a_cut_in_and_releases(
