@@ -66,9 +66,11 @@ class CanButtonPort:
             and now - self._last_sent_s < PERIOD_SLACK * self.car.command_period_s
         ):
             return
-        signals = self.car.button_signals(button, self.latest())
-        if self.car.command_counter_signal is not None:
-            signals[self.car.command_counter_signal] = self._counter
+        latest = self.latest()
+        signals = self.car.button_signals(button, latest)
+        counter = self.car.command_counter_signal
+        if counter is not None:
+            signals[counter] = self._next_counter(latest.get(self.car.command_message, {}))
         frame = can.Message(
             arbitration_id=self.frame_id,
             data=self.codec.encode(self.car.command_message, signals),
@@ -84,6 +86,18 @@ class CanButtonPort:
         elif button is not None:
             # Refused: fall back to releasing (always allowed) on the next period.
             self._release_frames = RELEASE_FRAMES
+
+    def _next_counter(self, car_frame: Signals) -> int:
+        """The rolling counter of the next frame: one past the car's own last frame of this
+        message, as the module receiving the buttons expects of its sender; a counter of our
+        own, counting from 0, only while no frame of the car's has been read. Counting on our
+        own beside the car's module broke its sequence on nearly every frame sent, which the
+        receiving module may drop as invalid."""
+        assert self.car.command_counter_signal is not None
+        seen = car_frame.get(self.car.command_counter_signal)
+        if seen is None or not self.car.command_counter_modulo:
+            return self._counter
+        return (int(seen) + 1) % self.car.command_counter_modulo
 
     def close(self) -> None:
         """Send nothing more: a button frame the car stops receiving is a released button."""

@@ -236,6 +236,32 @@ def test_no_button_frame_leaves_out_of_limits(
             held = pressed
 
 
+@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+def test_button_frames_count_on_from_the_cars_own_counter(
+    key: str, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """The port counted 0, 1, 2, 3 on its own beside the car's module sending the same
+    message: the receiving module saw the sequence broken on nearly every frame sent."""
+    agent_bus, car_bus = buses
+    car = car_for(key)
+    assert car.command_counter_signal is not None
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    car_frame = dict(car.button_signals(None, {}))
+    port = CanButtonPort(
+        car,
+        codec,
+        SafeSender(agent_bus, SafetyLayer(car, codec)),
+        lambda: {car.command_message: car_frame},
+    )
+    for step, car_counter in enumerate([2, 3, 0, 1, 1]):
+        car_frame[car.command_counter_signal] = car_counter
+        now = 0.05 * step
+        port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
+        (frame,) = received(car_bus)
+        _, signals = codec.decode(frame.arbitration_id, frame.data)
+        assert signals[car.command_counter_signal] == (car_counter + 1) % 4
+
+
 def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
