@@ -167,9 +167,16 @@ class TokenCache:
             future.exception()
             raise
         except Exception as error:
-            if is_database_outage(error) and entry is not None and entry[1] is not None:
-                # the database is away: a token known a moment ago still is (a revocation
-                # needs the database too); what it may do is checked as always
+            if (
+                is_database_outage(error)
+                and entry is not None
+                and entry[1] is not None
+                and self._clock() < entry[0] + self._ttl_s
+            ):
+                # the database is away: a token known a moment ago (its entry expired less than
+                # a TTL ago) still is; what it may do is checked as always. An older entry is
+                # no answer: a token revoked hours ago was honoured whenever its lookup met a
+                # lock or a timeout, while pings were still stored by the writer's connections
                 future.set_result(entry[1])
                 return entry[1]
             future.set_exception(error)

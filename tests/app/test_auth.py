@@ -86,6 +86,39 @@ def test_a_revoked_token_is_refused_once_its_cache_entry_expires(
     assert asyncio.run(scenario()) == [True, True, False]
 
 
+def test_a_token_known_long_ago_is_no_answer_when_its_lookup_fails(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """When the lookup meets a lock or a timeout, a token known a moment ago is honoured; one
+    known hours ago was too, so a token revoked since passed, its pings stored by the writer's
+    own connections. Past one TTL beyond its entry's expiry, the error stands (a 503)."""
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    clock = Clock()
+
+    async def scenario() -> tuple[bool, str]:
+        engine = make_async_engine(seeded_database_url, statement_timeout_s=1.0)
+        cache = TokenCache(engine, ttl_s=5, clock=clock)
+        try:
+            await cache.principal(token)
+            revoke(seeded_engine)
+            with seeded_engine.begin() as locker:
+                locker.execute(text("LOCK TABLE api_token IN ACCESS EXCLUSIVE MODE"))
+                clock.now = 5.5  # expired half a second ago: still a token known a moment ago
+                recent = await cache.principal(token) is not None
+                clock.now = 10.5  # expired 5.5 s ago: no answer
+                try:
+                    await cache.principal(token)
+                except Exception as error:  # the database's own error: an outage, a 503
+                    return recent, type(error).__name__
+            return recent, "accepted"
+        finally:
+            await engine.dispose()
+
+    recent, old = asyncio.run(scenario())
+    assert recent
+    assert old == "OperationalError"
+
+
 def test_concurrent_first_requests_of_a_token_share_one_lookup(
     seeded_database_url: str, seeded_engine: Engine
 ) -> None:
