@@ -187,13 +187,16 @@ def readings_of(response: InrixResponse) -> SnapshotReadings:
     refused (not a reading, or a code already read at that timestamp)."""
     found: list[SegmentReading] = []
     refused: list[RefusedReading] = []
+    # (instant, code) -> where it was first read, across the whole response: two segment sets
+    # may name one instant in two zones, and a second reading of a code there is refused as
+    # within one set, not stored as a "duplicate" of the first
+    first_of_code: dict[tuple[datetime, str], tuple[int, int]] = {}
     for number, segment_set in enumerate(response.result.segmentspeeds):
         measured_at = segment_set.timestamp or response.created_date
         if measured_at is None:
             raise InrixFormatError(
                 f"result.segmentspeeds.{number}: no timestamp (and no createdDate)"
             )
-        first_of_code: dict[str, int] = {}
         for index, item in enumerate(segment_set.segments):
             code = item.get("code") if isinstance(item, dict) else None
             named = code if isinstance(code, str) else None
@@ -202,18 +205,25 @@ def readings_of(response: InrixResponse) -> SnapshotReadings:
             except ValueError as error:
                 refused.append(RefusedReading(number, index, named, str(error)))
                 continue
-            if segment.code in first_of_code:
+            key = (measured_at, segment.code)
+            if key in first_of_code:
+                kept_set, kept_index = first_of_code[key]
+                where = (
+                    f"segment {kept_index}"
+                    if kept_set == number
+                    else f"segment set {kept_set}, segment {kept_index}"
+                )
                 refused.append(
                     RefusedReading(
                         number,
                         index,
                         segment.code,
-                        f"code {segment.code} already read at this timestamp (segment "
-                        f"{first_of_code[segment.code]}, which is kept)",
+                        f"code {segment.code} already read at this timestamp ({where}, which is "
+                        "kept)",
                     )
                 )
                 continue
-            first_of_code[segment.code] = index
+            first_of_code[key] = (number, index)
             found.append(
                 SegmentReading(
                     xd_code=segment.code,

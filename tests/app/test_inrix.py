@@ -212,6 +212,46 @@ def test_a_bad_segment_is_refused_on_its_own_and_the_snapshot_kept(
     assert stored[("SF-I24WB-07", measured)]["speed_mps"] == pytest.approx(50 * MPH)
 
 
+def test_a_code_read_again_at_one_instant_in_another_segment_set_is_refused(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    """Two sets naming one instant in two zones: the second reading of a code (20 mph against
+    50) was answered "already stored" and dropped without a word, where within one set it
+    is refused with its place."""
+    response = {
+        "docType": "GetSegmentSpeed",
+        "result": {
+            "segmentspeeds": [
+                {
+                    "timestamp": "2026-11-23T08:00:00Z",
+                    "segments": [{"code": "SF-I24WB-07", "speed": 50}],
+                },
+                {
+                    "timestamp": "2026-11-23T02:00:00-06:00",
+                    "segments": [
+                        {"code": "SF-I24WB-07", "speed": 20},
+                        {"code": "SF-I24WB-08", "speed": 55},
+                    ],
+                },
+            ]
+        },
+    }
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=feed)
+
+    assert answer.status_code == 200
+    body = answer.json()
+    assert (body["accepted"], body["duplicates"]) == (2, 0)
+    (refusal,) = body["refused"]
+    assert (refusal["segment"], refusal["code"]) == (0, "SF-I24WB-07")
+    assert (
+        "already read at this timestamp (segment set 0, segment 0, which is kept)"
+        in (refusal["error"])
+    )
+    stored = estimates(seeded_engine)
+    measured = datetime(2026, 11, 23, 8, 0, tzinfo=UTC)
+    assert stored[("SF-I24WB-07", measured)]["speed_mps"] == pytest.approx(50 * MPH)
+
+
 def test_a_snapshot_larger_than_one_insert_is_stored_whole(
     seeded_engine: Engine, seeded_database_url: str
 ) -> None:
