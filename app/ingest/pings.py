@@ -98,7 +98,9 @@ def parse_body(body: bytes) -> tuple[list[object], bool]:
         document = _lenient_json(body, error)
     if not isinstance(document, dict):
         raise BodyError('body must be a ping object or {"pings": [...]}')
-    if "pings" in document:
+    # a lone ping may carry fields it does not know, "pings" among them (Ping ignores them)
+    lone_ping = any(name in document for name in REQUIRED_FIELDS)
+    if "pings" in document and (isinstance(document["pings"], list) or not lone_ping):
         items = document["pings"]
         if not isinstance(items, list):
             raise BodyError('"pings" must be a list of ping objects')
@@ -107,7 +109,7 @@ def parse_body(body: bytes) -> tuple[list[object], bool]:
                 f"a batch holds at most {MAX_PINGS_PER_BATCH} pings, this one has {len(items)}"
             )
         return items, True
-    if not any(name in document for name in REQUIRED_FIELDS):
+    if not lone_ping:
         raise BodyError(
             'body is neither a ping (vehicle_id, ts, lat, lon, speed_mps) nor {"pings": [...]}'
         )

@@ -302,6 +302,23 @@ def test_a_body_that_is_not_a_ping_or_a_batch_is_422(
     assert answer.json()["detail"].startswith(expected)
 
 
+def test_a_lone_ping_with_an_unknown_field_called_pings_is_stored(
+    api: httpx.Client, car: dict[str, str], seeded_engine: Engine
+) -> None:
+    """A ping ignores fields it does not know, but one named "pings" made the body read as a
+    batch, refused whole with 422: the ping was lost for good."""
+    answer = api.post("/api/v1/pings", json=ping(pings="from a newer agent"), headers=car)
+    assert answer.status_code == 200, answer.text
+    assert answer.json()["accepted"] == 1
+    assert len(stored(seeded_engine)) == 1
+    # a body that is only {"pings": <not a list>} is still no batch at all
+    bad = api.post("/api/v1/pings", json={"pings": "x"}, headers=car)
+    assert (bad.status_code, bad.json()["detail"]) == (
+        422,
+        '"pings" must be a list of ping objects',
+    )
+
+
 def test_a_batch_of_1000_fits_and_1001_is_refused_whole(
     api: httpx.Client, car: dict[str, str], seeded_engine: Engine
 ) -> None:
