@@ -2,7 +2,10 @@
 
 A wrong password (or unknown username) counts against the account; from the third failure in a
 row the account must wait 1, 2, 4, ... s (at most LOCKOUT_MAX_S) after its last failure before
-another attempt is even checked. A success resets the count.
+another attempt is even checked. A success resets the count. A username that is no account is
+counted and made to wait the same way, in the server process's memory (an account's count is
+in its row): the answers do not tell which usernames exist. With several workers a made-up
+name's count is per worker, so its waits can come later than an account's.
 """
 
 from __future__ import annotations
@@ -134,6 +137,40 @@ class LoginResult:
 
 WRONG_CREDENTIALS = "Wrong username or password."
 
+# Failures of usernames that are no account, per server process, as an account's are counted
+# in its row: if only real accounts slowed down, three bad guesses would tell which usernames
+# exist. Bounded, so guessing many names cannot grow the process: past the bound it starts over.
+MAX_UNKNOWN_USERNAMES = 10_000
+_unknown_failures: dict[str, tuple[int, datetime]] = {}
+
+
+def _locked_out(
+    failures: int, last_failed_at: datetime | None, now: datetime
+) -> LoginResult | None:
+    """The answer to an attempt made before the account's wait ran out, or None."""
+    if last_failed_at is None:
+        return None
+    unlocks_at = last_failed_at + timedelta(seconds=wait_before_next_attempt(failures))
+    if now >= unlocks_at:
+        return None
+    wait_s = (unlocks_at - now).total_seconds()
+    return LoginResult(
+        None, f"Too many failed logins for this account: wait {wait_s:.0f} s and try again.", wait_s
+    )
+
+
+async def _unknown_username(username: str, password: str, now: datetime) -> LoginResult:
+    """Answer as for an account: the same scrypt time, the same count, the same waits."""
+    failures, last_failed_at = _unknown_failures.get(username, (0, None))
+    locked = _locked_out(failures, last_failed_at, now)
+    if locked is not None:
+        return locked
+    await anyio.to_thread.run_sync(verify_password, password, _DUMMY_HASH)
+    if len(_unknown_failures) >= MAX_UNKNOWN_USERNAMES:
+        _unknown_failures.clear()
+    _unknown_failures[username] = (failures + 1, now)
+    return LoginResult(None, WRONG_CREDENTIALS)
+
 
 async def log_in(session: AsyncSession, username: str, password: str, now: datetime) -> LoginResult:
     """Check a login; failures are counted and slow the account down."""
@@ -141,19 +178,10 @@ async def log_in(session: AsyncSession, username: str, password: str, now: datet
         select(OpsUser).where(OpsUser.username == username).with_for_update()
     )
     if user is None:
-        await anyio.to_thread.run_sync(verify_password, password, _DUMMY_HASH)
-        return LoginResult(None, WRONG_CREDENTIALS)
-    if user.last_failed_at is not None:
-        unlocks_at = user.last_failed_at + timedelta(
-            seconds=wait_before_next_attempt(user.failed_logins)
-        )
-        if now < unlocks_at:
-            wait_s = (unlocks_at - now).total_seconds()
-            return LoginResult(
-                None,
-                f"Too many failed logins for this account: wait {wait_s:.0f} s and try again.",
-                wait_s,
-            )
+        return await _unknown_username(username, password, now)
+    locked = _locked_out(user.failed_logins, user.last_failed_at, now)
+    if locked is not None:
+        return locked
     # scrypt takes tens of milliseconds: off the event loop.
     if not await anyio.to_thread.run_sync(verify_password, password, user.password_hash):
         user.failed_logins += 1

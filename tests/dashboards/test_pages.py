@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import html
 import re
+import secrets
 from collections.abc import Iterator
 from datetime import UTC, datetime, time, timedelta
 from zoneinfo import ZoneInfo
@@ -129,6 +130,23 @@ def test_repeated_failures_make_the_account_wait(site: str, seeded_engine: Engin
                 )
             )
         assert log_in(client, "operator", PASSWORDS["operator"]).status_code == 303
+
+
+def test_a_username_that_is_no_account_waits_as_an_account_does(site: str) -> None:
+    """Only real accounts slowed down: from the fourth guess a real username answered 429 and
+    a made-up one 401, so three bad guesses told which usernames exist."""
+    answers = {}
+    with httpx.Client(base_url=site) as client:
+        for username in ("viewer", f"nobody-{secrets.token_hex(4)}"):
+            for _ in range(3):
+                assert log_in(client, username, "guess-guess").status_code == 401
+            fourth = log_in(client, username, "guess-guess")
+            answers[username != "viewer"] = (
+                fourth.status_code,
+                fourth.headers.get("retry-after"),
+                "Too many failed logins for this account" in fourth.text,
+            )
+    assert answers[True] == answers[False] == (429, "1", True)
 
 
 def test_the_wait_doubles_with_each_failure_up_to_five_minutes() -> None:
