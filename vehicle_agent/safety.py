@@ -41,6 +41,10 @@ class SafetyLimits:
     max_input_age_s: float = 0.25
     min_period_fraction: float = 0.8
     min_press_interval_s: float = 0.45
+    # A press follows a release held at least this long (the sequencer releases for 0.25 s):
+    # a 50 ms blip between two holds is no release a car reliably sees, and two 1.1 s holds
+    # read as one would cross the 1.2 s of a second 5 mph step.
+    min_release_s: float = 0.15
     max_hold_s: float = 1.1
     allowed_buttons: frozenset[CruiseButton] = frozenset(
         {CruiseButton.PLUS, CruiseButton.MINUS, CruiseButton.GAP}
@@ -96,6 +100,7 @@ class SafetyLayer:
         self._last_accel: tuple[float, float] | None = None
         self._held: frozenset[CruiseButton] = frozenset()
         self._press_started_s: float | None = None
+        self._released_s: float | None = None
         self._log = ThrottledLog(log)
 
     def check(self, frame: can.Message, context: SafetyContext) -> Refusal | None:
@@ -187,6 +192,9 @@ class SafetyLayer:
                 return Refusal(
                     "press", f"press rate: {now - started:.2f} s after the previous press"
                 )
+            released = self._released_s
+            if released is not None and now - released < self.limits.min_release_s:
+                return Refusal("press", f"press rate: released only {now - released:.2f} s")
         elif pressed != self._held:
             return Refusal("buttons", "buttons: switching without a release")
         elif started is not None and now - started > self.limits.max_hold_s:
@@ -203,6 +211,8 @@ class SafetyLayer:
     def _record_press(self, pressed: frozenset[CruiseButton], now: float) -> None:
         if pressed and not self._held:
             self._press_started_s = now
+        elif self._held and not pressed:
+            self._released_s = now
         self._held = pressed
 
     def admit(self, frame: can.Message, context: SafetyContext) -> bool:

@@ -212,6 +212,7 @@ def test_no_button_frame_leaves_out_of_limits(
     held: frozenset[CruiseButton] = frozenset()
     press_started: float | None = None
     last_onset: float | None = None
+    released_at: float | None = None
     for index, (button, valid, engaged) in enumerate(steps):
         now = index * 0.05
         port.hold(button, SafetyContext(now, car_state(now, valid=valid, engaged=engaged)))
@@ -228,12 +229,45 @@ def test_no_button_frame_leaves_out_of_limits(
                 assert engaged
                 if not held:
                     assert last_onset is None or now - last_onset >= 0.45 - 1e-9
+                    # a real release between two presses, not a one-frame blip
+                    assert released_at is None or now - released_at >= 0.15 - 1e-9
                     last_onset = press_started = now
                 else:
                     assert pressed == held
                     assert press_started is not None
                     assert now - press_started <= SafetyLimits().max_hold_s + 1e-9
+            elif held:
+                released_at = now
             held = pressed
+
+
+def test_a_press_needs_a_real_release_before_it(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """The press rate was counted from onset to onset only: a 1.1 s hold, one 50 ms release
+    frame and another 1.1 s hold all passed, which a car that misses the blip reads as one
+    2.25 s hold, past the 1.2 s of a second 5 mph step."""
+    agent_bus, car_bus = buses
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), dict)
+    now = 0.0
+    while now < 1.1 - 1e-9:  # the longest hold allowed
+        port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
+        now = round(now + 0.05, 2)
+    port.hold(None, SafetyContext(now, car_state(now)))  # one release frame
+    for _ in range(2):  # pressed again at once: refused
+        now = round(now + 0.05, 2)
+        port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
+    assert safety.refused["press"] == 2
+    now = 1.35  # released for the sequencer's 0.25 s: let through
+    port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
+    pressed = [
+        car.pressed_buttons(codec.decode(frame.arbitration_id, frame.data)[1])
+        for frame in received(car_bus)
+    ]
+    assert sum(1 for buttons in pressed if buttons) == 22 + 1
 
 
 @pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
