@@ -128,6 +128,9 @@ class SafetyLayer:
             return self._check_car(context) or self._check_accel(
                 self.car.commanded_accel(signals), signals, context
             )
+        foreign = self.car.foreign_inputs(signals)
+        if foreign is not None:
+            return Refusal("button", f"{foreign}: not the agent's to send")
         return self.check_press(self.car.pressed_buttons(signals), context)
 
     def _check_car(self, context: SafetyContext) -> Refusal | None:

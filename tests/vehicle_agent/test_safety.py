@@ -241,6 +241,42 @@ def test_no_button_frame_leaves_out_of_limits(
             held = pressed
 
 
+@pytest.mark.parametrize(
+    ("changes", "reason"),
+    [
+        ({"ACCButtons": 4}, "ACCButtons code 4 is no known button"),
+        ({"ACCButtons": 0}, "ACCButtons code 0 is no known button"),
+        ({"LKAButton": 1}, "LKAButton pressed"),
+        ({"DriveModeButton": 1}, "DriveModeButton pressed"),
+    ],
+)
+def test_a_button_frame_setting_what_is_no_known_press_is_no_release(
+    changes: dict[str, int], reason: str, dbc_cache: Path
+) -> None:
+    """Whatever pressed_buttons did not list passed as a release, which is always allowed: a
+    frame pressing lane keeping or the drive mode, or an unknown code, went out with the ACC
+    off and the car state invalid."""
+    car = car_for("cadillac_xt5")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    invalid = SafetyContext(1.0, car_state(1.0, valid=False, engaged=False))
+    release = codec.encode(car.command_message, car.button_signals(None, {}))
+    frame_id = codec.frame_id(car.command_message)
+    assert (
+        safety.check(
+            can.Message(arbitration_id=frame_id, data=release, is_extended_id=False), invalid
+        )
+        is None
+    )
+    data = codec.encode(car.command_message, {**car.button_signals(None, {}), **changes})
+    refusal = safety.check(
+        can.Message(arbitration_id=frame_id, data=data, is_extended_id=False), invalid
+    )
+    assert refusal is not None
+    assert refusal.kind == "button"
+    assert reason in refusal.detail
+
+
 def test_a_press_needs_a_real_release_before_it(
     buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
 ) -> None:

@@ -113,3 +113,10 @@ class CarInterface(ABC):
     def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
         """The buttons a decoded command frame presses (button makes)."""
         raise NotImplementedError(f"{self.key} is not actuated by ACC buttons")
+
+    def foreign_inputs(self, signals: Signals) -> str | None:
+        """What a decoded command frame sets besides the buttons `pressed_buttons` knows (a
+        code of no known button, another switch on the same message), or None. The safety
+        layer refuses such a frame: read as no press, it would pass as a release, which is
+        always allowed."""
+        return None

@@ -94,6 +94,16 @@ class CadillacXT5(CarInterface):
             "ACCAlwaysOne": 1,
         }
 
+    def foreign_inputs(self, signals: Signals) -> str | None:
+        """A code of no known button, or the lane-keeping or drive-mode switch."""
+        code = int(signals.get("ACCButtons", NO_BUTTON))
+        if code != NO_BUTTON and code not in BUTTON_CODES.values():
+            return f"ACCButtons code {code} is no known button"
+        for switch in ("LKAButton", "DriveModeButton"):
+            if signals.get(switch):
+                return f"{switch} pressed"
+        return None
+
     def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
         """Buttons pressed in an ASCMSteeringButton frame."""
         code = int(signals.get("ACCButtons", NO_BUTTON))
