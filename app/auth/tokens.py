@@ -53,6 +53,10 @@ LOOKUP_SQL = text(
 MAX_CACHED_TOKENS = 10_000
 # The last share of an entry's life in which a request using it starts its background lookup.
 REFRESH_AHEAD_SHARE = 0.4
+# While its lookup fails for want of the database, a token whose entry expired less than this
+# long ago (s) still stands: an outage of a few minutes must not lock the fleet out of the plans
+# the server holds in memory. An older entry is no answer: a token revoked since would pass.
+OUTAGE_GRACE_S = 300.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,12 +175,12 @@ class TokenCache:
                 is_database_outage(error)
                 and entry is not None
                 and entry[1] is not None
-                and self._clock() < entry[0] + self._ttl_s
+                and self._clock() < entry[0] + OUTAGE_GRACE_S
             ):
-                # the database is away: a token known a moment ago (its entry expired less than
-                # a TTL ago) still is; what it may do is checked as always. An older entry is
-                # no answer: a token revoked hours ago was honoured whenever its lookup met a
-                # lock or a timeout, while pings were still stored by the writer's connections
+                # the database is away: a token known a few minutes ago still is; what it may
+                # do is checked as always. An older entry is no answer (OUTAGE_GRACE_S): a token
+                # revoked hours ago was honoured whenever its lookup met a lock or a timeout,
+                # while pings were still stored by the writer's connections
                 future.set_result(entry[1])
                 return entry[1]
             future.set_exception(error)
