@@ -1053,11 +1053,11 @@ async def _plans_context(
     }
     if corridor is None:
         return context
+    _check_lane(corridor, lane)
     if plan is None:
         plan = await data.latest_plan(session, corridor.corridor_id)
         context["plan"] = plan
     context["runs"] = await data.plan_runs(session, corridor.corridor_id)
-    _check_lane(corridor, lane)
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
         return context
