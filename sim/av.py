@@ -4,7 +4,9 @@
 (paper Table 2: the RAV4 measures the leader's gap and relative speed; the Rogue and the XT5
 only the "minicar" flag) and the plan's target at its position, calls the very controller object
 the agent runs (`vehicle_agent.controllers.build_controller`), and turns its action into the
-acceleration the car makes: an `accel` car makes the commanded acceleration; an `acc` car hands
+acceleration the car makes: an `accel` car makes the commanded acceleration as the agent sends it,
+through the agent's own `AccelLimiter` (range and jerk limits, started afresh at each engagement
+from the car's acceleration, as `vehicle_agent.agent` does on taking over); an `acc` car hands
 its set points to a stock-ACC model (`StockAcc`), which decides the acceleration.
 
 Without a fresh plan (none published yet, or the last older than a car holds one, when the
@@ -22,6 +24,7 @@ from typing import Any, Protocol
 
 from sim.emulator.acc import SimulatedAccCar
 from sim.platoon import AvObservation
+from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.controllers import (
     AccelCommand,
     AccSetPoint,
@@ -117,24 +120,43 @@ class AgentPolicy:
         self.plan_hand_backs = 0
         self.steps_without_plan = 0
         self._step = 0
+        # The agent's limiter between an `accel` controller and the car, and whether it holds
+        # this engagement's last request (it starts from the car's acceleration when not).
+        self.accel_limiter = AccelLimiter()
+        self._limiting = False
+        self._last_speed: tuple[float, float] | None = None
+        self._measured_accel_mps2 = 0.0
 
-    def _ping(self, observation: AvObservation) -> None:
-        """The agent pings once a second whoever drives."""
+    def _sense(self, observation: AvObservation) -> None:
+        """Every step, whoever drives: the agent pings once a second, and reads the car's
+        acceleration from its successive speeds (the step's exact change here; the car filters
+        the same difference)."""
         if self._step % PING_EVERY_STEPS == 0:
             self.plan.record_ping(observation.time_s, observation.position_m, observation.speed_mps)
         self._step += 1
+        if self._last_speed is not None and observation.time_s > self._last_speed[0]:
+            last_time, last_speed = self._last_speed
+            self._measured_accel_mps2 = (observation.speed_mps - last_speed) / (
+                observation.time_s - last_time
+            )
+        self._last_speed = (observation.time_s, observation.speed_mps)
+
+    def _release(self) -> None:
+        """The agent stops commanding: the controller starts afresh, and so does the limiter."""
+        self.controller.reset()
+        self._limiting = False
 
     def driver_drives(self, observation: AvObservation) -> None:
         """Handed back: the driver's braking cancels the ACC, the controller starts afresh."""
-        self._ping(observation)
-        self.controller.reset()
+        self._sense(observation)
+        self._release()
         if self.stock_acc is not None:
             self.stock_acc.cancel()
 
     def accel_mps2(self, observation: AvObservation) -> float:
         """Sense, decide with the agent's controller, actuate."""
         time_s = observation.time_s
-        self._ping(observation)
+        self._sense(observation)
         profile = self.plan.profile(time_s)
         lead_present = observation.gap_m <= RADAR_RANGE_M
         if profile is None:
@@ -157,7 +179,10 @@ class AgentPolicy:
             )
         )
         if isinstance(action, AccelCommand):
-            return action.accel_mps2
+            if not self._limiting:
+                self.accel_limiter.reset(self._measured_accel_mps2, time_s)
+                self._limiting = True
+            return self.accel_limiter.limit(time_s, action.accel_mps2)
         assert self.stock_acc is not None  # checked at construction for acc controllers
         return self.stock_acc.accel_mps2(
             action,
@@ -172,7 +197,7 @@ class AgentPolicy:
         if not self._without_plan:
             self._without_plan = True
             self.plan_hand_backs += 1
-            self.controller.reset()
+            self._release()
             if self.stock_acc is None:
                 self._acc_without_plan.cancel()  # resumes at the car's speed (module docstring)
         self.steps_without_plan += 1

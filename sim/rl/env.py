@@ -6,10 +6,12 @@ damps them. Each of the `num_envs` environments runs one such platoon on a windo
 drive; the state of all of them is one (environments x vehicles) array stepped together in numpy.
 The building blocks are the simulator's own: the drive replay (`sim.drives`), the I-24 IDM
 (`contract.idm`), the fuel model (`sim.energy`), the real planner in the loop (`sim.plans`
-`SimulatedPlanner`, its plans aged as the agent ages them), and for `acc` cars the stock ACC
-model driven by the agent's button sequencer (`sim.emulator.acc.SimulatedAccCar`) behind the
-paper's clip (`clip_speed_setting`). The observation and the decoding of the action are the car's
-own (`vehicle_agent.controllers.policy`), so a trained policy meets on the car what it learnt on.
+`SimulatedPlanner`, its plans aged as the agent ages them), for `accel` cars the agent's
+`AccelLimiter` (range and jerk limits) between the bounded request and the car, and for `acc`
+cars the stock ACC model driven by the agent's button sequencer
+(`sim.emulator.acc.SimulatedAccCar`) behind the paper's clip (`clip_speed_setting`). The
+observation and the decoding of the action are the car's own (`vehicle_agent.controllers.policy`),
+so a trained policy meets on the car what it learnt on.
 
 MDP (paper, "ACC-Based Controller"): observation and action as in `policy`; reward
 
@@ -45,6 +47,7 @@ from sim.gaps import GapBounds
 from sim.plans import SimulatedPlanner, simulated_grid, simulated_inrix
 from sim.platoon import MAX_BRAKING_MPS2, MAX_SPACING_SPEED_SHARE, VEHICLE_LENGTH_M
 from sim.traffic import InrixFeed
+from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.controllers import clip_speed_setting
 from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
@@ -179,6 +182,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.planners: list[SimulatedPlanner] = []
         self.cars: list[SimulatedAccCar] = []
         self.lead_accel = [LeadAccelEstimator(SAFETY.lead_accel_filter_s) for _ in range(num_envs)]
+        self.limiters = [AccelLimiter() for _ in range(num_envs)]
         self.recent_mph: list[deque[float | None]] = [
             deque(maxlen=CLIP_WINDOW_STEPS) for _ in range(num_envs)
         ]
@@ -226,6 +230,8 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         car = SimulatedAccCar()
         car.acc.engage(max(lead_speed, MIN_SET_SPEED_MPH * MPS_PER_MPH))
         self.lead_accel[env].reset()
+        # the agent takes over a car in equilibrium: its limiter starts from no acceleration
+        self.limiters[env].reset(0.0, self._time_s(env))
         self.recent_mph[env].clear()
         return self._new_planner(road), car
 
@@ -288,7 +294,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                     )
                 else:
                     self.lead_accel[env].reset()
-                accel[env] = bounded_request(
+                command = bounded_request(
                     float(request[env]),
                     float(speed[env]),
                     float(gap[env]) if measured else None,
@@ -296,6 +302,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                     lead_accel,
                     float(margin[env]),
                 )
+                accel[env] = self.limiters[env].limit(self._time_s(env), command)
             return accel
         # acc: v_action -> the paper's clip -> buttons (gap first) -> the stock ACC
         for env in range(self.num_envs):

@@ -14,6 +14,7 @@ from sim.kpi import platoon_kpis
 from sim.plans import ROAD_AFTER_M, ROAD_BEFORE_M, SimulatedPlanner
 from sim.platoon import AvObservation, platoon_roles, simulate_platoon
 from sim.traffic import InrixFeed, segment_bounds
+from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
@@ -47,6 +48,8 @@ def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
     assert isinstance(policy.controller, MicroAccelController)
     assert policy.controller.params.k == 0.4
     twin = build_controller("microaccel", "accel", {"k": 0.4})
+    limiter = AccelLimiter()  # the agent's, between the controller and the car
+    limiter.reset(0.0, 0.0)  # taking over a car at constant speed
     for step, (gap, lead) in enumerate([(40.0, 24.0), (39.6, 23.0), (39.0, 22.0)]):
         sensed = AvObservation(step * 0.1, 1000.0 + step, 25.0, gap, lead)
         expected = twin.step(
@@ -61,8 +64,64 @@ def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
                 lead_rel_speed_mps=lead - 25.0,
             )
         )
-        assert policy.accel_mps2(sensed) == expected.accel_mps2  # type: ignore[union-attr]
+        request = expected.accel_mps2  # type: ignore[union-attr]
+        assert request < -1.0  # closing on a slower leader: a braking the limiter ramps
+        assert policy.accel_mps2(sensed) == limiter.limit(step * 0.1, request)
     assert plan.pings == [(0.0, 1000.0, 25.0)]  # one ping per second
+
+
+class Requesting(Controller):
+    """Asks for one acceleration, whatever it sees; counts its resets."""
+
+    name = "requesting"
+
+    def __init__(self, request_mps2: float) -> None:
+        super().__init__("accel")
+        self.request_mps2 = request_mps2
+        self.resets = 0
+
+    def step(self, observation: Observation) -> AccelCommand:
+        return AccelCommand(self.request_mps2)
+
+    def reset(self) -> None:
+        self.resets += 1
+
+
+def test_an_accel_cars_commands_pass_the_agents_jerk_limits() -> None:
+    """The car sends what the agent's limiter lets through, not the controller's request: from
+    the car's 0 m/s^2 a -3 m/s^2 request falls 5 m/s^3 (0.5 a step), and back to +1.5 it rises
+    2.5 m/s^3 (0.25 a step)."""
+    controller = Requesting(-3.0)
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=True)
+    falling = [
+        policy.accel_mps2(AvObservation(step / 10, 25.0 * step / 10, 25.0, 200.0, 25.0))
+        for step in range(8)
+    ]
+    assert falling == pytest.approx([0.0, -0.5, -1.0, -1.5, -2.0, -2.5, -3.0, -3.0])
+    controller.request_mps2 = 1.5
+    rising = [
+        policy.accel_mps2(AvObservation(step / 10, 25.0 * step / 10, 25.0, 200.0, 25.0))
+        for step in range(8, 12)
+    ]
+    assert rising == pytest.approx([-2.75, -2.5, -2.25, -2.0])
+
+
+def test_each_engagement_starts_the_limiter_from_the_cars_acceleration() -> None:
+    """After the driver drives, the agent takes over from what the car does then (its speed
+    changing 0.2 m/s a step: 2 m/s^2, the range's top 1.5), not from its last request."""
+    controller = Requesting(-3.0)
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=True)
+    for step in range(10):
+        policy.accel_mps2(AvObservation(step / 10, 0.0, 25.0, 200.0, 25.0))
+    assert policy.accel_mps2(AvObservation(1.0, 0.0, 25.0, 200.0, 25.0)) == -3.0
+    for step in range(10, 20):
+        speed = 20.0 + 0.2 * (step - 10)
+        policy.driver_drives(AvObservation(step / 10, 0.0, speed, 200.0, 25.0))
+    assert controller.resets == 10  # afresh every step the driver drives
+    first = policy.accel_mps2(AvObservation(2.0, 0.0, 22.0, 200.0, 25.0))
+    assert first == pytest.approx(1.5)  # the car's 2 m/s^2, within the range
+    second = policy.accel_mps2(AvObservation(2.1, 0.0, 22.15, 200.0, 25.0))
+    assert second == pytest.approx(1.0)  # then falling 5 m/s^3
 
 
 class Recording(Controller):

@@ -176,9 +176,22 @@ def test_a_time_margin_action_holds_the_av_further_back() -> None:
     env.reset(seed=1)
     assert env.action_space.shape == (2, 2)
     place_av(env, 40.0)
-    env.step(np.array([[1.0, -1.0], [1.0, 1.0]]))
+    for _ in range(2):  # the first step's command is the car's own 0 m/s^2 (the limiter's start)
+        env.step(np.array([[1.0, -1.0], [1.0, 1.0]]))
     assert env.speed[0, 1] > 20.0
     assert env.speed[1, 1] < 20.0
+
+
+def test_accel_requests_reach_the_car_through_the_agents_limiter() -> None:
+    """The policy asks for -3 m/s^2 from a steady platoon: the car brakes as the agent's
+    `AccelLimiter` lets it, from its 0 m/s^2 down 5 m/s^3 (0.5 m/s^2 a 0.1 s step)."""
+    env = steady_env("accel", ONLY_GAP)
+    speeds = []
+    for _ in range(4):
+        env.step(np.full((2, 1), -1.0))
+        speeds.append(env.speed[:, 1].copy())
+    made = np.diff(np.vstack([np.full(2, 20.0), *speeds]), axis=0) / 0.1
+    np.testing.assert_allclose(made, [[0.0] * 2, [-0.5] * 2, [-1.0] * 2, [-1.5] * 2], atol=1e-9)
 
 
 def test_configuration_errors_say_what_is_wrong() -> None:
