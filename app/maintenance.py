@@ -17,17 +17,21 @@ from dataclasses import dataclass
 from sqlalchemy import Connection, text
 from sqlalchemy.ext.asyncio import AsyncConnection
 
+# Today's date in UTC, whatever the session's time zone: partitions are UTC days, and a session
+# need not be in UTC (libpq's PGTZ overrides the engine's `timezone=UTC`), so `current_date`
+# could drop or delete a day early or keep one late.
+UTC_TODAY = "(now() AT TIME ZONE 'UTC')::date"
 ENSURE_SQL = text(
-    "SELECT ensure_ping_partitions(current_date - 1, current_date + CAST(:ahead AS integer))"
+    f"SELECT ensure_ping_partitions({UTC_TODAY} - 1, {UTC_TODAY} + CAST(:ahead AS integer))"
 )
 RETENTION_SQL = text(
-    "SELECT drop_ping_partitions_before(current_date - CAST(:keep_days AS integer))"
+    f"SELECT drop_ping_partitions_before({UTC_TODAY} - CAST(:keep_days AS integer))"
 )
 # Rows past retention, deleted where whole days cannot be dropped: the status reports (one table)
 # and the pings that wait in the default partition.
 RETENTION_DELETE_SQL = (
     "DELETE FROM {table} "
-    "WHERE ts < (current_date - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
+    f"WHERE ts < ({UTC_TODAY} - CAST(:keep_days AS integer))::timestamp AT TIME ZONE 'UTC'"
 )
 STATUS_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_status"))
 DEFAULT_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_ping_default"))

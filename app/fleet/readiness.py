@@ -262,11 +262,16 @@ def _unreported(label: str, what: str) -> Grade:
     return Grade("red", "—", f"the car's status did not report {what}", f"{label} not reported")
 
 
+def _sent_at(ts: datetime, received_at: datetime) -> datetime:
+    """When a message was sent: by the car's time, but never later than the server received it.
+    A car whose clock runs ahead (the server accepts up to 300 s) would otherwise show a negative
+    age, green, and stay green that much longer after it fell silent."""
+    return min(ts, received_at)
+
+
 def _age_s(ts: datetime, received_at: datetime, now: datetime) -> float:
-    """How long ago a message was sent: by the car's time, but never later than the server
-    received it. A car whose clock runs ahead (the server accepts up to 300 s) would otherwise
-    show a negative age, green, and stay green that much longer after it fell silent."""
-    return max((now - min(ts, received_at)).total_seconds(), 0.0)
+    """How long ago a message was sent (`_sent_at`), never negative."""
+    return max((now - _sent_at(ts, received_at)).total_seconds(), 0.0)
 
 
 def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
@@ -431,15 +436,21 @@ def check_controller(facts: VehicleFacts, now: datetime, limits: Thresholds) -> 
 
 
 def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
-    """Age of the speed plan the car holds (it falls back to stock ACC when it is stale)."""
+    """Age of the speed plan the car holds (it falls back to stock ACC when it is stale).
+
+    The car measured the age when it sent the report; the plan has aged since as far as the
+    server knows: a report sent 60 s ago that said 10 s is a plan 70 s old now. Read as it was
+    sent, a car that fell silent with a fresh plan showed that plan fresh for ever.
+    """
     status = facts.last_status
     if status is None:
         return _unknown("plan", "its plan")
     if status.plan_age_s is None:
         return Grade("amber", "none", "no plan held: the car drives on stock ACC", "no plan held")
     amber, red = limits.plan_age_s
-    level = grade_rising(status.plan_age_s, limits.plan_age_s)
-    age = describe_age(status.plan_age_s)
+    age_s = status.plan_age_s + _age_s(status.ts, status.received_at, now)
+    level = grade_rising(age_s, limits.plan_age_s)
+    age = describe_age(age_s)
     return Grade(level, age, f"amber from {amber:g} s, red from {red:g} s", f"plan {age} old")
 
 
@@ -612,7 +623,12 @@ def _graded(check: Check, facts: VehicleFacts, now: datetime, limits: Thresholds
     if not check.from_report or facts.last_status is None or not facts.earlier_statuses:
         return CheckResult(check.name, check.label, *latest)
     reports = (*facts.earlier_statuses, facts.last_status)
-    grades = [check.evaluate(replace(facts, last_status=r), r.ts, limits) for r in reports[:-1]]
+    # each earlier report as of when it was sent, so nothing it says has aged (graded as of its
+    # `ts`, a car whose clock runs ahead would have its plans aged by its lead)
+    grades = [
+        check.evaluate(replace(facts, last_status=r), _sent_at(r.ts, r.received_at), limits)
+        for r in reports[:-1]
+    ]
     grades.append(latest)
     held = hold_levels(
         [r.ts.timestamp() for r in reports], [g.level for g in grades], limits.hold_s

@@ -23,8 +23,19 @@ STATUS_COLUMNS = {
 
 
 async def vehicle_exists(session: AsyncSession, vehicle_id: str) -> bool:
-    """True when the roster knows the vehicle."""
-    found = await session.scalar(select(Vehicle.vehicle_id).where(Vehicle.vehicle_id == vehicle_id))
+    """True when the roster knows the vehicle, which then stays until the transaction ends.
+
+    The row is locked FOR KEY SHARE (what the report's foreign key takes anyway, so no update of
+    the car's config waits on it): an operator deleting the car in SQL meanwhile waits for the
+    report to be stored, and a delete already under way is waited for and the car then found
+    unknown. A plain read let the delete in between, and the insert's foreign-key violation
+    answered 500.
+    """
+    found = await session.scalar(
+        select(Vehicle.vehicle_id)
+        .where(Vehicle.vehicle_id == vehicle_id)
+        .with_for_update(read=True, key_share=True)
+    )
     return found is not None
 
 

@@ -127,6 +127,35 @@ def test_a_car_whose_clock_runs_ahead_ages_from_when_its_messages_arrived() -> N
 
 
 @pytest.mark.parametrize(
+    ("sent_s_ago", "plan_age_s", "level", "shown"),
+    [(0, 100.0, "amber", "100 s"), (100, 10.0, "amber", "110 s"), (100, 100.0, "red", "200 s")],
+)
+def test_a_plan_ages_from_when_the_car_reported_it(
+    sent_s_ago: int, plan_age_s: float, level: str, shown: str
+) -> None:
+    """A report sent N s ago that said "plan 10 s old" means a plan 10 + N s old now; read as
+    it was sent, a car that fell silent with a fresh plan kept a green plan check for ever."""
+    sent = NOW - timedelta(seconds=sent_s_ago)
+    status = healthy_status(ts=sent, received_at=sent, plan_age_s=plan_age_s)
+    plan = assess(healthy_facts(last_status=status), NOW, LIMITS).checks[CHECK_NAMES.index("plan")]
+    assert (plan.level, plan.value, plan.reason) == (level, shown, f"plan {shown} old")
+
+
+def test_the_earlier_reports_of_a_car_whose_clock_runs_ahead_keep_their_plan_age() -> None:
+    """Replayed for hysteresis, each report is graded as of when it was sent (when it arrived,
+    for a clock 250 s ahead), not as of its `ts`, which would age its plan by the clock's lead."""
+    lead = timedelta(seconds=250)
+    statuses = [
+        healthy_status(ts=NOW + lead - timedelta(seconds=s), received_at=NOW - timedelta(seconds=s))
+        for s in range(120, -1, -10)
+    ]
+    facts = healthy_facts(last_status=statuses[-1], earlier_statuses=tuple(statuses[:-1]))
+    readiness = assess(facts, NOW, replace(LIMITS, hold_s=60.0))
+    assert readiness.level_of("plan") == "green"
+    assert readiness.is_cleared
+
+
+@pytest.mark.parametrize(
     ("change", "check", "level"),
     [
         ({"has_gps_fix": False}, "gps", "red"),
@@ -256,11 +285,12 @@ def test_a_car_of_an_unknown_make_gets_an_amber_can_check_that_says_so() -> None
 
 
 def test_reasons_read_as_words() -> None:
-    status = healthy_status(plan_age_s=212.0, is_acc_available=False)
+    # sent 5 s ago: the plan is 5 s older now than the car said
+    status = healthy_status(plan_age_s=207.0, is_acc_available=False)
     readiness = assess(healthy_facts(last_status=status), NOW, LIMITS)
     assert readiness.problems == ("ACC not available", "plan 212 s old")
     silent = healthy_facts(last_status=healthy_status(ts=NOW - timedelta(minutes=12)))
-    assert assess(silent, NOW, LIMITS).problems == ("no status for 12 min",)
+    assert assess(silent, NOW, LIMITS).problems == ("no status for 12 min", "plan 12 min old")
 
 
 def reports(*rates: float, every_s: float = 10.0) -> VehicleFacts:

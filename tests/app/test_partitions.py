@@ -110,3 +110,45 @@ def test_retention_reaches_old_pings_without_a_partition_and_old_status_reports(
         for table in ("fact_vehicle_ping", "fact_vehicle_status"):
             kept = connection.execute(text(f"SELECT ts FROM {table}")).scalars().all()
             assert kept == [recent_ts], table
+
+
+def a_zone_off_the_utc_date() -> str:
+    """A time zone whose date is not the UTC date now: UTC+14 from 10:00 UTC, UTC-12 before
+    12:00 UTC."""
+    return "Pacific/Kiritimati" if datetime.now(UTC).hour >= 12 else "Etc/GMT+12"
+
+
+def test_retention_counts_utc_days_whatever_the_sessions_time_zone(seeded_engine: Engine) -> None:
+    """Partitions are UTC days; a session in another zone (libpq's PGTZ overrides the engine's
+    `timezone=UTC`) read `current_date` there, and dropped or deleted a day early or late."""
+    today = datetime.now(UTC).date()
+    first_kept = today - timedelta(days=3)
+    kept_ts = datetime.combine(first_kept, time(0, 0, 30), tzinfo=UTC)
+    gone_ts = kept_ts - timedelta(minutes=1)
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("SELECT ensure_ping_partitions(CAST(:first AS date), CAST(:last AS date))"),
+            {"first": today - timedelta(days=6), "last": today},
+        )
+        for ts in (gone_ts, kept_ts):
+            connection.execute(
+                text("INSERT INTO fact_vehicle_status (vehicle_id, ts) VALUES ('SF-001', :ts)"),
+                {"ts": ts},
+            )
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("SELECT set_config('TimeZone', :zone, true)"), {"zone": a_zone_off_the_utc_date()}
+        )
+        maintain(connection, ahead_days=2, retention_days=3)
+    with seeded_engine.connect() as connection:
+        days = connection.execute(
+            text(
+                "SELECT min(to_date(right(child.relname, 8), 'YYYYMMDD')) FROM pg_inherits "
+                "JOIN pg_class child ON child.oid = pg_inherits.inhrelid "
+                "WHERE pg_inherits.inhparent = 'fact_vehicle_ping'::regclass "
+                "AND child.relname <> 'fact_vehicle_ping_default'"
+            )
+        ).scalar_one()
+        kept = connection.execute(text("SELECT ts FROM fact_vehicle_status")).scalars().all()
+    assert days == first_kept
+    assert kept == [kept_ts]

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import time
 from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
@@ -190,3 +192,41 @@ def test_the_corridor_geometry_matches_the_seed(api: httpx.Client, seeded_engine
     assert unchanged.status_code == 304
     unknown = api.get("/api/v1/corridors/I-40-EB", headers=car)
     assert unknown.status_code == 404
+
+
+def _wait_for_a_lock_wait(engine: Engine, timeout_s: float = 20.0) -> None:
+    """Until a session of this database waits on a lock (the request, behind the delete)."""
+    deadline = time.monotonic() + timeout_s
+    with engine.connect() as watcher:
+        while time.monotonic() < deadline:
+            waiting = watcher.execute(
+                text(
+                    "SELECT count(*) FROM pg_stat_activity "
+                    "WHERE datname = current_database() AND wait_event_type = 'Lock'"
+                )
+            ).scalar_one()
+            if waiting:
+                return
+            watcher.rollback()
+            time.sleep(0.02)
+    raise AssertionError("the status request never waited for the vehicle's delete")
+
+
+def test_a_vehicle_deleted_while_its_report_is_stored_is_404_not_500(
+    api: httpx.Client, seeded_engine: Engine
+) -> None:
+    """An operator deletes the car in SQL while its report is being stored: the report's insert
+    cannot reference the row any more, which was a foreign-key violation and a 500."""
+    operator = bearer(issue(seeded_engine, "operator"))
+    with seeded_engine.connect() as deleting, ThreadPoolExecutor(1) as pool:
+        deleting.execute(text("DELETE FROM dim_vehicle WHERE vehicle_id = 'SF-050'"))
+        posted = pool.submit(
+            api.post, "/api/v1/vehicles/SF-050/status", json=report(), headers=operator
+        )
+        _wait_for_a_lock_wait(seeded_engine)
+        deleting.commit()
+        answer = posted.result(timeout=30)
+
+    assert answer.status_code == 404
+    assert answer.json() == {"detail": "unknown vehicle SF-050"}
+    assert statuses(seeded_engine) == []
