@@ -985,7 +985,7 @@ class Agent:
         if self.buttons is not None:
             # every line, whatever the control thread (which may not have stopped) last held
             try:
-                self.buttons.close()
+                self.buttons.close(SafetyContext(now, self.reader.snapshot(now)))
             except Exception:
                 log.exception("letting go of the buttons failed")
         self.spool.close()

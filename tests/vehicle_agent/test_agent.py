@@ -310,6 +310,32 @@ def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
         assert r.agent.buttons.deadman_releases == 0  # let go by the shutdown, not the timer
 
 
+def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The agent stopped with a press in its last frame and sent nothing more: the module
+    reading the buttons went on seeing the press (here, the emulated car echoes it in its own
+    button frames until its command timeout)."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses +
+        r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
+        assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
+        sent = r.agent.safety.sent
+        # the runner stops the agent once its control loop has waited out its period
+        r.clock.advance(r.agent.command_period_s)
+        r.agent.shutdown()
+        r.emulator.step(r.clock.monotonic())
+        car = r.agent.car
+        echoed = [
+            car.pressed_buttons(r.agent.codec.decode(frame.arbitration_id, frame.data)[1])
+            for frame in iter(lambda: r.agent_bus.recv(timeout=0), None)
+            if frame.arbitration_id == r.agent.codec.frame_id(car.command_message)
+        ]
+        assert echoed, "the car sent no button frame"
+        assert echoed[-1] == frozenset()
+        assert r.agent.safety.sent == sent + 1  # the release passed the safety layer
+
+
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -138,7 +138,7 @@ def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache
         safety,
     )
     board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
-    board.close()
+    board.close(SafetyContext(0.5, car_state(0.5)))
     board.hold(CruiseButton.MINUS, SafetyContext(1.0, car_state(1.0)))
     assert writes == [(17, True), (17, False), (27, False)]
     assert board.held is None
