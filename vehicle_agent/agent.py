@@ -961,7 +961,7 @@ class Agent:
         now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back(reason)
-        self.state = engage.EngageState(engage.Mode.STOCK, now, None, reason)
+        self.state = engage.failed(self.state, now, reason)
         if self.snapshot is not None:
             # telemetry reads the snapshot, which the failed pass did not renew: it must not go
             # on reporting the car as commanded

@@ -262,6 +262,31 @@ def test_a_can_interface_going_down_hands_back_at_once(
         assert engaged(r), r.agent.state.reason
 
 
+def test_a_failed_pass_does_not_cut_short_the_hold_off_after_a_driver_override(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fail-safe set the mode to STOCK, so a pass failing just after the driver let go of
+    the gas made the agent take over after the 1 s engage wait instead of the 3 s hold-off."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        r.emulator.driver_gas(True)
+        r.run(1.0, until=lambda: r.agent.state.mode is Mode.OVERRIDDEN)
+        assert r.agent.state.mode is Mode.OVERRIDDEN
+        r.emulator.driver_gas(False)
+        r.run(1.0, until=lambda: r.agent.state.since_s < r.clock.monotonic())
+        assert r.agent.state.mode is Mode.OVERRIDDEN
+        touched_last = r.agent.state.since_s  # the last pass that saw the gas pressed
+        monkeypatch.setattr(r.agent_bus, "recv", network_down)
+        with pytest.raises(can.CanOperationError):
+            r.run(CONTROL_PERIOD_S)
+        monkeypatch.undo()
+        r.run(10.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+        policy = r.agent.engage_policy
+        waited = r.clock.monotonic() - touched_last
+        assert waited >= policy.override_holdoff_s + policy.engage_after_s - 1e-9
+
+
 def gpio_rig(
     tmp_path: Path, dbc_cache: Path, levels: dict[int, bool]
 ) -> AbstractContextManager[Rig]:
