@@ -16,10 +16,11 @@ from contract.corridor import CorridorGeometry
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, seed_corridor_document, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
-from vehicle_agent.cars import CruiseButton
+from vehicle_agent.cars import CarReading, CruiseButton
 from vehicle_agent.controllers import AccelCommand, Action, Observation
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import CHECKS, Mode
+from vehicle_agent.gps import GpsFix
 from vehicle_agent.ports import GpioButtonBoard
 from vehicle_agent.safety import SafetyLayer
 
@@ -117,6 +118,50 @@ def test_can_loss_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) 
         sent = r.emulator.agent_frames
         r.run(1.0)
         assert r.emulator.agent_frames == sent  # no more requests: the stock ACC drives
+
+
+def test_a_control_pass_follows_the_plan_it_checked_not_one_replaced_meanwhile(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pass checked the freshness of the plan held, then read `lane_plan` again for the
+    controller: a plan the network thread put in between (here, an expired one the server
+    answered) was followed unchecked."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        fresh = r.agent.lane_plan
+        assert fresh is not None
+        published = r.clock.now() - timedelta(hours=1)  # valid_until 50 min ago
+        assert r.agent.accept_plan(uniform_plan(5.0, plan_id=2, published=published))
+        expired = r.agent.lane_plan
+        r.agent.lane_plan = fresh
+        # the network thread swaps the plans inside every pass: the fresh one is held when
+        # the pass checks it (after reading GPS), the expired one from the stopping check on
+        latest_fix, needs_hand_back = r.gps.latest, r.agent.stopping.needs_hand_back
+
+        def fix_then_fresh_plan() -> GpsFix | None:
+            r.agent.lane_plan = fresh
+            return latest_fix()
+
+        def expired_plan_then_check(time_s: float, reading: CarReading | None) -> bool:
+            r.agent.lane_plan = expired
+            return needs_hand_back(time_s, reading)
+
+        monkeypatch.setattr(r.gps, "latest", fix_then_fresh_plan)
+        monkeypatch.setattr(r.agent.stopping, "needs_hand_back", expired_plan_then_check)
+        assignment = r.agent.assignment
+        assert assignment is not None
+        step = assignment.controller.step
+        targets: list[float] = []
+
+        def recorded(observation: Observation) -> Action:
+            targets.append(observation.target_speed_mps)
+            return step(observation)
+
+        monkeypatch.setattr(assignment.controller, "step", recorded)
+        r.run(1.0)
+        assert engaged(r), r.agent.state.reason
+        assert targets
+        assert set(targets) == {26.8224}  # the fresh plan's target, never the expired 5 m/s
 
 
 def test_every_fault_hold_holds_an_engage_check() -> None:
