@@ -253,7 +253,7 @@ class Agent:
                 else CanButtonPort(car, self.codec, self.sender, lambda: self.reader.latest)
             )
         else:
-            self.accel_port = CanAccelPort(car, self.codec, self.sender)
+            self.accel_port = CanAccelPort(car, self.codec, self.sender, lambda: self.reader.latest)
         self.stats = AgentStats()
         self.started_s = clock.monotonic()
         self.assignment: Assignment | None = None

@@ -229,12 +229,20 @@ def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bo
 
 
 class CanAccelPort:
-    """Sends the make's acceleration request frame every command period."""
+    """Sends the make's acceleration request frame every command period; `latest` gives the
+    car's latest signals, which the frame may depend on (the RAV4's standstill release)."""
 
-    def __init__(self, car: CarInterface, codec: Codec, sender: SafeSender) -> None:
+    def __init__(
+        self,
+        car: CarInterface,
+        codec: Codec,
+        sender: SafeSender,
+        latest: Callable[[], Mapping[str, Signals]],
+    ) -> None:
         self.car = car
         self.codec = codec
         self.sender = sender
+        self.latest = latest
         self.frame_id = codec.frame_id(car.command_message)
         self._last_sent_s: float | None = None
 
@@ -247,7 +255,7 @@ class CanAccelPort:
 
     def request(self, accel_mps2: float, context: SafetyContext) -> bool:
         """Send a request for `accel_mps2` (already limited); True when it went out."""
-        signals = self.car.accel_signals(accel_mps2, {})
+        signals = self.car.accel_signals(accel_mps2, self.latest())
         try:
             data = self.codec.encode(self.car.command_message, signals)
         except (ValueError, OverflowError) as error:

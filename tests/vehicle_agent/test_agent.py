@@ -483,6 +483,50 @@ def test_driver_override_hands_back_within_one_period(
         assert r.agent.state.mode is Mode.OVERRIDDEN
 
 
+def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """ACC_CONTROL always carried RELEASE_STANDSTILL 1: at the PCM's standstill (CRUISE_STATE
+    7, where the stock ACC waits for the driver's RES or gas) it released the hold, and the
+    agent's request to speed up drove the car off with nobody resuming."""
+    with (
+        rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=0.0) as r,
+        can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
+    ):
+        codec = r.agent.codec
+        r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
+        r.emulator.driver_engage(set_speed_mph=30)
+
+        def run(seconds: float, cruise_state: int) -> list[dict[str, float]]:
+            """Drive for `seconds` with the PCM in `cruise_state`: the agent's requests."""
+            end = r.clock.monotonic() + seconds
+            while r.clock.monotonic() < end - 1e-9:
+                r.clock.advance(r.agent.command_period_s)
+                r.emulator.step(r.clock.monotonic())
+                pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
+                r.emulator.send_raw(
+                    can.Message(
+                        arbitration_id=codec.frame_id("PCM_CRUISE"),
+                        data=codec.encode("PCM_CRUISE", pcm),
+                        is_extended_id=False,
+                    )
+                )
+                r.agent.tick()
+            return [
+                codec.decode(frame.arbitration_id, frame.data)[1]
+                for frame in iter(lambda: listener.recv(timeout=0), None)
+                if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+            ]
+
+        held = run(3.0, cruise_state=7)  # "standstill"
+        assert engaged(r), r.agent.state.reason
+        assert any(request["ACCEL_CMD"] > 0 for request in held)  # the agent would go
+        assert {request["RELEASE_STANDSTILL"] for request in held} == {0}
+        resumed = run(1.0, cruise_state=8)  # "adaptive engaged": the driver pressed RES
+        assert resumed
+        assert {request["RELEASE_STANDSTILL"] for request in resumed} == {1}
+
+
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:
     with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
         engage_and_settle(r)
