@@ -253,7 +253,7 @@ class Agent:
                 else CanButtonPort(car, self.codec, self.sender, lambda: self.reader.latest)
             )
         else:
-            self.accel_port = CanAccelPort(car, self.codec, self.sender)
+            self.accel_port = CanAccelPort(car, self.codec, self.sender, lambda: self.reader.latest)
         self.stats = AgentStats()
         self.started_s = clock.monotonic()
         self.assignment: Assignment | None = None
@@ -361,7 +361,7 @@ class Agent:
         if self.state.commanding and now >= self._next_control_s:
             late = now - self._next_control_s > CONTROL_PERIOD_S
             self._next_control_s = (now if late else self._next_control_s) + CONTROL_PERIOD_S
-            self._control(now, wall, reading, x_m)
+            self._control(now, wall, reading, x_m, lane_plan)
         self._actuate(now, car_state, measured_accel)
         self.snapshot = Snapshot(
             time_s=now,
@@ -480,10 +480,17 @@ class Agent:
         log.info("agent hands back to the stock ACC: %s", reason)
 
     def _control(
-        self, now: float, wall: datetime, reading: CarReading | None, x_m: float | None
+        self,
+        now: float,
+        wall: datetime,
+        reading: CarReading | None,
+        x_m: float | None,
+        lane_plan: LanePlan | None,
     ) -> None:
+        """Step the running controller toward `lane_plan`, the plan this pass found fresh: the
+        network thread may replace or drop `self.lane_plan` meanwhile, and a plan put in after
+        the check (an expired one the server answered) must not be followed unchecked."""
         running = self._running
-        lane_plan = self.lane_plan
         if running is None or reading is None or lane_plan is None or x_m is None:
             return
         profile = lane_plan.profile(wall, self.wave_speed_mps, now)
@@ -961,7 +968,7 @@ class Agent:
         now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back(reason)
-        self.state = engage.EngageState(engage.Mode.STOCK, now, None, reason)
+        self.state = engage.failed(self.state, now, reason)
         if self.snapshot is not None:
             # telemetry reads the snapshot, which the failed pass did not renew: it must not go
             # on reporting the car as commanded
@@ -985,7 +992,7 @@ class Agent:
         if self.buttons is not None:
             # every line, whatever the control thread (which may not have stopped) last held
             try:
-                self.buttons.close()
+                self.buttons.close(SafetyContext(now, self.reader.snapshot(now)))
             except Exception:
                 log.exception("letting go of the buttons failed")
         self.spool.close()

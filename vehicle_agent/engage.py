@@ -108,6 +108,15 @@ def first_failure(inputs: EngageInputs) -> str | None:
     return None
 
 
+def failed(state: EngageState, now: float, reason: str) -> EngageState:
+    """The state after a pass of the control loop failed outright: not engaged, every check to
+    hold anew for `engage_after_s`. An override keeps its mode and the time of the driver's
+    last touch, so a failure never cuts short the hold-off the driver is owed."""
+    if state.mode is Mode.OVERRIDDEN:
+        return EngageState(Mode.OVERRIDDEN, state.since_s, None, reason)
+    return EngageState(Mode.STOCK, now, None, reason)
+
+
 def step(state: EngageState, inputs: EngageInputs, policy: EngagePolicy) -> EngageState:
     """The next state; never ENGAGED while a check fails or the driver is active."""
     now = inputs.time_s

@@ -32,7 +32,7 @@ class ButtonPort(Protocol):
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Hold `button` from now on (None: release)."""
 
-    def close(self) -> None:
+    def close(self, context: SafetyContext) -> None:
         """Let go of every button for good: the agent is stopping."""
 
 
@@ -55,17 +55,31 @@ class CanButtonPort:
         self._last_sent_s: float | None = None
         self._release_frames = 0
         self._closed = False
+        # the control loop holds, and a stopping agent closes, from whichever thread stops it
+        self._lock = threading.Lock()
 
     def hold(self, button: CruiseButton | None, context: SafetyContext) -> None:
         """Send this period's frame for `button` if one is due."""
         now = context.time_s
-        if self._closed or (button is None and self._release_frames == 0):
-            return
-        if (
-            self._last_sent_s is not None
-            and now - self._last_sent_s < PERIOD_SLACK * self.car.command_period_s
-        ):
-            return
+        with self._lock:
+            if self._closed or (button is None and self._release_frames == 0):
+                return
+            if (
+                self._last_sent_s is not None
+                and now - self._last_sent_s < PERIOD_SLACK * self.car.command_period_s
+            ):
+                return
+            if self._send(button, context):
+                self._release_frames = (
+                    RELEASE_FRAMES if button is not None else self._release_frames - 1
+                )
+            elif button is not None:
+                # Refused: fall back to releasing (always allowed) on the next period.
+                self._release_frames = RELEASE_FRAMES
+
+    def _send(self, button: CruiseButton | None, context: SafetyContext) -> bool:
+        """Send one frame pressing `button` (None: all released) through the safety layer;
+        True when it went out."""
         latest = self.latest()
         signals = self.car.button_signals(button, latest)
         counter = self.car.command_counter_signal
@@ -76,16 +90,12 @@ class CanButtonPort:
             data=self.codec.encode(self.car.command_message, signals),
             is_extended_id=False,
         )
-        if self.sender.send(frame, context):
-            self._last_sent_s = now
-            if self.car.command_counter_modulo:
-                self._counter = (self._counter + 1) % self.car.command_counter_modulo
-            self._release_frames = (
-                RELEASE_FRAMES if button is not None else self._release_frames - 1
-            )
-        elif button is not None:
-            # Refused: fall back to releasing (always allowed) on the next period.
-            self._release_frames = RELEASE_FRAMES
+        if not self.sender.send(frame, context):
+            return False
+        self._last_sent_s = context.time_s
+        if self.car.command_counter_modulo:
+            self._counter = (self._counter + 1) % self.car.command_counter_modulo
+        return True
 
     def _next_counter(self, car_frame: Signals) -> int:
         """The rolling counter of the next frame: one past the car's own last frame of this
@@ -99,9 +109,17 @@ class CanButtonPort:
             return self._counter
         return (int(seen) + 1) % self.car.command_counter_modulo
 
-    def close(self) -> None:
-        """Send nothing more: a button frame the car stops receiving is a released button."""
-        self._closed = True
+    def close(self, context: SafetyContext) -> None:
+        """Send a released frame if a press may still stand in the last frame sent, then
+        nothing more. The module reading the buttons acts on the last frame it received, so
+        an agent stopping mid-press must end with a release, as every press does (one frame:
+        the agent waits no more periods on its way out)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            if self._release_frames and not self._send(None, context):
+                log.warning("the release frame on closing was not sent: the car may see a press")
 
 
 class GpioButtonBoard:
@@ -165,10 +183,11 @@ class GpioButtonBoard:
                 self._deadman.start()
                 self.write_line(self.lines[button], True)
 
-    def close(self) -> None:
+    def close(self, context: SafetyContext) -> None:
         """Write every line low and refuse every later press (the agent is stopping)."""
         with self._lock:
             self._closed = True
+            self.safety.admit_press(frozenset(), context)  # a release: always admitted
             self._cancel_deadman()
             self.held = None
             for button, line in self.lines.items():
@@ -210,12 +229,20 @@ def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bo
 
 
 class CanAccelPort:
-    """Sends the make's acceleration request frame every command period."""
+    """Sends the make's acceleration request frame every command period; `latest` gives the
+    car's latest signals, which the frame may depend on (the RAV4's standstill release)."""
 
-    def __init__(self, car: CarInterface, codec: Codec, sender: SafeSender) -> None:
+    def __init__(
+        self,
+        car: CarInterface,
+        codec: Codec,
+        sender: SafeSender,
+        latest: Callable[[], Mapping[str, Signals]],
+    ) -> None:
         self.car = car
         self.codec = codec
         self.sender = sender
+        self.latest = latest
         self.frame_id = codec.frame_id(car.command_message)
         self._last_sent_s: float | None = None
 
@@ -228,7 +255,7 @@ class CanAccelPort:
 
     def request(self, accel_mps2: float, context: SafetyContext) -> bool:
         """Send a request for `accel_mps2` (already limited); True when it went out."""
-        signals = self.car.accel_signals(accel_mps2, {})
+        signals = self.car.accel_signals(accel_mps2, self.latest())
         try:
             data = self.codec.encode(self.car.command_message, signals)
         except (ValueError, OverflowError) as error:

@@ -16,10 +16,11 @@ from contract.corridor import CorridorGeometry
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, seed_corridor_document, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
-from vehicle_agent.cars import CruiseButton
+from vehicle_agent.cars import CarReading, CruiseButton
 from vehicle_agent.controllers import AccelCommand, Action, Observation
 from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import CHECKS, Mode
+from vehicle_agent.gps import GpsFix
 from vehicle_agent.ports import GpioButtonBoard
 from vehicle_agent.safety import SafetyLayer
 
@@ -117,6 +118,50 @@ def test_can_loss_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) 
         sent = r.emulator.agent_frames
         r.run(1.0)
         assert r.emulator.agent_frames == sent  # no more requests: the stock ACC drives
+
+
+def test_a_control_pass_follows_the_plan_it_checked_not_one_replaced_meanwhile(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The pass checked the freshness of the plan held, then read `lane_plan` again for the
+    controller: a plan the network thread put in between (here, an expired one the server
+    answered) was followed unchecked."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        fresh = r.agent.lane_plan
+        assert fresh is not None
+        published = r.clock.now() - timedelta(hours=1)  # valid_until 50 min ago
+        assert r.agent.accept_plan(uniform_plan(5.0, plan_id=2, published=published))
+        expired = r.agent.lane_plan
+        r.agent.lane_plan = fresh
+        # the network thread swaps the plans inside every pass: the fresh one is held when
+        # the pass checks it (after reading GPS), the expired one from the stopping check on
+        latest_fix, needs_hand_back = r.gps.latest, r.agent.stopping.needs_hand_back
+
+        def fix_then_fresh_plan() -> GpsFix | None:
+            r.agent.lane_plan = fresh
+            return latest_fix()
+
+        def expired_plan_then_check(time_s: float, reading: CarReading | None) -> bool:
+            r.agent.lane_plan = expired
+            return needs_hand_back(time_s, reading)
+
+        monkeypatch.setattr(r.gps, "latest", fix_then_fresh_plan)
+        monkeypatch.setattr(r.agent.stopping, "needs_hand_back", expired_plan_then_check)
+        assignment = r.agent.assignment
+        assert assignment is not None
+        step = assignment.controller.step
+        targets: list[float] = []
+
+        def recorded(observation: Observation) -> Action:
+            targets.append(observation.target_speed_mps)
+            return step(observation)
+
+        monkeypatch.setattr(assignment.controller, "step", recorded)
+        r.run(1.0)
+        assert engaged(r), r.agent.state.reason
+        assert targets
+        assert set(targets) == {26.8224}  # the fresh plan's target, never the expired 5 m/s
 
 
 def test_every_fault_hold_holds_an_engage_check() -> None:
@@ -262,6 +307,31 @@ def test_a_can_interface_going_down_hands_back_at_once(
         assert engaged(r), r.agent.state.reason
 
 
+def test_a_failed_pass_does_not_cut_short_the_hold_off_after_a_driver_override(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fail-safe set the mode to STOCK, so a pass failing just after the driver let go of
+    the gas made the agent take over after the 1 s engage wait instead of the 3 s hold-off."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        r.emulator.driver_gas(True)
+        r.run(1.0, until=lambda: r.agent.state.mode is Mode.OVERRIDDEN)
+        assert r.agent.state.mode is Mode.OVERRIDDEN
+        r.emulator.driver_gas(False)
+        r.run(1.0, until=lambda: r.agent.state.since_s < r.clock.monotonic())
+        assert r.agent.state.mode is Mode.OVERRIDDEN
+        touched_last = r.agent.state.since_s  # the last pass that saw the gas pressed
+        monkeypatch.setattr(r.agent_bus, "recv", network_down)
+        with pytest.raises(can.CanOperationError):
+            r.run(CONTROL_PERIOD_S)
+        monkeypatch.undo()
+        r.run(10.0, until=lambda: engaged(r))
+        assert engaged(r), r.agent.state.reason
+        policy = r.agent.engage_policy
+        waited = r.clock.monotonic() - touched_last
+        assert waited >= policy.override_holdoff_s + policy.engage_after_s - 1e-9
+
+
 def gpio_rig(
     tmp_path: Path, dbc_cache: Path, levels: dict[int, bool]
 ) -> AbstractContextManager[Rig]:
@@ -308,6 +378,32 @@ def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
         assert r.agent.state.reason == "stopped"
         assert isinstance(r.agent.buttons, GpioButtonBoard)
         assert r.agent.buttons.deadman_releases == 0  # let go by the shutdown, not the timer
+
+
+def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The agent stopped with a press in its last frame and sent nothing more: the module
+    reading the buttons went on seeing the press (here, the emulated car echoes it in its own
+    button frames until its command timeout)."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses +
+        r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
+        assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
+        sent = r.agent.safety.sent
+        # the runner stops the agent once its control loop has waited out its period
+        r.clock.advance(r.agent.command_period_s)
+        r.agent.shutdown()
+        r.emulator.step(r.clock.monotonic())
+        car = r.agent.car
+        echoed = [
+            car.pressed_buttons(r.agent.codec.decode(frame.arbitration_id, frame.data)[1])
+            for frame in iter(lambda: r.agent_bus.recv(timeout=0), None)
+            if frame.arbitration_id == r.agent.codec.frame_id(car.command_message)
+        ]
+        assert echoed, "the car sent no button frame"
+        assert echoed[-1] == frozenset()
+        assert r.agent.safety.sent == sent + 1  # the release passed the safety layer
 
 
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
@@ -385,6 +481,50 @@ def test_driver_override_hands_back_within_one_period(
         # The driver's input reaches the agent with the car's next frame (<= 50 ms).
         assert hand_back_time(r, touched_at) <= 0.05 + CONTROL_PERIOD_S
         assert r.agent.state.mode is Mode.OVERRIDDEN
+
+
+def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """ACC_CONTROL always carried RELEASE_STANDSTILL 1: at the PCM's standstill (CRUISE_STATE
+    7, where the stock ACC waits for the driver's RES or gas) it released the hold, and the
+    agent's request to speed up drove the car off with nobody resuming."""
+    with (
+        rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=0.0) as r,
+        can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
+    ):
+        codec = r.agent.codec
+        r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
+        r.emulator.driver_engage(set_speed_mph=30)
+
+        def run(seconds: float, cruise_state: int) -> list[dict[str, float]]:
+            """Drive for `seconds` with the PCM in `cruise_state`: the agent's requests."""
+            end = r.clock.monotonic() + seconds
+            while r.clock.monotonic() < end - 1e-9:
+                r.clock.advance(r.agent.command_period_s)
+                r.emulator.step(r.clock.monotonic())
+                pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
+                r.emulator.send_raw(
+                    can.Message(
+                        arbitration_id=codec.frame_id("PCM_CRUISE"),
+                        data=codec.encode("PCM_CRUISE", pcm),
+                        is_extended_id=False,
+                    )
+                )
+                r.agent.tick()
+            return [
+                codec.decode(frame.arbitration_id, frame.data)[1]
+                for frame in iter(lambda: listener.recv(timeout=0), None)
+                if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+            ]
+
+        held = run(3.0, cruise_state=7)  # "standstill"
+        assert engaged(r), r.agent.state.reason
+        assert any(request["ACCEL_CMD"] > 0 for request in held)  # the agent would go
+        assert {request["RELEASE_STANDSTILL"] for request in held} == {0}
+        resumed = run(1.0, cruise_state=8)  # "adaptive engaged": the driver pressed RES
+        assert resumed
+        assert {request["RELEASE_STANDSTILL"] for request in resumed} == {1}
 
 
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:

@@ -15,6 +15,7 @@ from vehicle_agent.engage import (
     EngagePolicy,
     EngageState,
     Mode,
+    failed,
     step,
 )
 
@@ -61,6 +62,22 @@ def test_every_state_against_every_combination_of_inputs(state: EngageState) -> 
         if result.mode is Mode.ENGAGED:
             assert all_pass
             assert not flags["driver_active"]
+
+
+@pytest.mark.parametrize("state", STATES, ids=lambda s: f"{s.mode.value}-{s.since_s}")
+def test_a_failed_pass_hands_back_and_keeps_an_override_from_the_last_touch(
+    state: EngageState,
+) -> None:
+    result = failed(state, 10.0, "agent step failed")
+    assert result.mode is not Mode.ENGAGED
+    assert result.ready_since_s is None  # every check holds anew before taking over
+    assert result.reason == "agent step failed"
+    if state.mode is Mode.OVERRIDDEN:
+        assert result.mode is Mode.OVERRIDDEN
+        assert result.since_s == state.since_s
+        within = state.since_s + POLICY.override_holdoff_s > 10.0
+        # all inputs good: still held off within the hold-off, as without the failure
+        assert (step(result, inputs(10.0), POLICY).mode is Mode.OVERRIDDEN) is within
 
 
 def test_takes_over_after_steady_conditions_and_hands_back_at_once() -> None:

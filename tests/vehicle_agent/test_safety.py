@@ -138,7 +138,7 @@ def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache
         safety,
     )
     board.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
-    board.close()
+    board.close(SafetyContext(0.5, car_state(0.5)))
     board.hold(CruiseButton.MINUS, SafetyContext(1.0, car_state(1.0)))
     assert writes == [(17, True), (17, False), (27, False)]
     assert board.held is None
@@ -158,7 +158,7 @@ def test_no_acceleration_frame_leaves_out_of_limits(
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety), dict)
     sent_at: list[tuple[float, float]] = []
     for index, (request, (valid, engaged, state_age)) in enumerate(steps):
         now = index / 30
@@ -452,7 +452,7 @@ def test_what_the_limiter_lets_through_the_safety_layer_accepts(
     agent_bus, car_bus = buses
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)))
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)), dict)
     limiter = AccelLimiter()
     limiter.reset(measured, 0.0)
     for index, request in enumerate(requests, start=1):

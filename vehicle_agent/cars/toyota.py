@@ -7,6 +7,12 @@ and relative speed; checksum). The RAV4 is the make that measures the leader (pa
 distance of 252 m or more, or 0, means no leader, the field team's convention for "none".
 Sent: ACC_CONTROL with ACCEL_CMD at ~30 Hz (checksum). The RAV4 has no button actuation, so a
 change of the set speed or the distance lines is the driver's doing.
+
+At the PCM's standstill (PCM_CRUISE CRUISE_STATE 7) the car stays stopped until the driver
+resumes (RES or the gas pedal); ACC_CONTROL's RELEASE_STANDSTILL 1 releases that hold, as
+openpilot sets it to drive off by itself. The agent never does: the field team's libpanda
+released it only while the PCM was engaged (CRUISE_STATE 8 and above), and driving off from a
+standstill the stock ACC holds is left to the driver.
 """
 
 from __future__ import annotations
@@ -25,6 +31,9 @@ from vehicle_agent.cars.base import (
 from vehicle_agent.codec import Checksum, ToyotaChecksum
 
 NO_LEAD_DISTANCE_M = 252.0
+# PCM_CRUISE CRUISE_STATE while the PCM holds the car stopped for the driver to resume
+# (opendbc's value table: "standstill").
+CRUISE_STATE_STANDSTILL = 7
 
 _CHECKSUM = ToyotaChecksum()
 
@@ -78,13 +87,15 @@ class ToyotaRav4(CarInterface):
         )
 
     def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
-        """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted."""
+        """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted, releasing the
+        standstill only while the PCM holds none (the module docstring says why)."""
+        pcm_holds = latest.get("PCM_CRUISE", {}).get("CRUISE_STATE") == CRUISE_STATE_STANDSTILL
         return {
             "ACCEL_CMD": accel_mps2,
             "ACC_TYPE": 1,
             "ALLOW_LONG_PRESS": 1,
             "PERMIT_BRAKING": 1,
-            "RELEASE_STANDSTILL": 1,
+            "RELEASE_STANDSTILL": 0 if pcm_holds else 1,
             "CANCEL_REQ": 0,
         }
 
