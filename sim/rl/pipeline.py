@@ -222,6 +222,7 @@ def _cross_validate(
         tested,
         planner=config.planner,
         planner_params=config.planner_params,
+        bounds=config.gap_bounds,  # the envelope the policy was trained to keep, as recorded
         progress=scoring_progress(progress, f"{stage} held-out", len(fold.held_out) * len(tested)),
     )
     record = {

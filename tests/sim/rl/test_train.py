@@ -5,13 +5,16 @@ from __future__ import annotations
 import hashlib
 import json
 import subprocess
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sim.drives import Drive, load_drive
+from sim.gaps import GapBounds
 from sim.rl.env import EnvConfig
+from sim.rl.pipeline import run_training
 from sim.rl.scores import ControllerUnderTest
 from sim.rl.train import PpoSettings, export_policy, train_policy
 from tests.sim.test_evaluate import write_drive
@@ -125,6 +128,29 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     assert len(scored) == 8  # 4 drives x (rl_accel, microaccel), each on its held-out fold
     assert "rl_accel" in result.stdout
     assert "sha256" in result.stdout
+
+
+@pytest.mark.slow
+def test_held_out_scores_judge_the_envelope_the_policy_was_trained_to_keep(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    """The manifest records the training's gap bounds; its held-out "gap within" share must be
+    against the same bounds. No AV keeps a gap of 0-1 m: every share is 0 with those bounds
+    (the default 7-120 m envelope gave 1.0 on these slices)."""
+    fast = load_drive(shared_dir / FREEFLOW)
+    drives = [
+        replace(fast.slice(start, 120.0), name=name)
+        for name, start in (("2021-04-05-a", 0.0), ("2021-03-09-a", 220.0))
+    ]
+    bounds = GapBounds(min_gap_m=0.0, max_gap_m=1.0, min_time_gap_s=0.0)
+    config = EnvConfig("accel", humans=4, episode_s=60.0, gap_bounds=bounds)
+    run = run_training(
+        drives, config, TINY, timesteps=512, seed=3, folds=2, out_dir=tmp_path, final=False
+    )
+    manifest = json.loads(run.manifest_path.read_text())
+    assert manifest["environment"]["gap_bounds"]["max_gap_m"] == 1.0
+    shares = {row["gap_within_share"] for row in manifest["cross_validation"]["drives"]}
+    assert shares == {0.0}
 
 
 def test_cli_train_names_a_missing_folder(tmp_path: Path) -> None:
