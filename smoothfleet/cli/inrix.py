@@ -118,12 +118,26 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
 
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
         store = _storer(sessions, lambda snapshot: timedelta(0))
+        recording = record
 
         async def handle(snapshot: RecordedSnapshot) -> None:
+            nonlocal recording
             await store(snapshot)
-            if record is not None:
-                with record.open("ab") as handle_file:
+            if recording is None:
+                return
+            try:
+                with recording.open("ab") as handle_file:
                     handle_file.write(to_line(snapshot))
+            except OSError as error:
+                # The planner reads the warehouse, not the recording: a full disk or a lost
+                # mount under the recording must not stop the feed the fleet drives on. The
+                # recording stops whole, so no later line follows one cut short.
+                logging.error(
+                    "recording to %s failed (%s): snapshots are still stored, no longer recorded",
+                    recording,
+                    error.strerror or error,
+                )
+                recording = None
 
         async with httpx.AsyncClient() as client:
             poller = InrixPoller(

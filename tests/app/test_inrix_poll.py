@@ -122,6 +122,31 @@ def test_poll_retries_until_the_provider_answers_and_never_shows_the_key(
     )
 
 
+def test_a_recording_that_cannot_be_written_stops_recording_not_polling(
+    provider: tuple[Provider, str], seeded_database_url: str, tmp_path: Path
+) -> None:
+    """A full disk under the recording (/dev/full answers every write with ENOSPC) must not end
+    the feed the planner reads: both snapshots are still polled and stored."""
+    fake, url = provider
+    recording = tmp_path / "polled.jsonl"
+    recording.symlink_to("/dev/full")
+    env = cli_env(
+        SMOOTHFLEET_DATABASE_URL=seeded_database_url,
+        SMOOTHFLEET_INRIX_URL=url,
+        SMOOTHFLEET_INRIX_KEY=KEY,
+        SMOOTHFLEET_INRIX_POLL_PERIOD_S="0.1",
+    )
+
+    result = run_cli("inrix", "poll", "--count", "2", "--record", str(recording), env=env)
+
+    assert result.returncode == 0, result.stderr
+    assert len(fake.authorizations) == 2 + 2  # the two failures, then two snapshots
+    assert f"recording to {recording} failed (No space left on device)" in result.stderr
+    assert result.stderr.count("failed (No space left on device)") == 1
+    assert "18 stored" in result.stdout
+    assert "0 stored, 18 already stored" in result.stdout
+
+
 @pytest.mark.parametrize("missing", ["SMOOTHFLEET_INRIX_URL", "SMOOTHFLEET_INRIX_KEY"])
 def test_poll_without_url_or_key_is_one_line_naming_it(
     seeded_database_url: str, missing: str
