@@ -541,7 +541,10 @@ class Agent:
             if self.sender.send_errors > send_errors_before:
                 self._fault("commands_sent", now)
         elif self.accel_port is not None and self.state.commanding and self.accel_port.due(now):
-            accel = self.limiter.limit(now, self._requested_accel)
+            # While the car stands until the driver resumes, the request goes to the car's 0
+            # (within the jerk limits), so resuming pulls away from 0, not with what had built up.
+            standing = self.car.holds_standstill(self.reader.latest)
+            accel = self.limiter.limit(now, 0.0 if standing else self._requested_accel)
             send_errors_before = self.sender.send_errors
             if not self.accel_port.request(accel, context):
                 sent_error = self.sender.send_errors > send_errors_before

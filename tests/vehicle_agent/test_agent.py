@@ -3,6 +3,7 @@ taking over, reaching set points, handing back within one control period, bad in
 
 from __future__ import annotations
 
+import itertools
 import math
 from contextlib import AbstractContextManager
 from dataclasses import replace
@@ -520,11 +521,20 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
 
         held = run(3.0, cruise_state=7)  # "standstill"
         assert engaged(r), r.agent.state.reason
-        assert any(request["ACCEL_CMD"] > 0 for request in held)  # the agent would go
+        assert r.agent._requested_accel > 0  # the controller would go
         assert {request["RELEASE_STANDSTILL"] for request in held} == {0}
+        # the request goes to the standing car's 0 and stays: nothing builds up to be let go
+        commands = [request["ACCEL_CMD"] for request in held]
+        assert all(later <= earlier for earlier, later in itertools.pairwise(commands))
+        assert commands[-1] == 0.0
         resumed = run(1.0, cruise_state=8)  # "adaptive engaged": the driver pressed RES
         assert resumed
         assert {request["RELEASE_STANDSTILL"] for request in resumed} == {1}
+        # pulling away within the limiter's 2.5 m/s^3 from 0 (one frame's quantum of slack)
+        period = r.agent.command_period_s
+        for frame, request in enumerate(resumed, start=1):
+            assert request["ACCEL_CMD"] <= 2.5 * period * frame + 0.01
+        assert resumed[-1]["ACCEL_CMD"] > 0
 
 
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:

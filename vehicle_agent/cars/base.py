@@ -106,6 +106,11 @@ class CarInterface(ABC):
         """Signals of the command message requesting `accel_mps2`."""
         raise NotImplementedError(f"{self.key} is not actuated by acceleration requests")
 
+    def holds_standstill(self, latest: Mapping[str, Signals]) -> bool:
+        """Whether the stock ACC holds the car stopped until the driver resumes it, so that no
+        acceleration request moves it (accel makes; none by default)."""
+        return False
+
     def commanded_accel(self, signals: Signals) -> float:
         """The acceleration a decoded command frame requests (accel makes)."""
         raise NotImplementedError(f"{self.key} is not actuated by acceleration requests")

@@ -86,10 +86,14 @@ class ToyotaRav4(CarInterface):
             gas_pressed=not cruise["GAS_RELEASED"],
         )
 
+    def holds_standstill(self, latest: Mapping[str, Signals]) -> bool:
+        """The PCM's standstill (CRUISE_STATE 7): stopped until the driver's RES or gas."""
+        return latest.get("PCM_CRUISE", {}).get("CRUISE_STATE") == CRUISE_STATE_STANDSTILL
+
     def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
         """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted, releasing the
         standstill only while the PCM holds none (the module docstring says why)."""
-        pcm_holds = latest.get("PCM_CRUISE", {}).get("CRUISE_STATE") == CRUISE_STATE_STANDSTILL
+        pcm_holds = self.holds_standstill(latest)
         return {
             "ACCEL_CMD": accel_mps2,
             "ACC_TYPE": 1,
