@@ -36,8 +36,9 @@ class ButtonPort(Protocol):
         """Let go of every button for good: the agent is stopping."""
 
 
-class CanButtonPort:
-    """Holds a button by sending the make's button frame every command period."""
+class CanCommandPort:
+    """The make's command message on CAN, sent at most once a command period; `latest` gives
+    the car's latest signals, which a frame may copy or depend on."""
 
     def __init__(
         self,
@@ -51,8 +52,28 @@ class CanButtonPort:
         self.sender = sender
         self.latest = latest
         self.frame_id = codec.frame_id(car.command_message)
-        self._counter = 0
         self._last_sent_s: float | None = None
+
+    def due(self, now: float) -> bool:
+        """True when the next frame should go out."""
+        return (
+            self._last_sent_s is None
+            or now - self._last_sent_s >= PERIOD_SLACK * self.car.command_period_s
+        )
+
+
+class CanButtonPort(CanCommandPort):
+    """Holds a button by sending the make's button frame every command period."""
+
+    def __init__(
+        self,
+        car: CarInterface,
+        codec: Codec,
+        sender: SafeSender,
+        latest: Callable[[], Mapping[str, Signals]],
+    ) -> None:
+        super().__init__(car, codec, sender, latest)
+        self._counter = 0
         self._release_frames = 0
         self._closed = False
         # the control loop holds, and a stopping agent closes, from whichever thread stops it
@@ -64,10 +85,7 @@ class CanButtonPort:
         with self._lock:
             if self._closed or (button is None and self._release_frames == 0):
                 return
-            if (
-                self._last_sent_s is not None
-                and now - self._last_sent_s < PERIOD_SLACK * self.car.command_period_s
-            ):
+            if not self.due(now):
                 return
             if self._send(button, context):
                 self._release_frames = (
@@ -228,30 +246,9 @@ def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bo
     return write
 
 
-class CanAccelPort:
-    """Sends the make's acceleration request frame every command period; `latest` gives the
-    car's latest signals, which the frame may depend on (the RAV4's standstill release)."""
-
-    def __init__(
-        self,
-        car: CarInterface,
-        codec: Codec,
-        sender: SafeSender,
-        latest: Callable[[], Mapping[str, Signals]],
-    ) -> None:
-        self.car = car
-        self.codec = codec
-        self.sender = sender
-        self.latest = latest
-        self.frame_id = codec.frame_id(car.command_message)
-        self._last_sent_s: float | None = None
-
-    def due(self, now: float) -> bool:
-        """True when the next request frame should go out."""
-        return (
-            self._last_sent_s is None
-            or now - self._last_sent_s >= PERIOD_SLACK * self.car.command_period_s
-        )
+class CanAccelPort(CanCommandPort):
+    """Sends the make's acceleration request frame every command period (the frame may depend
+    on the car's latest signals: the RAV4's standstill release)."""
 
     def request(self, accel_mps2: float, context: SafetyContext) -> bool:
         """Send a request for `accel_mps2` (already limited); True when it went out."""
