@@ -8,7 +8,8 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
   plus, minus and gap buttons, one at a time, a new press no sooner than 0.45 s after the last,
   no hold longer than 1.1 s (the sequencer holds 0.9 s for one 5 mph step; a button held
   1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
-- rate: no faster than 0.8 x the make's command period;
+- rate: no faster than 0.8 x the make's command period (but for the one release that ends a
+  press: a stopping agent must not leave a press in the car's last frame);
 - the car: ACC engaged by the driver, the car state valid and fresh.
 """
 
@@ -24,6 +25,7 @@ import can
 
 from vehicle_agent.actuators import AccelLimits
 from vehicle_agent.cars import CarInterface, CarState, CruiseButton
+from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import Codec, FrameError
 from vehicle_agent.logs import ThrottledLog
 
@@ -101,6 +103,9 @@ class SafetyLayer:
         self._held: frozenset[CruiseButton] = frozenset()
         self._press_started_s: float | None = None
         self._released_s: float | None = None
+        # whether the last frame let through pressed a button: what the car reads now, which
+        # `idle` (a hand-back) does not change
+        self._last_frame_pressed = False
         self._log = ThrottledLog(log)
 
     def check(self, frame: can.Message, context: SafetyContext) -> Refusal | None:
@@ -120,10 +125,9 @@ class SafetyLayer:
         if not all(math.isfinite(float(value)) for value in signals.values()):
             return Refusal("value", "non-finite signal value")
         minimum_gap = self.limits.min_period_fraction * self.car.command_period_s
-        if self._last_sent_s is not None and now - self._last_sent_s < minimum_gap:
-            return Refusal(
-                "rate", f"rate: sent {now - self._last_sent_s:.3f} s after the previous frame"
-            )
+        last = self._last_sent_s
+        if last is not None and now - last < minimum_gap and not self._ends_a_press(signals):
+            return Refusal("rate", f"rate: sent {now - last:.3f} s after the previous frame")
         if self.car.actuation == "accel":
             return self._check_car(context) or self._check_accel(
                 self.car.commanded_accel(signals), signals, context
@@ -132,6 +136,18 @@ class SafetyLayer:
         if foreign is not None:
             return Refusal("button", f"{foreign}: not the agent's to send")
         return self.check_press(self.car.pressed_buttons(signals), context)
+
+    def _ends_a_press(self, signals: Signals) -> bool:
+        """A button frame releasing what the last frame held. It passes however soon after
+        that frame: releasing is always allowed, and refused, it would leave the press standing
+        in the last frame the car received (an agent stopping mid-press). Only once: the
+        releases after it keep the rate."""
+        return (
+            self.car.actuation != "accel"
+            and self._last_frame_pressed
+            and self.car.foreign_inputs(signals) is None
+            and not self.car.pressed_buttons(signals)
+        )
 
     def _check_car(self, context: SafetyContext) -> Refusal | None:
         state = context.car_state
@@ -231,7 +247,9 @@ class SafetyLayer:
         if self.car.actuation == "accel":
             self._last_accel = (now, self.car.commanded_accel(signals))
         else:
-            self._record_press(self.car.pressed_buttons(signals), now)
+            pressed = self.car.pressed_buttons(signals)
+            self._last_frame_pressed = bool(pressed)
+            self._record_press(pressed, now)
         return True
 
     def admit_press(self, pressed: frozenset[CruiseButton], context: SafetyContext) -> bool:

@@ -381,20 +381,22 @@ def test_stopping_the_agent_lets_go_of_the_button_a_gpio_board_holds(
         assert r.agent.buttons.deadman_releases == 0  # let go by the shutdown, not the timer
 
 
+@pytest.mark.parametrize("after_periods", [0.0, 0.5, 1.0])
 def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer(
-    tmp_path: Path, dbc_cache: Path
+    tmp_path: Path, dbc_cache: Path, after_periods: float
 ) -> None:
     """The agent stopped with a press in its last frame and sent nothing more: the module
     reading the buttons went on seeing the press (here, the emulated car echoes it in its own
-    button frames until its command timeout)."""
+    button frames until its command timeout). However soon after the last frame it stops (the
+    fleet worker's clock has not moved; a late control tick), the release gets through."""
     with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses +
         r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
         assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
         sent = r.agent.safety.sent
-        # the runner stops the agent once its control loop has waited out its period
-        r.clock.advance(r.agent.command_period_s)
+        r.clock.advance(after_periods * r.agent.command_period_s)
         r.agent.shutdown()
+        r.clock.advance(r.agent.command_period_s)  # the car's next own frame echoes what it read
         r.emulator.step(r.clock.monotonic())
         car = r.agent.car
         echoed = [

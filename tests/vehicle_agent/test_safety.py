@@ -277,6 +277,26 @@ def test_a_button_frame_setting_what_is_no_known_press_is_no_release(
     assert reason in refusal.detail
 
 
+def test_only_the_release_ending_a_press_may_come_sooner_than_the_rate(dbc_cache: Path) -> None:
+    """A release refused for its rate left a stopping agent's press standing in the car's last
+    frame. The one release after a press passes however soon; another right behind it, and a
+    press, keep the rate."""
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    frame_id = codec.frame_id(car.command_message)
+
+    def frame(button: CruiseButton | None) -> can.Message:
+        data = codec.encode(car.command_message, car.button_signals(button, {}))
+        return can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+
+    assert safety.admit(frame(CruiseButton.PLUS), SafetyContext(1.0, car_state(1.0)))
+    safety.idle()  # the agent hands back: the car still read the press last
+    assert safety.admit(frame(None), SafetyContext(1.01, car_state(1.01)))
+    assert not safety.admit(frame(None), SafetyContext(1.02, car_state(1.02)))
+    assert safety.refused["rate"] == 1
+
+
 def test_a_press_needs_a_real_release_before_it(
     buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
 ) -> None:
