@@ -623,25 +623,29 @@ def _graded(check: Check, facts: VehicleFacts, now: datetime, limits: Thresholds
     if not check.from_report or facts.last_status is None or not facts.earlier_statuses:
         return CheckResult(check.name, check.label, *latest)
     reports = (*facts.earlier_statuses, facts.last_status)
-    # each earlier report as of when it was sent, so nothing it says has aged (graded as of its
-    # `ts`, a car whose clock runs ahead would have its plans aged by its lead)
+    # Hysteresis is over what the car said: each report as of when it was sent, so nothing it
+    # says has aged (graded as of its `ts`, a car whose clock runs ahead would have its plans
+    # aged by its lead).
     grades = [
         check.evaluate(replace(facts, last_status=r), _sent_at(r.ts, r.received_at), limits)
-        for r in reports[:-1]
+        for r in reports
     ]
-    grades.append(latest)
     held = hold_levels(
         [r.ts.timestamp() for r in reports], [g.level for g in grades], limits.hold_s
     )
-    shown = grades[held.report]
+    level, shown = held.level, grades[held.report]
     pending = ""
     if held.pending is not None:
         pending = (
             f"{held.pending} for {held.pending_for_s:.0f} s of the {limits.hold_s:g} s "
             "it must hold to change"
         )
+    # What the silence since the latest report adds (a plan ageing) is no flicker, and no later
+    # report can hold it: it shows at once. Held back, a car fallen silent kept a fresh plan.
+    if SEVERITY[latest.level] > max(SEVERITY[grades[-1].level], SEVERITY[level]):
+        level, shown, pending = latest.level, latest, ""
     return CheckResult(
-        check.name, check.label, held.level, latest.value, latest.detail, shown.reason, pending
+        check.name, check.label, level, latest.value, latest.detail, shown.reason, pending
     )
 
 

@@ -141,6 +141,26 @@ def test_a_plan_ages_from_when_the_car_reported_it(
     assert (plan.level, plan.value, plan.reason) == (level, shown, f"plan {shown} old")
 
 
+def test_a_car_fallen_silent_shows_its_plan_aged_whatever_its_earlier_reports() -> None:
+    """The earlier reports are replayed for hysteresis, and the silence after the latest one
+    makes no later report: held back as a flicker, the aged plan never turned red."""
+    sent = NOW - timedelta(minutes=10)
+    statuses = [
+        healthy_status(
+            ts=sent - timedelta(seconds=s), received_at=sent - timedelta(seconds=s), plan_age_s=20.0
+        )
+        for s in range(180, -1, -10)
+    ]
+    facts = healthy_facts(last_status=statuses[-1], earlier_statuses=tuple(statuses[:-1]))
+    plan = assess(facts, NOW, LIMITS).checks[CHECK_NAMES.index("plan")]
+    assert (plan.level, plan.value, plan.reason, plan.pending) == (
+        "red",
+        "10 min",
+        "plan 10 min old",
+        "",
+    )
+
+
 def test_the_earlier_reports_of_a_car_whose_clock_runs_ahead_keep_their_plan_age() -> None:
     """Replayed for hysteresis, each report is graded as of when it was sent (when it arrived,
     for a clock 250 s ahead), not as of its `ts`, which would age its plan by the clock's lead."""
