@@ -14,6 +14,8 @@ segment codes are SF-I24WB-NN, NN being the column of those files (seed_data/bui
 
 from __future__ import annotations
 
+import contextlib
+import errno
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -51,6 +53,27 @@ def write_recording(path: Path, snapshots: Iterable[RecordedSnapshot]) -> int:
             handle.write(to_line(snapshot))
             count += 1
     return count
+
+
+def append_to_recording(path: Path, snapshot: RecordedSnapshot) -> None:
+    """Append one snapshot. A write that fails (a full disk) is undone back to the last whole
+    line before the error is raised: a line cut short would make `read_recording` refuse the
+    whole file."""
+    line = memoryview(to_line(snapshot))
+    with path.open("ab", buffering=0) as handle:  # unbuffered: every byte written is known
+        whole_until = handle.tell()
+        try:
+            while line:
+                written = handle.write(line)
+                if not written:  # a regular file takes a byte or raises; never spin on one
+                    raise OSError(errno.EIO, f"{path}: nothing written")
+                line = line[written:]
+        except OSError:
+            # the write's error is the one to raise, even when nothing can be undone (a device
+            # such as /dev/full cannot be truncated)
+            with contextlib.suppress(OSError):
+                handle.truncate(whole_until)
+            raise
 
 
 def read_recording(path: Path) -> list[RecordedSnapshot]:

@@ -23,9 +23,9 @@ from app.feeds.inrix import InrixFormatError, readings
 from app.feeds.poller import InrixPoller, PollFailed
 from app.feeds.recording import (
     RecordedSnapshot,
+    append_to_recording,
     read_recording,
     snapshots_from_drive,
-    to_line,
     write_recording,
 )
 from app.feeds.replay import live_offset
@@ -126,12 +126,11 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
             if recording is None:
                 return
             try:
-                with recording.open("ab") as handle_file:
-                    handle_file.write(to_line(snapshot))
+                append_to_recording(recording, snapshot)
             except OSError as error:
                 # The planner reads the warehouse, not the recording: a full disk or a lost
                 # mount under the recording must not stop the feed the fleet drives on. The
-                # recording stops whole, so no later line follows one cut short.
+                # recording keeps its whole lines, and stops.
                 logging.error(
                     "recording to %s failed (%s): snapshots are still stored, no longer recorded",
                     recording,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import subprocess
+import sys
 import threading
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
@@ -16,7 +18,12 @@ from pydantic import SecretStr
 from sqlalchemy import Engine, text
 
 from app.feeds.poller import InrixPoller
-from app.feeds.recording import RecordedSnapshot, read_recording, snapshots_from_drive
+from app.feeds.recording import (
+    RecordedSnapshot,
+    append_to_recording,
+    read_recording,
+    snapshots_from_drive,
+)
 from app.feeds.replay import live_offset, replay
 from tests.support.servers import cli_env, run_cli
 
@@ -145,6 +152,43 @@ def test_a_recording_that_cannot_be_written_stops_recording_not_polling(
     assert result.stderr.count("failed (No space left on device)") == 1
     assert "18 stored" in result.stdout
     assert "0 stored, 18 already stored" in result.stdout
+
+
+def test_a_write_cut_short_leaves_the_recording_whole(
+    snapshot: RecordedSnapshot, tmp_path: Path
+) -> None:
+    """A disk filling up mid-line left the bytes written, and `read_recording` refused the
+    whole file for the cut line. The append is undone to the last whole line. (A file-size
+    limit stands in for the full disk, in a process of its own: Python ignores SIGXFSZ, so
+    the write raises EFBIG once the limit is reached.)"""
+    recording = tmp_path / "polled.jsonl"
+    append_to_recording(recording, snapshot)
+    whole = recording.read_bytes()
+    script = (
+        "import resource, sys\n"
+        "from pathlib import Path\n"
+        "from app.feeds.recording import append_to_recording, read_recording\n"
+        "path = Path(sys.argv[1])\n"
+        "[snapshot] = read_recording(path)\n"
+        "limit = path.stat().st_size + 1000  # room for part of a second line only\n"
+        "resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))\n"
+        "try:\n"
+        "    append_to_recording(path, snapshot)\n"
+        "except OSError as error:\n"
+        "    print(error.strerror)\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script, str(recording)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=Path(__file__).resolve().parents[2],
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "File too large"
+    assert recording.read_bytes() == whole
+    assert len(read_recording(recording)) == 1
 
 
 @pytest.mark.parametrize("missing", ["SMOOTHFLEET_INRIX_URL", "SMOOTHFLEET_INRIX_KEY"])
