@@ -543,7 +543,8 @@ class Agent:
         elif self.accel_port is not None and self.state.commanding and self.accel_port.due(now):
             # While the car stands until the driver resumes, the request goes to the car's 0
             # (within the jerk limits), so resuming pulls away from 0, not with what had built up.
-            standing = self.car.holds_standstill(self.reader.latest)
+            reading = car_state.reading
+            standing = reading is not None and reading.standstill_held
             accel = self.limiter.limit(now, 0.0 if standing else self._requested_accel)
             send_errors_before = self.sender.send_errors
             if not self.accel_port.request(accel, context):

@@ -10,7 +10,8 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
   1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
-- the car: ACC engaged by the driver, the car state valid and fresh.
+- the car: ACC engaged by the driver, the car state valid and fresh, and no release of a
+  standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL).
 """
 
 from __future__ import annotations
@@ -170,6 +171,9 @@ class SafetyLayer:
             return Refusal("acceleration", f"acceleration {accel} m/s^2 outside [{low}, {high}]")
         if signals.get("CANCEL_REQ"):
             return Refusal("cancel", "cancel request")
+        held = context.car_state.reading is not None and context.car_state.reading.standstill_held
+        if held and self.car.releases_standstill(signals):
+            return Refusal("standstill", "releases a standstill held for the driver to resume")
         now = context.time_s
         last = self._last_accel
         if last is not None and now - last[0] <= self.limits.jerk_reference_s:

@@ -6,6 +6,7 @@ import itertools
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import can
@@ -295,6 +296,30 @@ def test_only_the_release_ending_a_press_may_come_sooner_than_the_rate(dbc_cache
     assert safety.admit(frame(None), SafetyContext(1.01, car_state(1.01)))
     assert not safety.admit(frame(None), SafetyContext(1.02, car_state(1.02)))
     assert safety.refused["rate"] == 1
+
+
+@pytest.mark.parametrize(("held", "refused"), [(True, True), (False, False)])
+def test_no_frame_releases_a_standstill_held_for_the_driver(
+    held: bool, refused: bool, dbc_cache: Path
+) -> None:
+    """The frame builder alone kept RELEASE_STANDSTILL at 0 while the RAV4's PCM holds the car
+    for the driver's resume: a builder that set it would have driven off unattended."""
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    state = car_state(1.0)
+    assert state.reading is not None
+    context = SafetyContext(
+        1.0, replace(state, reading=replace(state.reading, standstill_held=held)), 0.0
+    )
+    releasing = {**car.accel_signals(0.0, {}), "RELEASE_STANDSTILL": 1}
+    data = codec.encode(car.command_message, releasing)
+    frame = can.Message(
+        arbitration_id=codec.frame_id(car.command_message), data=data, is_extended_id=False
+    )
+    refusal = safety.check(frame, context)
+    assert (refusal is not None and refusal.kind == "standstill") is refused
+    assert (refusal is None) is not refused
 
 
 def test_a_press_needs_a_real_release_before_it(

@@ -58,6 +58,8 @@ class CarReading:
     brake_pressed: bool = False
     gas_pressed: bool = False
     buttons: frozenset[CruiseButton] = field(default_factory=frozenset)
+    # the stock ACC holds the car stopped until the driver resumes it (`holds_standstill`)
+    standstill_held: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,6 +111,11 @@ class CarInterface(ABC):
     def holds_standstill(self, latest: Mapping[str, Signals]) -> bool:
         """Whether the stock ACC holds the car stopped until the driver resumes it, so that no
         acceleration request moves it (accel makes; none by default)."""
+        return False
+
+    def releases_standstill(self, signals: Signals) -> bool:
+        """Whether a decoded command frame releases a standstill the stock ACC holds, driving
+        off without the driver (accel makes; none by default)."""
         return False
 
     def commanded_accel(self, signals: Signals) -> float:

@@ -84,11 +84,16 @@ class ToyotaRav4(CarInterface):
             lead_rel_speed_mps=float(lead["LEAD_REL_SPEED"]) if present else None,
             brake_pressed=bool(cruise_2["BRAKE_PRESSED"]),
             gas_pressed=not cruise["GAS_RELEASED"],
+            standstill_held=self.holds_standstill(signals),
         )
 
     def holds_standstill(self, latest: Mapping[str, Signals]) -> bool:
         """The PCM's standstill (CRUISE_STATE 7): stopped until the driver's RES or gas."""
         return latest.get("PCM_CRUISE", {}).get("CRUISE_STATE") == CRUISE_STATE_STANDSTILL
+
+    def releases_standstill(self, signals: Signals) -> bool:
+        """ACC_CONTROL's RELEASE_STANDSTILL set."""
+        return bool(signals.get("RELEASE_STANDSTILL"))
 
     def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
         """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted, releasing the
