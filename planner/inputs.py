@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -188,6 +188,27 @@ def clean_inrix_speeds(speed_mps: ArrayLike) -> tuple[FloatArray, InrixCleaning]
     out_of_range = np.isfinite(speeds) & ((speeds < 0) | (speeds > MAX_INRIX_SPEED_MPS))
     speeds[not_finite | out_of_range] = np.nan
     return speeds, InrixCleaning(int(not_finite.sum()), int(out_of_range.sum()))
+
+
+EngagedPings = Literal["all", "behind_leader"]
+
+
+def traffic_pings(engaged: ArrayLike, lead_present: ArrayLike, rule: EngagedPings) -> BoolArray:
+    """Which pings tell the traffic's speed, by the `engaged_pings` rule.
+
+    A car whose controller is engaged follows the plan; with no leader in radar range nothing
+    but the plan sets its speed, so its ping echoes the plan. Under "behind_leader" such pings
+    drop; a car on its stock ACC or driven by hand, and an engaged car behind a leader, count.
+    Under "all" every ping counts (the paper fuses every vehicle observation). The server's
+    SQL (`planner.warehouse.PER_VEHICLE`) states the same rule, unknown flags read as false.
+    """
+    engaged_flags = np.asarray(engaged, dtype=bool)
+    lead_flags = np.asarray(lead_present, dtype=bool)
+    if engaged_flags.shape != lead_flags.shape:
+        raise ValueError("pings: engaged and lead flags differ in length")
+    if rule == "all":
+        return np.ones(engaged_flags.shape, dtype=bool)
+    return np.asarray(~engaged_flags | lead_flags, dtype=bool)
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from contract.idm import I24_IDM
 from contract.units import MPS_PER_MPH
+from planner.inputs import EngagedPings
 
 
 class InvalidParams(ValueError):
@@ -48,6 +49,11 @@ class PlannerParams(BaseModel):
     # Step 2 - fusion with the fleet's observations.
     fuser: str = "precedence"
     ping_window_s: float = Field(60.0, gt=0, le=600)
+    # An engaged car with nothing in radar range drives the plan's own target, so its pings
+    # report the plan back as the traffic's speed. "all" fuses every ping (the paper's design);
+    # "behind_leader" keeps an engaged car's ping only while its radar sees a leader (the
+    # paper's "minicar" flag), when traffic bounds its speed (`planner.inputs.traffic_pings`).
+    engaged_pings: EngagedPings = "all"
     correction_length_m: float = Field(
         100.0, ge=0, description="distance over which an observation corrects unobserved cells"
     )

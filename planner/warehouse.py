@@ -31,6 +31,7 @@ from sqlalchemy.orm import Session
 from planner.algorithms import plan_speeds
 from planner.inputs import (
     CorridorGrid,
+    EngagedPings,
     FloatArray,
     InrixHistory,
     LaneObservations,
@@ -102,6 +103,8 @@ class PingWindow:
     vehicles: int
     pings: int
     pings_off_corridor: int
+    # engaged cars' pings with no leader in radar range, under the "behind_leader" rule
+    pings_set_aside: int
 
 
 def _epoch_s(moment: datetime) -> float:
@@ -214,29 +217,37 @@ def load_inrix(
 
 # Per vehicle, lane and sub-segment of the window (cell = -1: off the corridor, x_m NULL or
 # beyond its ends); the cycle pools these per lane and cell, the observation table keeps them.
+# `traffic`: whether the pings tell the traffic's speed under the cycle's `engaged_pings` rule
+# (`planner.inputs.traffic_pings`; a flag the car did not send reads as false).
 PER_VEHICLE = """
     SELECT p.vehicle_id,
            coalesce(p.lane, v.assigned_lane) AS lane,
            CASE WHEN p.x_m IS NULL OR p.x_m < :first_start OR p.x_m >= :last_end THEN -1
                 ELSE width_bucket(p.x_m::float8, CAST(:starts AS float8[])) END AS cell,
+           (:engaged_pings = 'all' OR p.is_controller_engaged IS NOT TRUE
+            OR p.is_lead_present IS TRUE) AS traffic,
            sum(p.speed_mps::float8) AS speed_sum,
            count(*) AS pings
     FROM fact_vehicle_ping p
     JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id
     WHERE v.corridor_id = :corridor AND p.ts > :window_start AND p.ts <= :window_end
-    GROUP BY 1, 2, 3
+    GROUP BY 1, 2, 3, 4
 """
 
+# Rows: per (lane, cell) fused; the totals (lane and cell NULL); off the corridor (cell -1);
+# set aside by the rule, on the corridor or off (cell -2).
 POOL_PINGS = text(
     f"""
     WITH per_vehicle AS ({PER_VEHICLE})
     SELECT lane, cell, sum(speed_sum) / sum(pings) AS mean_speed_mps, sum(pings) AS ping_count,
            count(DISTINCT vehicle_id) AS vehicles
     FROM per_vehicle
-    WHERE cell >= 1 AND lane BETWEEN 1 AND :lanes
+    WHERE traffic AND cell >= 1 AND lane BETWEEN 1 AND :lanes
     GROUP BY GROUPING SETS ((lane, cell), ())
     UNION ALL
-    SELECT NULL, -1, NULL, sum(pings), NULL FROM per_vehicle WHERE cell = -1
+    SELECT NULL, -1, NULL, sum(pings), NULL FROM per_vehicle WHERE traffic AND cell = -1
+    UNION ALL
+    SELECT NULL, -2, NULL, sum(pings), NULL FROM per_vehicle WHERE NOT traffic
     """
 )
 
@@ -272,7 +283,7 @@ POOLED_OBSERVATIONS = text(
 
 
 def _window_params(
-    grid: CorridorGrid, window_start: datetime, window_end: datetime
+    grid: CorridorGrid, window_start: datetime, window_end: datetime, engaged_pings: EngagedPings
 ) -> dict[str, Any]:
     gaps = grid.start_x_m[1:] > grid.end_x_m[:-1]
     if gaps.any():
@@ -286,6 +297,7 @@ def _window_params(
         "first_start": float(grid.start_x_m[0]),
         "last_end": float(grid.end_x_m[-1]),
         "lanes": grid.lanes,
+        "engaged_pings": engaged_pings,
     }
 
 
@@ -294,6 +306,7 @@ def _ping_window(rows: Sequence[Row[Any]]) -> PingWindow:
     cells = [row for row in rows if row.lane is not None]
     totals = next((row for row in rows if row.lane is None and row.cell is None), None)
     off = next((row for row in rows if row.cell == -1), None)
+    set_aside = next((row for row in rows if row.cell == -2), None)
     observations = LaneObservations(
         lane=np.array([row.lane for row in cells], dtype=np.int64),
         cell=np.array([row.cell - 1 for row in cells], dtype=np.int64),
@@ -305,18 +318,24 @@ def _ping_window(rows: Sequence[Row[Any]]) -> PingWindow:
         vehicles=int(totals.vehicles or 0) if totals is not None else 0,
         pings=int(totals.ping_count or 0) if totals is not None else 0,
         pings_off_corridor=int(off.ping_count or 0) if off is not None else 0,
+        pings_set_aside=int(set_aside.ping_count or 0) if set_aside is not None else 0,
     )
 
 
 def pool_pings(
-    session: Session, grid: CorridorGrid, window_start: datetime, window_end: datetime
+    session: Session,
+    grid: CorridorGrid,
+    window_start: datetime,
+    window_end: datetime,
+    engaged_pings: EngagedPings,
 ) -> PingWindow:
     """The fleet's speeds per lane and sub-segment in the window, straight from the pings.
 
     Pings off the corridor (x_m NULL) or in a lane the corridor lacks do not feed the TSE; a
-    ping without a lane counts in its vehicle's assigned lane.
+    ping without a lane counts in its vehicle's assigned lane. Pings the `engaged_pings` rule
+    sets aside (an engaged car with no leader in radar range) feed nothing and are counted.
     """
-    params = _window_params(grid, window_start, window_end)
+    params = _window_params(grid, window_start, window_end, engaged_pings)
     return _ping_window(session.execute(POOL_PINGS, params).all())
 
 
@@ -324,8 +343,11 @@ def store_observations(
     session: Session, grid: CorridorGrid, window_start: datetime, window_end: datetime
 ) -> int:
     """Write each vehicle's mean speed per sub-segment and lane in the window (paper:
-    fact_vehicle_observation); returns the rows written."""
-    result = session.execute(STORE_OBSERVATIONS, _window_params(grid, window_start, window_end))
+    fact_vehicle_observation); returns the rows written. The fact keeps every vehicle's speed,
+    whatever the cycle's `engaged_pings` rule fused."""
+    result = session.execute(
+        STORE_OBSERVATIONS, _window_params(grid, window_start, window_end, "all")
+    )
     return int(result.rowcount)  # type: ignore[attr-defined]
 
 
@@ -575,7 +597,7 @@ def run_cycle(
     grid = load_grid(session, corridor_id)
     inrix = load_inrix(session, corridor_id, now, params, received_by=now)
     window_start = now - timedelta(seconds=params.ping_window_s)
-    pings = pool_pings(session, grid, window_start, now)
+    pings = pool_pings(session, grid, window_start, now, params.engaged_pings)
     previous = recent_plan_ids(session, corridor_id, now, params)
     inputs: dict[str, Any] = {
         "inrix_as_of": None,
@@ -589,6 +611,7 @@ def run_cycle(
         "vehicles": pings.vehicles,
         "pings": pings.pings,
         "pings_off_corridor": pings.pings_off_corridor,
+        "pings_set_aside": pings.pings_set_aside,
         "previous_plans": previous,
         # Exactly which INRIX snapshots the cycle read: one committing just after the read,
         # with received_at before it, must not enter a replay.
@@ -711,7 +734,7 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
         if pings.pings != inputs["pings"]:
             # The observations are written just after publication; if that failed, the pings
             # themselves (still within retention) are the record.
-            pings = pool_pings(session, grid, window_start, window_end)
+            pings = pool_pings(session, grid, window_start, window_end, params.engaged_pings)
         fleet = pings.observations
     previous = [int(plan) for plan in inputs.get("previous_plans", [])]
     plan = plan_speeds(

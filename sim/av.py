@@ -48,8 +48,11 @@ class PlanSource(Protocol):
         """The plan the vehicle holds at `time_s`; None while it holds none fresh."""
         ...
 
-    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
-        """A ping from the vehicle."""
+    def record_ping(
+        self, time_s: float, x_m: float, speed_mps: float, *, engaged: bool, lead_present: bool
+    ) -> None:
+        """A ping from the vehicle: whether its controller was engaged, whether its radar saw
+        a leader (the ping's `controller_engaged` and `lead_present`)."""
         ...
 
 
@@ -116,6 +119,8 @@ class AgentPolicy:
         # the ACC under an `accel` car's requests.
         self._acc_without_plan: StockAcc = stock_acc if stock_acc is not None else SimulatedAccCar()
         self._without_plan = False
+        # Whether the agent's controller drove the last step (what the next ping reports).
+        self._engaged = False
         # Times the car was left to its ACC for want of a fresh plan, and the steps it drove so.
         self.plan_hand_backs = 0
         self.steps_without_plan = 0
@@ -132,7 +137,13 @@ class AgentPolicy:
         acceleration from its successive speeds (the step's exact change here; the car filters
         the same difference)."""
         if self._step % PING_EVERY_STEPS == 0:
-            self.plan.record_ping(observation.time_s, observation.position_m, observation.speed_mps)
+            self.plan.record_ping(
+                observation.time_s,
+                observation.position_m,
+                observation.speed_mps,
+                engaged=self._engaged,
+                lead_present=observation.gap_m <= RADAR_RANGE_M,
+            )
         self._step += 1
         if self._last_speed is not None and observation.time_s > self._last_speed[0]:
             last_time, last_speed = self._last_speed
@@ -145,6 +156,7 @@ class AgentPolicy:
         """The agent stops commanding: the controller starts afresh, and so does the limiter."""
         self.controller.reset()
         self._limiting = False
+        self._engaged = False
 
     def driver_drives(self, observation: AvObservation) -> None:
         """Handed back: the driver's braking cancels the ACC, the controller starts afresh."""
@@ -162,6 +174,7 @@ class AgentPolicy:
         if profile is None:
             return self._acc_drives(observation, lead_present)
         self._without_plan = False
+        self._engaged = True
         measured = lead_present and self.senses_lead_state
         rel_speed = observation.lead_speed_mps - observation.speed_mps
         action = self.controller.step(

@@ -171,7 +171,13 @@ def plan_ahead(
         while next_ping <= step:
             # as in the loop: the ping, then the plan read at the same second, so every plan
             # is made when it is due (from the first second on) with the pings it would have
-            schedule.record_ping(next_ping * STEP_S, position[next_ping], speed[next_ping])
+            schedule.record_ping(
+                next_ping * STEP_S,
+                position[next_ping],
+                speed[next_ping],
+                engaged=False,  # the leader is driven by its recorded driver
+                lead_present=False,
+            )
             schedule.profile(next_ping * STEP_S)
             next_ping += PING_EVERY_STEPS
         profile = schedule.held_profile(float(step) * STEP_S)

@@ -32,6 +32,7 @@ from planner import (
     PlannerParams,
     plan_speeds,
 )
+from planner.inputs import traffic_pings
 from sim.drives import Drive
 from sim.inrix import CALIBRATED, simulated_feed
 from sim.traffic import INRIX_PERIOD_S, InrixFeed, segment_bounds
@@ -102,6 +103,8 @@ class SimulatedPlanner:
     _ping_time: list[float] = field(default_factory=list)
     _ping_x: list[float] = field(default_factory=list)
     _ping_speed: list[float] = field(default_factory=list)
+    _ping_engaged: list[bool] = field(default_factory=list)
+    _ping_lead: list[bool] = field(default_factory=list)
     _previous_smoothed: deque[FloatArray] = field(default_factory=deque)
     # Simulated time 0 on the plans' clock (plans carry wall-clock publication times).
     epoch: datetime = datetime(2021, 1, 1, tzinfo=UTC)
@@ -122,11 +125,16 @@ class SimulatedPlanner:
         inrix = feed if feed is not None else simulated_inrix(drive, checked)
         return cls(algorithm, checked, simulated_grid(drive), inrix)
 
-    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
-        """An AV's ping (the agent posts one per second)."""
+    def record_ping(
+        self, time_s: float, x_m: float, speed_mps: float, *, engaged: bool, lead_present: bool
+    ) -> None:
+        """An AV's ping (the agent posts one per second), with its controller's engagement and
+        its radar's lead flag as the ping carries them."""
         self._ping_time.append(time_s)
         self._ping_x.append(x_m)
         self._ping_speed.append(speed_mps)
+        self._ping_engaged.append(engaged)
+        self._ping_lead.append(lead_present)
 
     def profile(self, time_s: float) -> TargetProfile | None:
         """The plan the AVs hold at `time_s`, looked up as the agent does; None while they hold
@@ -159,7 +167,11 @@ class SimulatedPlanner:
             self.feed.segment_center_x_m,
         )
         times = np.asarray(self._ping_time)
-        window = (times > now_s - self.params.ping_window_s) & (times <= now_s)
+        window = (
+            (times > now_s - self.params.ping_window_s)
+            & (times <= now_s)
+            & traffic_pings(self._ping_engaged, self._ping_lead, self.params.engaged_pings)
+        )
         observations = LaneObservations.from_pings(
             self.grid,
             np.full(int(window.sum()), SIM_LANE),

@@ -125,6 +125,9 @@ def _count(outcome: CycleOutcome) -> None:
         metrics.PLANNER_INPUT_PINGS.labels(corridor, "off_corridor").set(
             outcome.inputs["pings_off_corridor"]
         )
+        metrics.PLANNER_INPUT_PINGS.labels(corridor, "set_aside").set(
+            outcome.inputs["pings_set_aside"]
+        )
 
 
 def schedule_planner(scheduler: Any, database_url: str, settings: Settings) -> Callable[[], None]:

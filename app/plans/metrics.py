@@ -28,7 +28,8 @@ PLANNER_INRIX_IGNORED = Gauge(
 )
 PLANNER_INPUT_PINGS = Gauge(
     "smoothfleet_planner_window_pings",
-    "Pings in the last cycle's window, by corridor and whether they were on the corridor.",
+    "Pings in the last cycle's window, by corridor and where they went: fused on the corridor, "
+    "off the corridor, or set aside by the engaged_pings rule.",
     ["corridor", "where"],
     multiprocess_mode="mostrecent",
 )

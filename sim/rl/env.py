@@ -247,7 +247,14 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             x = float(self.position[env, 1])
             planner = self.planners[env]
             if self.elapsed[env] % PING_EVERY_STEPS == 0:
-                planner.record_ping(time_s, x, float(self.speed[env, 1]))
+                gap = float(self.position[env, 0]) - x - VEHICLE_LENGTH_M
+                planner.record_ping(
+                    time_s,
+                    x,
+                    float(self.speed[env, 1]),
+                    engaged=True,  # the policy drives every step of an episode
+                    lead_present=gap <= RADAR_RANGE_M,
+                )
             profile = planner.held_profile(time_s)
             self.target_here[env] = profile.at(x)
             self.target_ahead[env] = profile.at(x + PLAN_LOOKAHEAD_M)

@@ -58,8 +58,12 @@ def pings(
     x_m: Sequence[float | None],
     speed_mps: float | Sequence[float],
     lane: int | None = None,
+    *,
+    engaged: bool | None = None,
+    lead_present: bool | None = None,
 ) -> None:
-    """One ping a second ending at `end`, at the given positions (None = off the corridor)."""
+    """One ping a second ending at `end`, at the given positions (None = off the corridor),
+    with the controller's engagement and the radar's lead flag as the car sent them."""
     count = len(x_m)
     speeds = np.broadcast_to(np.asarray(speed_mps, dtype=float), (count,))
     rows = [
@@ -69,14 +73,17 @@ def pings(
             "x_m": position,
             "speed": float(speeds[index]),
             "lane": lane,
+            "engaged": engaged,
+            "lead": lead_present,
         }
         for index, position in enumerate(x_m)
     ]
     with engine.begin() as connection:
         connection.execute(
             text(
-                "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps, x_m, lane) "
-                "VALUES (:vehicle, :ts, 36.0, -86.6, :speed, :x_m, :lane)"
+                "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps, x_m, lane, "
+                "is_controller_engaged, is_lead_present) "
+                "VALUES (:vehicle, :ts, 36.0, -86.6, :speed, :x_m, :lane, :engaged, :lead)"
             ),
             rows,
         )

@@ -11,6 +11,7 @@ from planner.inputs import (
     InrixHistory,
     LaneObservations,
     clean_inrix_speeds,
+    traffic_pings,
 )
 from planner.registry import Registry, UnknownVariant
 from tests.planner.grids import uniform_grid
@@ -79,3 +80,13 @@ def test_an_unknown_variant_names_the_known_ones() -> None:
     registry.register("uniform", 1)
     with pytest.raises(UnknownVariant, match=r"unknown kernel 'box' \(known: uniform\)"):
         registry.get("box")
+
+
+def test_the_engaged_pings_rule_keeps_what_tells_the_traffics_speed() -> None:
+    engaged = [False, False, True, True]
+    lead = [False, True, False, True]
+    assert traffic_pings(engaged, lead, "all").tolist() == [True, True, True, True]
+    # only an engaged car with nothing in radar range drives the plan's own speed
+    assert traffic_pings(engaged, lead, "behind_leader").tolist() == [True, True, False, True]
+    with pytest.raises(ValueError, match="differ in length"):
+        traffic_pings([True], [True, False], "all")

@@ -35,7 +35,7 @@ def cycle(
             session,
             CORRIDOR,
             algorithm=str(options.pop("algorithm", "kernel_smooth_buffer")),
-            params=PARAMS,
+            params=options.pop("params", PARAMS),
             valid_for_s=180.0,
             now=now,
             **options,  # type: ignore[arg-type]
@@ -89,9 +89,48 @@ def test_a_cycle_publishes_every_lane_with_its_provenance(seeded_engine: Engine)
     assert inputs["vehicles"] == 1
     assert inputs["pings"] == 60
     assert inputs["pings_off_corridor"] == 30
+    assert inputs["pings_set_aside"] == 0  # the paper's rule fuses every ping
     assert inputs["inrix_age_s"] == 180.0
     assert inputs["inrix_snapshots"] == 5
     assert inputs["ping_window_end"] == NOW.isoformat()
+
+
+def test_the_behind_leader_rule_sets_aside_an_engaged_cars_echo_of_the_plan(
+    seeded_engine: Engine,
+) -> None:
+    minutes_of_slowdown(seeded_engine, NOW, 5)
+    crawl = np.linspace(8400, 8700, 60)
+    # Both cars crawl at 5 m/s under their controllers; only SF-003's radar sees a leader.
+    pings(seeded_engine, "SF-002", NOW, crawl, 5.0, lane=2, engaged=True, lead_present=False)
+    pings(seeded_engine, "SF-003", NOW, crawl, 5.0, lane=3, engaged=True, lead_present=True)
+    # An engaged car whose lead flag did not arrive cannot show traffic bounds it.
+    pings(seeded_engine, "SF-004", NOW, [8500.0] * 10, 5.0, lane=4, engaged=True)
+    outcome = cycle(seeded_engine, NOW, params=PlannerParams(engaged_pings="behind_leader"))
+    assert outcome.status == "published"
+    assert (outcome.inputs["vehicles"], outcome.inputs["pings"]) == (1, 60)
+    assert outcome.inputs["pings_set_aside"] == 70
+    with seeded_engine.connect() as connection:
+        slowest = dict(
+            connection.execute(
+                text(
+                    "SELECT lane, min(tse_speed_mps) FROM fact_speed_planner "
+                    "WHERE plan_id = :id GROUP BY lane"
+                ),
+                {"id": outcome.plan_id},
+            ).all()
+        )
+        observed = connection.execute(
+            text(
+                "SELECT vehicle_id, sum(ping_count) FROM fact_vehicle_observation "
+                "GROUP BY vehicle_id ORDER BY vehicle_id"
+            )
+        ).all()
+    assert slowest[3] == pytest.approx(5.0)  # behind a leader: the traffic's speed
+    assert slowest[2] > 5.0  # alone on its radar: the plan's own echo, not fused
+    # the observation fact keeps every vehicle's speed, whatever the rule fused
+    assert [tuple(row) for row in observed] == [("SF-002", 60), ("SF-003", 60), ("SF-004", 10)]
+    with Session(seeded_engine) as session:
+        assert replay_plan(session, outcome.plan_id or 0).matches
 
 
 def test_a_standing_slowdown_gets_a_buffer_from_the_fourth_cycle(seeded_engine: Engine) -> None:

@@ -33,13 +33,15 @@ class FixedPlan:
     """A plan of 20 m/s everywhere, and a record of the pings it was sent."""
 
     def __init__(self) -> None:
-        self.pings: list[tuple[float, float, float]] = []
+        self.pings: list[tuple[float, float, float, bool, bool]] = []
 
     def profile(self, time_s: float) -> TargetProfile:
         return TargetProfile(np.array([0.0, 1e5]), np.array([20.0, 20.0]))
 
-    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
-        self.pings.append((time_s, x_m, speed_mps))
+    def record_ping(
+        self, time_s: float, x_m: float, speed_mps: float, *, engaged: bool, lead_present: bool
+    ) -> None:
+        self.pings.append((time_s, x_m, speed_mps, engaged, lead_present))
 
 
 def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
@@ -67,7 +69,28 @@ def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
         request = expected.accel_mps2  # type: ignore[union-attr]
         assert request < -1.0  # closing on a slower leader: a braking the limiter ramps
         assert policy.accel_mps2(sensed) == limiter.limit(step * 0.1, request)
-    assert plan.pings == [(0.0, 1000.0, 25.0)]  # one ping per second
+    # one ping per second; the first is sent before the controller has driven
+    assert plan.pings == [(0.0, 1000.0, 25.0, False, True)]
+
+
+def test_pings_say_whether_the_controller_drove_and_the_radar_saw_a_leader() -> None:
+    plan = FixedPlan()
+    policy = agent_policy("microaccel", "accel", plan)
+    for step in range(31):
+        gap = 40.0 if step < 15 else RADAR_RANGE_M + 1.0  # the leader pulls out of range
+        sensed = AvObservation(step * 0.1, 1000.0 + 2.5 * step, 25.0, gap, 25.0)
+        if step < 25:
+            policy.accel_mps2(sensed)
+        else:
+            policy.driver_drives(sensed)
+    # each ping tells what the last step did: not yet driven; driven behind the leader;
+    # driven with nothing in range; the driver's since 2.5 s
+    assert [(engaged, lead) for *_, engaged, lead in plan.pings] == [
+        (False, True),
+        (True, True),
+        (True, False),
+        (False, False),
+    ]
 
 
 class Requesting(Controller):
@@ -240,6 +263,38 @@ def test_planner_runs_every_minute_and_the_plan_ages() -> None:
     assert later.shift_m == pytest.approx(59.9 * 15.0 / 3.6)
     planner.profile(60.0)
     assert planner.plans_run == 2
+
+
+def _plan_after_slow_pings(rule: str, *, engaged: bool, lead_present: bool) -> np.ndarray:
+    """The second plan over steady 25 m/s traffic (exact INRIX) after a minute of pings at
+    10 m/s around x = 1,000 m."""
+    steady = drive_from_speeds("steady", np.full(3001, 25.0))
+    bounds = segment_bounds(-ROAD_BEFORE_M, float(steady.position_m[-1]) + ROAD_AFTER_M)
+    stamps = np.arange(-900.0, 301.0, 60.0)
+    exact = InrixFeed(
+        bounds[:-1], bounds[1:], stamps, np.full((len(stamps), len(bounds) - 1), 25.0), 0.0
+    )
+    planner = SimulatedPlanner.for_drive(
+        steady, "kernel_smooth", {"engaged_pings": rule}, feed=exact
+    )
+    planner.profile(0.0)
+    for second in range(1, 61):
+        planner.record_ping(float(second), 1000.0, 10.0, engaged=engaged, lead_present=lead_present)
+    return planner.held_profile(60.0).target_speed_mps
+
+
+def test_an_engaged_car_alone_on_its_radar_feeds_the_plan_only_under_all() -> None:
+    echo = {"engaged": True, "lead_present": False}
+    # the paper's design: every ping is an observation, the plan's own echo included
+    assert _plan_after_slow_pings("all", **echo).min() < 24.0
+    # "behind_leader": nothing but the plan set that car's speed, so the plan ignores it
+    np.testing.assert_allclose(_plan_after_slow_pings("behind_leader", **echo), 25.0, atol=1e-6)
+    # behind a leader, or on its stock ACC, the car's speed is the traffic's: it counts
+    for counted in (
+        {"engaged": True, "lead_present": True},
+        {"engaged": False, "lead_present": False},
+    ):
+        assert _plan_after_slow_pings("behind_leader", **counted).min() < 24.0
 
 
 def test_one_av_smooths_a_real_stop_and_go_slice(shared_dir: Path) -> None:

@@ -89,7 +89,13 @@ def test_the_plan_columns_are_the_loops_plan_at_the_leader_and_ahead_of_it() -> 
     row = int(np.searchsorted(steps, 3000))
     planner = SimulatedPlanner.for_drive(drive, RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS)
     for ping in range(0, int(steps[row]) + 1, 10):
-        planner.record_ping(ping * STEP_S, drive.position_m[ping], drive.speed_mps[ping])
+        planner.record_ping(
+            ping * STEP_S,
+            drive.position_m[ping],
+            drive.speed_mps[ping],
+            engaged=False,
+            lead_present=False,
+        )
         planner.profile(ping * STEP_S)
     profile = planner.profile(float(steps[row]) * STEP_S)
     here = drive.position_m[steps[row]]

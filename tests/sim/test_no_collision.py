@@ -79,7 +79,9 @@ class StalePlan:
     def profile(self, time_s: float) -> TargetProfile:
         return TargetProfile(np.array([-1e6, 1e6]), np.array([28.0, 28.0]))
 
-    def record_ping(self, time_s: float, x_m: float, speed_mps: float) -> None:
+    def record_ping(
+        self, time_s: float, x_m: float, speed_mps: float, *, engaged: bool, lead_present: bool
+    ) -> None:
         pass
 
 
