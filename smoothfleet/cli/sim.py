@@ -476,6 +476,13 @@ SELECTION_VARIANTS = (
     help="Planner smoothing window (m) to try (repeatable; default 1500 and 4000).",
 )
 @click.option(
+    "--engaged-pings",
+    "engaged_pings_rules",
+    multiple=True,
+    type=click.Choice(["all", "behind_leader"]),
+    help="Planner rule for engaged cars' pings to try (repeatable; default both).",
+)
+@click.option(
     "--controller",
     "controllers",
     multiple=True,
@@ -501,6 +508,7 @@ SELECTION_VARIANTS = (
 def select_command(
     drives_dir: Path | None,
     windows: tuple[float, ...],
+    engaged_pings_rules: tuple[str, ...],
     controllers: tuple[str, ...],
     folds: int,
     workers: int,
@@ -531,7 +539,9 @@ def select_command(
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="--folds") from None
     candidates = [
-        {**RECOMMENDED_PLANNER_PARAMS, "window_m": window} for window in windows or (1500.0, 4000.0)
+        {**RECOMMENDED_PLANNER_PARAMS, "window_m": window, "engaged_pings": rule}
+        for window in windows or (1500.0, 4000.0)
+        for rule in engaged_pings_rules or ("all", "behind_leader")
     ]
     for params in candidates:  # before anything is simulated
         try:
@@ -541,9 +551,9 @@ def select_command(
     output_folder(out_dir, "--out")
     rows: list[dict[str, Any]] = []
     for params in candidates:
-        window = float(params["window_m"])
+        setting = _planner_setting(params)
         with progress_bar() as progress:
-            task = progress.add_task(f"window {window:.0f} m", total=len(cases))
+            task = progress.add_task(setting, total=len(cases))
 
             def advance(label: str, task: TaskID = task) -> None:
                 progress.update(task, advance=1)
@@ -558,7 +568,7 @@ def select_command(
             )
         for row in evaluation.rows():
             if row["controller"] != BASELINE:
-                row["candidate"] = f"{row['planner']} x {row['controller']} @ {window:.0f} m"
+                row["candidate"] = f"{row['planner']} x {row['controller']} @ {setting}"
                 row["policy_training_dates"] = ";".join(sorted(fitted_dates[row["controller"]]))
                 rows.append(row)
     choices = cross_validate(rows, folds)
@@ -593,6 +603,15 @@ def select_command(
     write_rows(rows, out_dir / "selection.csv")
     write_rows(summary, out_dir / "held_out.csv")
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
+
+
+def _planner_setting(params: Mapping[str, Any]) -> str:
+    """A candidate's planner setting as the selection names it: the window, and the
+    `engaged_pings` rule when it is not the paper's (every ping fused)."""
+    setting = f"{float(params['window_m']):.0f} m"
+    if params["engaged_pings"] != "all":
+        setting += f", engaged pings {params['engaged_pings']}"
+    return setting
 
 
 def _summary_table(title: str, lines: Sequence[Mapping[str, Any]]) -> Table:

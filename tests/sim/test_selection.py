@@ -283,12 +283,22 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
     assert "chosen on every date" in result.stdout
     with (out / "selection.csv").open() as handle:
         rows = list(csv.DictReader(handle))
-    # 2 candidates x (the slices as shockwave, the fast drive as freeflow)
-    assert len(rows) == 6
+    # 2 controllers x 2 engaged-pings rules x (the slices as shockwave, the fast drive as
+    # freeflow)
+    assert len(rows) == 12
     assert sorted({row["candidate"] for row in rows}) == [
         "kernel_smooth x microaccel/accel @ 1500 m",
+        "kernel_smooth x microaccel/accel @ 1500 m, engaged pings behind_leader",
         "kernel_smooth x simple/accel @ 1500 m",
+        "kernel_smooth x simple/accel @ 1500 m, engaged pings behind_leader",
     ]
+    # the rule changes what the plans hear, so what the AVs drive
+    fuel = {(row["candidate"], row["drive"]): row["fuel_saving_pct"] for row in rows}
+    assert any(
+        fuel[candidate, drive] != fuel[f"{candidate}, engaged pings behind_leader", drive]
+        for candidate, drive in fuel
+        if "behind_leader" not in candidate
+    )
     with (out / "held_out.csv").open() as handle:
         held_out = {row["scenario"]: row for row in csv.DictReader(handle)}
     # each drive held out once: the shockwave slices by one fold each, the freeflow drive by one
