@@ -31,6 +31,12 @@ class PlannerParams(BaseModel):
     predictor: str = "wave_trend"
     max_inrix_age_s: float = Field(600.0, gt=0, description="older INRIX is no estimate at all")
     inrix_history_s: float = Field(900.0, gt=0, description="how far back the history reaches")
+    # INRIX scores a reading 30 (real time), 20 (real time mixed with history) or 10 (history
+    # alone, no probe on the segment): a score-10 speed is the usual traffic at that hour, no
+    # measurement of this morning's wave, so by default it counts as no reading at all.
+    min_inrix_score: int = Field(
+        20, ge=0, le=30, description="readings INRIX scored lower are ignored and counted"
+    )
     min_inrix_coverage: float = Field(
         0.5,
         gt=0,

@@ -173,7 +173,7 @@ def load_inrix(
     column = {code: index for index, (code, _) in enumerate(segments)}
     rows = session.execute(
         text(
-            "SELECT xd_code, measured_at, speed_mps, is_closed FROM fact_inrix_estimate "
+            "SELECT xd_code, measured_at, speed_mps, is_closed, score FROM fact_inrix_estimate "
             "WHERE corridor_id = :corridor AND measured_at > :since AND measured_at <= :now "
             "AND received_at <= :received_by ORDER BY measured_at"
         ),
@@ -189,12 +189,14 @@ def load_inrix(
     times = sorted({row.measured_at for row in rows})
     snapshot = {moment: index for index, moment in enumerate(times)}
     speeds = np.full((len(times), len(segments)), np.nan)
-    unknown = closed = not_a_number = 0
+    unknown = closed = low_score = not_a_number = 0
     for row in rows:
         if row.xd_code not in column:
             unknown += 1
         elif row.is_closed:
             closed += 1
+        elif row.score is not None and row.score < params.min_inrix_score:
+            low_score += 1  # a feed that sends no score is taken at its word
         elif row.speed_mps is None or not math.isfinite(row.speed_mps):
             not_a_number += 1
         else:
@@ -209,6 +211,7 @@ def load_inrix(
     ignored = {
         "unknown_segment": unknown,
         "closed": closed,
+        "below_min_score": low_score,
         "not_a_number": not_a_number,
         "out_of_range": cleaning.out_of_range,
     }
@@ -709,7 +712,8 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
         raise UnknownPlan(f"no plan {plan_id}")
     if run["status"] != "published":
         raise UnknownPlan(f"plan {plan_id} was {run['status']}, not published: nothing to replay")
-    params = PlannerParams.parse(run["params"])
+    # A plan stored before `min_inrix_score` existed read every score.
+    params = PlannerParams.parse({"min_inrix_score": 0, **run["params"]})
     inputs = run["inputs"]
     now: datetime = run["started_at"]
     grid = load_grid(session, run["corridor_id"])

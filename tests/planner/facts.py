@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import datetime, timedelta
 
 import numpy as np
@@ -20,15 +20,18 @@ def inrix_snapshot(
     measured_at: datetime,
     speeds_mps: Sequence[float],
     received_at: datetime | None = None,
+    scores: Mapping[str, int] | None = None,
     **by_code: float,
 ) -> None:
-    """One INRIX minute: a speed per corridor segment in order (overrides by code)."""
+    """One INRIX minute: a speed per corridor segment in order (overrides by code), with the
+    INRIX score of the codes in `scores` (the others send none)."""
     speeds = dict(zip(INRIX_CODES, speeds_mps, strict=True)) | by_code
     with engine.begin() as connection:
         connection.execute(
             text(
                 "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, speed_mps, "
-                "received_at) VALUES (:corridor, :code, :measured_at, :speed, :received_at)"
+                "received_at, score) "
+                "VALUES (:corridor, :code, :measured_at, :speed, :received_at, :score)"
             ),
             [
                 {
@@ -37,6 +40,7 @@ def inrix_snapshot(
                     "measured_at": measured_at,
                     "speed": speed,
                     "received_at": received_at or measured_at,
+                    "score": (scores or {}).get(code),
                 }
                 for code, speed in speeds.items()
             ],

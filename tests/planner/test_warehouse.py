@@ -181,6 +181,7 @@ def test_bad_inrix_readings_are_ignored_and_counted(seeded_engine: Engine) -> No
     assert outcome.inputs["inrix_ignored"] == {
         "unknown_segment": 0,
         "closed": 0,
+        "below_min_score": 0,
         "not_a_number": 1,
         "out_of_range": 2,  # 50 m/s is 112 mph
     }
@@ -192,6 +193,57 @@ def test_bad_inrix_readings_are_ignored_and_counted(seeded_engine: Engine) -> No
             )
         )
     assert segment_06 == pytest.approx(29.0)  # filled from its neighbours, not 50 m/s
+
+
+def _segment_12_speed(engine: Engine, plan_id: int | None) -> float:
+    with engine.connect() as connection:
+        return float(
+            connection.scalar(
+                text(
+                    "SELECT max(p.tse_speed_mps) FROM fact_speed_planner p "
+                    "JOIN dim_i24_segment s USING (i24_segment_id) "
+                    "WHERE p.plan_id = :id AND s.xd_code = 'SF-I24WB-12'"
+                ),
+                {"id": plan_id},
+            )
+        )
+
+
+def test_a_reading_from_inrix_history_alone_is_no_measurement_of_now(
+    seeded_engine: Engine,
+) -> None:
+    # The slowdown at 11-14, but INRIX has no probe on 12 and sends its usual free flow there
+    # with score 10; its neighbours are measured (score 30).
+    inrix_snapshot(
+        seeded_engine,
+        NOW - timedelta(minutes=3),
+        standing_slowdown(),
+        scores={"SF-I24WB-11": 30, "SF-I24WB-12": 10, "SF-I24WB-13": 30},
+        **{"SF-I24WB-12": 29.0},
+    )
+    outcome = cycle(seeded_engine, NOW, algorithm="kernel_smooth")
+    assert outcome.inputs["inrix_ignored"]["below_min_score"] == 1
+    assert _segment_12_speed(seeded_engine, outcome.plan_id) == pytest.approx(7.0)  # neighbours
+    with Session(seeded_engine) as session:
+        assert replay_plan(session, outcome.plan_id or 0).matches
+    # taken at its word when the operator asks for it
+    everything = cycle(
+        seeded_engine,
+        NOW + timedelta(seconds=1),
+        algorithm="kernel_smooth",
+        params=PlannerParams(min_inrix_score=0),
+    )
+    assert everything.inputs["inrix_ignored"]["below_min_score"] == 0
+    # its free flow shows between the slow neighbours (interpolated towards them)
+    assert _segment_12_speed(seeded_engine, everything.plan_id) > 25.0
+    # a plan stored before the parameter existed read every score, and replays so
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("UPDATE plan_run SET params = params - 'min_inrix_score' WHERE plan_id = :id"),
+            {"id": everything.plan_id},
+        )
+    with Session(seeded_engine) as session:
+        assert replay_plan(session, everything.plan_id or 0).matches
 
 
 def test_only_one_planner_publishes_per_corridor(seeded_engine: Engine) -> None:
