@@ -31,7 +31,7 @@ from vehicle_agent.codec import codec_for
 from vehicle_agent.dbc import DbcError
 from vehicle_agent.gps import GpsdSource, GpsFix, GpsSource
 from vehicle_agent.policies import PolicyStore
-from vehicle_agent.ports import GpioButtonBoard, sysfs_gpio_writer
+from vehicle_agent.ports import GpioButtonBoard, release_board_lines, sysfs_gpio_writer
 from vehicle_agent.runner import run_agent
 from vehicle_agent.safety import SafetyLayer
 from vehicle_agent.server import ServerClient, ServerError
@@ -71,6 +71,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--button-board", help="GPIO lines, e.g. plus=17,minus=27,gap=22")
     p.add_argument("--env-file", type=Path, help="read SMOOTHFLEET_AGENT_* settings from a file")
     p.add_argument("--log-level", help="DEBUG, INFO, WARNING (SMOOTHFLEET_AGENT_LOG_LEVEL)")
+    p.add_argument(
+        "--release-buttons",
+        action="store_true",
+        help="write every button-board line low and exit (run after the agent stops, however)",
+    )
     p.add_argument("--version", action="version", version=f"smoothfleet-agent {AGENT_VERSION}")
     return p
 
@@ -127,6 +132,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=settings.log_level.upper(), format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
+    if settings.button_board:
+        # a line an earlier agent left high (killed mid-press) would hold its button down
+        failures = release_board_lines(
+            board_lines(settings.button_board), sysfs_gpio_writer(settings.gpio_root)
+        )
+        for failure in failures:
+            sys.stderr.write(f"smoothfleet-agent: {failure}\n")
+        if failures or args.release_buttons:
+            return 1 if failures else 0
+    elif args.release_buttons:
+        return 0  # no board: the car's buttons are CAN frames, which stop with the agent
     stop = threading.Event()
 
     def request_stop(signum: int, frame: FrameType | None) -> None:
@@ -159,7 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         board = None
         if settings.button_board:
             lines = board_lines(settings.button_board)
-            writer = sysfs_gpio_writer()
+            writer = sysfs_gpio_writer(settings.gpio_root)
 
             def board(safety: SafetyLayer) -> GpioButtonBoard:
                 return GpioButtonBoard(lines, writer, safety)

@@ -237,6 +237,22 @@ class GpioButtonBoard:
         )
 
 
+def release_board_lines(
+    lines: Mapping[CruiseButton, int], write_line: Callable[[int, bool], None]
+) -> list[str]:
+    """Write every board line low, outside any agent: what a killed agent (SIGKILL, a crash)
+    could not do, so the service manager runs it after every exit (`smoothfleet-agent
+    --release-buttons`, deploy/smoothfleet-agent.service), and the agent before it starts.
+    Returns one message per line that could not be written; the others are written anyway."""
+    failures = []
+    for button, line in lines.items():
+        try:
+            write_line(line, False)
+        except OSError as error:
+            failures.append(f"the {button.value} line (GPIO {line}) was not written low: {error}")
+    return failures
+
+
 def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bool], None]:
     """Drive exported GPIO lines through sysfs (`/sys/class/gpio/gpioN/value`)."""
 

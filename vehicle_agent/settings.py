@@ -63,6 +63,8 @@ class AgentSettings(BaseSettings):
     wave_speed_mps: float = Field(DEFAULT_WAVE_SPEED_MPS, le=0, ge=-20)
     # GPIO button board instead of CAN button frames, e.g. "plus=17,minus=27,gap=22".
     button_board: str | None = None
+    # Where the board's lines are exported (sysfs); another root where sysfs is mounted elsewhere.
+    gpio_root: Path = Path("/sys/class/gpio")
     log_level: str = "INFO"
 
     @property

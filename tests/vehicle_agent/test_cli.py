@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import configparser
 import subprocess
 import sys
 from pathlib import Path
@@ -226,3 +227,55 @@ def test_each_car_has_its_own_ping_spool_unless_one_is_named(tmp_path: Path) -> 
         server_url="http://x", token="abc", vehicle_id="SF-001", spool_path=tmp_path / "p.sqlite"
     )
     assert named.spool_file == tmp_path / "p.sqlite"
+
+
+def _board_env(tmp_path: Path, board: str | None) -> Path:
+    env_file = tmp_path / "agent.env"
+    env_file.write_text(
+        "SMOOTHFLEET_AGENT_SERVER_URL=https://fleet.example/\n"
+        "SMOOTHFLEET_AGENT_TOKEN=secret-token-1\n"
+        "SMOOTHFLEET_AGENT_VEHICLE_ID=SF-010\n"
+        f"SMOOTHFLEET_AGENT_GPIO_ROOT={tmp_path / 'gpio'}\n"
+        + (f"SMOOTHFLEET_AGENT_BUTTON_BOARD={board}\n" if board else "")
+    )
+    return env_file
+
+
+def test_release_buttons_lowers_a_line_a_killed_agent_left_high(tmp_path: Path) -> None:
+    # an agent killed (SIGKILL) while it held minus: sysfs keeps the line high
+    for line, level in ((17, "0"), (27, "1"), (22, "0")):
+        (tmp_path / "gpio" / f"gpio{line}").mkdir(parents=True)
+        (tmp_path / "gpio" / f"gpio{line}" / "value").write_text(level)
+    env_file = _board_env(tmp_path, "plus=17,minus=27,gap=22")
+    result = run_agent_cli("--env-file", str(env_file), "--release-buttons")
+    assert result.returncode == 0, result.stderr
+    levels = {
+        line: (tmp_path / "gpio" / f"gpio{line}" / "value").read_text() for line in (17, 27, 22)
+    }
+    assert levels == {17: "0", 27: "0", 22: "0"}
+    # a line that cannot be written is named, and the others are still written low
+    (tmp_path / "gpio" / "gpio27" / "value").write_text("1")
+    (tmp_path / "gpio" / "gpio17" / "value").unlink()
+    (tmp_path / "gpio" / "gpio17").rmdir()
+    failed = run_agent_cli("--env-file", str(env_file), "--release-buttons")
+    assert failed.returncode == 1
+    assert failed.stderr.startswith(
+        "smoothfleet-agent: the plus line (GPIO 17) was not written low"
+    )
+    assert (tmp_path / "gpio" / "gpio27" / "value").read_text() == "0"
+    # the agent itself refuses to start on a board it cannot lower
+    refused = run_agent_cli("--env-file", str(env_file), "--can", "virtual:release-test")
+    assert refused.returncode == 1
+    assert "the plus line (GPIO 17) was not written low" in refused.stderr
+    # a car without a board has nothing to release
+    plain = run_agent_cli("--env-file", str(_board_env(tmp_path, None)), "--release-buttons")
+    assert (plain.returncode, plain.stderr) == (0, "")
+
+
+def test_the_service_releases_the_buttons_after_every_exit_of_the_agent() -> None:
+    unit = configparser.ConfigParser(strict=False, interpolation=None)
+    unit.read(Path(__file__).parents[2] / "deploy" / "smoothfleet-agent.service")
+    service = unit["Service"]
+    # systemd runs ExecStopPost after any exit, a SIGKILL included, with the agent's settings
+    assert service["ExecStopPost"] == service["ExecStart"] + " --release-buttons"
+    assert service["Restart"] == "always"
