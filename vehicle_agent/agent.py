@@ -250,7 +250,13 @@ class Agent:
             self.buttons = (
                 button_port(self.safety)
                 if button_port is not None
-                else CanButtonPort(car, self.codec, self.sender, lambda: self.reader.latest)
+                else CanButtonPort(
+                    car,
+                    self.codec,
+                    self.sender,
+                    lambda: self.reader.latest,
+                    self.reader.received_at,
+                )
             )
         else:
             self.accel_port = CanAccelPort(car, self.codec, self.sender, lambda: self.reader.latest)

@@ -63,7 +63,9 @@ class CanCommandPort:
 
 
 class CanButtonPort(CanCommandPort):
-    """Holds a button by sending the make's button frame every command period."""
+    """Holds a button by sending the make's button frame every command period; `received_at`
+    tells when the car's frame of a message now in `latest` was read
+    (`CarStateReader.received_at`), for a make whose button frames copy the car's own."""
 
     def __init__(
         self,
@@ -71,8 +73,10 @@ class CanButtonPort(CanCommandPort):
         codec: Codec,
         sender: SafeSender,
         latest: Callable[[], Mapping[str, Signals]],
+        received_at: Callable[[str], float | None],
     ) -> None:
         super().__init__(car, codec, sender, latest)
+        self.received_at = received_at
         self._counter = 0
         self._release_frames = 0
         self._closed = False
@@ -97,7 +101,15 @@ class CanButtonPort(CanCommandPort):
 
     def _send(self, button: CruiseButton | None, context: SafetyContext) -> bool:
         """Send one frame pressing `button` (None: all released) through the safety layer;
-        True when it went out."""
+        True when it went out. A press copying a car frame too old to copy is refused
+        (`SafetyLayer.check_copy`); a release is not, as releasing is always allowed."""
+        if button is not None and self.car.copies_command_frame:
+            refusal = self.sender.safety.check_copy(
+                self.received_at(self.car.command_message), context
+            )
+            if refusal is not None:
+                self.sender.safety.refuse(refusal)
+                return False
         latest = self.latest()
         signals = self.car.button_signals(button, latest)
         counter = self.car.command_counter_signal

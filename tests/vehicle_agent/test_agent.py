@@ -409,6 +409,46 @@ def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer
         assert r.agent.safety.sent == sent + 1  # the release passed the safety layer
 
 
+def test_a_nissan_press_copies_no_car_frame_older_than_two_periods(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The Rogue's button frame copies the car's latest CRUISE_THROTTLE, gas pedal and brake
+    included, and the car state stays valid on one 10 periods (0.5 s) old: with the car's
+    frames no longer reaching the agent, it went on pressing + and telling the car the gas was
+    released while the driver held it. A press copies a frame read at most 2 periods before,
+    and the refusal hands back."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent holds + 0.9 s
+        r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
+        assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
+        car, codec = r.agent.car, r.agent.codec
+        command_id = codec.frame_id(car.command_message)
+        period = car.command_period_s
+        spy = can.Bus(interface="virtual", channel=r.agent_bus.channel_id)
+        try:
+            r.emulator.muted.add("CRUISE_THROTTLE")
+            r.emulator.driver_gas(True)
+            muted_at = r.clock.monotonic()  # the car's last CRUISE_THROTTLE: no later
+            pressed_at = []
+            for _ in range(8):  # 0.4 s: the car state stays valid throughout
+                r.run(period)
+                for frame in iter(lambda: spy.recv(timeout=0), None):
+                    if frame.arbitration_id != command_id:
+                        continue
+                    _, signals = codec.decode(frame.arbitration_id, frame.data)
+                    if car.pressed_buttons(signals):
+                        assert signals["GAS_PEDAL"] == 0  # the copy: the gas released
+                        pressed_at.append(r.clock.monotonic())
+            assert r.agent.reader.snapshot(r.clock.monotonic()).valid
+        finally:
+            spy.shutdown()
+        assert pressed_at, "no press went out before the car's frames stopped"
+        assert max(pressed_at) - muted_at <= 2 * period + 1e-9
+        assert r.agent.safety.refused["copy"] == 1
+        assert not engaged(r)
+        assert r.agent.state.reason == "actuator refused by the safety layer"
+
+
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
