@@ -263,6 +263,8 @@ def test_no_button_frame_leaves_out_of_limits(
                     assert now - press_started <= SafetyLimits().max_hold_s + 1e-9
             elif held:
                 released_at = now
+            elif car.copies_command_frame:
+                assert copy_age <= 0.1  # from a stale copy, only the release ending a press
             held = pressed
 
 
@@ -403,6 +405,37 @@ def test_button_frames_count_on_from_the_cars_own_counter(
         (frame,) = received(car_bus)
         _, signals = codec.decode(frame.arbitration_id, frame.data)
         assert signals[car.command_counter_signal] == (car_counter + 1) % 4
+
+
+@pytest.mark.parametrize("stops", [False, True])
+def test_from_a_stale_copy_only_the_release_ending_a_press_goes_out(
+    stops: bool, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """Every Rogue button frame copies the car's CRUISE_THROTTLE, pedals and brake included.
+    Once its frames stopped reaching the agent, the press was refused, but the port went on to
+    send its repeated releases from the stale copy (or one more when the agent stopped), each
+    telling the car the driver's inputs of a moment ago. The release ending the press still
+    goes out: no press may stand in the last frame the car read."""
+    agent_bus, car_bus = buses
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    copy.read_s = 0.0  # the car's last CRUISE_THROTTLE the agent reads
+    sent: list[tuple[float, frozenset[CruiseButton]]] = []
+    for step in range(9 if not stops else 5):
+        now = round(0.05 * step, 2)
+        port.hold(CruiseButton.PLUS if now < 0.2 else None, SafetyContext(now, car_state(now)))
+        for frame in received(car_bus):
+            sent.append(
+                (now, car.pressed_buttons(codec.decode(frame.arbitration_id, frame.data)[1]))
+            )
+    port.close(SafetyContext(0.45, car_state(0.45)))
+    assert received(car_bus) == []
+    plus = frozenset({CruiseButton.PLUS})
+    assert sent == [(0.0, plus), (0.05, plus), (0.1, plus), (0.2, frozenset())]
+    assert safety.refused == {"copy": 1}  # the press at 0.15 s
 
 
 def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
