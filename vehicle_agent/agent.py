@@ -576,10 +576,16 @@ class Agent:
 
     def ping(self) -> dict[str, Any] | None:
         """The ping for the latest snapshot as `contract.vehicles.Ping` JSON (None without a
-        current GPS fix: lat/lon are required, and an old fix is not where the car is)."""
+        current GPS fix: lat/lon are required, and an old fix is not where the car is; None
+        too when neither the car nor the receiver tells the speed, also required: 0 m/s in
+        its place would show the server a car standing on the road)."""
         snapshot = self.snapshot
         fix = snapshot.fix if snapshot else None
         if snapshot is None or fix is None or not fix_is_current(fix, self.clock.monotonic()):
+            return None
+        reading = snapshot.reading
+        speed_mps = reading.speed_mps if reading is not None else fix.speed_mps
+        if speed_mps is None:
             return None
         ts = self.clock.now()
         if not self._clock_agrees_with_gps(fix, ts):
@@ -592,13 +598,12 @@ class Agent:
             # than none until the clock passes the last one again
             log.warning("wall clock stepped back %.1f s", (self._last_ping_ts - ts).total_seconds())
         self._last_ping_ts = ts
-        reading = snapshot.reading
         ping: dict[str, Any] = {
             "vehicle_id": self.vehicle_id,
             "ts": ts.isoformat(timespec="milliseconds"),
             "lat": round(fix.lat, 7),
             "lon": round(fix.lon, 7),
-            "speed_mps": round(reading.speed_mps if reading else (fix.speed_mps or 0.0), 3),
+            "speed_mps": round(speed_mps, 3),
             "controller_engaged": snapshot.mode is engage.Mode.ENGAGED,
         }
         optional = {

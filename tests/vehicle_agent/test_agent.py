@@ -749,6 +749,40 @@ def test_a_reading_outside_the_contract_costs_only_its_field(
         assert "ts" in r.agent.status_report()
 
 
+def test_no_ping_says_a_car_of_unknown_speed_stands(tmp_path: Path, dbc_cache: Path) -> None:
+    """With the car's CAN not read and a receiver that reports no speed (gpsd leaves it out of
+    a fix it has none for), the ping went out at 0 m/s: to the server, whose traffic estimate
+    it joins, a car standing on the highway. A ping needs a speed, so none goes out."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        receiver = r.gps
+
+        class NoSpeedReceiver:
+            def latest(self) -> GpsFix | None:
+                fix = receiver.latest()
+                return None if fix is None else replace(fix, speed_mps=None)
+
+        r.agent.gps = NoSpeedReceiver()
+        r.run(1.0)
+        r.clock.advance(0.01)  # past the instant of the last ping spooled
+        ping = r.agent.ping()
+        assert ping is not None
+        assert ping["speed_mps"] == pytest.approx(22.0, abs=0.5)  # the car's own
+        r.emulator.muted = set(r.emulator.frames)
+        r.run(1.0)
+        snapshot = r.agent.snapshot
+        assert snapshot is not None
+        assert snapshot.reading is None
+        assert snapshot.fix is not None
+        r.clock.advance(0.01)
+        assert r.agent.ping() is None
+        r.agent.gps = receiver  # the receiver's speed, where the car's is missing
+        r.run(0.1)
+        r.clock.advance(0.01)
+        ping = r.agent.ping()
+        assert ping is not None
+        assert ping["speed_mps"] == pytest.approx(22.0, abs=0.5)
+
+
 def test_a_button_car_that_does_not_report_its_gap_hands_back_and_says_so(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
