@@ -77,6 +77,10 @@ AGENT_VERSION = "0.1.0"
 CONTROL_PERIOD_S = 0.1
 # A GPS fix older than this is no fix (s).
 GPS_MAX_AGE_S = 2.0
+# A control pass's snapshot older than this says nothing of the car now (s): passes renew it
+# every command period, so no pass has completed since (a call stuck in the loop, every pass
+# failing), and what it read and whether it commanded are history (`status_report`).
+SNAPSHOT_MAX_AGE_S = 1.0
 # The wall clock may differ this much from the GPS receiver's time of a fix before the agent
 # stamps no ping with it (s): a receiver reports up to a second late, a Pi without a real-time
 # clock boots at its last shutdown's time, hours or days off, until NTP sets it.
@@ -649,7 +653,9 @@ class Agent:
         return agrees
 
     def status_report(self) -> dict[str, Any]:
-        """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON."""
+        """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON. The
+        car's state and whether the controller drives it come from a snapshot of the last
+        SNAPSHOT_MAX_AGE_S only: an older one is no pass running, whatever it said."""
         now = self.clock.monotonic()
         snapshot = self.snapshot
         since, frames_then = self._frames_at_status
@@ -657,20 +663,32 @@ class Agent:
         rate = (frames - frames_then) / (now - since) if now > since else 0.0
         self._frames_at_status = (now, frames)
         fix = snapshot.fix if snapshot and fix_is_current(snapshot.fix, now) else None
-        reading = snapshot.reading if snapshot else None
+        current = (
+            snapshot
+            if snapshot is not None and now - snapshot.time_s <= SNAPSHOT_MAX_AGE_S
+            else None
+        )
+        reading = current.reading if current else None
+        if current is not None:
+            reason: str | None = current.reason
+        elif snapshot is not None:
+            reason = f"no control pass for {now - snapshot.time_s:.0f} s"
+        else:
+            reason = None
         report: dict[str, Any] = {
             "ts": self.clock.now().isoformat(timespec="milliseconds"),
             "agent_version": AGENT_VERSION,
             "uptime_s": round(now - self.started_s, 1),
-            "can_ok": snapshot is not None and snapshot.can_problem is None,
+            "can_ok": current is not None and current.can_problem is None,
             "can_msgs_per_s": round(rate, 1),
             "gps_fix": fix is not None,
             "gps_satellites": fix.satellites if fix else None,
             "acc_available": reading.acc_available if reading else None,
             "controller": snapshot.controller if snapshot else None,
-            "controller_running": snapshot is not None and snapshot.mode is engage.Mode.ENGAGED,
+            "controller_running": current is not None and current.mode is engage.Mode.ENGAGED,
             "plan_id": snapshot.plan_id if snapshot else None,
-            "plan_age_s": round(max(snapshot.plan_age_s, 0.0), 1)
+            # aged since the pass that judged it
+            "plan_age_s": round(max(snapshot.plan_age_s + now - snapshot.time_s, 0.0), 1)
             if snapshot and snapshot.plan_age_s is not None
             else None,
             "spool_backlog": self.spool.backlog(),
@@ -681,7 +699,7 @@ class Agent:
             else None,
             "config_version": snapshot.config_version if snapshot else None,
             "policy_sha256": snapshot.policy_sha256 if snapshot else None,
-            "engage_reason": snapshot.reason if snapshot else None,
+            "engage_reason": reason,
         }
         status = self._message(
             VehicleStatusReport,

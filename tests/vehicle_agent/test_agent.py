@@ -508,6 +508,30 @@ def test_a_silent_gps_receiver_is_no_fix_in_pings_or_status(
         assert r.agent.status_report()["gps_fix"] is True
 
 
+def test_a_control_loop_that_stopped_is_not_reported_driving(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The status report read the control loop's last snapshot however old it was: with the
+    loop stuck in a call (no pass renewing it, none failing to hand back), the car went on
+    being reported with the controller running, its CAN read, its ACC available and its plan
+    as young as at the last pass, while nothing commanded or read the car."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        status = r.agent.status_report()
+        assert status["controller_running"] is True
+        assert status["can_ok"] is True
+        assert status["acc_available"] is True
+        plan_age_s = status["plan_age_s"]
+        r.clock.advance(5.0)  # the network thread reports on; no control pass runs
+        status = r.agent.status_report()
+        assert status["controller_running"] is False
+        assert status["can_ok"] is False
+        assert "acc_available" not in status
+        assert status["engage_reason"] == "no control pass for 5 s"
+        assert status["controller"] == "simple"  # the assignment it holds
+        assert status["plan_age_s"] == pytest.approx(plan_age_s + 5.0, abs=0.11)
+
+
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
 def test_driver_override_hands_back_within_one_period(
     action: str, tmp_path: Path, dbc_cache: Path
