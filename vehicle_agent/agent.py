@@ -77,6 +77,10 @@ AGENT_VERSION = "0.1.0"
 CONTROL_PERIOD_S = 0.1
 # A GPS fix older than this is no fix (s).
 GPS_MAX_AGE_S = 2.0
+# A control pass's snapshot older than this says nothing of the car now (s): passes renew it
+# every command period, so no pass has completed since (a call stuck in the loop, every pass
+# failing), and what it read and whether it commanded are history (`status_report`).
+SNAPSHOT_MAX_AGE_S = 1.0
 # The wall clock may differ this much from the GPS receiver's time of a fix before the agent
 # stamps no ping with it (s): a receiver reports up to a second late, a Pi without a real-time
 # clock boots at its last shutdown's time, hours or days off, until NTP sets it.
@@ -250,7 +254,13 @@ class Agent:
             self.buttons = (
                 button_port(self.safety)
                 if button_port is not None
-                else CanButtonPort(car, self.codec, self.sender, lambda: self.reader.latest)
+                else CanButtonPort(
+                    car,
+                    self.codec,
+                    self.sender,
+                    lambda: self.reader.latest,
+                    self.reader.received_at,
+                )
             )
         else:
             self.accel_port = CanAccelPort(car, self.codec, self.sender, lambda: self.reader.latest)
@@ -570,10 +580,16 @@ class Agent:
 
     def ping(self) -> dict[str, Any] | None:
         """The ping for the latest snapshot as `contract.vehicles.Ping` JSON (None without a
-        current GPS fix: lat/lon are required, and an old fix is not where the car is)."""
+        current GPS fix: lat/lon are required, and an old fix is not where the car is; None
+        too when neither the car nor the receiver tells the speed, also required: 0 m/s in
+        its place would show the server a car standing on the road)."""
         snapshot = self.snapshot
         fix = snapshot.fix if snapshot else None
         if snapshot is None or fix is None or not fix_is_current(fix, self.clock.monotonic()):
+            return None
+        reading = snapshot.reading
+        speed_mps = reading.speed_mps if reading is not None else fix.speed_mps
+        if speed_mps is None:
             return None
         ts = self.clock.now()
         if not self._clock_agrees_with_gps(fix, ts):
@@ -586,13 +602,12 @@ class Agent:
             # than none until the clock passes the last one again
             log.warning("wall clock stepped back %.1f s", (self._last_ping_ts - ts).total_seconds())
         self._last_ping_ts = ts
-        reading = snapshot.reading
         ping: dict[str, Any] = {
             "vehicle_id": self.vehicle_id,
             "ts": ts.isoformat(timespec="milliseconds"),
             "lat": round(fix.lat, 7),
             "lon": round(fix.lon, 7),
-            "speed_mps": round(reading.speed_mps if reading else (fix.speed_mps or 0.0), 3),
+            "speed_mps": round(speed_mps, 3),
             "controller_engaged": snapshot.mode is engage.Mode.ENGAGED,
         }
         optional = {
@@ -638,7 +653,9 @@ class Agent:
         return agrees
 
     def status_report(self) -> dict[str, Any]:
-        """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON."""
+        """The piStatus report for now, as `contract.vehicles.VehicleStatusReport` JSON. The
+        car's state and whether the controller drives it come from a snapshot of the last
+        SNAPSHOT_MAX_AGE_S only: an older one is no pass running, whatever it said."""
         now = self.clock.monotonic()
         snapshot = self.snapshot
         since, frames_then = self._frames_at_status
@@ -646,20 +663,32 @@ class Agent:
         rate = (frames - frames_then) / (now - since) if now > since else 0.0
         self._frames_at_status = (now, frames)
         fix = snapshot.fix if snapshot and fix_is_current(snapshot.fix, now) else None
-        reading = snapshot.reading if snapshot else None
+        current = (
+            snapshot
+            if snapshot is not None and now - snapshot.time_s <= SNAPSHOT_MAX_AGE_S
+            else None
+        )
+        reading = current.reading if current else None
+        if current is not None:
+            reason: str | None = current.reason
+        elif snapshot is not None:
+            reason = f"no control pass for {now - snapshot.time_s:.0f} s"
+        else:
+            reason = None
         report: dict[str, Any] = {
             "ts": self.clock.now().isoformat(timespec="milliseconds"),
             "agent_version": AGENT_VERSION,
             "uptime_s": round(now - self.started_s, 1),
-            "can_ok": snapshot is not None and snapshot.can_problem is None,
+            "can_ok": current is not None and current.can_problem is None,
             "can_msgs_per_s": round(rate, 1),
             "gps_fix": fix is not None,
             "gps_satellites": fix.satellites if fix else None,
             "acc_available": reading.acc_available if reading else None,
             "controller": snapshot.controller if snapshot else None,
-            "controller_running": snapshot is not None and snapshot.mode is engage.Mode.ENGAGED,
+            "controller_running": current is not None and current.mode is engage.Mode.ENGAGED,
             "plan_id": snapshot.plan_id if snapshot else None,
-            "plan_age_s": round(max(snapshot.plan_age_s, 0.0), 1)
+            # aged since the pass that judged it
+            "plan_age_s": round(max(snapshot.plan_age_s + now - snapshot.time_s, 0.0), 1)
             if snapshot and snapshot.plan_age_s is not None
             else None,
             "spool_backlog": self.spool.backlog(),
@@ -670,7 +699,7 @@ class Agent:
             else None,
             "config_version": snapshot.config_version if snapshot else None,
             "policy_sha256": snapshot.policy_sha256 if snapshot else None,
-            "engage_reason": snapshot.reason if snapshot else None,
+            "engage_reason": reason,
         }
         status = self._message(
             VehicleStatusReport,

@@ -63,7 +63,9 @@ class CanCommandPort:
 
 
 class CanButtonPort(CanCommandPort):
-    """Holds a button by sending the make's button frame every command period."""
+    """Holds a button by sending the make's button frame every command period; `received_at`
+    tells when the car's frame of a message now in `latest` was read
+    (`CarStateReader.received_at`), for a make whose button frames copy the car's own."""
 
     def __init__(
         self,
@@ -71,10 +73,14 @@ class CanButtonPort(CanCommandPort):
         codec: Codec,
         sender: SafeSender,
         latest: Callable[[], Mapping[str, Signals]],
+        received_at: Callable[[str], float | None],
     ) -> None:
         super().__init__(car, codec, sender, latest)
+        self.received_at = received_at
         self._counter = 0
         self._release_frames = 0
+        # whether the last frame sent pressed a button: a press the car may still read
+        self._pressed_last = False
         self._closed = False
         # the control loop holds, and a stopping agent closes, from whichever thread stops it
         self._lock = threading.Lock()
@@ -87,6 +93,9 @@ class CanButtonPort(CanCommandPort):
                 return
             if not self.due(now):
                 return
+            if button is None and self._repeats_stale_release(context):
+                self._release_frames = 0
+                return
             if self._send(button, context):
                 self._release_frames = (
                     RELEASE_FRAMES if button is not None else self._release_frames - 1
@@ -97,7 +106,14 @@ class CanButtonPort(CanCommandPort):
 
     def _send(self, button: CruiseButton | None, context: SafetyContext) -> bool:
         """Send one frame pressing `button` (None: all released) through the safety layer;
-        True when it went out."""
+        True when it went out. A press copying a car frame too old to copy is refused
+        (`SafetyLayer.check_copy`); a release is not, as releasing is always allowed (`hold`
+        and `close` leave out the releases that only repeat one, `_repeats_stale_release`)."""
+        if button is not None:
+            refusal = self._stale_copy(context)
+            if refusal is not None:
+                self.sender.safety.refuse(refusal)
+                return False
         latest = self.latest()
         signals = self.car.button_signals(button, latest)
         counter = self.car.command_counter_signal
@@ -111,9 +127,25 @@ class CanButtonPort(CanCommandPort):
         if not self.sender.send(frame, context):
             return False
         self._last_sent_s = context.time_s
+        self._pressed_last = button is not None
         if self.car.command_counter_modulo:
             self._counter = (self._counter + 1) % self.car.command_counter_modulo
         return True
+
+    def _stale_copy(self, context: SafetyContext) -> Refusal | None:
+        """Why the car's frame a button frame would copy is too old to copy, or None (also
+        for makes whose button frames copy none)."""
+        if not self.car.copies_command_frame:
+            return None
+        return self.sender.safety.check_copy(self.received_at(self.car.command_message), context)
+
+    def _repeats_stale_release(self, context: SafetyContext) -> bool:
+        """Whether a release now would only repeat one the car has read, copying a car frame
+        too old to copy. The releases after a press are repeated so that the car sees one even
+        if a frame is lost, but each copies the driver's pedal and brake too, from a stale copy
+        their values of a moment ago. The release ending a press goes out all the same: a
+        press must not stand in the last frame the car read."""
+        return not self._pressed_last and self._stale_copy(context) is not None
 
     def _next_counter(self, car_frame: Signals) -> int:
         """The rolling counter of the next frame: one past the car's own last frame of this
@@ -131,12 +163,15 @@ class CanButtonPort(CanCommandPort):
         """Send a released frame if a press may still stand in the last frame sent, then
         nothing more. The module reading the buttons acts on the last frame it received, so
         an agent stopping mid-press must end with a release, as every press does (one frame:
-        the agent waits no more periods on its way out)."""
+        the agent waits no more periods on its way out), unless it would only repeat one the
+        car has read from a stale copy (`_repeats_stale_release`)."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
-            if self._release_frames and not self._send(None, context):
+            if not self._release_frames or self._repeats_stale_release(context):
+                return
+            if not self._send(None, context):
                 log.warning("the release frame on closing was not sent: the car may see a press")
 
 

@@ -11,7 +11,10 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
 - the car: ACC engaged by the driver, the car state valid and fresh, and no release of a
-  standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL).
+  standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL);
+- the copy: a press whose frame copies the car's own latest frame of the command message (the
+  Nissan's CRUISE_THROTTLE, pedals and brake included) only from one read at most 2 of its
+  periods ago (`check_copy`).
 """
 
 from __future__ import annotations
@@ -54,6 +57,11 @@ class SafetyLimits:
     )
     # A previous request older than this is no reference for the jerk check (s).
     jerk_reference_s: float = 0.5
+    # A press copies the car's own frame of the command message (`copies_command_frame`) only
+    # when it was read at most this many of its periods ago. The car state stays valid for 10
+    # periods (0.5 s on the Nissan), and a copy that old re-sends pedal and brake values the
+    # driver may have changed since; 2 periods let one frame come late or go missing.
+    copy_fresh_periods: float = 2.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,12 +162,32 @@ class SafetyLayer:
         state = context.car_state
         if not state.valid or state.reading is None:
             return Refusal("car state", f"car state invalid: {state.problem}")
-        checked_at = context.time_s if self._clock is None else self._clock()
-        age = checked_at - state.time_s
+        age = self._age_s(state.time_s, context)
         if age > self.limits.max_input_age_s:
             return Refusal("car state", f"car state {age:.2f} s old")
         if not state.reading.acc_engaged:
             return Refusal("ACC", "ACC not engaged by the driver")
+        return None
+
+    def _age_s(self, read_s: float, context: SafetyContext) -> float:
+        """How old what was read at `read_s` is at the instant a frame is checked (the
+        clock's, see `__init__`)."""
+        checked_at = context.time_s if self._clock is None else self._clock()
+        return checked_at - read_s
+
+    def check_copy(self, read_s: float | None, context: SafetyContext) -> Refusal | None:
+        """Why a press may not be built from the car's frame of the command message read at
+        `read_s` (None: never read), or None when it may. Only makes whose button frames copy
+        that frame (`copies_command_frame`) are asked: the copy carries the driver's pedal and
+        brake besides the buttons, and the older it is, the longer the driver has had to change
+        them. Aged by the clock, as the car state is: a stalled pass copies an older frame."""
+        name = self.car.command_message
+        if read_s is None:
+            return Refusal("copy", f"no {name} of the car's to copy")
+        age = self._age_s(read_s, context)
+        limit = self.limits.copy_fresh_periods * self.car.messages[name].period_s
+        if age > limit:
+            return Refusal("copy", f"the car's {name} to copy is {age:.2f} s old")
         return None
 
     def _check_accel(

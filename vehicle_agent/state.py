@@ -102,6 +102,11 @@ class CarStateReader:
             self._reported.discard(name)
         self.stats.used += 1
 
+    def received_at(self, name: str) -> float | None:
+        """When the frame now in `latest[name]` was read (None: none yet), for a command
+        frame that copies it (`CarInterface.copies_command_frame`) to judge its age."""
+        return self._received_at.get(name)
+
     def _refuse(self, name: str, kind: str, message: str) -> None:
         self.stats.errors[kind] += 1
         self._problems[name] = message

@@ -409,6 +409,46 @@ def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer
         assert r.agent.safety.sent == sent + 1  # the release passed the safety layer
 
 
+def test_a_nissan_press_copies_no_car_frame_older_than_two_periods(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The Rogue's button frame copies the car's latest CRUISE_THROTTLE, gas pedal and brake
+    included, and the car state stays valid on one 10 periods (0.5 s) old: with the car's
+    frames no longer reaching the agent, it went on pressing + and telling the car the gas was
+    released while the driver held it. A press copies a frame read at most 2 periods before,
+    and the refusal hands back."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent holds + 0.9 s
+        r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
+        assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
+        car, codec = r.agent.car, r.agent.codec
+        command_id = codec.frame_id(car.command_message)
+        period = car.command_period_s
+        spy = can.Bus(interface="virtual", channel=r.agent_bus.channel_id)
+        try:
+            r.emulator.muted.add("CRUISE_THROTTLE")
+            r.emulator.driver_gas(True)
+            muted_at = r.clock.monotonic()  # the car's last CRUISE_THROTTLE: no later
+            pressed_at = []
+            for _ in range(8):  # 0.4 s: the car state stays valid throughout
+                r.run(period)
+                for frame in iter(lambda: spy.recv(timeout=0), None):
+                    if frame.arbitration_id != command_id:
+                        continue
+                    _, signals = codec.decode(frame.arbitration_id, frame.data)
+                    if car.pressed_buttons(signals):
+                        assert signals["GAS_PEDAL"] == 0  # the copy: the gas released
+                        pressed_at.append(r.clock.monotonic())
+            assert r.agent.reader.snapshot(r.clock.monotonic()).valid
+        finally:
+            spy.shutdown()
+        assert pressed_at, "no press went out before the car's frames stopped"
+        assert max(pressed_at) - muted_at <= 2 * period + 1e-9
+        assert r.agent.safety.refused["copy"] == 1
+        assert not engaged(r)
+        assert r.agent.state.reason == "actuator refused by the safety layer"
+
+
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -466,6 +506,30 @@ def test_a_silent_gps_receiver_is_no_fix_in_pings_or_status(
         assert engaged(r), r.agent.state.reason
         assert r.agent.ping() is not None
         assert r.agent.status_report()["gps_fix"] is True
+
+
+def test_a_control_loop_that_stopped_is_not_reported_driving(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The status report read the control loop's last snapshot however old it was: with the
+    loop stuck in a call (no pass renewing it, none failing to hand back), the car went on
+    being reported with the controller running, its CAN read, its ACC available and its plan
+    as young as at the last pass, while nothing commanded or read the car."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        status = r.agent.status_report()
+        assert status["controller_running"] is True
+        assert status["can_ok"] is True
+        assert status["acc_available"] is True
+        plan_age_s = status["plan_age_s"]
+        r.clock.advance(5.0)  # the network thread reports on; no control pass runs
+        status = r.agent.status_report()
+        assert status["controller_running"] is False
+        assert status["can_ok"] is False
+        assert "acc_available" not in status
+        assert status["engage_reason"] == "no control pass for 5 s"
+        assert status["controller"] == "simple"  # the assignment it holds
+        assert status["plan_age_s"] == pytest.approx(plan_age_s + 5.0, abs=0.11)
 
 
 @pytest.mark.parametrize("action", ["brake", "gas", "button"])
@@ -707,6 +771,40 @@ def test_a_reading_outside_the_contract_costs_only_its_field(
         assert r.agent.stats.fields_dropped["ping"] == 1
         # a status report is always sent (only its ts is required)
         assert "ts" in r.agent.status_report()
+
+
+def test_no_ping_says_a_car_of_unknown_speed_stands(tmp_path: Path, dbc_cache: Path) -> None:
+    """With the car's CAN not read and a receiver that reports no speed (gpsd leaves it out of
+    a fix it has none for), the ping went out at 0 m/s: to the server, whose traffic estimate
+    it joins, a car standing on the highway. A ping needs a speed, so none goes out."""
+    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+        receiver = r.gps
+
+        class NoSpeedReceiver:
+            def latest(self) -> GpsFix | None:
+                fix = receiver.latest()
+                return None if fix is None else replace(fix, speed_mps=None)
+
+        r.agent.gps = NoSpeedReceiver()
+        r.run(1.0)
+        r.clock.advance(0.01)  # past the instant of the last ping spooled
+        ping = r.agent.ping()
+        assert ping is not None
+        assert ping["speed_mps"] == pytest.approx(22.0, abs=0.5)  # the car's own
+        r.emulator.muted = set(r.emulator.frames)
+        r.run(1.0)
+        snapshot = r.agent.snapshot
+        assert snapshot is not None
+        assert snapshot.reading is None
+        assert snapshot.fix is not None
+        r.clock.advance(0.01)
+        assert r.agent.ping() is None
+        r.agent.gps = receiver  # the receiver's speed, where the car's is missing
+        r.run(0.1)
+        r.clock.advance(0.01)
+        ping = r.agent.ping()
+        assert ping is not None
+        assert ping["speed_mps"] == pytest.approx(22.0, abs=0.5)
 
 
 def test_a_button_car_that_does_not_report_its_gap_hands_back_and_says_so(

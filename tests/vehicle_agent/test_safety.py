@@ -5,7 +5,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,7 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vehicle_agent.actuators import AccelLimiter
-from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
+from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton, car_for
+from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
 from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer, SafetyLimits
@@ -189,6 +190,23 @@ def test_no_acceleration_frame_leaves_out_of_limits(
 
 
 buttons = st.one_of(st.none(), st.sampled_from(list(CruiseButton)))
+# How long before a frame is built the car's own frame of the command message was read.
+copy_ages = st.sampled_from([0.0, 0.05, 0.1, 0.15, 0.45])
+
+
+class CarCopy:
+    """The car's own frame of the command message as the agent's reader keeps it: the signals
+    a button frame may copy, and when they were read (`read_s`, None: not yet)."""
+
+    def __init__(self, car: CarInterface, read_s: float | None = None) -> None:
+        self.frames = {car.command_message: dict(car.button_signals(None, {}))}
+        self.read_s = read_s
+
+    def latest(self) -> Mapping[str, Signals]:
+        return self.frames
+
+    def received_at(self, name: str) -> float | None:
+        return self.read_s
 
 
 @settings(
@@ -196,11 +214,13 @@ buttons = st.one_of(st.none(), st.sampled_from(list(CruiseButton)))
 )
 @given(
     key=st.sampled_from(["nissan_rogue", "cadillac_xt5"]),
-    steps=st.lists(st.tuples(buttons, st.booleans(), st.booleans()), min_size=1, max_size=120),
+    steps=st.lists(
+        st.tuples(buttons, st.booleans(), st.booleans(), copy_ages), min_size=1, max_size=120
+    ),
 )
 def test_no_button_frame_leaves_out_of_limits(
     key: str,
-    steps: list[tuple[CruiseButton | None, bool, bool]],
+    steps: list[tuple[CruiseButton | None, bool, bool, float]],
     buses: tuple[can.BusABC, can.BusABC],
     dbc_cache: Path,
 ) -> None:
@@ -209,13 +229,15 @@ def test_no_button_frame_leaves_out_of_limits(
     car = car_for(key)
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), dict)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
     held: frozenset[CruiseButton] = frozenset()
     press_started: float | None = None
     last_onset: float | None = None
     released_at: float | None = None
-    for index, (button, valid, engaged) in enumerate(steps):
+    for index, (button, valid, engaged, copy_age) in enumerate(steps):
         now = index * 0.05
+        copy.read_s = now - copy_age
         port.hold(button, SafetyContext(now, car_state(now, valid=valid, engaged=engaged)))
         frames = received(car_bus)  # the virtual bus delivers at once: these left just now
         assert len(frames) <= 1
@@ -228,6 +250,8 @@ def test_no_button_frame_leaves_out_of_limits(
             if pressed:
                 assert valid
                 assert engaged
+                # the Nissan's copy of the car's frame (pedals, brake) at most 2 periods old
+                assert not car.copies_command_frame or copy_age <= 0.1
                 if not held:
                     assert last_onset is None or now - last_onset >= 0.45 - 1e-9
                     # a real release between two presses, not a one-frame blip
@@ -239,6 +263,8 @@ def test_no_button_frame_leaves_out_of_limits(
                     assert now - press_started <= SafetyLimits().max_hold_s + 1e-9
             elif held:
                 released_at = now
+            elif car.copies_command_frame:
+                assert copy_age <= 0.1  # from a stale copy, only the release ending a press
             held = pressed
 
 
@@ -332,17 +358,20 @@ def test_a_press_needs_a_real_release_before_it(
     car = car_for("nissan_rogue")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), dict)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
     now = 0.0
     while now < 1.1 - 1e-9:  # the longest hold allowed
+        copy.read_s = now
         port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
         now = round(now + 0.05, 2)
     port.hold(None, SafetyContext(now, car_state(now)))  # one release frame
     for _ in range(2):  # pressed again at once: refused
         now = round(now + 0.05, 2)
+        copy.read_s = now
         port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
     assert safety.refused["press"] == 2
-    now = 1.35  # released for the sequencer's 0.25 s: let through
+    now = copy.read_s = 1.35  # released for the sequencer's 0.25 s: let through
     port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
     pressed = [
         car.pressed_buttons(codec.decode(frame.arbitration_id, frame.data)[1])
@@ -361,20 +390,52 @@ def test_button_frames_count_on_from_the_cars_own_counter(
     car = car_for(key)
     assert car.command_counter_signal is not None
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    car_frame = dict(car.button_signals(None, {}))
+    copy = CarCopy(car)
     port = CanButtonPort(
         car,
         codec,
         SafeSender(agent_bus, SafetyLayer(car, codec)),
-        lambda: {car.command_message: car_frame},
+        copy.latest,
+        copy.received_at,
     )
     for step, car_counter in enumerate([2, 3, 0, 1, 1]):
-        car_frame[car.command_counter_signal] = car_counter
-        now = 0.05 * step
+        copy.frames[car.command_message][car.command_counter_signal] = car_counter
+        now = copy.read_s = 0.05 * step
         port.hold(CruiseButton.PLUS, SafetyContext(now, car_state(now)))
         (frame,) = received(car_bus)
         _, signals = codec.decode(frame.arbitration_id, frame.data)
         assert signals[car.command_counter_signal] == (car_counter + 1) % 4
+
+
+@pytest.mark.parametrize("stops", [False, True])
+def test_from_a_stale_copy_only_the_release_ending_a_press_goes_out(
+    stops: bool, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """Every Rogue button frame copies the car's CRUISE_THROTTLE, pedals and brake included.
+    Once its frames stopped reaching the agent, the press was refused, but the port went on to
+    send its repeated releases from the stale copy (or one more when the agent stopped), each
+    telling the car the driver's inputs of a moment ago. The release ending the press still
+    goes out: no press may stand in the last frame the car read."""
+    agent_bus, car_bus = buses
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    copy.read_s = 0.0  # the car's last CRUISE_THROTTLE the agent reads
+    sent: list[tuple[float, frozenset[CruiseButton]]] = []
+    for step in range(9 if not stops else 5):
+        now = round(0.05 * step, 2)
+        port.hold(CruiseButton.PLUS if now < 0.2 else None, SafetyContext(now, car_state(now)))
+        for frame in received(car_bus):
+            sent.append(
+                (now, car.pressed_buttons(codec.decode(frame.arbitration_id, frame.data)[1]))
+            )
+    port.close(SafetyContext(0.45, car_state(0.45)))
+    assert received(car_bus) == []
+    plus = frozenset({CruiseButton.PLUS})
+    assert sent == [(0.0, plus), (0.05, plus), (0.1, plus), (0.2, frozenset())]
+    assert safety.refused == {"copy": 1}  # the press at 0.15 s
 
 
 def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
@@ -431,6 +492,22 @@ def test_the_car_state_is_aged_when_the_command_leaves_not_when_the_pass_began(
     sent_at[0] = 0.3  # ... and reached the button 0.3 s later
     assert safety.check_press(frozenset({CruiseButton.PLUS}), context) == Refusal(
         "car state", "car state 0.30 s old"
+    )
+
+
+def test_a_press_copies_only_a_car_frame_read_within_two_periods(dbc_cache: Path) -> None:
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    checked_at = [0.1]
+    safety = SafetyLayer(car, codec, clock=lambda: checked_at[0])
+    context = SafetyContext(0.1, car_state(0.1))
+    assert safety.check_copy(None, context) == Refusal(
+        "copy", "no CRUISE_THROTTLE of the car's to copy"
+    )
+    assert safety.check_copy(0.0, context) is None  # 2 periods old
+    checked_at[0] = 0.16  # the pass stalled after reading the car
+    assert safety.check_copy(0.0, context) == Refusal(
+        "copy", "the car's CRUISE_THROTTLE to copy is 0.16 s old"
     )
 
 

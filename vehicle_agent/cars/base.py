@@ -93,6 +93,10 @@ class CarInterface(ABC):
     command_period_s: ClassVar[float]
     command_counter_signal: ClassVar[str | None] = None
     command_counter_modulo: ClassVar[int] = 0
+    # Whether a button frame copies the car's own latest frame of the command message besides
+    # its buttons (the Nissan's pedals and brake): a press then needs that frame fresh, or it
+    # would tell the car the driver's inputs of a moment ago (`SafetyLayer.check_copy`).
+    copies_command_frame: ClassVar[bool] = False
 
     @abstractmethod
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:

@@ -4,7 +4,9 @@ Read: wheel speeds (km/h, the mean of four), PRO_PILOT (cruise main on, ACC acti
 counter), PROPILOT_HUD (set speed in mph on US cars, follow distance 1-3 bars, lead car icon =
 the "minicar"), CRUISE_THROTTLE (the steering-wheel buttons, brake and gas; 2-bit counter). No
 lead distance or relative speed (paper Table 2). Sent: CRUISE_THROTTLE with RES (+) or SET (-) or
-the follow-distance button, the other signals copied from the car's latest frame.
+the follow-distance button, the other signals copied from the car's latest frame. That frame
+carries the driver's gas pedal and brake too, so a press is built only from one read at most 2
+periods ago (`copies_command_frame`): the car state stays valid on one 10 periods old.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ class NissanRogue(CarInterface):
     command_period_s = 0.05
     command_counter_signal = "COUNTER"
     command_counter_modulo = 4
+    copies_command_frame = True
 
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
         """Wheel speeds, cruise state, HUD set points and driver inputs."""
