@@ -70,7 +70,8 @@ def view(name: str) -> AnalyticsView:
 
 def _as_utc(value: datetime | date) -> datetime:
     """The moment in UTC (naive: read as UTC), so a window cut to whole days or hours is cut
-    where the views' UTC buckets begin, whatever zone the bound was written in."""
+    where the views' UTC buckets begin, whatever zone the bound was written in, and a date or a
+    naive bound never reaches PostgreSQL, which would read it in the session's time zone."""
     if isinstance(value, datetime):
         return value.astimezone(UTC) if value.tzinfo is not None else value.replace(tzinfo=UTC)
     return datetime(value.year, value.month, value.day, tzinfo=UTC)
@@ -147,10 +148,10 @@ def view_query(
         source = f"analytics.{name}"
         if since is not None:
             conditions.append(f"{chosen.time_column} >= :since")
-            params["since"] = since
+            params["since"] = _as_utc(since)
         if until is not None:
             conditions.append(f"{chosen.time_column} < :until")
-            params["until"] = until
+            params["until"] = _as_utc(until)
     if vehicle_id is not None:
         conditions.append("vehicle_id = :vehicle_id")
         params["vehicle_id"] = vehicle_id

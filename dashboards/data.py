@@ -394,7 +394,12 @@ async def latest_inrix(session: AsyncSession) -> RowMapping | None:
 
 
 async def pings_per_minute(session: AsyncSession, since: datetime) -> Sequence[RowMapping]:
-    """Pings and vehicles per minute of GPS time since `since`, with latency percentiles."""
+    """Pings and vehicles per minute of GPS time from the minute holding `since`, with latency
+    percentiles.
+
+    That first minute is counted whole: cut at `since` (the page asks from the second it is
+    loaded) it held only the pings after that second and read as a drop in the ping rate.
+    """
     return await _rows(
         session,
         "SELECT date_trunc('minute', ts, 'UTC') AS minute, count(*) AS pings, "
@@ -403,7 +408,9 @@ async def pings_per_minute(session: AsyncSession, since: datetime) -> Sequence[R
         "AS latency_p50_s, "
         "percentile_cont(0.95) WITHIN GROUP (ORDER BY extract(epoch FROM received_at - ts)) "
         "AS latency_p95_s "
-        "FROM fact_vehicle_ping WHERE ts >= :since GROUP BY minute ORDER BY minute",
+        "FROM fact_vehicle_ping "
+        "WHERE ts >= date_trunc('minute', CAST(:since AS timestamptz), 'UTC') "
+        "GROUP BY minute ORDER BY minute",
         since=since,
     )
 

@@ -4,23 +4,28 @@ A published MOTION day is a JSON array of trajectory documents (one per vehicle 
 GB, so it is never loaded whole (`json.load`): `split_documents` reads the file in chunks and finds
 where each top-level document begins and ends by tracking only JSON's structure (braces,
 brackets, strings and their escapes; numbers, the bulk of the bytes, are skipped by one table
-lookup in numpy), and `parse_batch` hands a batch of whole documents to DuckDB's JSON reader, which
-parses the number arrays straight into columns, on every core, without a Python object per
-number (ijson's C backend, the streaming parser the bench measures as its baseline, builds one
-per number on one core).
+lookup in numpy), and `parse_batch` hands a batch of whole documents to Arrow's JSON reader with
+the MOTION schema, which parses the number arrays straight into columns, in blocks on every core,
+without a Python object per number (ijson's C backend, the streaming parser the bench measures as
+its baseline, builds one per number on one core).
+
+A batch and a single document are read by the same reader with the same schema, so whether a
+document is accepted cannot depend on its neighbours: DuckDB's JSON reader, used for batches
+before, cast a number written as a string ("1.5"), a boolean among the positions and a fraction
+where MOTION has an integer (vehicle class 1.6 became 2), which a lone document was refused for.
 
 A file may also hold one document per line (JSON lines): the same scanner splits both.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
 from typing import BinaryIO
 
-import duckdb
 import numpy as np
 import pyarrow as pa
 import pyarrow.json as pa_json
@@ -32,6 +37,11 @@ CHUNK_BYTES = 16 * 1024 * 1024
 BATCH_BYTES = 48 * 1024 * 1024
 # One vehicle fragment is a few hundred kB; a "document" beyond this is refused, not buffered.
 MAX_DOCUMENT_BYTES = 256 * 1024 * 1024
+# Arrow parses a batch in blocks of this size, one per core at a time (a block is widened to the
+# largest document: Arrow refuses a document longer than a block).
+BLOCK_BYTES = 4 * 1024 * 1024
+# A refused value is quoted in the reason up to this many characters.
+VALUE_SHOWN_CHARS = 40
 
 _OPEN_BRACE, _CLOSE_BRACE, _OPEN_BRACKET = ord("{"), ord("}"), ord("[")
 _QUOTE, _BACKSLASH = ord('"'), ord("\\")
@@ -59,20 +69,22 @@ DOCUMENT_SCHEMA = pa.schema(
         pa.field("smoothfleet_fleet", pa.bool_()),
     ]
 )
-_PARSE_OPTIONS = pa_json.ParseOptions(
+# Documents one per line (the batch of a JSON-lines file, or of compact documents) are cut into
+# blocks at newlines; pretty-printed ones need the slower layout-aware reading.
+_PARSE_ONE_PER_LINE = pa_json.ParseOptions(
+    explicit_schema=DOCUMENT_SCHEMA, newlines_in_values=False, unexpected_field_behavior="ignore"
+)
+_PARSE_ANY_LAYOUT = pa_json.ParseOptions(
     explicit_schema=DOCUMENT_SCHEMA, newlines_in_values=True, unexpected_field_behavior="ignore"
 )
-_DUCKDB_TYPES = {
-    pa.float64(): "DOUBLE",
-    pa.int64(): "BIGINT",
-    pa.bool_(): "BOOLEAN",
-    pa.list_(pa.float64()): "DOUBLE[]",
-    pa.list_(pa.string()): "VARCHAR[]",
-    pa.struct([pa.field("$oid", pa.string())]): 'STRUCT("$oid" VARCHAR)',
+# What MOTION writes for each type of the schema: the JSON values Arrow takes for it (bool is not
+# an int here: `type(True)` is bool) and how a reason names it.
+_JSON_KINDS: dict[pa.DataType, tuple[tuple[type, ...], str]] = {
+    pa.float64(): ((int, float), "a number"),
+    pa.int64(): ((int,), "an integer"),
+    pa.bool_(): ((bool,), "true or false"),
+    pa.string(): ((str,), "a string"),
 }
-_DUCKDB_COLUMNS = (
-    "{" + ", ".join(f"'{f.name}': '{_DUCKDB_TYPES[f.type]}'" for f in DOCUMENT_SCHEMA) + "}"
-)
 
 
 class MotionFileError(ValueError):
@@ -208,31 +220,26 @@ def split_documents(
         raise MotionFileError(where, "the file ends inside a document")
 
 
-def parse_batch(batch: DocumentBatch, scratch: Path) -> tuple[pa.Table, list[int]]:
+def parse_batch(batch: DocumentBatch) -> tuple[pa.Table, list[int]]:
     """Parse a batch's documents into columns; return the table and each row's document index.
 
-    DuckDB's JSON reader parses the batch (written to `scratch`, a file of the import's own
-    staging folder); it is several times faster than Arrow's on these number arrays. If any
-    document is not a MOTION document (a string among the positions, a broken value), each
-    document of the batch is read on its own with Arrow, whose message becomes the refused
-    document's reason, and the others are kept.
+    The batch is read in one go. If any document is not a MOTION document (a value of the wrong
+    type, a broken value), each document of the batch is read on its own by the same reader, so
+    exactly the documents it refuses are refused, each with the reason of `_type_problem` (or
+    Arrow's message when the document is not JSON at all), and the others are kept.
     """
-    text = b"\n".join(batch.texts)
-    scratch.write_bytes(text)
     try:
-        table = _read_with_duckdb(scratch, one_per_line=text.count(b"\n") == len(batch.texts) - 1)
-        return table, list(batch.indices)
-    except duckdb.Error:
+        return _read(batch.texts), list(batch.indices)
+    except pa.ArrowInvalid:
         pass
-    finally:
-        scratch.unlink()
     tables: list[pa.Table] = []
     indices: list[int] = []
     for index, offset, text in zip(batch.indices, batch.offsets, batch.texts, strict=True):
         try:
-            tables.append(_read(text))
+            tables.append(_read([text]))
         except pa.ArrowInvalid as error:
-            batch.bad.append(BadDocument(index, offset, str(error)))
+            reason = _type_problem(text) or str(error)
+            batch.bad.append(BadDocument(index, offset, reason))
             continue
         indices.append(index)
     if not tables:
@@ -240,22 +247,76 @@ def parse_batch(batch: DocumentBatch, scratch: Path) -> tuple[pa.Table, list[int
     return pa.concat_tables(tables), indices
 
 
-def _read_with_duckdb(path: Path, *, one_per_line: bool) -> pa.Table:
-    """The documents of a file (one per line, or any layout) in the MOTION schema."""
-    layout = "newline_delimited" if one_per_line else "unstructured"
-    escaped = str(path).replace("'", "''")
-    query = (
-        f"SELECT * FROM read_json('{escaped}', format = '{layout}', columns = {_DUCKDB_COLUMNS}, "
-        f"maximum_object_size = {MAX_DOCUMENT_BYTES})"
-    )
-    with duckdb.connect(":memory:") as connection:
-        return connection.sql(query).to_arrow_table().cast(DOCUMENT_SCHEMA)
+def _read(texts: list[bytes]) -> pa.Table:
+    """Documents read by Arrow with the MOTION schema (fields outside it are ignored)."""
+    text = b"\n".join(texts)
+    options = pa_json.ReadOptions(block_size=max(BLOCK_BYTES, max(map(len, texts)) + 1))
+    one_per_line = text.count(b"\n") == len(texts) - 1
+    parse = _PARSE_ONE_PER_LINE if one_per_line else _PARSE_ANY_LAYOUT
+    return pa_json.read_json(BytesIO(text), read_options=options, parse_options=parse)
 
 
-def _read(text: bytes) -> pa.Table:
-    """One document read by Arrow with the MOTION schema."""
-    options = pa_json.ReadOptions(block_size=len(text) + 1, use_threads=False)
-    return pa_json.read_json(BytesIO(text), read_options=options, parse_options=_PARSE_OPTIONS)
+def _type_problem(text: bytes) -> str | None:
+    """The first value of a refused document whose JSON type is not MOTION's, in words.
+
+    Arrow's own message gives a column path and "row 0" (the document's row in its own read),
+    and for an integer field not even the field; an analyst fixing the file needs the field, the
+    point and the value. None when the text is not JSON or has no such value.
+    """
+    try:
+        document = json.loads(text)
+    except ValueError:
+        return None
+    if not isinstance(document, dict):
+        return None
+    for schema_field in DOCUMENT_SCHEMA:
+        if schema_field.name in document:
+            problem = _mismatch(document[schema_field.name], schema_field.type, schema_field.name)
+            if problem:
+                return problem
+    return None
+
+
+def _mismatch(value: object, expected: pa.DataType, path: str) -> str | None:
+    """Why `value` at `path` is not of the schema's type `expected` (None when it is; null is
+    allowed anywhere: the import's own checks say what a missing value means)."""
+    if value is None:
+        return None
+    if pa.types.is_list(expected):
+        if not isinstance(value, list):
+            return f"{path} is {_described(value)} where MOTION has an array"
+        for position, item in enumerate(value):
+            problem = _mismatch(item, expected.value_type, f"{path}[{position}]")
+            if problem:
+                return problem
+        return None
+    if pa.types.is_struct(expected):
+        if not isinstance(value, dict):
+            return f"{path} is {_described(value)} where MOTION has an object"
+        for child in expected:
+            if child.name in value:
+                problem = _mismatch(value[child.name], child.type, f"{path}.{child.name}")
+                if problem:
+                    return problem
+        return None
+    kinds, name = _JSON_KINDS[expected]
+    if type(value) not in kinds:
+        return f"{path} is {_described(value)} where MOTION has {name}"
+    return None
+
+
+def _described(value: object) -> str:
+    """A JSON value as a reason names it: its type and, if short, the value."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        shown = json.dumps(value)
+        if len(shown) > VALUE_SHOWN_CHARS:
+            shown = shown[: VALUE_SHOWN_CHARS - 4] + '..."'
+        return f"a string ({shown})"
+    if isinstance(value, int | float):
+        return f"the number {value!r}"
+    return "an array" if isinstance(value, list) else "an object"
 
 
 def open_motion_file(path: Path) -> BinaryIO:

@@ -124,7 +124,7 @@ def import_motion_file(
     try:
         with open_motion_file(path) as stream:
             for batch in split_documents(stream):
-                _import_batch(batch, frame, known, writer, report, staging / "batch.json")
+                _import_batch(batch, frame, known, writer, report)
                 if progress is not None:
                     progress(batch.bytes_read)
     except MotionFileError as error:
@@ -145,10 +145,9 @@ def _import_batch(
     known: set[int],
     writer: _DayWriters,
     report: ImportReport,
-    scratch: Path,
 ) -> None:
     """Check a batch's documents, then write the good ones' points, cells and trajectories."""
-    table, indices = parse_batch(batch, scratch)
+    table, indices = parse_batch(batch)
     report.bad.extend(batch.bad)
     accepted = _accept(
         table, indices, dict(zip(batch.indices, batch.offsets, strict=True)), frame, known, report

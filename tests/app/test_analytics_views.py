@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import math
 from collections.abc import Callable, Iterator
-from datetime import UTC, datetime, timedelta
+from datetime import UTC, date, datetime, timedelta
 from typing import Any
 
 import httpx
@@ -478,6 +478,42 @@ def test_read_view_filters_by_time_and_vehicle(connection: Connection, store: St
         analytics.read_view(connection, "pings; DROP TABLE dim_vehicle")
     with pytest.raises(analytics.UnknownView, match="no vehicle_id"):
         analytics.read_view(connection, "fleet_ping_hourly", vehicle_id="SF-001")
+
+
+def test_a_date_or_naive_bound_is_utc_on_the_views_filtered_on_their_own_time(
+    seeded_engine: Engine,
+) -> None:
+    """inrix_latency and plan_adherence are filtered on their own time column, and a date or a
+    naive bound reached PostgreSQL as it was, to be read in the session's time zone: in a
+    session in Nashville's (a server's default zone, or PGTZ) since=date(2022, 11, 16) began at
+    06:00 UTC and lost the night's snapshots, while every other view's window began at UTC
+    midnight, as the module reads a date or naive bound."""
+    measured = datetime(2022, 11, 16, 3, 0, tzinfo=UTC)  # 21:00 on the 15th in Nashville
+    with seeded_engine.begin() as connection:
+        corridor_id, xd_code = connection.execute(
+            text("SELECT corridor_id, xd_code FROM dim_inrix_segment ORDER BY seq LIMIT 1")
+        ).one()
+        connection.execute(
+            text(
+                "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, speed_mps)"
+                " VALUES (:corridor, :xd, :measured, 25.0)"
+            ),
+            {"corridor": corridor_id, "xd": xd_code, "measured": measured},
+        )
+    with seeded_engine.connect() as connection:
+        connection.execute(text("SET LOCAL TIME ZONE 'America/Chicago'"))
+        day = analytics.read_view(
+            connection, "inrix_latency", since=date(2022, 11, 16), until=date(2022, 11, 17)
+        )
+        hours = analytics.read_view(
+            connection,
+            "inrix_latency",
+            since=datetime(2022, 11, 16, 2, 0),
+            until=datetime(2022, 11, 16, 4, 0),
+        )
+
+    assert list(day["measured_at"]) == [measured]
+    assert list(hours["measured_at"]) == [measured]
 
 
 def test_export_csv_writes_a_header_and_iso_times(connection: Connection, store: Store) -> None:
