@@ -104,9 +104,22 @@ def _by_sha256(sha256: str) -> Select[Policy]:
     return select(Policy).where(Policy.policy_sha256 == sha256)
 
 
+def _as_stored(value: Any) -> Any:
+    """A manifest value as JSONB gives it back, for comparing: JSONB keeps a number as an exact
+    decimal, so a float like 1e23 comes back as the integer 10**23, unequal to the float that
+    was sent. Every number is compared as a float (booleans stay booleans)."""
+    if isinstance(value, dict):
+        return {key: _as_stored(item) for key, item in value.items()}
+    if isinstance(value, list):
+        return [_as_stored(item) for item in value]
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
 def _same_manifest(checked: CheckedPolicy, stored: Policy) -> None:
     """An upload of bytes already stored is a no-op only with the manifest stored with them."""
-    if stored.manifest != checked.manifest:
+    if _as_stored(stored.manifest) != _as_stored(checked.manifest):
         raise ManifestConflict(
             f"policy {checked.sha256} is stored already, with another manifest "
             f"(uploaded {stored.uploaded_at:%Y-%m-%d %H:%M} UTC by {stored.uploaded_by})"

@@ -137,6 +137,20 @@ def test_uploading_the_same_file_twice_stores_it_once(api: Api) -> None:
     assert stored_rows(api.engine) == 1
 
 
+def test_the_same_manifest_again_is_no_conflict_whatever_jsonb_made_of_its_numbers(
+    api: Api,
+) -> None:
+    content = ACC_FILE.read_bytes()
+    # JSONB keeps 1e23 as the exact decimal 10**23, which reads back as an int != the float
+    manifest = {**manifest_of(ACC_FILE), "scale": 1e23, "steps": [1e23, 0.1, 3]}
+    assert api.upload(content, manifest).status_code == 201
+
+    again = api.upload(content, manifest)
+
+    assert again.status_code == 200, again.text
+    assert again.json()["created"] is False
+
+
 def test_the_same_file_with_another_manifest_is_a_conflict(api: Api) -> None:
     content = ACC_FILE.read_bytes()
     assert api.upload(content, manifest_of(ACC_FILE)).status_code == 201
