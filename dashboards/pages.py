@@ -13,7 +13,7 @@ import inspect
 import json
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -22,6 +22,7 @@ from zoneinfo import ZoneInfo
 
 import numpy as np
 from fastapi import APIRouter, FastAPI, Form, Query, Request
+from fastapi import Path as PathParameter
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import (
     HTMLResponse,
@@ -34,6 +35,7 @@ from fastapi.staticfiles import StaticFiles
 from fastapi.templating import Jinja2Templates
 from jinja2 import pass_context
 from jinja2.runtime import Context
+from sqlalchemy import RowMapping
 from sqlalchemy.ext.asyncio import AsyncSession
 from starlette.concurrency import run_in_threadpool
 from starlette.exceptions import HTTPException as StarletteHTTPException
@@ -58,6 +60,7 @@ from app.models import Corridor, PlanRun
 from app.users.service import log_in
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
+from contract.vehicles import VEHICLE_ID_PATTERN
 from dashboards import data, motion
 from dashboards.auth import (
     LoginRequired,
@@ -91,6 +94,12 @@ HERE = Path(__file__).parent
 log = logging.getLogger(__name__)
 templates = Jinja2Templates(directory=HERE / "templates")
 router = APIRouter(include_in_schema=False)
+
+# Path parameters are checked as the API checks them, before any query: a vehicle id the roster
+# cannot hold (a NUL, which PostgreSQL text refuses) or a plan id beyond bigint was refused by
+# the database instead, and its refusal reached a browser as the API's JSON 422, not a page.
+VehicleId = Annotated[str, PathParameter(pattern=VEHICLE_ID_PATTERN)]
+PlanId = Annotated[int, PathParameter(ge=1, le=2**63 - 1)]  # plan_run.plan_id: bigint identity
 
 TRACE_WINDOW = timedelta(minutes=30)
 PLAN_HISTORY = timedelta(minutes=60)
@@ -255,7 +264,7 @@ ERROR_PAGES = {
 
 def _field_of(error: Mapping[str, Any]) -> str:
     """The parameter a validation error is about, as the address or form names it."""
-    location = [str(part) for part in error.get("loc", ()) if part not in ("query", "body")]
+    location = [str(part) for part in error.get("loc", ()) if part not in ("path", "query", "body")]
     return ".".join(location) or "request"
 
 
@@ -784,7 +793,7 @@ async def vehicle_page(
     request: Request,
     user: UserDep,
     session: SessionDep,
-    vehicle_id: str,
+    vehicle_id: VehicleId,
     saved: str | None = None,
 ) -> HTMLResponse:
     """One vehicle: checks, speed against the plan, status history, engagement, assignment."""
@@ -803,7 +812,7 @@ async def vehicle_page(
 
 @router.get("/vehicles/{vehicle_id}/live")
 async def vehicle_live(
-    request: Request, user: UserDep, session: SessionDep, vehicle_id: str
+    request: Request, user: UserDep, session: SessionDep, vehicle_id: VehicleId
 ) -> HTMLResponse:
     """The vehicle's verdict and checks, for the page's periodic refresh."""
     entry = await _entry_or_404(request, session, vehicle_id)
@@ -812,7 +821,7 @@ async def vehicle_live(
 
 @router.get("/vehicles/{vehicle_id}/history/live")
 async def vehicle_history_live(
-    request: Request, user: UserDep, session: SessionDep, vehicle_id: str
+    request: Request, user: UserDep, session: SessionDep, vehicle_id: VehicleId
 ) -> HTMLResponse:
     """The vehicle's speed chart, engagement and status reports, for their periodic refresh."""
     entry = await _entry_or_404(request, session, vehicle_id)
@@ -859,7 +868,7 @@ async def vehicle_assignment(
     request: Request,
     user: UserDep,
     session: SessionDep,
-    vehicle_id: str,
+    vehicle_id: VehicleId,
     lane: Annotated[str, Form()] = "",
     route: Annotated[str, Form()] = "",
     controller: Annotated[str, Form()] = "",
@@ -918,7 +927,7 @@ async def vehicle_maintenance(
     request: Request,
     user: UserDep,
     session: SessionDep,
-    vehicle_id: str,
+    vehicle_id: VehicleId,
     in_maintenance: Annotated[str, Form()] = "",
     note: Annotated[str, Form()] = "",
     config_version: Annotated[str, Form()] = "",
@@ -1120,7 +1129,7 @@ async def plan_page(
     request: Request,
     user: UserDep,
     session: SessionDep,
-    plan_id: int,
+    plan_id: PlanId,
     lane: Annotated[int, Query(ge=1, le=12)] = 1,
 ) -> HTMLResponse:
     """One plan run by id."""
@@ -1272,8 +1281,8 @@ async def _analytics_context(
         hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
         charts["pings"] = _over_time(
             "pings-hourly",
-            "Pings per hour",
-            Series("pings", hours, [float(r["pings"]) for r in hourly], "#2563eb"),
+            "Pings per hour (the hour in progress at its rate so far)",
+            Series("pings", hours, pings_per_hour(hourly), "#2563eb"),
             Axis("hour", "time"),
             Axis("pings per hour", lower=0.0),
             zone,
@@ -1303,6 +1312,17 @@ async def _analytics_context(
         )
     await _edie_charts(session, context, zone)
     return context
+
+
+def pings_per_hour(hourly: Sequence[RowMapping]) -> list[float]:
+    """Each hour's pings per hour: its mean rate (`analytics.fleet_ping_hourly.pings_per_s`)
+    times 3,600 s.
+
+    For an hour that is over this is its count of pings. The hour in progress is at its rate so
+    far, as the view divides it by the seconds it has run (migration 0011): its count, plotted
+    before, always ended the chart in a dip (half the fleet's pings at half past) that read as
+    the fleet going quiet."""
+    return [float(row["pings_per_s"]) * 3600.0 for row in hourly]
 
 
 async def _edie_charts(session: SessionDep, context: dict[str, Any], zone: ZoneInfo) -> None:

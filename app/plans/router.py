@@ -168,7 +168,7 @@ async def get_vehicle_plan(
     )
 
 
-@router.get("/plans", responses=error_responses(401, 403, 503))
+@router.get("/plans", responses=error_responses(401, 403, 404, 503))
 async def get_plan_history(
     principal: AuthDep,
     session: SessionDep,
@@ -182,10 +182,15 @@ async def get_plan_history(
     status: Annotated[Literal["published", "skipped", "failed"] | None, Query()] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 100,
 ) -> PlanHistoryOut:
-    """Planner runs with their algorithm, parameters and inputs, newest first (for replay)."""
+    """Planner runs with their algorithm, parameters and inputs, newest first (for replay).
+
+    An unknown corridor is a 404, as on `plans/latest`: an empty history would read as a
+    corridor the planner never ran for, and hide a misspelt id."""
     corridor_id = await _readable_corridor(principal, session, corridor)
     for name, moment in (("since", since), ("until", until)):
         if moment is not None and moment.tzinfo is None:
             raise HTTPException(422, f"{name} needs a time zone (RFC 3339)")
+    if corridor_id is not None and await corridor_lanes(session, corridor_id) is None:
+        raise HTTPException(404, f"unknown corridor {corridor_id}")
     runs = await plan_history(session, corridor_id, since, until, status, limit)
     return PlanHistoryOut(plans=runs)

@@ -74,6 +74,25 @@ def _made_folder(folder: Path, named: Path, option: str) -> Path:
 
 
 @contextmanager
+def replaced_on_success(path: Path) -> Iterator[Path]:
+    """A temporary file beside `path` to write into, renamed to `path` when the block ends.
+
+    A run that fails or is stopped half-way (Ctrl-C, SIGTERM, a full disk, a bug) removes it
+    instead: `motion generate` used to leave a truncated JSON array under the output's name,
+    which `motion import` then read as a broken file, and an earlier good file is kept. The
+    same folder keeps the rename atomic (one file system). The name holds the process id, so
+    two runs writing the same output do not share one; the writer creates the file, with the
+    permissions any output of the user gets (mkstemp's would be 0600)."""
+    partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
+    try:
+        yield partial
+        partial.replace(path)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+
+
+@contextmanager
 def database(settings: Settings) -> Iterator[str]:
     """The URL of the database to use, starting the embedded server if none is configured."""
     if settings.database_url is not None:

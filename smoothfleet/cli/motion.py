@@ -36,6 +36,7 @@ from smoothfleet.cli.common import (
     console,
     database,
     output_file,
+    replaced_on_success,
     settings,
 )
 
@@ -147,7 +148,7 @@ def _print_report(report: ImportReport) -> None:
     show_default=True,
     help="Seconds.",
 )
-@click.option("--lanes", default=4, show_default=True)
+@click.option("--lanes", type=click.IntRange(min=1), default=4, show_default=True)
 @click.option(
     "--demand",
     "demand_vph",
@@ -157,7 +158,13 @@ def _print_report(report: ImportReport) -> None:
     help="Vehicles per hour and lane entering upstream.",
 )
 @click.option("--fleet-share", type=FiniteFloatRange(0.0, 1.0), default=0.02, show_default=True)
-@click.option("--seed", default=0, show_default=True)
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="Of the random demand and vehicle mix (numpy takes no negative seed).",
+)
 @click.option(
     "--drive",
     "drives",
@@ -199,9 +206,12 @@ def motion_generate(
     except (DriveError, ValueError) as error:
         raise CliError(str(error)) from None
     output_file(output, "--output")
-    with console.status(f"simulating {duration_s:g} s of {lanes} lanes"):
+    with (
+        console.status(f"simulating {duration_s:g} s of {lanes} lanes"),
+        replaced_on_success(output) as partial,
+    ):
         documents, points = write_motion_json(
-            output, simulate_motion_run(config, boundary), MotionFrame(), seed
+            partial, simulate_motion_run(config, boundary), MotionFrame(), seed
         )
     console.print(f"{output}: {documents} trajectories, {points:,} points from {start.isoformat()}")
 

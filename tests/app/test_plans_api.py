@@ -186,6 +186,15 @@ def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None
     assert naive.status_code == 422
 
 
+def test_the_history_of_an_unknown_corridor_is_a_404_naming_it(served: Served) -> None:
+    """It was 200 with no runs: a misspelt corridor read as one the planner never ran for."""
+    unknown = served.get("/api/v1/plans", corridor="I-40-EB")
+    assert unknown.status_code == 404
+    assert unknown.json() == {"detail": "unknown corridor I-40-EB"}
+    assert served.get(LATEST, corridor="I-40-EB").json() == unknown.json()  # the same answer
+    assert served.get("/api/v1/plans", corridor="I-24-WB").json()["plans"]
+
+
 def test_without_a_valid_plan_vehicles_are_told_to_retry(
     seeded_database_url: str, seeded_engine: Engine
 ) -> None:

@@ -483,6 +483,42 @@ def test_a_parameter_a_page_refuses_is_an_html_page_that_names_it(site: str) -> 
         assert api.json()["detail"][0]["loc"] == ["query", "hours"]
 
 
+def test_an_address_no_plan_or_vehicle_can_have_is_an_html_page_that_names_it(site: str) -> None:
+    """A plan id beyond bigint and a NUL in a vehicle id reached the database, whose refusal
+    came back as the API's JSON 422 to a browser."""
+    page = {"Accept": "text/html"}
+    with logged_in(site, "viewer") as client:
+        for path, reason in (
+            ("/plans/99999999999999999999", "plan_id: Input should be less than or equal to"),
+            ("/vehicles/%00", "vehicle_id: String should match pattern"),
+            ("/vehicles/%00/live", "vehicle_id: String should match pattern"),
+            ("/vehicles/SF%00/history/live", "vehicle_id: String should match pattern"),
+        ):
+            response = client.get(path, headers=page)
+            assert response.status_code == 422, path
+            assert response.headers["content-type"].startswith("text/html"), path
+            assert "<h1>Not a valid address</h1>" in response.text, path
+            assert reason in html.unescape(response.text), path
+            assert '<a href="/fleet"' in response.text, path
+    with logged_in(site, "operator") as operator:
+        form = operator.get("/vehicles/SF-001").text
+        for action in ("assignment", "maintenance"):
+            posted = operator.post(
+                f"/vehicles/%00/{action}", data={"csrf_token": csrf_of(form)}, headers=page
+            )
+            assert posted.status_code == 422, action
+            assert "<h1>Not a valid address</h1>" in posted.text, action
+            assert "vehicle_id: String should match pattern" in html.unescape(posted.text)
+    with logged_in(site, "viewer") as client:
+        # a client that is not a browser keeps FastAPI's JSON answer, as the API's own paths do
+        api = client.get("/plans/99999999999999999999")
+        assert api.status_code == 422
+        assert api.json()["detail"][0]["loc"] == ["path", "plan_id"]
+        for api_path in ("/api/v1/vehicles/%00/plan", "/api/v1/no-such-thing/%00"):
+            refused = client.get(api_path, headers=page)
+            assert refused.headers["content-type"] == "application/json", api_path
+
+
 def test_a_failing_page_is_a_500_page_and_the_api_keeps_its_answer(database_url: str) -> None:
     from smoothfleet.server import create_app
 

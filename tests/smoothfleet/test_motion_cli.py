@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import csv
 import io
+import signal
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
 
-from tests.support.servers import cli_env, run_cli
+from tests.support.servers import cli_env, run_cli, smoothfleet_command
 
 REAL_RECORD = "i24motion/INCEPTION.22-11-22.single_record_from_tutorial_notebook.json"
 
@@ -104,3 +107,49 @@ def test_a_missing_file_and_a_bad_window_say_what_is_wrong(tmp_path: Path) -> No
     )
     assert endless.returncode == 2
     assert "'--h-x': 'inf' is not a finite number" in endless.stderr
+
+
+def test_generate_refuses_a_bad_option_before_writing_anything(tmp_path: Path) -> None:
+    """`--seed -1` stopped as "unexpected ValueError" from numpy once the output was opened,
+    and left its first two bytes ("[\\n") under the output's name."""
+    output = tmp_path / "out" / "hour.json"
+    for option, value, reason in (
+        ("--seed", "-1", "-1 is not in the range x>=0"),
+        ("--lanes", "0", "0 is not in the range x>=1"),
+    ):
+        refused = run_cli("motion", "generate", "-o", str(output), option, value, env=cli_env())
+        assert refused.returncode == 2, (option, refused.stderr)
+        assert f"Invalid value for '{option}': {reason}" in refused.stderr
+        assert "unexpected" not in refused.stderr
+        assert not output.exists()
+        assert not output.parent.exists() or not list(output.parent.iterdir())
+
+
+def test_a_stopped_generate_leaves_no_partial_file_and_keeps_the_earlier_one(
+    tmp_path: Path,
+) -> None:
+    """Stopped half-way, the output was a truncated JSON array in place of the earlier file."""
+    output = tmp_path / "hour.json"
+    output.write_text("an earlier run's hour")
+    process = subprocess.Popen(
+        [*smoothfleet_command(), "motion", "generate", "-o", str(output), "--duration", "3600"],
+        env=cli_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.iterdir())) < 2 and output.read_text() == "an earlier run's hour":
+            assert process.poll() is None, process.communicate()[1]
+            assert time.monotonic() < deadline, "the simulation never started writing"
+            time.sleep(0.05)
+        time.sleep(0.5)  # some trajectories written
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        process.kill()
+        process.wait()
+    assert process.returncode == 130, stderr
+    assert output.read_text() == "an earlier run's hour"
+    assert list(tmp_path.iterdir()) == [output]
