@@ -8,7 +8,7 @@ and lane adds none.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from datetime import datetime
+from datetime import UTC, datetime, timedelta
 from importlib import resources
 from typing import Any
 
@@ -17,8 +17,10 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.core.db import session_scope
+from app.motion.fleet import fleet_pings
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import parse_roster_csv, upsert_vehicles
+from tests.planner.facts import pings
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 
@@ -179,3 +181,35 @@ def test_two_changes_in_one_transaction_keep_the_history_contiguous(
     for earlier, later in zip(rows, rows[1:], strict=False):
         assert earlier["to"] == later["from"]
     assert rows[-1]["to"] == POS_INF
+
+
+def test_the_motion_figure_draws_a_moved_car_on_the_corridor_it_drove_then(
+    seeded_engine: Engine,
+) -> None:
+    """`smoothfleet motion figure` (app.motion.fleet) reads the fleet's pings on a corridor:
+    those of a car since moved elsewhere are still on it for the time before the move."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    pings(seeded_engine, "SF-001", now - timedelta(minutes=10), [1000.0, 1025.0, 1050.0], 25.0)
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
+            )
+        )
+        connection.execute(
+            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-001'")
+        )
+    pings(seeded_engine, "SF-001", now + timedelta(minutes=1), [2000.0, 2025.0], 25.0)
+
+    with seeded_engine.connect() as connection:
+        west = fleet_pings(
+            connection, "I-24-WB", now - timedelta(hours=1), now + timedelta(hours=1)
+        )
+        east = fleet_pings(
+            connection, "I-24-EB", now - timedelta(hours=1), now + timedelta(hours=1)
+        )
+
+    assert list(west.pings["x_m"]) == [1000.0, 1025.0, 1050.0]
+    assert list(east.pings["x_m"]) == [2000.0, 2025.0]
