@@ -184,8 +184,10 @@ async def fleet_trajectories(
         "extract(epoch FROM max(p.ts)) AS t, "
         "(array_agg(p.x_m ORDER BY p.ts DESC))[1] AS x_m, "
         "(array_agg(coalesce(p.is_controller_engaged, false) ORDER BY p.ts DESC))[1] AS engaged "
-        "FROM fact_vehicle_ping p JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
-        "WHERE v.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
+        # the corridor each ping's car was assigned at its ts, not the car's corridor now
+        "FROM fact_vehicle_ping p JOIN dim_vehicle_assignment a ON a.vehicle_id = p.vehicle_id "
+        "AND p.ts >= a.valid_from AND p.ts < a.valid_to "
+        "WHERE a.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
         "AND p.x_m IS NOT NULL GROUP BY p.vehicle_id, bucket ORDER BY p.vehicle_id, bucket",
         corridor=corridor.corridor_id,
         since=since,
@@ -215,8 +217,10 @@ async def engagement_share(
         await _rows(
             session,
             "SELECT count(*) AS pings, avg(coalesce(p.is_controller_engaged, false)::int) "
-            "AS share FROM fact_vehicle_ping p JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id "
-            "WHERE v.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
+            "AS share FROM fact_vehicle_ping p "
+            "JOIN dim_vehicle_assignment a ON a.vehicle_id = p.vehicle_id "
+            "AND p.ts >= a.valid_from AND p.ts < a.valid_to "
+            "WHERE a.corridor_id = :corridor AND p.ts >= :since AND p.ts <= :until "
             "AND p.x_m IS NOT NULL",
             corridor=corridor_id,
             since=since,

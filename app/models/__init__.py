@@ -2,7 +2,14 @@
 
 from app.models.access import ApiToken, OpsUser
 from app.models.base import Base
-from app.models.dimensions import Corridor, I24Segment, InrixSegment, Policy, Vehicle
+from app.models.dimensions import (
+    Corridor,
+    I24Segment,
+    InrixSegment,
+    Policy,
+    Vehicle,
+    VehicleAssignment,
+)
 from app.models.facts import (
     InrixEstimate,
     PlanRun,
@@ -24,6 +31,7 @@ __all__ = [
     "Policy",
     "SpeedPlan",
     "Vehicle",
+    "VehicleAssignment",
     "VehicleObservation",
     "VehiclePing",
     "VehicleStatus",

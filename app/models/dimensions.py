@@ -14,6 +14,7 @@ from sqlalchemy import (
     DateTime,
     Float,
     ForeignKey,
+    Index,
     Integer,
     LargeBinary,
     SmallInteger,
@@ -137,6 +138,47 @@ class Vehicle(Base):
     updated_at: Mapped[datetime] = mapped_column(
         DateTime(timezone=True), server_default=func.now(), onupdate=func.now()
     )
+
+
+class VehicleAssignment(Base):
+    """A vehicle's corridor, route and lane over a span of time (slowly changing, type 2).
+
+    `dim_vehicle` holds what a car is assigned now; this table what it was assigned when, so a
+    ping is read against the assignment in force at its ts (the analytics views join on
+    `valid_from <= ts < valid_to`). A trigger on dim_vehicle writes it (migration 0012), in the
+    transaction of the change and only when corridor, route or lane actually change: no code
+    writes it directly. A vehicle's first row starts at -infinity (a ping's ts is the car's
+    clock and may precede the server's row); the open row has valid_to = infinity. psycopg
+    loads no infinite timestamp into a `datetime`: read the ends with `isfinite()` in SQL.
+    """
+
+    __tablename__ = "dim_vehicle_assignment"
+    __table_args__ = (
+        CheckConstraint("valid_from < valid_to", name="span_positive"),
+        CheckConstraint("assigned_lane >= 1", name="lane_positive"),
+        # One open (current) row per vehicle.
+        Index(
+            "ix_dim_vehicle_assignment_vehicle_id",
+            "vehicle_id",
+            unique=True,
+            postgresql_where=text("valid_to = 'infinity'::timestamptz"),
+        ),
+        {
+            "comment": "One row per vehicle per assignment (corridor, route, lane), in force "
+            "over [valid_from, valid_to); the current one has valid_to = infinity."
+        },
+    )
+
+    vehicle_id: Mapped[str] = mapped_column(
+        ForeignKey("dim_vehicle.vehicle_id", ondelete="CASCADE"), primary_key=True
+    )
+    valid_from: Mapped[datetime] = mapped_column(DateTime(timezone=True), primary_key=True)
+    valid_to: Mapped[datetime] = mapped_column(
+        DateTime(timezone=True), server_default=text("'infinity'")
+    )
+    corridor_id: Mapped[str] = mapped_column(ForeignKey("dim_corridor.corridor_id"))
+    route: Mapped[str] = mapped_column(Text)
+    assigned_lane: Mapped[int] = mapped_column(SmallInteger)
 
 
 class Policy(Base):

@@ -33,9 +33,11 @@ def fleet_pings(
     result = connection.execute(
         text(
             "SELECT p.vehicle_id, p.ts, p.x_m, coalesce(p.is_controller_engaged, false) AS engaged"
-            " FROM fact_vehicle_ping p JOIN dim_vehicle v USING (vehicle_id)"
+            # the corridor each ping's car was assigned at its ts, not the car's corridor now
+            " FROM fact_vehicle_ping p JOIN dim_vehicle_assignment a ON a.vehicle_id = p.vehicle_id"
+            " AND p.ts >= a.valid_from AND p.ts < a.valid_to"
             " WHERE p.ts >= :since AND p.ts < :until AND p.x_m IS NOT NULL"
-            " AND v.corridor_id = :corridor ORDER BY p.vehicle_id, p.ts"
+            " AND a.corridor_id = :corridor ORDER BY p.vehicle_id, p.ts"
         ),
         {"since": since, "until": until, "corridor": corridor_id},
     )

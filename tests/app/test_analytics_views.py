@@ -10,6 +10,7 @@ import io
 import math
 from collections.abc import Callable, Iterator
 from datetime import UTC, date, datetime, timedelta
+from importlib import resources
 from typing import Any
 
 import httpx
@@ -19,9 +20,11 @@ import pytest
 from sqlalchemy import Connection, Engine, text
 
 from app import analytics
+from app.core.db import session_scope
+from app.vehicles.service import parse_roster_csv, upsert_vehicles
 from tests.support.fleet import drive, ping, post_inrix, post_pings, seed_geometry
 from tests.support.servers import live_server
-from tests.support.tokens import issue
+from tests.support.tokens import bearer, issue
 
 # A whole hour two days back: a 10 s box boundary, inside the ping retention window, and with a
 # whole UTC day after it for the second day of the engagement test.
@@ -442,6 +445,93 @@ def test_plan_adherence_compares_speed_with_the_target_where_the_car_was(
     assert daily.loc["SF-002", "mean_abs_speed_error_mps"] == pytest.approx(3.0)
     assert daily.loc["SF-002", "rms_speed_error_mps"] == pytest.approx(math.sqrt(11))
     assert daily.loc["SF-002", "engaged_mean_abs_speed_error_mps"] == pytest.approx(2.0)
+
+
+def reassign(client: httpx.Client, token: str, vehicle_id: str, lane: int) -> datetime:
+    """Move a car to another lane through the API (as an operator does); the time after it."""
+    response = client.put(
+        f"/api/v1/vehicles/{vehicle_id}/assignment",
+        json={"lane": lane, "route": "B", "controller": {"name": "microaccel_acc", "params": {}}},
+        headers=bearer(token),
+    )
+    assert response.status_code == 200, response.text
+    return datetime.now(UTC)
+
+
+def test_plan_adherence_reads_each_ping_against_the_lane_assigned_at_its_time(
+    seeded_engine: Engine, connection: Connection, api: tuple[httpx.Client, str], store: Store
+) -> None:
+    """A reassignment does not rewrite a car's history: pings without a lane from before it
+    are compared with the old lane's target, those after it with the new lane's."""
+    segment = segment_at(5000.0)
+    middle = (segment["start_x_m"] + segment["end_x_m"]) / 2
+    plan_id = publish_plan(
+        seeded_engine, {(2, segment["i24_segment_id"]): 20.0, (3, segment["i24_segment_id"]): 25.0}
+    )
+    # SF-002 drives in its seed lane 2 at 22 m/s (no lane in its pings), is moved to lane 3,
+    # and drives on at 22 m/s: +2 m/s against lane 2's 20 before, -3 against lane 3's 25 after.
+    store(
+        [ping("SF-002", T0 + timedelta(seconds=i), middle, 22.0, plan_id=plan_id) for i in (0, 1)]
+    )
+    moved = reassign(*api, "SF-002", 3)
+    store(
+        [
+            ping("SF-002", moved + timedelta(seconds=i), middle, 22.0, plan_id=plan_id)
+            for i in (0, 1, 2)
+        ]
+    )
+
+    detail = analytics.read_view(connection, "plan_adherence").sort_values("ts")
+
+    assert list(detail["lane"]) == [2, 2, 3, 3, 3]
+    assert list(detail["target_speed_mps"]) == [20.0, 20.0, 25.0, 25.0, 25.0]
+    assert list(detail["speed_error_mps"]) == [2.0, 2.0, -3.0, -3.0, -3.0]
+    daily = analytics.read_view(connection, "plan_adherence_daily").set_index("day")
+    assert daily.loc[DAY1, "mean_speed_error_mps"] == pytest.approx(2.0)
+    assert daily.loc[moved.date(), "mean_speed_error_mps"] == pytest.approx(-3.0)
+
+
+def test_edie_boxes_put_each_ping_on_the_corridor_assigned_at_its_time(
+    seeded_engine: Engine, connection: Connection
+) -> None:
+    """A car moved to another corridor (a roster import) keeps its earlier boxes on the first."""
+    with seeded_engine.begin() as writer:
+        writer.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
+            )
+        )
+
+    def drive_at(start: datetime) -> None:
+        # 10 pings at 20 m/s from x = 1010 m, written as ingest would have map-matched them
+        # (ingest locates a car on the corridor it is assigned when the ping arrives).
+        with seeded_engine.begin() as writer:
+            writer.execute(
+                text(
+                    "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps, "
+                    "accel_mps2, x_m) VALUES ('SF-001', :ts, 36.0, -86.6, 20, 0, :x)"
+                ),
+                [{"ts": start + timedelta(seconds=i), "x": 1010.0 + 20.0 * i} for i in range(10)],
+            )
+
+    drive_at(T0)
+    with session_scope(seeded_engine) as session:
+        with resources.as_file(resources.files("seed_data").joinpath("roster.csv")) as roster:
+            (row,) = [row for row in parse_roster_csv(roster) if row.vehicle_id == "SF-001"]
+        upsert_vehicles(
+            session, [row.model_copy(update={"corridor_id": "I-24-EB"})], update_existing=True
+        )
+    # the next whole 10 s box but one, so the drive fills one box
+    moved = datetime.fromtimestamp((math.floor(datetime.now(UTC).timestamp() / 10) + 2) * 10, UTC)
+    drive_at(moved)
+
+    boxes = analytics.read_view(connection, "edie_boxes").sort_values("t_start")
+
+    assert list(boxes["corridor_id"]) == ["I-24-WB", "I-24-EB"]
+    assert list(boxes["pings"]) == [10, 10]
+    assert list(boxes["t_start"]) == [pd.Timestamp(T0), pd.Timestamp(moved)]
 
 
 # --- app.analytics: registry, windows, CSV ------------------------------------------------------

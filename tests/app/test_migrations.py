@@ -166,3 +166,89 @@ def test_a_target_that_names_no_revision_is_refused_before_the_database_is_touch
         check_revision("nosuch")
     with pytest.raises(UnknownRevision, match="Multiple revisions start with '00'"):
         check_revision("00")
+
+
+# --- 0012: the vehicle assignment history ------------------------------------------------------
+
+EDIE_FIELD = "analytics.edie_field(timestamptz, timestamptz, double precision, double precision)"
+
+
+DEFINITIONS = {
+    "plan_adherence": "pg_get_viewdef('analytics.plan_adherence'::regclass)",
+    "edie_field": "pg_get_functiondef(CAST(:edie AS regprocedure))",
+    "edie_boxes": "pg_get_viewdef('analytics.edie_boxes'::regclass)",
+    "comments": "concat_ws(' | ', obj_description('analytics.plan_adherence'::regclass),"
+    " obj_description('analytics.edie_boxes'::regclass),"
+    " obj_description(CAST(:edie AS regprocedure)))",
+    "table": "to_regclass('dim_vehicle_assignment')::text",
+    "trigger function": "to_regprocedure('record_vehicle_assignment()')::text",
+}
+
+
+def definitions(engine: Engine) -> dict[str, str | None]:
+    """The definitions 0012 replaces, and whether its table and trigger function exist."""
+    with engine.connect() as connection:
+        return {
+            name: connection.execute(text(f"SELECT {sql}"), {"edie": EDIE_FIELD}).scalar_one()
+            for name, sql in DEFINITIONS.items()
+        }
+
+
+def test_the_assignment_history_downgrades_to_the_previous_definitions(
+    empty_engine: Engine,
+) -> None:
+    upgrade(empty_engine, "0011")
+    at_0011 = definitions(empty_engine)
+    upgrade(empty_engine, "0012")
+    at_0012 = definitions(empty_engine)
+    downgrade(empty_engine, "0011")
+
+    assert definitions(empty_engine) == at_0011
+    assert (at_0011["table"], at_0011["trigger function"]) == (None, None)
+    assert (at_0012["table"], at_0012["trigger function"]) == (
+        "dim_vehicle_assignment",
+        "record_vehicle_assignment()",
+    )
+    for name in ("plan_adherence", "edie_field"):
+        assert "dim_vehicle_assignment" in str(at_0012[name])
+        assert "dim_vehicle_assignment" not in str(at_0011[name])
+    assert at_0012["comments"] == at_0011["comments"]
+    upgrade(empty_engine)
+
+
+def test_the_assignment_history_backfills_one_open_row_per_vehicle(seeded_engine: Engine) -> None:
+    """Upgrading a database with a fleet: each car's current assignment, from the start of time
+    (when it began is not known), so the views answer as before the upgrade."""
+    downgrade(seeded_engine, "0011")
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("UPDATE dim_vehicle SET assigned_lane = 4 WHERE vehicle_id = 'SF-001'")
+        )
+        connection.execute(
+            text(
+                "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps, x_m) "
+                "SELECT 'SF-001', date_trunc('hour', now()) - interval '1 hour' + s * interval "
+                "'1 second', 36.0, -86.6, 20, 1010 + 20 * s FROM generate_series(0, 9) s"
+            )
+        )
+    boxes = "SELECT * FROM analytics.edie_boxes ORDER BY corridor_id, t_start, x_start_m"
+    with seeded_engine.connect() as connection:
+        before = connection.execute(text(boxes)).all()
+    upgrade(seeded_engine, "0012")
+
+    with seeded_engine.connect() as connection:
+        rows = connection.execute(
+            text(
+                "SELECT vehicle_id, valid_from::text, valid_to::text, corridor_id, route,"
+                " assigned_lane FROM dim_vehicle_assignment ORDER BY vehicle_id"
+            )
+        ).all()
+        vehicles = connection.execute(
+            text("SELECT vehicle_id, corridor_id, route, assigned_lane FROM dim_vehicle ORDER BY 1")
+        ).all()
+    assert len(rows) == len(vehicles) == 100
+    assert {(row[1], row[2]) for row in rows} == {("-infinity", "infinity")}
+    assert [(row[0], *row[3:]) for row in rows] == [tuple(vehicle) for vehicle in vehicles]
+    assert ("SF-001", "I-24-WB", "A", 4) in [tuple(vehicle) for vehicle in vehicles]
+    with seeded_engine.connect() as connection:
+        assert connection.execute(text(boxes)).all() == before != []

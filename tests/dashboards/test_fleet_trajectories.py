@@ -6,7 +6,7 @@ import asyncio
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
-from sqlalchemy import Engine
+from sqlalchemy import Engine, text
 from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.db import make_async_engine
@@ -41,3 +41,52 @@ def test_a_car_is_drawn_where_it_was_at_the_time_it_is_drawn(
     assert len(path.times_s) >= 5
     x_m = (path.postmiles - postmile_at_start) * METRES_PER_MILE
     np.testing.assert_allclose(x_m, 1000.0 + 25.0 * (path.times_s - start.timestamp()), atol=0.01)
+
+
+def test_a_car_moved_to_another_corridor_stays_on_the_first_for_the_time_before(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """The trajectories and the engagement share read each ping on the corridor its car was
+    assigned at the ping's time: moving a car does not carry its past drives along."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    before = now - timedelta(minutes=10)
+    pings(
+        seeded_engine, "SF-001", before, [1000.0 + 25.0 * i for i in range(60)], 25.0, engaged=True
+    )
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
+            )
+        )
+        connection.execute(
+            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-001'")
+        )
+    after = now + timedelta(minutes=2)  # its 60 pings all come after the move
+    pings(
+        seeded_engine, "SF-001", after, [1000.0 + 25.0 * i for i in range(60)], 25.0, engaged=False
+    )
+    since = now - timedelta(hours=1)
+
+    async def read() -> dict[str, tuple[list[Trajectory], tuple[int, float | None]]]:
+        engine = make_async_engine(seeded_database_url, pool_size=1)
+        try:
+            async with async_sessionmaker(engine)() as session:
+                return {
+                    corridor.corridor_id: (
+                        await data.fleet_trajectories(session, corridor, since, after, 10.0),
+                        await data.engagement_share(session, corridor.corridor_id, since, after),
+                    )
+                    for corridor in await data.corridors(session)
+                }
+        finally:
+            await engine.dispose()
+
+    read_back = asyncio.run(read())
+    (west_path,), west_share = read_back["I-24-WB"]
+    (east_path,), east_share = read_back["I-24-EB"]
+    assert west_path.times_s.max() <= before.timestamp()
+    assert east_path.times_s.min() > now.timestamp()
+    assert (west_share, east_share) == ((60, 1.0), (60, 0.0))

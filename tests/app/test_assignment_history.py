@@ -1,0 +1,215 @@
+"""dim_vehicle_assignment: a vehicle's corridor, route and lane over time (SCD type 2).
+
+Every writer of dim_vehicle keeps it (a trigger, migration 0012): the assignment API, the roster
+import, the seed, plain SQL. A change opens a row; a write that changes none of corridor, route
+and lane adds none.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from datetime import UTC, datetime, timedelta
+from importlib import resources
+from typing import Any
+
+import httpx
+import pytest
+from sqlalchemy import Engine, text
+
+from app.core.db import session_scope
+from app.motion.fleet import fleet_pings
+from app.vehicles.schemas import RosterRow
+from app.vehicles.service import parse_roster_csv, upsert_vehicles
+from tests.planner.facts import pings
+from tests.support.servers import live_server
+from tests.support.tokens import bearer, issue
+
+NEG_INF = "-infinity"
+POS_INF = "infinity"
+
+
+@pytest.fixture
+def operator(seeded_database_url: str, seeded_engine: Engine) -> Iterator[httpx.Client]:
+    """A client of the real app with an operator's token."""
+    token = issue(seeded_engine, "operator")
+    with (
+        live_server(seeded_database_url) as base,
+        httpx.Client(base_url=base, timeout=30, headers=bearer(token)) as client,
+    ):
+        yield client
+
+
+def history(engine: Engine, vehicle_id: str) -> list[dict[str, Any]]:
+    """The vehicle's rows in time order; the unbounded ends as text, the others as datetimes."""
+    with engine.connect() as connection:
+        rows = connection.execute(
+            text(
+                # psycopg loads no infinite timestamp into a datetime: those come as text
+                "SELECT CASE WHEN NOT isfinite(valid_from) THEN valid_from::text END AS from_text,"
+                " CASE WHEN isfinite(valid_from) THEN valid_from END AS from_at,"
+                " CASE WHEN NOT isfinite(valid_to) THEN valid_to::text END AS to_text,"
+                " CASE WHEN isfinite(valid_to) THEN valid_to END AS to_at,"
+                " corridor_id, route, assigned_lane "
+                "FROM dim_vehicle_assignment WHERE vehicle_id = :vehicle ORDER BY valid_from"
+            ),
+            {"vehicle": vehicle_id},
+        ).mappings()
+        return [
+            {
+                "from": row["from_text"] or row["from_at"],
+                "to": row["to_text"] or row["to_at"],
+                "assignment": (row["corridor_id"], row["route"], row["assigned_lane"]),
+            }
+            for row in rows
+        ]
+
+
+def assign(client: httpx.Client, vehicle_id: str, **body: Any) -> dict[str, Any]:
+    answer = client.put(
+        f"/api/v1/vehicles/{vehicle_id}/assignment",
+        json={
+            "lane": 2,
+            "route": "B",
+            "controller": {"name": "microaccel_acc", "params": {}},
+            **body,
+        },
+    )
+    assert answer.status_code == 200, answer.text
+    result: dict[str, Any] = answer.json()
+    return result
+
+
+def seed_roster() -> list[RosterRow]:
+    with resources.as_file(resources.files("seed_data").joinpath("roster.csv")) as roster:
+        return parse_roster_csv(roster)
+
+
+def test_every_seeded_vehicle_has_one_open_assignment_from_the_start_of_time(
+    seeded_engine: Engine,
+) -> None:
+    with seeded_engine.connect() as connection:
+        mismatched = connection.execute(
+            text(
+                "SELECT count(*) FROM dim_vehicle v FULL JOIN dim_vehicle_assignment a "
+                "USING (vehicle_id) WHERE a.valid_from IS DISTINCT FROM '-infinity' "
+                "OR a.valid_to IS DISTINCT FROM 'infinity' "
+                "OR (a.corridor_id, a.route, a.assigned_lane) "
+                "   IS DISTINCT FROM (v.corridor_id, v.route, v.assigned_lane)"
+            )
+        ).scalar_one()
+        rows = connection.execute(text("SELECT count(*) FROM dim_vehicle_assignment")).scalar_one()
+    assert (mismatched, rows) == (0, 100)
+
+
+def test_a_reassignment_closes_the_open_row_and_opens_the_next(
+    seeded_engine: Engine, operator: httpx.Client
+) -> None:
+    # SF-002 is seeded in lane 2, route B
+    assert history(seeded_engine, "SF-002") == [
+        {"from": NEG_INF, "to": POS_INF, "assignment": ("I-24-WB", "B", 2)}
+    ]
+    assign(operator, "SF-002", lane=3)
+    assign(operator, "SF-002", lane=3, route="C")
+
+    rows = history(seeded_engine, "SF-002")
+
+    assert [row["assignment"] for row in rows] == [
+        ("I-24-WB", "B", 2),
+        ("I-24-WB", "B", 3),
+        ("I-24-WB", "C", 3),
+    ]
+    # contiguous: each row ends where the next begins, the last is open
+    assert rows[0]["from"] == NEG_INF
+    assert rows[0]["to"] == rows[1]["from"]
+    assert rows[1]["to"] == rows[2]["from"]
+    assert isinstance(rows[1]["from"], datetime)
+    assert rows[1]["from"] < rows[2]["from"]
+    assert rows[2]["to"] == POS_INF
+
+
+def test_a_reassignment_that_changes_no_lane_or_route_adds_no_row(
+    seeded_engine: Engine, operator: httpx.Client
+) -> None:
+    before = history(seeded_engine, "SF-002")
+    # the same lane and route: once exactly as it is, once with another controller
+    first = assign(operator, "SF-002", lane=2, route="B")
+    second = assign(
+        operator, "SF-002", lane=2, route="B", controller={"name": "simple", "params": {"k": 0.4}}
+    )
+
+    assert second["config_version"] == first["config_version"] + 1  # the car is told
+    assert history(seeded_engine, "SF-002") == before  # its lane history is not touched
+
+
+def test_the_roster_import_opens_rows_only_for_what_it_changes(seeded_engine: Engine) -> None:
+    roster = seed_roster()
+    with session_scope(seeded_engine) as session:
+        upsert_vehicles(session, roster, update_existing=True)  # the same roster again
+    with seeded_engine.connect() as connection:
+        rows = connection.execute(text("SELECT count(*) FROM dim_vehicle_assignment")).scalar_one()
+    assert rows == 100
+
+    sf001 = next(row for row in roster if row.vehicle_id == "SF-001")
+    new = sf001.model_copy(update={"vehicle_id": "SF-900", "vin": "JN8BT3BB3PW900000"})
+    with session_scope(seeded_engine) as session:
+        upsert_vehicles(
+            session, [sf001.model_copy(update={"assigned_lane": 4}), new], update_existing=True
+        )
+
+    assert [row["assignment"] for row in history(seeded_engine, "SF-001")] == [
+        ("I-24-WB", "A", 1),
+        ("I-24-WB", "A", 4),
+    ]
+    assert history(seeded_engine, "SF-900") == [
+        {"from": NEG_INF, "to": POS_INF, "assignment": ("I-24-WB", "A", 1)}
+    ]
+
+
+def test_two_changes_in_one_transaction_keep_the_history_contiguous(
+    seeded_engine: Engine,
+) -> None:
+    with seeded_engine.begin() as connection:
+        for lane in (3, 4, 3):
+            connection.execute(
+                text("UPDATE dim_vehicle SET assigned_lane = :lane WHERE vehicle_id = 'SF-001'"),
+                {"lane": lane},
+            )
+
+    rows = history(seeded_engine, "SF-001")
+
+    assert [row["assignment"][2] for row in rows] == [1, 3, 4, 3]
+    for earlier, later in zip(rows, rows[1:], strict=False):
+        assert earlier["to"] == later["from"]
+    assert rows[-1]["to"] == POS_INF
+
+
+def test_the_motion_figure_draws_a_moved_car_on_the_corridor_it_drove_then(
+    seeded_engine: Engine,
+) -> None:
+    """`smoothfleet motion figure` (app.motion.fleet) reads the fleet's pings on a corridor:
+    those of a car since moved elsewhere are still on it for the time before the move."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    pings(seeded_engine, "SF-001", now - timedelta(minutes=10), [1000.0, 1025.0, 1050.0], 25.0)
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
+            )
+        )
+        connection.execute(
+            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-001'")
+        )
+    pings(seeded_engine, "SF-001", now + timedelta(minutes=1), [2000.0, 2025.0], 25.0)
+
+    with seeded_engine.connect() as connection:
+        west = fleet_pings(
+            connection, "I-24-WB", now - timedelta(hours=1), now + timedelta(hours=1)
+        )
+        east = fleet_pings(
+            connection, "I-24-EB", now - timedelta(hours=1), now + timedelta(hours=1)
+        )
+
+    assert list(west.pings["x_m"]) == [1000.0, 1025.0, 1050.0]
+    assert list(east.pings["x_m"]) == [2000.0, 2025.0]
