@@ -20,7 +20,7 @@ from app.core.db import session_scope
 from app.motion.fleet import fleet_pings
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import parse_roster_csv, upsert_vehicles
-from tests.planner.facts import pings
+from tests.planner.facts import move_to_eastbound, pings
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 
@@ -190,17 +190,7 @@ def test_the_motion_figure_draws_a_moved_car_on_the_corridor_it_drove_then(
     those of a car since moved elsewhere are still on it for the time before the move."""
     now = datetime.now(UTC).replace(microsecond=0)
     pings(seeded_engine, "SF-001", now - timedelta(minutes=10), [1000.0, 1025.0, 1050.0], 25.0)
-    with seeded_engine.begin() as connection:
-        connection.execute(
-            text(
-                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
-                "speed_limit_mps, min_target_speed_mps) "
-                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
-            )
-        )
-        connection.execute(
-            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-001'")
-        )
+    move_to_eastbound(seeded_engine, "SF-001")
     pings(seeded_engine, "SF-001", now + timedelta(minutes=1), [2000.0, 2025.0], 25.0)
 
     with seeded_engine.connect() as connection:

@@ -6,14 +6,14 @@ import asyncio
 from datetime import UTC, datetime, timedelta
 
 import numpy as np
-from sqlalchemy import Engine, text
+from sqlalchemy import Engine
 from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.db import make_async_engine
 from contract.units import METRES_PER_MILE
 from dashboards import data
 from dashboards.figures import Trajectory
-from tests.planner.facts import pings
+from tests.planner.facts import move_to_eastbound, pings
 
 
 def test_a_car_is_drawn_where_it_was_at_the_time_it_is_drawn(
@@ -53,17 +53,7 @@ def test_a_car_moved_to_another_corridor_stays_on_the_first_for_the_time_before(
     pings(
         seeded_engine, "SF-001", before, [1000.0 + 25.0 * i for i in range(60)], 25.0, engaged=True
     )
-    with seeded_engine.begin() as connection:
-        connection.execute(
-            text(
-                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
-                "speed_limit_mps, min_target_speed_mps) "
-                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
-            )
-        )
-        connection.execute(
-            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-001'")
-        )
+    move_to_eastbound(seeded_engine, "SF-001")
     after = now + timedelta(minutes=2)  # its 60 pings all come after the move
     pings(
         seeded_engine, "SF-001", after, [1000.0 + 25.0 * i for i in range(60)], 25.0, engaged=False

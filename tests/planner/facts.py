@@ -91,3 +91,19 @@ def pings(
             ),
             rows,
         )
+
+
+def move_to_eastbound(engine: Engine, vehicle_id: str) -> None:
+    """Open an eastbound corridor and move the vehicle onto it (a roster change of corridor)."""
+    with engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "VALUES ('I-24-EB', 'I-24 eastbound', 'EB', 4, 6000, 31.3, 4.5)"
+            )
+        )
+        connection.execute(
+            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = :vehicle"),
+            {"vehicle": vehicle_id},
+        )
