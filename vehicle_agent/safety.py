@@ -14,7 +14,8 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
   standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL);
 - the copy: a press whose frame copies the car's own latest frame of the command message (the
   Nissan's CRUISE_THROTTLE, pedals and brake included) only from one read at most 2 of its
-  periods ago (`check_copy`).
+  periods ago (`check_copy`), and never in a frame that shows the driver's brake or gas
+  (`CarInterface.driver_inputs`; a release is).
 """
 
 from __future__ import annotations
@@ -144,7 +145,11 @@ class SafetyLayer:
         foreign = self.car.foreign_inputs(signals)
         if foreign is not None:
             return Refusal("button", f"{foreign}: not the agent's to send")
-        return self.check_press(self.car.pressed_buttons(signals), context)
+        pressed = self.car.pressed_buttons(signals)
+        driver = self.car.driver_inputs(signals) if pressed else None
+        if driver is not None:
+            return Refusal("driver", f"a press in a frame showing {driver}")
+        return self.check_press(pressed, context)
 
     def _ends_a_press(self, signals: Signals) -> bool:
         """A button frame releasing what the last frame held. It passes however soon after

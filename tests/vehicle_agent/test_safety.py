@@ -304,6 +304,33 @@ def test_a_button_frame_setting_what_is_no_known_press_is_no_release(
     assert reason in refusal.detail
 
 
+@pytest.mark.parametrize(
+    ("pedal", "shown"),
+    [({"USER_BRAKE_PRESSED": 1}, "the brake pressed"), ({"GAS_PEDAL": 200}, "the gas pedal")],
+)
+def test_a_rogue_press_in_a_frame_showing_the_drivers_pedal_is_refused(
+    pedal: dict[str, int], shown: str, dbc_cache: Path
+) -> None:
+    """A Rogue button frame copies the car's pedal and brake. A press beside the driver's
+    pedal went out whenever the agent's override check had not yet seen the pedal; the release
+    carrying it still goes out, as every release does."""
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    context = SafetyContext(1.0, car_state(1.0))
+    frame_id = codec.frame_id(car.command_message)
+
+    def frame(button: CruiseButton | None) -> can.Message:
+        data = codec.encode(car.command_message, {**car.button_signals(button, {}), **pedal})
+        return can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+
+    refusal = safety.check(frame(CruiseButton.PLUS), context)
+    assert refusal is not None
+    assert refusal.kind == "driver"
+    assert shown in refusal.detail
+    assert safety.check(frame(None), context) is None
+
+
 def test_only_the_release_ending_a_press_may_come_sooner_than_the_rate(dbc_cache: Path) -> None:
     """A release refused for its rate left a stopping agent's press standing in the car's last
     frame. The one release after a press passes however soon; another right behind it, and a

@@ -130,6 +130,13 @@ class CarInterface(ABC):
         """The buttons a decoded command frame presses (button makes)."""
         raise NotImplementedError(f"{self.key} is not actuated by ACC buttons")
 
+    def driver_inputs(self, signals: Signals) -> str | None:
+        """The driver's pedal a decoded command frame shows pressed, in words, or None. Only
+        makes whose button frames copy the car's own (`copies_command_frame`) carry one. The
+        safety layer refuses a press in such a frame: with the driver on a pedal the car is
+        the driver's, whatever the agent's override check has yet to see."""
+        return None
+
     def foreign_inputs(self, signals: Signals) -> str | None:
         """What a decoded command frame sets besides the buttons `pressed_buttons` knows (a
         code of no known button, another switch on the same message), or None. The safety

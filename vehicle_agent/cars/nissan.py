@@ -99,6 +99,15 @@ class NissanRogue(CarInterface):
         values["NO_BUTTON_PRESSED"] = 0 if button is not None else 1
         return values
 
+    def driver_inputs(self, signals: Signals) -> str | None:
+        """The brake or the gas pedal a CRUISE_THROTTLE frame shows pressed (copied from the
+        car's, `button_signals`), or None."""
+        if signals.get("USER_BRAKE_PRESSED"):
+            return "the brake pressed"
+        if signals.get("GAS_PEDAL", 0.0) > GAS_PRESSED_COUNTS:
+            return "the gas pedal pressed"
+        return None
+
     def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
         """Buttons set in a CRUISE_THROTTLE frame."""
         return frozenset(b for b, name in BUTTON_SIGNALS.items() if signals.get(name))
