@@ -243,11 +243,8 @@ class GpioButtonBoard:
             self.safety.admit_press(frozenset(), context)  # a release: always admitted
             self._cancel_deadman()
             self.held = None
-            for button, line in self.lines.items():
-                try:
-                    self.write_line(line, False)
-                except OSError:
-                    log.exception("writing the %s line low failed", button.name)
+            for failure in release_board_lines(self.lines, self.write_line):
+                log.error(failure)
 
     def _cancel_deadman(self) -> None:
         if self._deadman is not None:
