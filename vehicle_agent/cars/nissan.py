@@ -82,8 +82,8 @@ class NissanRogue(CarInterface):
             acc_speed_setting_mph=set_speed if engaged and set_speed > 0 else None,
             acc_gap_setting=gap if 1 <= gap <= 3 else None,
             lead_present=bool(hud["LEAD_CAR"]),
-            brake_pressed=bool(throttle["USER_BRAKE_PRESSED"]),
-            gas_pressed=throttle["GAS_PEDAL"] > GAS_PRESSED_COUNTS,
+            brake_pressed=_brake_pressed(throttle),
+            gas_pressed=_gas_pressed(throttle),
             buttons=frozenset(b for b, name in BUTTON_SIGNALS.items() if throttle[name]),
         )
 
@@ -102,12 +102,22 @@ class NissanRogue(CarInterface):
     def driver_inputs(self, signals: Signals) -> str | None:
         """The brake or the gas pedal a CRUISE_THROTTLE frame shows pressed (copied from the
         car's, `button_signals`), or None."""
-        if signals.get("USER_BRAKE_PRESSED"):
+        if _brake_pressed(signals):
             return "the brake pressed"
-        if signals.get("GAS_PEDAL", 0.0) > GAS_PRESSED_COUNTS:
+        if _gas_pressed(signals):
             return "the gas pedal pressed"
         return None
 
     def pressed_buttons(self, signals: Signals) -> frozenset[CruiseButton]:
         """Buttons set in a CRUISE_THROTTLE frame."""
         return frozenset(b for b, name in BUTTON_SIGNALS.items() if signals.get(name))
+
+
+def _brake_pressed(throttle: Signals) -> bool:
+    """The driver's brake in a CRUISE_THROTTLE frame, the car's or one the agent builds."""
+    return bool(throttle.get("USER_BRAKE_PRESSED"))
+
+
+def _gas_pressed(throttle: Signals) -> bool:
+    """The driver's gas pedal in a CRUISE_THROTTLE frame, past the counts of a resting foot."""
+    return float(throttle.get("GAS_PEDAL", 0.0)) > GAS_PRESSED_COUNTS
