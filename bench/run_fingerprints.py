@@ -22,9 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.drives import load_drives, shared_data_dir
 from sim.evaluate import run_case
-from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS, registered_variants
+from sim.recommended import registered_variants
 from sim.recorded import load_recorded_drives
 from sim.scenarios import SCENARIOS, Case, scenario_cases
 

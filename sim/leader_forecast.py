@@ -33,11 +33,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.av import PING_EVERY_STEPS
 from sim.drives import STEP_S, Drive, load_drives, shared_data_dir
 from sim.folds import date_folds
 from sim.plans import SimulatedPlanner
-from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.rl.scores import is_stop_and_go
 
 FloatArray = NDArray[np.float64]

@@ -27,6 +27,14 @@ PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "develop
 logger = logging.getLogger(__name__)
 
 
+def _recommended_planner() -> tuple[str, Mapping[str, Any]]:
+    """The simulator's recommended planner and parameters, imported when first needed: the
+    planner package brings numpy, which reading the settings does not otherwise need."""
+    from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
+
+    return RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
+
+
 class SettingsError(Exception):
     """A setting is missing or wrong; the message names it in one line."""
 
@@ -88,8 +96,10 @@ class Settings(BaseSettings):
     planner_period_s: float = Field(60.0, gt=0, le=3600)
     plan_valid_for_s: float = Field(180.0, gt=0)
     planner_enabled: bool = True  # `smoothfleet serve --no-planner` turns it off
-    planner_algorithm: str = "kernel_smooth_buffer"
-    planner_params: dict[str, Any] = Field(default_factory=dict)  # JSON, see planner/params.py
+    # The planner the simulator recommends (planner/recommended.py) unless these say otherwise;
+    # SMOOTHFLEET_PLANNER_PARAMS overrides its parameters one by one (JSON, planner/params.py).
+    planner_algorithm: str = Field(default_factory=lambda: _recommended_planner()[0])
+    planner_params: dict[str, Any] = Field(default_factory=dict)
 
     # INRIX feed
     inrix_url: str | None = None
@@ -213,8 +223,18 @@ class Settings(BaseSettings):
     def _planner_params_are_valid(cls, value: dict[str, Any]) -> dict[str, Any]:
         from planner import PlannerParams
 
-        PlannerParams.parse(value)
+        PlannerParams.parse({**_recommended_planner()[1], **value})
         return value
+
+    def planner_param_values(self) -> dict[str, Any]:
+        """The parameters the server plans with: the recommended ones, each overridden by
+        SMOOTHFLEET_PLANNER_PARAMS, and the schedule's period (the look-back of standing
+        bottlenecks spans `standing_cycles` of the cycles actually run)."""
+        return {
+            **_recommended_planner()[1],
+            **self.planner_params,
+            "cycle_period_s": self.planner_period_s,
+        }
 
     @model_validator(mode="after")
     def _one_planner_period(self) -> Settings:

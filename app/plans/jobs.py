@@ -34,14 +34,6 @@ log = logging.getLogger(__name__)
 PLANNER_JOB_ID = "planner"
 
 
-def planner_params(settings: Settings) -> PlannerParams:
-    """The configured planner parameters, its cycle period being the schedule's period (the
-    look-back of standing bottlenecks spans `standing_cycles` of the cycles actually run)."""
-    return PlannerParams.parse(
-        {**settings.planner_params, "cycle_period_s": settings.planner_period_s}
-    )
-
-
 def run_planner(
     engine: Engine,
     settings: Settings,
@@ -52,7 +44,7 @@ def run_planner(
 ) -> list[CycleOutcome]:
     """One cycle for each corridor (all of them unless named), each in its own transaction."""
     algorithm = settings.planner_algorithm
-    params = planner_params(settings)
+    params = PlannerParams.parse(settings.planner_param_values())
     if corridors is None:
         with session_scope(engine) as session:
             corridors = corridor_ids(session)

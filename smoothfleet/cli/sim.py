@@ -24,6 +24,7 @@ from rich.progress import (
 from rich.table import Table
 
 from planner.params import InvalidParams, PlannerParams
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.drives import (
     FREEFLOW_MIN_SPEED_MPS,
     FREEFLOW_PERCENTILE,
@@ -50,12 +51,7 @@ from sim.evaluate import (
 )
 from sim.folds import drive_date
 from sim.platoon import HandBack, PlatoonRun
-from sim.recommended import (
-    RECOMMENDED_CONTROLLER,
-    RECOMMENDED_PLANNER,
-    RECOMMENDED_PLANNER_PARAMS,
-    registered_variants,
-)
+from sim.recommended import RECOMMENDED_CONTROLLER, registered_variants
 from sim.recorded import RecordedDrive, load_recorded_drives
 from sim.report import (
     MAX_LOSS_PCT,

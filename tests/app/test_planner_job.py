@@ -14,6 +14,7 @@ from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from tests.planner.facts import inrix_snapshot, standing_slowdown
 from tests.support.servers import (
     cli_env,
@@ -103,9 +104,18 @@ def test_once_then_replay_from_the_command_line(
     assert once.returncode == 0, once.stderr
     assert "I-24-WB: published plan 1 in" in once.stdout
     assert "(0 vehicles, 0 pings, INRIX 1" in once.stdout  # ~180 s old
+    # Planned as the simulator recommends, by default.
+    with seeded_engine.connect() as connection:
+        algorithm, params = connection.execute(
+            text("SELECT algorithm, params FROM plan_run WHERE plan_id = 1")
+        ).one()
+    assert algorithm == RECOMMENDED_PLANNER
+    assert {name: params[name] for name in RECOMMENDED_PLANNER_PARAMS} == dict(
+        RECOMMENDED_PLANNER_PARAMS
+    )
     replay = run_cli("planner", "replay", "--plan-id", "1", env=env)
     assert replay.returncode == 0, replay.stderr
-    assert "plan 1 (I-24-WB, kernel_smooth_buffer): recomputed 632 targets, matches" in (
+    assert f"plan 1 (I-24-WB, {RECOMMENDED_PLANNER}): recomputed 632 targets, matches" in (
         replay.stdout
     )
     with seeded_engine.begin() as connection:
@@ -153,7 +163,7 @@ def test_planner_run_keeps_publishing_until_stopped(
             process.send_signal(signal.SIGTERM)
             process.wait(timeout=30)
     assert process.returncode == 128 + signal.SIGTERM, log.read_text()
-    assert "planner: every 1 s, algorithm kernel_smooth_buffer" in log.read_text()
+    assert f"planner: every 1 s, algorithm {RECOMMENDED_PLANNER}" in log.read_text()
 
 
 def test_serve_no_planner_publishes_nothing(

@@ -57,7 +57,10 @@ def served(seeded_database_url: str, seeded_engine: Engine) -> Iterator[Served]:
     now = datetime.now(UTC).replace(microsecond=0)
     for minute in range(12, 2, -1):
         inrix_snapshot(seeded_engine, now - timedelta(minutes=minute), standing_slowdown())
-    settings = load_settings(database_url=seeded_database_url)
+    # The full pipeline with its buffer, which these tests are about (not the default planner).
+    settings = load_settings(
+        database_url=seeded_database_url, planner_algorithm="kernel_smooth_buffer"
+    )
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base, timeout=30) as client,
@@ -260,7 +263,11 @@ def test_at_a_120_s_schedule_a_standing_slowdown_still_gets_its_buffer(
     now = datetime.now(UTC).replace(microsecond=0)
     for minute in range(14, 0, -1):
         inrix_snapshot(seeded_engine, now - timedelta(minutes=minute), standing_slowdown())
-    settings = load_settings(database_url=seeded_database_url, planner_period_s=120)
+    settings = load_settings(
+        database_url=seeded_database_url,
+        planner_period_s=120,
+        planner_algorithm="kernel_smooth_buffer",
+    )
     outcomes = [
         run_planner(seeded_engine, settings, now=now - timedelta(seconds=120 * cycles_ago))[0]
         for cycles_ago in (3, 2, 1, 0)

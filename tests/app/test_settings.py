@@ -10,6 +10,7 @@ from typing import get_origin
 import pytest
 
 from app.core.config import Settings, SettingsError, load_settings, unknown_variables
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 
 
 def json_valued_fields() -> list[str]:
@@ -32,6 +33,25 @@ def test_every_json_valued_setting_reads_its_json(monkeypatch: pytest.MonkeyPatc
     read = load_settings()
     for name in fields:
         assert getattr(read, name) == getattr(defaults, name), name
+
+
+def test_the_server_plans_as_the_simulator_recommends(monkeypatch: pytest.MonkeyPatch) -> None:
+    defaults = load_settings()
+    assert defaults.planner_algorithm == RECOMMENDED_PLANNER
+    assert defaults.planner_param_values() == {
+        **RECOMMENDED_PLANNER_PARAMS,
+        "cycle_period_s": defaults.planner_period_s,
+    }
+    # An override replaces its own parameter and keeps the others recommended.
+    monkeypatch.setenv("SMOOTHFLEET_PLANNER_PARAMS", '{"window_m": 2000}')
+    monkeypatch.setenv("SMOOTHFLEET_PLANNER_ALGORITHM", "kernel_smooth_buffer")
+    overridden = load_settings()
+    assert overridden.planner_algorithm == "kernel_smooth_buffer"
+    assert overridden.planner_param_values() == {
+        **RECOMMENDED_PLANNER_PARAMS,
+        "window_m": 2000,
+        "cycle_period_s": overridden.planner_period_s,
+    }
 
 
 @pytest.mark.parametrize(

@@ -18,6 +18,7 @@ from app.core.config import load_settings
 from app.core.db import session_scope
 from app.plans.jobs import run_planner
 from app.users.service import save_user, wait_before_next_attempt
+from planner.recommended import RECOMMENDED_PLANNER
 from tests.dashboards.support import PASSWORDS, add_users, csrf_of, log_in, logged_in, post_form
 from tests.support.fleet import drive, healthy_status, post_inrix, post_pings, post_status
 from tests.support.servers import live_server
@@ -671,7 +672,7 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
         for chart in ("plan-lane-1", "plan-lane-4", "plan-heatmap", "tse-heatmap"):
             assert f'data-chart="{chart}"' in plans
         assert 'alt="Target speed of lane 1 along the corridor"' in plans  # axes: test_charts
-        assert "kernel_smooth_buffer" in plans
+        assert f"<dt>algorithm</dt><dd>{RECOMMENDED_PLANNER}</dd>" in plans
         assert 'data-live-url="/plans/live?corridor=I-24-WB&amp;lane=1"' in plans
         plans_live = client.get("/plans/live", params={"corridor": "I-24-WB", "lane": 2}).text
         assert "<html" not in plans_live

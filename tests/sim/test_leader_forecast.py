@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.drives import STEP_S, drive_from_speeds, load_drive, shared_data_dir
 from sim.leader_forecast import (
     PLAN_OFFSETS_M,
@@ -19,7 +20,6 @@ from sim.leader_forecast import (
     lag_steps,
 )
 from sim.plans import SimulatedPlanner
-from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 
 
 def test_lags_reach_a_minute_back_every_two_seconds() -> None:

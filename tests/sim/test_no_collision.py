@@ -24,6 +24,7 @@ from hypothesis import strategies as st
 from pydantic import BaseModel
 
 from contract.controllers import CONTROLLER_SCHEMAS
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.av import agent_policy
 from sim.drives import drive_from_speeds, load_drives
 from sim.emulator.acc import SimulatedAccCar
@@ -37,11 +38,7 @@ from sim.evaluate import (
     run_case,
 )
 from sim.platoon import CutIns, HandBack, platoon_roles, simulate_platoon
-from sim.recommended import (
-    RECOMMENDED_PLANNER,
-    RECOMMENDED_PLANNER_PARAMS,
-    registered_variants,
-)
+from sim.recommended import registered_variants
 from sim.recorded import load_recorded_drives
 from sim.scenarios import SCENARIOS, Case, scenario_cases
 from vehicle_agent.controllers import CONTROLLERS, TargetProfile

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from contract.recorded import InrixMinutes, read_trajectory
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.drives import DriveError
 from sim.evaluate import ControllerVariant, run_case
 from sim.plans import NoPlanHeld, SimulatedPlanner
-from sim.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.recorded import feed_in_drive_frame, load_recorded_drives
 from sim.scenarios import Case, scenario_cases
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
