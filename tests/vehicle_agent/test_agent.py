@@ -550,6 +550,34 @@ def test_driver_override_hands_back_within_one_period(
         assert r.agent.state.mode is Mode.OVERRIDDEN
 
 
+def play_the_pcm(
+    r: Rig, listener: can.BusABC, seconds: float, cruise_state: int | None
+) -> list[dict[str, float]]:
+    """Drive for `seconds`, the test playing the RAV4's PCM (the emulator's own PCM_CRUISE
+    muted): a PCM_CRUISE in `cruise_state` every command period, or none (None). Returns the
+    agent's ACC_CONTROL requests meanwhile, as `listener` read them."""
+    codec = r.agent.codec
+    end = r.clock.monotonic() + seconds
+    while r.clock.monotonic() < end - 1e-9:
+        r.clock.advance(r.agent.command_period_s)
+        r.emulator.step(r.clock.monotonic())
+        if cruise_state is not None:
+            pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
+            r.emulator.send_raw(
+                can.Message(
+                    arbitration_id=codec.frame_id("PCM_CRUISE"),
+                    data=codec.encode("PCM_CRUISE", pcm),
+                    is_extended_id=False,
+                )
+            )
+        r.agent.tick()
+    return [
+        codec.decode(frame.arbitration_id, frame.data)[1]
+        for frame in iter(lambda: listener.recv(timeout=0), None)
+        if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+    ]
+
+
 def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
@@ -560,32 +588,9 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=0.0) as r,
         can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
     ):
-        codec = r.agent.codec
         r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
         r.emulator.driver_engage(set_speed_mph=30)
-
-        def run(seconds: float, cruise_state: int) -> list[dict[str, float]]:
-            """Drive for `seconds` with the PCM in `cruise_state`: the agent's requests."""
-            end = r.clock.monotonic() + seconds
-            while r.clock.monotonic() < end - 1e-9:
-                r.clock.advance(r.agent.command_period_s)
-                r.emulator.step(r.clock.monotonic())
-                pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
-                r.emulator.send_raw(
-                    can.Message(
-                        arbitration_id=codec.frame_id("PCM_CRUISE"),
-                        data=codec.encode("PCM_CRUISE", pcm),
-                        is_extended_id=False,
-                    )
-                )
-                r.agent.tick()
-            return [
-                codec.decode(frame.arbitration_id, frame.data)[1]
-                for frame in iter(lambda: listener.recv(timeout=0), None)
-                if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
-            ]
-
-        held = run(3.0, cruise_state=7)  # "standstill"
+        held = play_the_pcm(r, listener, 3.0, cruise_state=7)  # "standstill"
         assert engaged(r), r.agent.state.reason
         assert r.agent._requested_accel > 0  # the controller would go
         assert {request["RELEASE_STANDSTILL"] for request in held} == {0}
@@ -593,7 +598,8 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         commands = [request["ACCEL_CMD"] for request in held]
         assert all(later <= earlier for earlier, later in itertools.pairwise(commands))
         assert commands[-1] == 0.0
-        resumed = run(1.0, cruise_state=8)  # "adaptive engaged": the driver pressed RES
+        # "adaptive engaged": the driver pressed RES
+        resumed = play_the_pcm(r, listener, 1.0, cruise_state=8)
         assert resumed
         assert {request["RELEASE_STANDSTILL"] for request in resumed} == {1}
         # pulling away within the limiter's 2.5 m/s^3 from 0 (one frame's quantum of slack)
