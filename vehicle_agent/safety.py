@@ -58,11 +58,12 @@ class SafetyLimits:
     )
     # A previous request older than this is no reference for the jerk check (s).
     jerk_reference_s: float = 0.5
-    # A press copies the car's own frame of the command message (`copies_command_frame`) only
-    # when it was read at most this many of its periods ago. The car state stays valid for 10
-    # periods (0.5 s on the Nissan), and a copy that old re-sends pedal and brake values the
-    # driver may have changed since; 2 periods let one frame come late or go missing.
-    copy_fresh_periods: float = 2.0
+    # A car frame a command is built from counts only when it was read at most this many of its
+    # periods ago (`_fresh_age_s`). The car state stays valid for 10 periods (0.5 s on the
+    # Nissan), and a frame that old may no longer be the car: a copy of the Nissan's own frame
+    # of the command message (`copies_command_frame`) re-sends pedal and brake values the
+    # driver may have changed since. 2 periods let one frame come late or go missing.
+    fresh_periods: float = 2.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,10 +191,14 @@ class SafetyLayer:
         if read_s is None:
             return Refusal("copy", f"no {name} of the car's to copy")
         age = self._age_s(read_s, context)
-        limit = self.limits.copy_fresh_periods * self.car.messages[name].period_s
-        if age > limit:
+        if age > self._fresh_age_s(name):
             return Refusal("copy", f"the car's {name} to copy is {age:.2f} s old")
         return None
+
+    def _fresh_age_s(self, name: str) -> float:
+        """The oldest the car's frame of `name` may be for a command to be built from it:
+        `fresh_periods` of its periods."""
+        return self.limits.fresh_periods * self.car.messages[name].period_s
 
     def _check_accel(
         self, accel: float, signals: dict[str, float], context: SafetyContext
