@@ -195,6 +195,25 @@ class SafetyLayer:
             return Refusal("copy", f"the car's {name} to copy is {age:.2f} s old")
         return None
 
+    def check_standstill_release(self, context: SafetyContext) -> Refusal | None:
+        """Why a frame may not release a standstill the stock ACC holds for the driver to
+        resume, or None when it may: only while the car's `standstill_message`, read fresh,
+        shows none held. The car state stays valid on a frame of it 10 periods old (0.33 s of
+        the RAV4's PCM_CRUISE), time enough for the car to have stopped and the ACC to hold it
+        since, and a release judged from that frame would drive off a hold that is the
+        driver's to release. Aged by the clock, as the car state is."""
+        name = self.car.standstill_message
+        state = context.car_state
+        read_s = None if name is None else state.received_at.get(name)
+        if name is None or read_s is None or state.reading is None:
+            return Refusal("standstill", "releases a standstill with no reading of it")
+        age = self._age_s(read_s, context)
+        if age > self._fresh_age_s(name):
+            return Refusal("standstill", f"releases a standstill from a {name} {age:.2f} s old")
+        if state.reading.standstill_held:
+            return Refusal("standstill", "releases a standstill held for the driver to resume")
+        return None
+
     def _fresh_age_s(self, name: str) -> float:
         """The oldest the car's frame of `name` may be for a command to be built from it:
         `fresh_periods` of its periods."""

@@ -609,6 +609,35 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         assert resumed[-1]["ACCEL_CMD"] > 0
 
 
+def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """ACC_CONTROL released the standstill whenever the latest PCM_CRUISE the agent had read
+    showed none, however old: the car state stays valid on a PCM_CRUISE 10 periods (0.33 s)
+    old, time enough for the PCM to have stopped the car and held it since, and the release
+    would have driven off a hold that is the driver's to release. From a PCM_CRUISE read more
+    than 2 of its periods ago the request keeps the standstill (0), and the agent goes on
+    commanding: a late PCM_CRUISE is no reason to hand back."""
+    with (
+        rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r,
+        can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
+    ):
+        r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
+        r.emulator.driver_engage(set_speed_mph=50)
+        play_the_pcm(r, listener, 3.0, cruise_state=8)  # "adaptive engaged"
+        assert engaged(r), r.agent.state.reason
+        period = r.agent.command_period_s
+        late = play_the_pcm(r, listener, 6 * period, cruise_state=None)
+        # one request a period, the last PCM_CRUISE read 1, 2, ... 6 periods before each
+        assert len(late) == 6
+        assert late[0]["RELEASE_STANDSTILL"] == 1
+        assert [request["RELEASE_STANDSTILL"] for request in late[2:]] == [0, 0, 0, 0]
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.safety.refused == {}
+        back = play_the_pcm(r, listener, 6 * period, cruise_state=8)
+        assert {request["RELEASE_STANDSTILL"] for request in back} == {1}
+
+
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:
     with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
         engage_and_settle(r)

@@ -160,7 +160,7 @@ def test_no_acceleration_frame_leaves_out_of_limits(
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety), dict)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
     sent_at: list[tuple[float, float]] = []
     for index, (request, (valid, engaged, state_age)) in enumerate(steps):
         now = index / 30
@@ -365,7 +365,7 @@ def test_no_frame_releases_a_standstill_held_for_the_driver(
     context = SafetyContext(
         1.0, replace(state, reading=replace(state.reading, standstill_held=held)), 0.0
     )
-    releasing = {**car.accel_signals(0.0, {}), "RELEASE_STANDSTILL": 1}
+    releasing = car.accel_signals(0.0, release_standstill=True)
     data = codec.encode(car.command_message, releasing)
     frame = can.Message(
         arbitration_id=codec.frame_id(car.command_message), data=data, is_extended_id=False
@@ -470,7 +470,7 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
     context = SafetyContext(1.0, car_state(1.0), 0.0)
-    good = codec.encode("ACC_CONTROL", car.accel_signals(0.05, {}))
+    good = codec.encode("ACC_CONTROL", car.accel_signals(0.05, release_standstill=False))
     frame_id = codec.frame_id("ACC_CONTROL")
     assert (
         safety.check(can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), context)
@@ -493,7 +493,7 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     for frame in checks.values():
         assert not safety.admit(frame, context)
     assert safety.refused == {"id": 1, "length": 1, "decode": 1}
-    too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, {}))
+    too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, release_standstill=False))
     assert safety.check(
         can.Message(arbitration_id=frame_id, data=too_hard, is_extended_id=False), context
     ) == Refusal("acceleration", "acceleration -3.5 m/s^2 outside [-3.0, 1.5]")
@@ -601,7 +601,7 @@ def test_what_the_limiter_lets_through_the_safety_layer_accepts(
     agent_bus, car_bus = buses
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)), dict)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)))
     limiter = AccelLimiter()
     limiter.reset(measured, 0.0)
     for index, request in enumerate(requests, start=1):
