@@ -297,7 +297,9 @@ class CanAccelPort(CanCommandPort):
         The request releases the stock ACC's standstill (the RAV4's RELEASE_STANDSTILL) only
         when the safety layer says a release may go out (`check_standstill_release`: a fresh
         reading showing no hold), judged from the same car state. Otherwise it keeps the
-        standstill, the safe side: the stock ACC holds the stop and the driver resumes."""
+        standstill, the safe side: the stock ACC holds the stop and the driver resumes. A
+        release built regardless would be refused, and every refusal hands the car back: a
+        single late PCM_CRUISE frame would end the agent's command."""
         release = self.sender.safety.check_standstill_release(context) is None
         signals = self.car.accel_signals(accel_mps2, release_standstill=release)
         try:

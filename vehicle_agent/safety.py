@@ -11,7 +11,10 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
 - the car: ACC engaged by the driver, the car state valid and fresh, and no release of a
-  standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL);
+  standstill the stock ACC may hold for the driver to resume (the RAV4's RELEASE_STANDSTILL)
+  but from a reading of it at most 2 of its periods old that shows none held
+  (`check_standstill_release`; the port builds no other release, so this refuses only a frame
+  built wrong, not every late PCM_CRUISE);
 - the copy: a press whose frame copies the car's own latest frame of the command message (the
   Nissan's CRUISE_THROTTLE, pedals and brake included) only from one read at most 2 of its
   periods ago (`check_copy`), and never in a frame that shows the driver's brake or gas
@@ -228,9 +231,10 @@ class SafetyLayer:
             return Refusal("acceleration", f"acceleration {accel} m/s^2 outside [{low}, {high}]")
         if signals.get("CANCEL_REQ"):
             return Refusal("cancel", "cancel request")
-        held = context.car_state.reading is not None and context.car_state.reading.standstill_held
-        if held and self.car.releases_standstill(signals):
-            return Refusal("standstill", "releases a standstill held for the driver to resume")
+        if self.car.releases_standstill(signals):
+            refusal = self.check_standstill_release(context)
+            if refusal is not None:
+                return refusal
         now = context.time_s
         last = self._last_accel
         if last is not None and now - last[0] <= self.limits.jerk_reference_s:

@@ -14,12 +14,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.vehicle_agent.test_state import TOYOTA_FRAMES
+from tests.vehicle_agent.test_state import frame as car_frame
 from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
 from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer, SafetyLimits
+from vehicle_agent.state import CarStateReader
 
 _channels = itertools.count()
 READING = CarReading(
@@ -362,8 +365,9 @@ def test_no_frame_releases_a_standstill_held_for_the_driver(
     safety = SafetyLayer(car, codec)
     state = car_state(1.0)
     assert state.reading is not None
+    reading = replace(state.reading, standstill_held=held)
     context = SafetyContext(
-        1.0, replace(state, reading=replace(state.reading, standstill_held=held)), 0.0
+        1.0, replace(state, reading=reading, received_at={"PCM_CRUISE": 1.0}), 0.0
     )
     releasing = car.accel_signals(0.0, release_standstill=True)
     data = codec.encode(car.command_message, releasing)
@@ -373,6 +377,44 @@ def test_no_frame_releases_a_standstill_held_for_the_driver(
     refusal = safety.check(frame, context)
     assert (refusal is not None and refusal.kind == "standstill") is refused
     assert (refusal is None) is not refused
+
+
+def test_no_frame_releases_a_standstill_from_a_pcm_cruise_over_two_periods_old(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """The layer refused a release only while the car state's reading showed the PCM's hold,
+    whatever the age of the PCM_CRUISE it was read from: the car state stays valid on one 10
+    periods (0.33 s) old, time enough for the PCM to have stopped and held since. A release
+    now needs a PCM_CRUISE read at most 2 of its periods ago, showing no hold."""
+    agent_bus, car_bus = buses
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    reader = CarStateReader(car, codec)
+    safety = SafetyLayer(car, codec)
+    sender = SafeSender(agent_bus, safety)
+    releasing = can.Message(
+        arbitration_id=codec.frame_id(car.command_message),
+        data=codec.encode(
+            car.command_message, {"ACCEL_CMD": 0.0, "PERMIT_BRAKING": 1, "RELEASE_STANDSTILL": 1}
+        ),
+        is_extended_id=False,
+    )
+    engaged = {**TOYOTA_FRAMES["PCM_CRUISE"], "CRUISE_STATE": 8}  # "adaptive engaged"
+    for step in range(7):  # 0 .. 0.2 s, PCM_CRUISE only at 0 s
+        now = step * car.command_period_s
+        for name, signals in {**TOYOTA_FRAMES, "PCM_CRUISE": engaged}.items():
+            if name != "PCM_CRUISE" or step == 0:
+                reader.ingest(car_frame(codec, name, signals), now)
+        if step == 0:
+            assert sender.send(releasing, SafetyContext(now, reader.snapshot(now), 0.0))
+    stale = SafetyContext(now, reader.snapshot(now), 0.0)
+    assert stale.car_state.valid, stale.car_state.problem
+    assert safety.check(releasing, stale) == Refusal(
+        "standstill", "releases a standstill from a PCM_CRUISE 0.20 s old"
+    )
+    assert not sender.send(releasing, stale)
+    assert len(received(car_bus)) == 1
+    assert safety.refused == {"standstill": 1}
 
 
 def test_a_press_needs_a_real_release_before_it(
