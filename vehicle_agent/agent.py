@@ -263,7 +263,7 @@ class Agent:
                 )
             )
         else:
-            self.accel_port = CanAccelPort(car, self.codec, self.sender, lambda: self.reader.latest)
+            self.accel_port = CanAccelPort(car, self.codec, self.sender)
         self.stats = AgentStats()
         self.started_s = clock.monotonic()
         self.assignment: Assignment | None = None

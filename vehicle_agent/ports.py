@@ -37,20 +37,12 @@ class ButtonPort(Protocol):
 
 
 class CanCommandPort:
-    """The make's command message on CAN, sent at most once a command period; `latest` gives
-    the car's latest signals, which a frame may copy or depend on."""
+    """The make's command message on CAN, sent at most once a command period."""
 
-    def __init__(
-        self,
-        car: CarInterface,
-        codec: Codec,
-        sender: SafeSender,
-        latest: Callable[[], Mapping[str, Signals]],
-    ) -> None:
+    def __init__(self, car: CarInterface, codec: Codec, sender: SafeSender) -> None:
         self.car = car
         self.codec = codec
         self.sender = sender
-        self.latest = latest
         self.frame_id = codec.frame_id(car.command_message)
         self._last_sent_s: float | None = None
 
@@ -63,9 +55,10 @@ class CanCommandPort:
 
 
 class CanButtonPort(CanCommandPort):
-    """Holds a button by sending the make's button frame every command period; `received_at`
-    tells when the car's frame of a message now in `latest` was read
-    (`CarStateReader.received_at`), for a make whose button frames copy the car's own."""
+    """Holds a button by sending the make's button frame every command period; `latest` gives
+    the car's latest signals, which a frame may copy, and `received_at` tells when the car's
+    frame of a message now in `latest` was read (`CarStateReader.received_at`), for a make
+    whose button frames copy the car's own."""
 
     def __init__(
         self,
@@ -75,7 +68,8 @@ class CanButtonPort(CanCommandPort):
         latest: Callable[[], Mapping[str, Signals]],
         received_at: Callable[[str], float | None],
     ) -> None:
-        super().__init__(car, codec, sender, latest)
+        super().__init__(car, codec, sender)
+        self.latest = latest
         self.received_at = received_at
         self._counter = 0
         self._release_frames = 0
@@ -295,12 +289,19 @@ def sysfs_gpio_writer(root: Path = Path("/sys/class/gpio")) -> Callable[[int, bo
 
 
 class CanAccelPort(CanCommandPort):
-    """Sends the make's acceleration request frame every command period (the frame may depend
-    on the car's latest signals: the RAV4's standstill release)."""
+    """Sends the make's acceleration request frame every command period."""
 
     def request(self, accel_mps2: float, context: SafetyContext) -> bool:
-        """Send a request for `accel_mps2` (already limited); True when it went out."""
-        signals = self.car.accel_signals(accel_mps2, self.latest())
+        """Send a request for `accel_mps2` (already limited); True when it went out.
+
+        The request releases the stock ACC's standstill (the RAV4's RELEASE_STANDSTILL) only
+        when the safety layer says a release may go out (`check_standstill_release`: a fresh
+        reading showing no hold), judged from the same car state. Otherwise it keeps the
+        standstill, the safe side: the stock ACC holds the stop and the driver resumes. A
+        release built regardless would be refused, and every refusal hands the car back: a
+        single late PCM_CRUISE frame would end the agent's command."""
+        release = self.sender.safety.check_standstill_release(context) is None
+        signals = self.car.accel_signals(accel_mps2, release_standstill=release)
         try:
             data = self.codec.encode(self.car.command_message, signals)
         except (ValueError, OverflowError) as error:

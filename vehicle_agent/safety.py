@@ -11,7 +11,10 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
 - the car: ACC engaged by the driver, the car state valid and fresh, and no release of a
-  standstill the stock ACC holds for the driver to resume (the RAV4's RELEASE_STANDSTILL);
+  standstill the stock ACC may hold for the driver to resume (the RAV4's RELEASE_STANDSTILL)
+  but from a reading of it at most 2 of its periods old that shows none held
+  (`check_standstill_release`; the port builds no other release, so this refuses only a frame
+  built wrong, not every late PCM_CRUISE);
 - the copy: a press whose frame copies the car's own latest frame of the command message (the
   Nissan's CRUISE_THROTTLE, pedals and brake included) only from one read at most 2 of its
   periods ago (`check_copy`), and never in a frame that shows the driver's brake or gas
@@ -58,11 +61,12 @@ class SafetyLimits:
     )
     # A previous request older than this is no reference for the jerk check (s).
     jerk_reference_s: float = 0.5
-    # A press copies the car's own frame of the command message (`copies_command_frame`) only
-    # when it was read at most this many of its periods ago. The car state stays valid for 10
-    # periods (0.5 s on the Nissan), and a copy that old re-sends pedal and brake values the
-    # driver may have changed since; 2 periods let one frame come late or go missing.
-    copy_fresh_periods: float = 2.0
+    # A car frame a command is built from counts only when it was read at most this many of its
+    # periods ago (`_fresh_age_s`). The car state stays valid for 10 periods (0.5 s on the
+    # Nissan), and a frame that old may no longer be the car: a copy of the Nissan's own frame
+    # of the command message (`copies_command_frame`) re-sends pedal and brake values the
+    # driver may have changed since. 2 periods let one frame come late or go missing.
+    fresh_periods: float = 2.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -190,10 +194,33 @@ class SafetyLayer:
         if read_s is None:
             return Refusal("copy", f"no {name} of the car's to copy")
         age = self._age_s(read_s, context)
-        limit = self.limits.copy_fresh_periods * self.car.messages[name].period_s
-        if age > limit:
+        if age > self._fresh_age_s(name):
             return Refusal("copy", f"the car's {name} to copy is {age:.2f} s old")
         return None
+
+    def check_standstill_release(self, context: SafetyContext) -> Refusal | None:
+        """Why a frame may not release a standstill the stock ACC holds for the driver to
+        resume, or None when it may: only while the car's `standstill_message`, read fresh,
+        shows none held. The car state stays valid on a frame of it 10 periods old (0.33 s of
+        the RAV4's PCM_CRUISE), time enough for the car to have stopped and the ACC to hold it
+        since, and a release judged from that frame would drive off a hold that is the
+        driver's to release. Aged by the clock, as the car state is."""
+        name = self.car.standstill_message
+        state = context.car_state
+        read_s = None if name is None else state.received_at.get(name)
+        if name is None or read_s is None or state.reading is None:
+            return Refusal("standstill", "releases a standstill with no reading of it")
+        age = self._age_s(read_s, context)
+        if age > self._fresh_age_s(name):
+            return Refusal("standstill", f"releases a standstill from a {name} {age:.2f} s old")
+        if state.reading.standstill_held:
+            return Refusal("standstill", "releases a standstill held for the driver to resume")
+        return None
+
+    def _fresh_age_s(self, name: str) -> float:
+        """The oldest the car's frame of `name` may be for a command to be built from it:
+        `fresh_periods` of its periods."""
+        return self.limits.fresh_periods * self.car.messages[name].period_s
 
     def _check_accel(
         self, accel: float, signals: dict[str, float], context: SafetyContext
@@ -204,9 +231,10 @@ class SafetyLayer:
             return Refusal("acceleration", f"acceleration {accel} m/s^2 outside [{low}, {high}]")
         if signals.get("CANCEL_REQ"):
             return Refusal("cancel", "cancel request")
-        held = context.car_state.reading is not None and context.car_state.reading.standstill_held
-        if held and self.car.releases_standstill(signals):
-            return Refusal("standstill", "releases a standstill held for the driver to resume")
+        if self.car.releases_standstill(signals):
+            refusal = self.check_standstill_release(context)
+            if refusal is not None:
+                return refusal
         now = context.time_s
         last = self._last_accel
         if last is not None and now - last[0] <= self.limits.jerk_reference_s:

@@ -133,4 +133,4 @@ class CarStateReader:
         speed = reading.speed_mps
         if not (math.isfinite(speed) and 0.0 <= speed <= MAX_PLAUSIBLE_SPEED_MPS):
             return CarState(time_s, False, f"implausible speed {speed} m/s", None)
-        return CarState(time_s, True, None, reading)
+        return CarState(time_s, True, None, reading, dict(self._received_at))

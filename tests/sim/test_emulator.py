@@ -138,7 +138,7 @@ def test_acceleration_requests_drive_the_rav4_until_they_stop(
         agent_bus.send(
             can.Message(
                 arbitration_id=codec.frame_id("ACC_CONTROL"),
-                data=codec.encode("ACC_CONTROL", car.accel_signals(-1.0, {})),
+                data=codec.encode("ACC_CONTROL", car.accel_signals(-1.0, release_standstill=True)),
                 is_extended_id=False,
             )
         )

@@ -550,6 +550,34 @@ def test_driver_override_hands_back_within_one_period(
         assert r.agent.state.mode is Mode.OVERRIDDEN
 
 
+def play_the_pcm(
+    r: Rig, listener: can.BusABC, seconds: float, cruise_state: int | None
+) -> list[dict[str, float]]:
+    """Drive for `seconds`, the test playing the RAV4's PCM (the emulator's own PCM_CRUISE
+    muted): a PCM_CRUISE in `cruise_state` every command period, or none (None). Returns the
+    agent's ACC_CONTROL requests meanwhile, as `listener` read them."""
+    codec = r.agent.codec
+    end = r.clock.monotonic() + seconds
+    while r.clock.monotonic() < end - 1e-9:
+        r.clock.advance(r.agent.command_period_s)
+        r.emulator.step(r.clock.monotonic())
+        if cruise_state is not None:
+            pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
+            r.emulator.send_raw(
+                can.Message(
+                    arbitration_id=codec.frame_id("PCM_CRUISE"),
+                    data=codec.encode("PCM_CRUISE", pcm),
+                    is_extended_id=False,
+                )
+            )
+        r.agent.tick()
+    return [
+        codec.decode(frame.arbitration_id, frame.data)[1]
+        for frame in iter(lambda: listener.recv(timeout=0), None)
+        if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+    ]
+
+
 def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
@@ -560,32 +588,9 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=0.0) as r,
         can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
     ):
-        codec = r.agent.codec
         r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
         r.emulator.driver_engage(set_speed_mph=30)
-
-        def run(seconds: float, cruise_state: int) -> list[dict[str, float]]:
-            """Drive for `seconds` with the PCM in `cruise_state`: the agent's requests."""
-            end = r.clock.monotonic() + seconds
-            while r.clock.monotonic() < end - 1e-9:
-                r.clock.advance(r.agent.command_period_s)
-                r.emulator.step(r.clock.monotonic())
-                pcm = {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1, "CRUISE_STATE": cruise_state}
-                r.emulator.send_raw(
-                    can.Message(
-                        arbitration_id=codec.frame_id("PCM_CRUISE"),
-                        data=codec.encode("PCM_CRUISE", pcm),
-                        is_extended_id=False,
-                    )
-                )
-                r.agent.tick()
-            return [
-                codec.decode(frame.arbitration_id, frame.data)[1]
-                for frame in iter(lambda: listener.recv(timeout=0), None)
-                if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
-            ]
-
-        held = run(3.0, cruise_state=7)  # "standstill"
+        held = play_the_pcm(r, listener, 3.0, cruise_state=7)  # "standstill"
         assert engaged(r), r.agent.state.reason
         assert r.agent._requested_accel > 0  # the controller would go
         assert {request["RELEASE_STANDSTILL"] for request in held} == {0}
@@ -593,7 +598,8 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         commands = [request["ACCEL_CMD"] for request in held]
         assert all(later <= earlier for earlier, later in itertools.pairwise(commands))
         assert commands[-1] == 0.0
-        resumed = run(1.0, cruise_state=8)  # "adaptive engaged": the driver pressed RES
+        # "adaptive engaged": the driver pressed RES
+        resumed = play_the_pcm(r, listener, 1.0, cruise_state=8)
         assert resumed
         assert {request["RELEASE_STANDSTILL"] for request in resumed} == {1}
         # pulling away within the limiter's 2.5 m/s^3 from 0 (one frame's quantum of slack)
@@ -601,6 +607,35 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         for frame, request in enumerate(resumed, start=1):
             assert request["ACCEL_CMD"] <= 2.5 * period * frame + 0.01
         assert resumed[-1]["ACCEL_CMD"] > 0
+
+
+def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """ACC_CONTROL released the standstill whenever the latest PCM_CRUISE the agent had read
+    showed none, however old: the car state stays valid on a PCM_CRUISE 10 periods (0.33 s)
+    old, time enough for the PCM to have stopped the car and held it since, and the release
+    would have driven off a hold that is the driver's to release. From a PCM_CRUISE read more
+    than 2 of its periods ago the request keeps the standstill (0), and the agent goes on
+    commanding: a late PCM_CRUISE is no reason to hand back."""
+    with (
+        rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r,
+        can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
+    ):
+        r.emulator.muted = {"PCM_CRUISE"}  # the test plays the PCM
+        r.emulator.driver_engage(set_speed_mph=50)
+        play_the_pcm(r, listener, 3.0, cruise_state=8)  # "adaptive engaged"
+        assert engaged(r), r.agent.state.reason
+        period = r.agent.command_period_s
+        late = play_the_pcm(r, listener, 6 * period, cruise_state=None)
+        # one request a period, the last PCM_CRUISE read 1, 2, ... 6 periods before each
+        assert len(late) == 6
+        assert late[0]["RELEASE_STANDSTILL"] == 1
+        assert [request["RELEASE_STANDSTILL"] for request in late[2:]] == [0, 0, 0, 0]
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.safety.refused == {}
+        back = play_the_pcm(r, listener, 6 * period, cruise_state=8)
+        assert {request["RELEASE_STANDSTILL"] for request in back} == {1}
 
 
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:

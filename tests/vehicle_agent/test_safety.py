@@ -14,12 +14,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from tests.vehicle_agent.test_state import TOYOTA_FRAMES
+from tests.vehicle_agent.test_state import frame as car_frame
 from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
 from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer, SafetyLimits
+from vehicle_agent.state import CarStateReader
 
 _channels = itertools.count()
 READING = CarReading(
@@ -160,7 +163,7 @@ def test_no_acceleration_frame_leaves_out_of_limits(
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety), dict)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
     sent_at: list[tuple[float, float]] = []
     for index, (request, (valid, engaged, state_age)) in enumerate(steps):
         now = index / 30
@@ -362,10 +365,11 @@ def test_no_frame_releases_a_standstill_held_for_the_driver(
     safety = SafetyLayer(car, codec)
     state = car_state(1.0)
     assert state.reading is not None
+    reading = replace(state.reading, standstill_held=held)
     context = SafetyContext(
-        1.0, replace(state, reading=replace(state.reading, standstill_held=held)), 0.0
+        1.0, replace(state, reading=reading, received_at={"PCM_CRUISE": 1.0}), 0.0
     )
-    releasing = {**car.accel_signals(0.0, {}), "RELEASE_STANDSTILL": 1}
+    releasing = car.accel_signals(0.0, release_standstill=True)
     data = codec.encode(car.command_message, releasing)
     frame = can.Message(
         arbitration_id=codec.frame_id(car.command_message), data=data, is_extended_id=False
@@ -373,6 +377,44 @@ def test_no_frame_releases_a_standstill_held_for_the_driver(
     refusal = safety.check(frame, context)
     assert (refusal is not None and refusal.kind == "standstill") is refused
     assert (refusal is None) is not refused
+
+
+def test_no_frame_releases_a_standstill_from_a_pcm_cruise_over_two_periods_old(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """The layer refused a release only while the car state's reading showed the PCM's hold,
+    whatever the age of the PCM_CRUISE it was read from: the car state stays valid on one 10
+    periods (0.33 s) old, time enough for the PCM to have stopped and held since. A release
+    now needs a PCM_CRUISE read at most 2 of its periods ago, showing no hold."""
+    agent_bus, car_bus = buses
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    reader = CarStateReader(car, codec)
+    safety = SafetyLayer(car, codec)
+    sender = SafeSender(agent_bus, safety)
+    releasing = can.Message(
+        arbitration_id=codec.frame_id(car.command_message),
+        data=codec.encode(
+            car.command_message, {"ACCEL_CMD": 0.0, "PERMIT_BRAKING": 1, "RELEASE_STANDSTILL": 1}
+        ),
+        is_extended_id=False,
+    )
+    engaged = {**TOYOTA_FRAMES["PCM_CRUISE"], "CRUISE_STATE": 8}  # "adaptive engaged"
+    for step in range(7):  # 0 .. 0.2 s, PCM_CRUISE only at 0 s
+        now = step * car.command_period_s
+        for name, signals in {**TOYOTA_FRAMES, "PCM_CRUISE": engaged}.items():
+            if name != "PCM_CRUISE" or step == 0:
+                reader.ingest(car_frame(codec, name, signals), now)
+        if step == 0:
+            assert sender.send(releasing, SafetyContext(now, reader.snapshot(now), 0.0))
+    stale = SafetyContext(now, reader.snapshot(now), 0.0)
+    assert stale.car_state.valid, stale.car_state.problem
+    assert safety.check(releasing, stale) == Refusal(
+        "standstill", "releases a standstill from a PCM_CRUISE 0.20 s old"
+    )
+    assert not sender.send(releasing, stale)
+    assert len(received(car_bus)) == 1
+    assert safety.refused == {"standstill": 1}
 
 
 def test_a_press_needs_a_real_release_before_it(
@@ -470,7 +512,7 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
     context = SafetyContext(1.0, car_state(1.0), 0.0)
-    good = codec.encode("ACC_CONTROL", car.accel_signals(0.05, {}))
+    good = codec.encode("ACC_CONTROL", car.accel_signals(0.05, release_standstill=False))
     frame_id = codec.frame_id("ACC_CONTROL")
     assert (
         safety.check(can.Message(arbitration_id=frame_id, data=good, is_extended_id=False), context)
@@ -493,7 +535,7 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
     for frame in checks.values():
         assert not safety.admit(frame, context)
     assert safety.refused == {"id": 1, "length": 1, "decode": 1}
-    too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, {}))
+    too_hard = codec.encode("ACC_CONTROL", car.accel_signals(-3.5, release_standstill=False))
     assert safety.check(
         can.Message(arbitration_id=frame_id, data=too_hard, is_extended_id=False), context
     ) == Refusal("acceleration", "acceleration -3.5 m/s^2 outside [-3.0, 1.5]")
@@ -601,7 +643,7 @@ def test_what_the_limiter_lets_through_the_safety_layer_accepts(
     agent_bus, car_bus = buses
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)), dict)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, SafetyLayer(car, codec)))
     limiter = AccelLimiter()
     limiter.reset(measured, 0.0)
     for index, request in enumerate(requests, start=1):

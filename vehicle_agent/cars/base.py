@@ -70,6 +70,10 @@ class CarState:
     valid: bool
     problem: str | None
     reading: CarReading | None
+    # when the frame of each watched message the reading was built from was read (the agent's
+    # monotonic s): a frame the agent builds from one of them needs that one fresh, which the
+    # state's own validity (10 periods) does not tell (`SafetyLayer.check_standstill_release`)
+    received_at: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def speed_mps(self) -> float | None:
@@ -97,6 +101,10 @@ class CarInterface(ABC):
     # its buttons (the Nissan's pedals and brake): a press then needs that frame fresh, or it
     # would tell the car the driver's inputs of a moment ago (`SafetyLayer.check_copy`).
     copies_command_frame: ClassVar[bool] = False
+    # The message whose latest frame tells whether the stock ACC holds a standstill
+    # (`holds_standstill`), for makes whose command frame may release one: a release goes out
+    # only while a fresh frame of it shows none held (`SafetyLayer.check_standstill_release`).
+    standstill_message: ClassVar[str | None] = None
 
     @abstractmethod
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
@@ -108,8 +116,10 @@ class CarInterface(ABC):
         """Signals of the command message pressing `button` (None: all released)."""
         raise NotImplementedError(f"{self.key} is not actuated by ACC buttons")
 
-    def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
-        """Signals of the command message requesting `accel_mps2`."""
+    def accel_signals(self, accel_mps2: float, *, release_standstill: bool) -> dict[str, float]:
+        """Signals of the command message requesting `accel_mps2`, releasing a standstill the
+        stock ACC holds (`releases_standstill`) only when `release_standstill`: the agent's
+        judgement, from the car's `standstill_message` and its age, not the make's."""
         raise NotImplementedError(f"{self.key} is not actuated by acceleration requests")
 
     def holds_standstill(self, latest: Mapping[str, Signals]) -> bool:

@@ -12,7 +12,10 @@ At the PCM's standstill (PCM_CRUISE CRUISE_STATE 7) the car stays stopped until 
 resumes (RES or the gas pedal); ACC_CONTROL's RELEASE_STANDSTILL 1 releases that hold, as
 openpilot sets it to drive off by itself. The agent never does: the field team's libpanda
 released it only while the PCM was engaged (CRUISE_STATE 8 and above), and driving off from a
-standstill the stock ACC holds is left to the driver.
+standstill the stock ACC holds is left to the driver. So a frame releases only while a
+PCM_CRUISE read at most 2 of its periods ago shows no standstill
+(`SafetyLayer.check_standstill_release`): the car state stays valid on one 10 periods (0.33 s)
+old, time enough for the PCM to have stopped the car and held it since.
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ class ToyotaRav4(CarInterface):
     )
     command_message = "ACC_CONTROL"
     command_period_s = 1 / 30
+    standstill_message = "PCM_CRUISE"
 
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
         """Speed, cruise state, set points, radar lead and pedals."""
@@ -95,16 +99,15 @@ class ToyotaRav4(CarInterface):
         """ACC_CONTROL's RELEASE_STANDSTILL set."""
         return bool(signals.get("RELEASE_STANDSTILL"))
 
-    def accel_signals(self, accel_mps2: float, latest: Mapping[str, Signals]) -> dict[str, float]:
+    def accel_signals(self, accel_mps2: float, *, release_standstill: bool) -> dict[str, float]:
         """An ACC_CONTROL frame requesting `accel_mps2` with braking permitted, releasing the
-        standstill only while the PCM holds none (the module docstring says why)."""
-        pcm_holds = self.holds_standstill(latest)
+        standstill only when `release_standstill` (the module docstring says when)."""
         return {
             "ACCEL_CMD": accel_mps2,
             "ACC_TYPE": 1,
             "ALLOW_LONG_PRESS": 1,
             "PERMIT_BRAKING": 1,
-            "RELEASE_STANDSTILL": 0 if pcm_holds else 1,
+            "RELEASE_STANDSTILL": int(release_standstill),
             "CANCEL_REQ": 0,
         }
 
