@@ -183,6 +183,7 @@ def test_no_acceleration_frame_leaves_out_of_limits(
         assert math.isfinite(accel)
         assert -3.0 <= accel <= 1.5
         assert signals["CANCEL_REQ"] == 0
+        assert signals["RELEASE_STANDSTILL"] == 0  # no PCM_CRUISE read: no release
         if previous is not None and now - previous[0] <= 0.5:
             dt = now - previous[0]
             assert dt >= 0.8 / 30 - 1e-9
