@@ -11,14 +11,23 @@ would lose its first ones. In the last `REFRESH_AHEAD_SHARE` of a snapshot's
 life the next request starts its reload in the background and goes on with the snapshot, so
 under traffic no request waits for a reload (every request in flight used to wait for one
 every `roster_cache_ttl_s`: a stall in the ingest tail, docs/performance.md).
+
+A car spools its pings while offline and sends them later, possibly after an operator moved it
+to another corridor: each ping is checked and map-matched on the corridor the car was assigned
+at the ping's `ts` (`dim_vehicle_assignment`, migration 0012), as the analytics views read it,
+not on today's, which would refuse its lane for good or place it on the wrong road. Only the
+corridor changes that ended within the ping retention window are loaded: an older assignment
+can hold no ping that ingest still accepts, and the table keeps every change forever.
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
+from bisect import bisect_right
 from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,8 +38,22 @@ from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
 
 MIN_RELOAD_INTERVAL_S = 2.0
 REFRESH_AHEAD_SHARE = 0.2
+# Corridor changes loaded beyond the retention window: a request that waited for a load arrived
+# before it, and a wall clock may step back; a day more of history costs next to nothing.
+HISTORY_MARGIN = timedelta(days=1)
 
 VEHICLES_SQL = text("SELECT vehicle_id, corridor_id FROM dim_vehicle")
+# The end of each corridor a vehicle was assigned before its current one, if the assignment
+# ended after `since`: a row whose next row names the same corridor (a change of lane or route
+# only) is no end of a corridor. The window function sees the later rows (valid_to > since
+# holds for them too), and the open row (valid_to = infinity, no next row) is never one.
+CORRIDOR_ENDS_SQL = text(
+    "SELECT vehicle_id, valid_to, corridor_id FROM ("
+    " SELECT vehicle_id, valid_to, corridor_id,"
+    " lead(corridor_id) OVER (PARTITION BY vehicle_id ORDER BY valid_from) AS next_corridor_id"
+    " FROM dim_vehicle_assignment WHERE valid_to > :since"
+    ") spans WHERE next_corridor_id <> corridor_id ORDER BY vehicle_id, valid_to"
+)
 CORRIDORS_SQL = text("SELECT corridor_id, lanes FROM dim_corridor")
 SEGMENTS_SQL = text(
     "SELECT corridor_id, start_x_m, end_x_m, start_lat, start_lon, end_lat, end_lon "
@@ -75,26 +98,59 @@ class CorridorInfo:
 
 
 @dataclass(frozen=True)
+class CorridorEnds:
+    """A vehicle's earlier corridors: `corridor_ids[i]` was assigned until `ends[i]` (from
+    `ends[i - 1]`; the first from before the retention window), in time order."""
+
+    ends: tuple[datetime, ...]
+    corridor_ids: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class FleetDirectory:
-    """A snapshot of the roster and corridors."""
+    """A snapshot of the roster, the recent corridor changes and the corridors."""
 
     vehicle_corridor: dict[str, str] = field(default_factory=dict)
+    # only the vehicles moved to another corridor within the retention window: most have none
+    earlier_corridors: dict[str, CorridorEnds] = field(default_factory=dict)
     corridors: dict[str, CorridorInfo] = field(default_factory=dict)
 
-    def corridor_of(self, vehicle_id: str) -> CorridorInfo | None:
-        """The corridor a known vehicle drives, or None for an unknown vehicle."""
+    def corridor_of(self, vehicle_id: str, ts: datetime) -> CorridorInfo | None:
+        """The corridor a known vehicle was assigned at `ts`, or None for an unknown vehicle.
+
+        Spans are half-open, [valid_from, valid_to), and the boundary is judged on two clocks,
+        as the analytics views judge it: `ts` is the car's GPS clock, a change's time the
+        database server's clock when it was made. So the pings a car takes between the change
+        and its next config fetch (seconds later) count on the new corridor. A `ts` before the
+        loaded history (older than the retention window: refused anyway) gets the earliest
+        corridor loaded.
+        """
         corridor_id = self.vehicle_corridor.get(vehicle_id)
-        return None if corridor_id is None else self.corridors.get(corridor_id)
+        if corridor_id is None:
+            return None
+        earlier = self.earlier_corridors.get(vehicle_id)
+        if earlier is not None:
+            index = bisect_right(earlier.ends, ts)
+            if index < len(earlier.ends):
+                corridor_id = earlier.corridor_ids[index]
+        return self.corridors.get(corridor_id)
 
 
 class FleetDirectoryCache:
-    """Loads the directory on demand and keeps it `ttl_s` seconds."""
+    """Loads the directory on demand and keeps it `ttl_s` seconds; the corridor changes of the
+    last `retention_days` (the pings' retention window) with it."""
 
     def __init__(
-        self, engine: AsyncEngine, ttl_s: float, *, clock: Callable[[], float] = time.monotonic
+        self,
+        engine: AsyncEngine,
+        ttl_s: float,
+        *,
+        retention_days: int,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._engine = engine
         self._ttl_s = ttl_s
+        self._retention = timedelta(days=retention_days)
         self._clock = clock
         self._directory: FleetDirectory | None = None
         self._loaded_at = -float("inf")
@@ -145,8 +201,11 @@ class FleetDirectoryCache:
             task.exception()
 
     async def _load(self) -> FleetDirectory:
+        # On this process's wall clock, as each request's window (from its received_at) is.
+        since = datetime.now(UTC) - self._retention - HISTORY_MARGIN
         async with self._engine.connect() as connection:
             vehicles = (await connection.execute(VEHICLES_SQL)).all()
+            ends = (await connection.execute(CORRIDOR_ENDS_SQL, {"since": since})).all()
             corridors = (await connection.execute(CORRIDORS_SQL)).all()
             segments = (await connection.execute(SEGMENTS_SQL)).mappings().all()
         by_corridor: dict[str, list[dict[str, float]]] = {}
@@ -159,7 +218,18 @@ class FleetDirectoryCache:
                 CorridorGeometry.from_segments(corridor_id, int(lanes), pieces) if pieces else None
             )
             infos[corridor_id] = CorridorInfo(corridor_id, int(lanes), geometry)
+        by_vehicle: dict[str, list[tuple[datetime, str]]] = {}
+        for row in ends:
+            by_vehicle.setdefault(str(row.vehicle_id), []).append(
+                (row.valid_to, str(row.corridor_id))
+            )
         return FleetDirectory(
             vehicle_corridor={str(row.vehicle_id): str(row.corridor_id) for row in vehicles},
+            earlier_corridors={
+                vehicle_id: CorridorEnds(
+                    tuple(end for end, _ in spans), tuple(corridor for _, corridor in spans)
+                )
+                for vehicle_id, spans in by_vehicle.items()
+            },
             corridors=infos,
         )

@@ -201,11 +201,15 @@ def check_in_context(
     window: TimeWindow,
     received_at: datetime,
 ) -> tuple[list[PingRow], list[Rejected]]:
-    """Rows for the pings that fit the roster, the corridor and the clock; rejections else."""
+    """Rows for the pings that fit the roster, the corridor and the clock; rejections else.
+
+    A ping's lane is checked against, and its row carries, the corridor its vehicle was
+    assigned at the ping's `ts`: a late ping from before a move keeps its own corridor.
+    """
     rows: list[PingRow] = []
     rejected: list[Rejected] = []
     for index, ping in pings:
-        corridor = directory.corridor_of(ping.vehicle_id)
+        corridor = directory.corridor_of(ping.vehicle_id, ping.ts)
         if corridor is None:
             rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}", retryable=True))
             continue

@@ -92,7 +92,9 @@ async def ingest_running(
 ) -> AsyncIterator[None]:
     """Run the ingest machinery for the app's lifetime (app.state.ingest)."""
     writer = PingWriter(engine, concurrency=settings.ingest_write_concurrency)
-    directory = FleetDirectoryCache(engine, settings.roster_cache_ttl_s)
+    directory = FleetDirectoryCache(
+        engine, settings.roster_cache_ttl_s, retention_days=settings.ping_retention_days
+    )
     app.state.ingest = Ingest(
         directory=directory,
         writer=writer,

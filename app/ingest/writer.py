@@ -342,8 +342,8 @@ def _refusal(error: Exception, rows: Sequence[PingRow]) -> RefusedByDatabase:
 
 
 def _map_match(rows: Sequence[PingRow]) -> list[float | None]:
-    """x_m of each row on its vehicle's corridor (vectorised per corridor, but fix by fix for
-    the few fixes of a small group)."""
+    """x_m of each row on its corridor, its vehicle's at the ping's ts (vectorised per
+    corridor, but fix by fix for the few fixes of a small group)."""
     x_m: list[float | None] = [None] * len(rows)
     by_corridor: dict[str, list[int]] = {}
     for position, row in enumerate(rows):

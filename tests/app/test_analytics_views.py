@@ -505,8 +505,7 @@ def test_edie_boxes_put_each_ping_on_the_corridor_assigned_at_its_time(
         )
 
     def drive_at(start: datetime) -> None:
-        # 10 pings at 20 m/s from x = 1010 m, written as ingest would have map-matched them
-        # (ingest locates a car on the corridor it is assigned when the ping arrives).
+        # 10 pings at 20 m/s from x = 1010 m, written as ingest would have map-matched them.
         with seeded_engine.begin() as writer:
             writer.execute(
                 text(

@@ -21,6 +21,7 @@ from app.motion.fleet import fleet_pings
 from app.vehicles.schemas import RosterRow
 from app.vehicles.service import parse_roster_csv, upsert_vehicles
 from tests.planner.facts import move_to_eastbound, pings
+from tests.support.api import ON_CORRIDOR_X_M, ping, serving
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
 
@@ -203,3 +204,94 @@ def test_the_motion_figure_draws_a_moved_car_on_the_corridor_it_drove_then(
 
     assert list(west.pings["x_m"]) == [1000.0, 1025.0, 1050.0]
     assert list(east.pings["x_m"]) == [2000.0, 2025.0]
+
+
+def open_reversed_corridor(engine: Engine, corridor_id: str, lanes: int) -> float:
+    """A corridor on the seed corridor's road driven the other way, with `lanes` lanes and its
+    own INRIX and sub-segments (so ingest can map-match on it); returns its length: a point at
+    x on the seed corridor is at length - x on this one."""
+    with engine.begin() as connection:
+        length_m: float = connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps) "
+                "SELECT :corridor, 'the seed road reversed', 'reversed', :lanes, length_m, "
+                "speed_limit_mps, min_target_speed_mps FROM dim_corridor "
+                "WHERE corridor_id = 'I-24-WB' RETURNING length_m"
+            ),
+            {"corridor": corridor_id, "lanes": lanes},
+        ).scalar_one()
+        reversed_columns = (
+            "(SELECT max(seq) + 1 FROM {table} WHERE corridor_id = 'I-24-WB') - seq, "
+            ":length - end_x_m, :length - start_x_m, "
+            ":length / 1609.344 - end_postmile, :length / 1609.344 - start_postmile, "
+            ":lanes, end_lat, end_lon, start_lat, start_lon"
+        )
+        connection.execute(
+            text(
+                "INSERT INTO dim_inrix_segment (xd_code, corridor_id, seq, start_x_m, end_x_m, "
+                "start_postmile, end_postmile, lanes, start_lat, start_lon, end_lat, end_lon, "
+                "length_m) "
+                f"SELECT :corridor || xd_code, :corridor, "
+                f"{reversed_columns.format(table='dim_inrix_segment')}, length_m "
+                "FROM dim_inrix_segment WHERE corridor_id = 'I-24-WB'"
+            ),
+            {"corridor": corridor_id, "lanes": lanes, "length": length_m},
+        )
+        connection.execute(
+            text(
+                "INSERT INTO dim_i24_segment (i24_segment_id, xd_code, corridor_id, seq, "
+                "start_x_m, end_x_m, start_postmile, end_postmile, lanes, start_lat, start_lon, "
+                "end_lat, end_lon) "
+                "SELECT i24_segment_id + 100000, :corridor || xd_code, :corridor, "
+                f"{reversed_columns.format(table='dim_i24_segment')} "
+                "FROM dim_i24_segment WHERE corridor_id = 'I-24-WB'"
+            ),
+            {"corridor": corridor_id, "lanes": lanes, "length": length_m},
+        )
+    return length_m
+
+
+def test_a_late_ping_is_checked_and_placed_on_the_corridor_assigned_at_its_ts(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """A car spools its pings while offline. Moved meanwhile from the 4-lane seed corridor to a
+    3-lane one, its spool sent afterwards holds pings from both sides of the move: those from
+    before count on the corridor it drove then (its lane 4 is no error, its x_m is on that
+    road), those from after on the new one."""
+    length_m = open_reversed_corridor(seeded_engine, "I-24-EB", lanes=3)
+    (sf001,) = [row for row in seed_roster() if row.vehicle_id == "SF-001"]
+    with session_scope(seeded_engine) as session:  # the roster import: an operator's move
+        upsert_vehicles(
+            session, [sf001.model_copy(update={"corridor_id": "I-24-EB"})], update_existing=True
+        )
+    moved_at = history(seeded_engine, "SF-001")[-1]["from"]
+    before = ping(ts=moved_at - timedelta(minutes=5), lane=4, heading_deg=323.0)
+    after_lane_4 = ping(ts=moved_at + timedelta(seconds=1), lane=4, heading_deg=143.0)
+    after = ping(ts=moved_at + timedelta(seconds=2), lane=3, heading_deg=143.0)
+    car = bearer(issue(seeded_engine, "vehicle", "SF-001"))
+
+    with serving(seeded_database_url) as api:
+        answer = api.post(
+            "/api/v1/pings", json={"pings": [before, after_lane_4, after]}, headers=car
+        )
+
+    assert answer.status_code == 200, answer.text
+    assert answer.json() == {
+        "accepted": 2,
+        "duplicates": 0,
+        "rejected": [
+            {"index": 1, "error": "lane 4 is outside the 3 lanes of I-24-EB", "retryable": False}
+        ],
+    }
+    with seeded_engine.connect() as connection:
+        stored = dict(
+            connection.execute(
+                text("SELECT ts, x_m FROM fact_vehicle_ping WHERE vehicle_id = 'SF-001'")
+            ).all()
+        )
+    # the same point of the road, at its x_m on each corridor, driven each corridor's way
+    assert stored[moved_at - timedelta(minutes=5)] == pytest.approx(ON_CORRIDOR_X_M, abs=0.5)
+    assert stored[moved_at + timedelta(seconds=2)] == pytest.approx(
+        length_m - ON_CORRIDOR_X_M, abs=0.5
+    )

@@ -1,8 +1,10 @@
-"""The ingest's fleet directory: cached, reloaded ahead of its expiry without holding requests."""
+"""The ingest's fleet directory: cached, reloaded ahead of its expiry without holding requests;
+each ping's corridor the one its car was assigned at the ping's time."""
 
 from __future__ import annotations
 
 import asyncio
+from datetime import UTC, datetime, timedelta
 
 import numpy as np
 from sqlalchemy import Engine, text
@@ -10,6 +12,11 @@ from sqlalchemy import Engine, text
 from app.core.db import make_async_engine
 from app.ingest.directory import FleetDirectory, FleetDirectoryCache
 from contract.corridor import trusted_heading
+from tests.planner.facts import move_to_eastbound
+
+RETENTION_DAYS = 90
+# A car never moved to another corridor has the one it drives at any time.
+NOW = datetime.now(UTC)
 
 
 class Clock:
@@ -18,6 +25,17 @@ class Clock:
 
     def __call__(self) -> float:
         return self.now
+
+
+async def load_directory(database_url: str) -> FleetDirectory:
+    """A directory freshly loaded from the database."""
+    engine = make_async_engine(database_url)
+    try:
+        return await FleetDirectoryCache(
+            engine, ttl_s=30, retention_days=RETENTION_DAYS
+        ).directory()
+    finally:
+        await engine.dispose()
 
 
 def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
@@ -29,7 +47,9 @@ def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
         engine = make_async_engine(seeded_database_url)
         release = asyncio.Event()
         try:
-            cache = FleetDirectoryCache(engine, ttl_s=30, clock=clock)
+            cache = FleetDirectoryCache(
+                engine, ttl_s=30, retention_days=RETENTION_DAYS, clock=clock
+            )
             first = await cache.directory()
             with seeded_engine.begin() as connection:
                 connection.execute(text("DELETE FROM dim_vehicle WHERE vehicle_id = 'SF-100'"))
@@ -50,7 +70,7 @@ def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
                 await asyncio.sleep(0.01)
             clock.now = 26.0
             fresh = await cache.directory()
-            return quiet, at_once, reloading, fresh.corridor_of("SF-100") is None
+            return quiet, at_once, reloading, fresh.corridor_of("SF-100", NOW) is None
         finally:
             await engine.dispose()
 
@@ -67,7 +87,7 @@ def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
     async def scenario() -> tuple[bool, bool, int]:
         engine = make_async_engine(seeded_database_url)
         try:
-            cache = FleetDirectoryCache(engine, ttl_s=30)
+            cache = FleetDirectoryCache(engine, ttl_s=30, retention_days=RETENTION_DAYS)
             loads = 0
             original = cache._load
 
@@ -91,8 +111,8 @@ def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
             new_car = await cache.directory(["SF-777"])
             bad_ids = await asyncio.gather(*(cache.directory(["SF-NOBODY"]) for _ in range(20)))
             return (
-                new_car.corridor_of("SF-777") is not None,
-                all(directory.corridor_of("SF-NOBODY") is None for directory in bad_ids),
+                new_car.corridor_of("SF-777", NOW) is not None,
+                all(directory.corridor_of("SF-NOBODY", NOW) is None for directory in bad_ids),
                 loads,
             )
         finally:
@@ -109,15 +129,7 @@ def test_a_lone_fix_is_placed_where_the_vectorised_match_places_it(
 ) -> None:
     """The writer places a small group's fixes one by one: same x_m, same off-corridor verdict
     (too far, outside the corridor's ends, driving against it), same trust in slow headings."""
-
-    async def load() -> FleetDirectory:
-        engine = make_async_engine(seeded_database_url)
-        try:
-            return await FleetDirectoryCache(engine, ttl_s=30).directory()
-        finally:
-            await engine.dispose()
-
-    corridor = asyncio.run(load()).corridor_of("SF-001")
+    corridor = asyncio.run(load_directory(seeded_database_url)).corridor_of("SF-001", NOW)
     assert corridor is not None
     assert corridor.geometry is not None
     geometry = corridor.geometry
@@ -139,3 +151,60 @@ def test_a_lone_fix_is_placed_where_the_vectorised_match_places_it(
     assert 0 < sum(v is None for v in vectorised) < len(x)
     placed = [(a, b) for a, b in zip(one_by_one, vectorised, strict=True) if a is not None]
     assert np.allclose([a for a, _ in placed], [b for _, b in placed], atol=1e-6)
+
+
+def test_a_moved_car_is_on_the_corridor_it_was_assigned_at_each_ts(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """A car's spool may hold pings from before an operator moved it to another corridor: they
+    belong to the corridor it was assigned then, [valid_from, valid_to) as the views read it."""
+    move_to_eastbound(seeded_engine, "SF-001")
+    with seeded_engine.connect() as connection:
+        moved_at = connection.execute(
+            text(
+                "SELECT valid_from FROM dim_vehicle_assignment "
+                "WHERE vehicle_id = 'SF-001' AND valid_to = 'infinity'"
+            )
+        ).scalar_one()
+
+    directory = asyncio.run(load_directory(seeded_database_url))
+
+    def corridor_at(ts: datetime) -> str | None:
+        corridor = directory.corridor_of("SF-001", ts)
+        return None if corridor is None else corridor.corridor_id
+
+    assert corridor_at(moved_at - timedelta(days=30)) == "I-24-WB"
+    assert corridor_at(moved_at - timedelta(microseconds=1)) == "I-24-WB"
+    assert corridor_at(moved_at) == "I-24-EB"
+    assert corridor_at(moved_at + timedelta(minutes=5)) == "I-24-EB"
+    assert directory.corridor_of("SF-002", moved_at - timedelta(days=30)) is not None
+
+
+def test_the_directory_loads_only_corridor_changes_a_ping_in_retention_can_meet(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Most cars have one assignment, and a change of lane or route moves no ping to another
+    corridor: neither costs the directory anything. Nor does a corridor change older than the
+    retention window (plus a day's margin), whose pings ingest refuses anyway."""
+    move_to_eastbound(seeded_engine, "SF-001")
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("UPDATE dim_vehicle SET assigned_lane = 3 WHERE vehicle_id = 'SF-002'")
+        )
+        connection.execute(
+            text("UPDATE dim_vehicle SET corridor_id = 'I-24-EB' WHERE vehicle_id = 'SF-003'")
+        )
+        # SF-003's move made long ago: beyond the window and its margin
+        for column, which in (("valid_to", "<>"), ("valid_from", "=")):
+            connection.execute(
+                text(
+                    f"UPDATE dim_vehicle_assignment SET {column} = now() - :age "
+                    f"WHERE vehicle_id = 'SF-003' AND valid_to {which} 'infinity'"
+                ),
+                {"age": timedelta(days=RETENTION_DAYS + 2)},
+            )
+
+    directory = asyncio.run(load_directory(seeded_database_url))
+
+    assert set(directory.earlier_corridors) == {"SF-001"}
+    assert directory.earlier_corridors["SF-001"].corridor_ids == ("I-24-WB",)
