@@ -25,6 +25,11 @@ MAX_GAP_SETTING = 3
 # window, vehicle_agent.actuators.AccelLimits). a_safe's gap assumes the ego can brake this
 # hard, so no controller parameter may plan with harder braking than it can command.
 AGENT_MIN_ACCEL_MPS2 = -3.0
+# The fleet's top speed (mph): the paper's "modest speeds in excess of the posted speed limit
+# of 70 mph", the top of its clip on every ACC speed setting. An `acc` car's stock ACC holds the
+# clipped setting; an `accel` car has no setting holding it, so the agent's acceleration limiter
+# keeps it under this speed (vehicle_agent.actuators.AccelLimits).
+FLEET_TOP_SPEED_MPH = 73.0
 
 # Parameters arrive as JSON: a number is a JSON number and a flag a JSON boolean, as the schema
 # (`controller_choice_schema`) says; lax coercion would take "0.5" or 1 and so accept what the

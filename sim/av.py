@@ -195,7 +195,9 @@ class AgentPolicy:
             if not self._limiting:
                 self.accel_limiter.reset(self._measured_accel_mps2, time_s)
                 self._limiting = True
-            return self.accel_limiter.limit(time_s, action.accel_mps2)
+            return self.accel_limiter.limit(
+                time_s, action.accel_mps2, speed_mps=observation.speed_mps
+            )
         assert self.stock_acc is not None  # checked at construction for acc controllers
         return self.stock_acc.accel_mps2(
             action,

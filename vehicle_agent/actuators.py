@@ -9,8 +9,8 @@ so. It is pure: time and the car's feedback come in, the button to hold now goes
 `ButtonPort` realises the held button: as the make's button frames on CAN or on a GPIO button board
 (ports.py), behind the safety layer.
 
-`AccelLimiter` bounds acceleration requests to [-3, 1.5] m/s^2 and limits jerk, before the
-safety layer re-checks every frame.
+`AccelLimiter` bounds acceleration requests to [-3, 1.5] m/s^2, keeps the car under the fleet's
+top speed and limits jerk, before the safety layer re-checks every frame.
 """
 
 from __future__ import annotations
@@ -19,7 +19,13 @@ import enum
 import math
 from dataclasses import dataclass
 
-from contract.controllers import AGENT_MIN_ACCEL_MPS2, MAX_GAP_SETTING, MIN_GAP_SETTING
+from contract.controllers import (
+    AGENT_MIN_ACCEL_MPS2,
+    FLEET_TOP_SPEED_MPH,
+    MAX_GAP_SETTING,
+    MIN_GAP_SETTING,
+)
+from contract.units import MPS_PER_MPH
 from vehicle_agent.cars import CruiseButton
 
 # One press of the gap button moves to the next shorter gap, from the shortest back to the
@@ -165,7 +171,8 @@ class ButtonSequencer:
 
 @dataclass(frozen=True)
 class AccelLimits:
-    """Acceleration request limits: the issue's [-3, 1.5] m/s^2 and comfort jerk limits."""
+    """Acceleration request limits: the issue's [-3, 1.5] m/s^2, the fleet's top speed and
+    comfort jerk limits."""
 
     min_accel_mps2: float = AGENT_MIN_ACCEL_MPS2
     max_accel_mps2: float = 1.5
@@ -173,6 +180,23 @@ class AccelLimits:
     # safety braking reaches -3 m/s^2 within 0.6 s.
     max_jerk_up_mps3: float = 2.5
     max_jerk_down_mps3: float = 5.0
+    # No request may take the car over the fleet's top speed: an `accel` car has no ACC setting
+    # to hold it there, and a controller that asks to accelerate with nothing in radar range
+    # (the shipped rl_accel asks +0.1 to +0.5 m/s^2 whatever the plan's target) would otherwise
+    # drive on past it. Under the top a request is at most (top - v) / `top_speed_approach_s`,
+    # so the car closes on the top as a first-order lag and settles on it instead of
+    # overshooting; 2 s makes that 0.22 m/s^2 at 1 mph under it and leaves every request below
+    # 66 mph untouched. Over it (downhill) the request slows the car back, by at most
+    # `over_top_speed_decel_mps2`: returning to the top is no emergency, and any harder braking
+    # a leader needs is the controller's own request, which the limiter keeps.
+    top_speed_mps: float = FLEET_TOP_SPEED_MPH * MPS_PER_MPH
+    top_speed_approach_s: float = 2.0
+    over_top_speed_decel_mps2: float = 1.0
+
+    def top_speed_accel_mps2(self, speed_mps: float) -> float:
+        """The most a request may ask for at `speed_mps` to keep the car under the top speed."""
+        toward_top = (self.top_speed_mps - speed_mps) / self.top_speed_approach_s
+        return max(toward_top, -self.over_top_speed_decel_mps2)
 
 
 class AccelLimiter:
@@ -191,12 +215,15 @@ class AccelLimiter:
         """Start again from the car's current acceleration (None: from no reference)."""
         self._last = None if accel_mps2 is None or now is None else (now, accel_mps2)
 
-    def limit(self, now: float, requested_mps2: float) -> float:
-        """The request as it may be sent now."""
+    def limit(self, now: float, requested_mps2: float, *, speed_mps: float) -> float:
+        """The request as it may be sent now, with the car at `speed_mps`."""
         limits = self.limits
         if not math.isfinite(requested_mps2):
             raise ValueError(f"acceleration request {requested_mps2} m/s^2 is not a number")
-        value = min(max(requested_mps2, limits.min_accel_mps2), limits.max_accel_mps2)
+        if not math.isfinite(speed_mps):
+            raise ValueError(f"speed {speed_mps} m/s is not a number")
+        value = min(requested_mps2, limits.top_speed_accel_mps2(speed_mps))
+        value = min(max(value, limits.min_accel_mps2), limits.max_accel_mps2)
         if self._last is not None:
             last_time, last_value = self._last
             dt = max(now - last_time, 0.0)

@@ -554,8 +554,10 @@ class Agent:
             # While the car stands until the driver resumes, the request goes to the car's 0
             # (within the jerk limits), so resuming pulls away from 0, not with what had built up.
             reading = car_state.reading
-            standing = reading is not None and reading.standstill_held
-            accel = self.limiter.limit(now, 0.0 if standing else self._requested_accel)
+            # commanding needs a valid car state (the engage rule's can_ok), which has a reading
+            assert reading is not None
+            request = 0.0 if reading.standstill_held else self._requested_accel
+            accel = self.limiter.limit(now, request, speed_mps=reading.speed_mps)
             send_errors_before = self.sender.send_errors
             if not self.accel_port.request(accel, context):
                 sent_error = self.sender.send_errors > send_errors_before

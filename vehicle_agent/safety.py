@@ -4,7 +4,8 @@ It trusts nothing upstream (controller, limiter, sequencer, frame builder): the 
 again with the make's DBC and must pass every check, or it is not sent, counted and logged:
 - allowed: the make's one command message (standard id, DBC length, valid checksum);
 - values: finite, acceleration within [-3, 1.5] m/s^2 and within the jerk limits of the last
-  request (or of the car's measured acceleration when taking over), no cancel request; only the
+  request (or of the car's measured acceleration when taking over), no cancel request, no
+  request for more speed 2 mph over the fleet's top speed (73 mph, the limiter's); only the
   plus, minus and gap buttons, one at a time, a new press no sooner than 0.45 s after the last,
   no hold longer than 1.1 s (the sequencer holds 0.9 s for one 5 mph step; a button held
   1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
@@ -31,6 +32,7 @@ from dataclasses import dataclass, field
 
 import can
 
+from contract.units import MPH_PER_MPS, MPS_PER_MPH
 from vehicle_agent.actuators import AccelLimits
 from vehicle_agent.cars import CarInterface, CarState, CruiseButton
 from vehicle_agent.cars.base import Signals
@@ -67,6 +69,11 @@ class SafetyLimits:
     # of the command message (`copies_command_frame`) re-sends pedal and brake values the
     # driver may have changed since. 2 periods let one frame come late or go missing.
     fresh_periods: float = 2.0
+    # No acceleration frame asks for more speed while the car reads this far over the fleet's
+    # top speed (`AccelLimits.top_speed_mps`). The limiter's request is already at most 0 over
+    # the top and follows its bound within the jerk limits, so one still positive this far over
+    # (2 mph) comes from a frame built without the limiter.
+    over_top_speed_tolerance_mps: float = 2.0 * MPS_PER_MPH
 
 
 @dataclass(frozen=True, slots=True)
@@ -231,6 +238,18 @@ class SafetyLayer:
             return Refusal("acceleration", f"acceleration {accel} m/s^2 outside [{low}, {high}]")
         if signals.get("CANCEL_REQ"):
             return Refusal("cancel", "cancel request")
+        speed = context.car_state.speed_mps
+        top = limits.top_speed_mps
+        if (
+            accel > 0.0
+            and speed is not None
+            and speed > top + self.limits.over_top_speed_tolerance_mps
+        ):
+            return Refusal(
+                "top speed",
+                f"acceleration {accel} m/s^2 at {speed * MPH_PER_MPS:.1f} mph, over the fleet's "
+                f"top speed {top * MPH_PER_MPS:.0f} mph",
+            )
         if self.car.releases_standstill(signals):
             refusal = self.check_standstill_release(context)
             if refusal is not None:

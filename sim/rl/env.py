@@ -309,7 +309,9 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                     lead_accel,
                     float(margin[env]),
                 )
-                accel[env] = self.limiters[env].limit(self._time_s(env), command)
+                accel[env] = self.limiters[env].limit(
+                    self._time_s(env), command, speed_mps=float(speed[env])
+                )
             return accel
         # acc: v_action -> the paper's clip -> buttons (gap first) -> the stock ACC
         for env in range(self.num_envs):

@@ -68,7 +68,7 @@ def test_the_av_runs_the_agents_controller_and_makes_its_command() -> None:
         )
         request = expected.accel_mps2  # type: ignore[union-attr]
         assert request < -1.0  # closing on a slower leader: a braking the limiter ramps
-        assert policy.accel_mps2(sensed) == limiter.limit(step * 0.1, request)
+        assert policy.accel_mps2(sensed) == limiter.limit(step * 0.1, request, speed_mps=25.0)
     # one ping per second; the first is sent before the controller has driven
     assert plan.pings == [(0.0, 1000.0, 25.0, False, True)]
 

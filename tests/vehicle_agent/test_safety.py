@@ -35,11 +35,14 @@ READING = CarReading(
 )
 
 
-def car_state(time_s: float, *, valid: bool = True, engaged: bool = True) -> CarState:
+def car_state(
+    time_s: float, *, valid: bool = True, engaged: bool = True, speed_mps: float = 25.0
+) -> CarState:
     reading = CarReading(
         **{
             **{f: getattr(READING, f) for f in READING.__slots__},  # type: ignore[attr-defined]
             "acc_engaged": engaged,
+            "speed_mps": speed_mps,
         }
     )
     return CarState(time_s, valid, None if valid else "SPEED missing", reading if valid else None)
@@ -631,16 +634,21 @@ def test_a_held_button_is_let_go_before_the_car_takes_a_second_long_step(
 @given(
     measured=st.floats(min_value=-6.0, max_value=4.0),
     requests=st.lists(st.floats(min_value=-4.0, max_value=2.0), min_size=1, max_size=60),
+    # up to the safety layer's tolerance over the fleet's top speed (73 + 2 mph = 33.53 m/s):
+    # beyond it the layer refuses a request still positive (the next test)
+    speed_mps=st.floats(min_value=0.0, max_value=33.5),
 )
 def test_what_the_limiter_lets_through_the_safety_layer_accepts(
     measured: float,
     requests: list[float],
+    speed_mps: float,
     buses: tuple[can.BusABC, can.BusABC],
     dbc_cache: Path,
 ) -> None:
     """Taking over a car that already accelerates outside [-3, 1.5] m/s^2 (a hard launch, an
-    emergency stop): the limiter starts from that measurement, and none of its requests may be
-    refused by the independent check, which would hand the car back for nothing."""
+    emergency stop), at any speed up to the fleet's top speed and a little over it: the limiter
+    starts from that measurement, and none of its requests may be refused by the independent
+    check, which would hand the car back for nothing."""
     agent_bus, car_bus = buses
     car = car_for("toyota_rav4")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
@@ -649,7 +657,51 @@ def test_what_the_limiter_lets_through_the_safety_layer_accepts(
     limiter.reset(measured, 0.0)
     for index, request in enumerate(requests, start=1):
         now = index * car.command_period_s
-        value = limiter.limit(now, request)
+        value = limiter.limit(now, request, speed_mps=speed_mps)
         assert -3.0 <= value <= 1.5
-        assert port.request(value, SafetyContext(now, car_state(now), measured))
+        context = SafetyContext(now, car_state(now, speed_mps=speed_mps), measured)
+        assert port.request(value, context)
     assert len(received(car_bus)) == len(requests)
+
+
+def test_the_limiter_keeps_the_car_under_the_fleets_top_speed() -> None:
+    """Worked by hand: top 73 mph = 32.63392 m/s, approached over 2 s, left at 1 m/s^2 at most."""
+    top = 73 * 0.44704
+    limits = AccelLimiter().limits
+    assert limits.top_speed_mps == pytest.approx(top)
+    for speed, expected in [
+        (20.0, 1.5),  # 45 mph: the request is the limiter's own bound, untouched
+        (top - 1.0, 0.5),  # (32.634 - 31.634) / 2
+        (top, 0.0),
+        (top + 0.5, -0.25),
+        (top + 10.0, -1.0),  # 95 mph: back to the top gently, no emergency braking
+    ]:
+        limiter = AccelLimiter()  # no previous request: no jerk limit
+        assert limiter.limit(0.0, 1.5, speed_mps=speed) == pytest.approx(expected)
+    # A braking the controller asks for is never softened by the bound.
+    assert AccelLimiter().limit(0.0, -2.5, speed_mps=top + 10.0) == -2.5
+
+
+def test_no_frame_asks_for_more_speed_well_over_the_fleets_top_speed(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """A request built without the limiter, positive at 76 mph, is refused and never sent; a
+    braking one there, and a positive one within 2 mph of the top, go out."""
+    agent_bus, car_bus = buses
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
+    mph = 0.44704
+
+    def request(index: int, accel: float, speed_mph: float) -> bool:
+        now = index * car.command_period_s
+        return port.request(
+            accel, SafetyContext(now, car_state(now, speed_mps=speed_mph * mph), accel)
+        )
+
+    assert not request(1, 0.1, 76.0)
+    assert safety.refused["top speed"] == 1
+    assert request(2, -0.5, 76.0)
+    assert request(40, 0.1, 74.5)  # over 0.5 s later: no jerk reference to the braking
+    assert len(received(car_bus)) == 2

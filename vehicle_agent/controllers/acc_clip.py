@@ -13,6 +13,7 @@ import math
 from collections import deque
 from collections.abc import Iterable
 
+from contract.controllers import FLEET_TOP_SPEED_MPH
 from contract.units import mps_to_mph
 from vehicle_agent.controllers.base import (
     AccSetPoint,
@@ -30,7 +31,7 @@ BELOW_MEAN_MPH = 15.0
 ABOVE_MEAN_MPH = 5.0
 MIN_SETTING_MPH = 20.0
 # 73 mph: modest speeds above the 70 mph posted limit (paper).
-MAX_SETTING_MPH = 73.0
+MAX_SETTING_MPH = FLEET_TOP_SPEED_MPH
 
 
 def clip_speed_setting(action_mph: float, recent_speeds_mph: Iterable[float | None]) -> int:

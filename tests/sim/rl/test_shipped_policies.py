@@ -16,6 +16,8 @@ from sim.gaps import GapBounds, gap_kpis
 from sim.kpi import platoon_kpis
 from sim.plans import SimulatedPlanner
 from sim.platoon import platoon_roles, simulate_platoon
+from vehicle_agent.actuators import AccelLimiter, AccelLimits
+from vehicle_agent.controllers import AccelCommand, Observation, build_controller
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 STOP_AND_GO = "data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
@@ -93,3 +95,23 @@ def test_the_shipped_policy_drives_a_real_stop_and_go_drive_without_collision(
     assert envelope.within_bounds_share >= within_bounds
     # less fuel per distance than the all-human platoon behind the same drive
     assert platoon_kpis(mixed).fuel_economy_mpg > platoon_kpis(humans).fuel_economy_mpg
+
+
+def test_rl_accel_alone_on_the_road_stays_under_the_fleets_top_speed() -> None:
+    """With nothing in radar range the shipped rl_accel asks to accelerate whatever the plan's
+    target (+0.1 to +0.5 m/s^2 here): alone on the road it drove on past 150 mph within two
+    minutes. The agent's limiter, between it and the car, holds it at the fleet's top speed."""
+    controller = build_controller("rl_accel", "accel", {})
+    limiter = AccelLimiter()
+    limiter.reset(0.0, 0.0)
+    speed, top = 29.0, AccelLimits().top_speed_mps
+    highest = speed
+    for step in range(1200):  # 120 s at the controller's 10 Hz
+        time_s = step * 0.1
+        action = controller.step(Observation(time_s=time_s, speed_mps=speed, target_speed_mps=29.0))
+        assert isinstance(action, AccelCommand)
+        assert action.accel_mps2 > 0.0  # it never asks to slow to the plan's 65 mph
+        speed += limiter.limit(time_s, action.accel_mps2, speed_mps=speed) * 0.1
+        highest = max(highest, speed)
+    assert highest <= top
+    assert speed == pytest.approx(top, abs=0.05)
