@@ -1,12 +1,15 @@
 """Load the project's seed data (corridor, segments, roster) idempotently.
 
 Dimensions are upserted (seed files may be corrected); vehicles that already exist are left as
-they are, so an operator's assignment changes survive a re-seed.
+they are, so an operator's assignment changes survive a re-seed. The policies the agent package
+ships for the RL controllers the roster runs are stored first: its rows name them by sha256.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from typing import Any
@@ -16,7 +19,12 @@ from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.orm import Session
 
 from app.models import Corridor, I24Segment, InrixSegment, Vehicle
+from app.policies.service import ManifestConflict, store_shipped_policy
+from app.vehicles.schemas import RosterRow
 from app.vehicles.service import parse_roster_csv, upsert_vehicles
+from contract.controllers import RL_CONTROLLERS
+
+log = logging.getLogger(__name__)
 
 CORRIDOR_COLUMNS = (
     "corridor_id",
@@ -53,8 +61,21 @@ def _upsert(session: Session, model: type[Any], rows: list[dict[str, Any]], key:
     session.execute(statement.on_conflict_do_update(index_elements=[key], set_=updates))
 
 
+def _store_shipped_policies(session: Session, rows: Sequence[RosterRow]) -> None:
+    """Store the shipped policy of each RL controller the roster runs: a row may name a policy
+    only when the server holds it (the car downloads it from here by that sha256)."""
+    for controller in sorted({row.controller_name for row in rows} & RL_CONTROLLERS.keys()):
+        try:
+            store_shipped_policy(session, controller, "seed")
+        except ManifestConflict as conflict:
+            # The bytes the rows name are held, which is all the roster and its cars need; a
+            # stored policy's manifest never changes, so the one it was first stored with stands.
+            log.warning("seed: %s; it is kept as stored", conflict)
+
+
 def seed(session: Session) -> SeedCounts:
-    """Upsert the seed corridor and its segments, add the seed roster's missing vehicles."""
+    """Upsert the seed corridor and its segments, store the policies the seed roster names, add
+    the roster's missing vehicles."""
     document = seed_corridor_document()
     corridor = {name: document["corridor"][name] for name in CORRIDOR_COLUMNS}
     _upsert(session, Corridor, [corridor], "corridor_id")
@@ -63,7 +84,9 @@ def seed(session: Session) -> SeedCounts:
     subs = [{**row, "corridor_id": corridor["corridor_id"]} for row in document["i24_segments"]]
     _upsert(session, I24Segment, subs, "i24_segment_id")
     with resources.as_file(resources.files("seed_data").joinpath("roster.csv")) as roster:
-        upsert_vehicles(session, parse_roster_csv(roster), update_existing=False, label="seed")
+        rows = parse_roster_csv(roster)
+    _store_shipped_policies(session, rows)
+    upsert_vehicles(session, rows, update_existing=False, label="seed")
     session.flush()
 
     def count(model: type[Any]) -> int:

@@ -11,19 +11,25 @@ segment codes, VINs and roster are this project's own and visibly marked so:
 - INRIX-style segments take the boundaries of `segments.json` (about 0.5 mi each); real XD codes
   are not public, so ours read `SF-I24WB-NN` (NN = column of the recorded INRIX speed files);
 - every INRIX-style segment is cut into equal sub-segments of at most 100 m.
+
+The roster's RL controllers name the policy the agent package ships for them by the sha256 of
+its file (`app/seed.py` stores it on the server before it adds the cars).
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from contract.controllers import RL_CONTROLLERS
 from contract.units import METRES_PER_MILE, MPS_PER_MPH
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 HERE = Path(__file__).parent
 CORRIDOR_FILE = HERE / "i24_wb_corridor.json"
@@ -187,11 +193,14 @@ def vin(prefix8: str, year: int, plant: str, serial: int) -> str:
     return body[:8] + check + body[9:]
 
 
+# The controllers follow the simulator's verdict (docs/simulation.md): the acceleration cars run
+# the recommended rl_accel (sim/recommended.py); for the ACC-button cars no pair meets the aims,
+# and they keep microaccel_acc.
 FLEET = (
     # (count, make, model, year(s), actuation, VIN prefix, plant, controller)
     (82, "Nissan", "Rogue", (2023,), "acc", "JN8BT3BB", "W", "microaccel_acc"),
     (15, "Cadillac", "XT5", (2022,), "acc", "1GYKNCRS", "Z", "microaccel_acc"),
-    (3, "Toyota", "RAV4", (2020, 2021), "accel", "2T3MWRFV", "W", "microaccel"),
+    (3, "Toyota", "RAV4", (2020, 2021), "accel", "2T3MWRFV", "W", "rl_accel"),
 )
 ROSTER_FIELDS = (
     "vehicle_id",
@@ -206,6 +215,16 @@ ROSTER_FIELDS = (
     "controller_name",
     "controller_params",
 )
+
+
+def controller_params(controller: str) -> str:
+    """A roster row's controller params (JSON): an RL controller runs the policy the agent
+    package ships for it, named by the sha256 of its file, so every car of the roster runs the
+    same, verified file, downloaded from the server."""
+    if controller not in RL_CONTROLLERS:
+        return "{}"
+    policy = BUNDLED_POLICIES / f"{controller}.npz"
+    return json.dumps({"policy_sha256": hashlib.sha256(policy.read_bytes()).hexdigest()})
 
 
 def build_roster() -> list[dict[str, object]]:
@@ -232,7 +251,7 @@ def build_roster() -> list[dict[str, object]]:
                     "route": "A" if number % 2 else "B",
                     "assigned_lane": 1 + (number - 1) % LANES,
                     "controller_name": name,
-                    "controller_params": "{}",
+                    "controller_params": controller_params(name),
                 }
             )
     return rows

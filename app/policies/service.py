@@ -175,6 +175,20 @@ async def policy_controller(session: AsyncSession, sha256: str) -> str | None:
     return await session.scalar(select(Policy.controller).where(Policy.policy_sha256 == sha256))
 
 
+def store_shipped_policy(session: Session, controller: str, uploaded_by: str) -> Policy:
+    """Store the policy the agent package ships for `controller` (`rl_acc` / `rl_accel`, in
+    `vehicle_agent/controllers/policies/`) with the manifest written beside it, checked as an
+    upload is, so that a car can be assigned it by sha256 and download it from here.
+
+    Idempotent on the bytes; ManifestConflict when they are stored already with another manifest.
+    """
+    path = BUNDLED_POLICIES / f"{controller}.npz"
+    manifest = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+    checked = check_policy(path.read_bytes(), manifest, controller)
+    stored, _ = store_policy_sync(session, checked, uploaded_by)
+    return stored
+
+
 def assign_shipped_policies(session: Session) -> dict[str, str]:
     """Store the policies the agent package ships (`vehicle_agent/controllers/policies/`) and
     assign each to every car of its actuation (`smoothfleet demo --rl`); controller -> sha256.
@@ -184,9 +198,7 @@ def assign_shipped_policies(session: Session) -> dict[str, str]:
     """
     assigned: dict[str, str] = {}
     for controller, actuation in RL_CONTROLLERS.items():
-        path = BUNDLED_POLICIES / f"{controller}.npz"
-        manifest = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
-        stored, _ = store_policy_sync(session, check_policy(path.read_bytes(), manifest), "demo")
+        stored = store_shipped_policy(session, controller, "demo")
         session.execute(
             update(Vehicle)
             .where(Vehicle.actuation == actuation)

@@ -92,9 +92,7 @@ def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str
     held = dict(
         session.execute(
             select(Policy.policy_sha256, Policy.controller).where(Policy.policy_sha256.in_(named))
-        )
-        .tuples()
-        .all()
+        ).all()
     )
     for number, row in enumerate(rows, start=2):
         sha256 = row.controller_params.get("policy_sha256")

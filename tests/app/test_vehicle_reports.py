@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from collections.abc import Iterator
@@ -16,6 +17,7 @@ from sqlalchemy import Engine, text
 
 from tests.support.api import serving
 from tests.support.tokens import bearer, issue
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 SEED_CORRIDOR = Path(__file__).resolve().parents[2] / "seed_data/i24_wb_corridor.json"
 
@@ -131,10 +133,12 @@ def test_a_vehicle_reads_its_config(api: httpx.Client, seeded_engine: Engine) ->
 
     assert answer.status_code == 200
     config = answer.json()
-    # seed_data/roster.csv: SF-098 is the first RAV4 (acceleration-actuated), route B, lane 2.
+    # seed_data/roster.csv: SF-098 is the first RAV4 (acceleration-actuated), route B, lane 2,
+    # on rl_accel with the shipped policy, named by its sha256.
     assert (config["make"], config["model"], config["actuation"]) == ("Toyota", "RAV4", "accel")
     assert (config["corridor_id"], config["route"], config["assigned_lane"]) == ("I-24-WB", "B", 2)
-    assert config["controller"] == {"name": "microaccel", "params": {}}
+    shipped = hashlib.sha256((BUNDLED_POLICIES / "rl_accel.npz").read_bytes()).hexdigest()
+    assert config["controller"] == {"name": "rl_accel", "params": {"policy_sha256": shipped}}
     assert (config["active"], config["in_maintenance"]) == (True, False)
     assert config["ping_period_s"] == 1.0
     assert config["status_period_s"] == 10.0

@@ -19,8 +19,8 @@ trained network of the manifest's actuation (app/policies/service.py): condition
 bytes that no schema can state, so every drawn file would be refused (422) and the 201/200 path
 never judged. A positive upload therefore gets a policy the repository ships
 (vehicle_agent/controllers/policies/) and the manifest written beside it: the one of the
-controller the case drew, or rl_accel when it drew none (test_fuzz_openapi.py stores rl_acc
-before the run, so such an upload stores a new policy and the test can see uploads were
+controller the case drew, or rl_acc when it drew none (the seed stores rl_accel before the
+run, so such an upload stores a new policy and test_fuzz_openapi.py can see uploads were
 accepted). The drawn controller and any extra form fields stay as drawn; the refusals of bad
 files and manifests are tested in tests/app/test_policies.py. Negative uploads stay as drawn, so
 `negative_data_rejection` still judges them. Schemathesis re-judges a body a hook edits, and it
@@ -51,7 +51,7 @@ from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 STATUS = ("POST", "/api/v1/vehicles/{vehicle_id}/status")
 POLICY_UPLOAD = ("POST", "/api/v1/policies")
 # What a positive upload that names no controller sends (see above).
-UNNAMED_CONTROLLER = "rl_accel"
+UNNAMED_CONTROLLER = "rl_acc"
 # The window of the server under test (test_fuzz_openapi.py runs it with the defaults).
 RETENTION = timedelta(days=Settings.model_fields["ping_retention_days"].default)
 AHEAD = timedelta(seconds=Settings.model_fields["ping_max_future_s"].default)

@@ -6,8 +6,8 @@ in its documented shape (errors: `{"detail": ...}`), schema-violating requests r
 schema-valid ones accepted, on every operation. Timestamps are drawn from the last hour, and a
 status report's `ts` outside the server's window is moved to now (schemathesis_hooks.py): the
 API's window around now cannot be said in JSON Schema. Reports and assignments go to a vehicle of
-the seeded roster (schemathesis.toml). A shipped policy is stored before the run, so its reads
-are 200, and a positive upload sends a shipped policy with its manifest (schemathesis_hooks.py):
+the seeded roster (schemathesis.toml). The seed stores a shipped policy, so its reads are 200,
+and a positive upload sends a shipped policy with its manifest (schemathesis_hooks.py):
 a schema cannot say that a file must hash to its manifest and load. The run's seed is fixed so
 CI is repeatable; run the same command without `--seed` for fresh cases (see docs/operations.md).
 """
@@ -15,7 +15,6 @@ CI is repeatable; run the same command without `--seed` for fresh cases (see doc
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 import subprocess
@@ -27,11 +26,9 @@ from pathlib import Path
 
 import pytest
 from sqlalchemy import Engine, text
-from sqlalchemy.orm import Session
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
-from app.policies.service import check_policy, store_policy_sync
 from tests.planner.facts import inrix_snapshot, standing_slowdown
 from tests.security.schemathesis_hooks import UNNAMED_CONTROLLER
 from tests.support.servers import live_server
@@ -40,8 +37,9 @@ from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIG = Path(__file__).with_name("schemathesis.toml")
-# Stored before the run; schemathesis.toml names it as the policy the reads ask for.
-STORED_POLICY = BUNDLED_POLICIES / "rl_acc.npz"
+# Stored by the seed (the RAV4s run it); schemathesis.toml names it as the policy the reads ask
+# for.
+STORED_POLICY = BUNDLED_POLICIES / "rl_accel.npz"
 SEED = "20261123"
 # Per principal: the coverage phase (every operation's boundaries, ~8 s) runs whole, fuzzing
 # gets the rest. CI's 20-minute budget holds four such runs; docs/operations.md gives the longer
@@ -51,17 +49,14 @@ SECONDS_PER_RUN = "20"
 
 @pytest.fixture
 def api_with_a_plan(seeded_database_url: str, seeded_engine: Engine) -> Iterator[str]:
-    """The live API over a seeded warehouse with a published plan and a stored policy (so plan
-    and policy reads are 200)."""
+    """The live API over a seeded warehouse (which holds a shipped policy) with a published plan
+    (so plan and policy reads are 200)."""
     now = datetime.now(UTC).replace(microsecond=0)
     for minutes_ago in range(6, 1, -1):
         inrix_snapshot(seeded_engine, now - timedelta(minutes=minutes_ago), standing_slowdown())
     settings = load_settings(database_url=seeded_database_url, plan_valid_for_s=900)
     (outcome,) = run_planner(seeded_engine, settings)
     assert outcome.status == "published", outcome.reason
-    manifest = json.loads(STORED_POLICY.with_suffix(".json").read_text(encoding="utf-8"))
-    with Session(seeded_engine) as session, session.begin():
-        store_policy_sync(session, check_policy(STORED_POLICY.read_bytes(), manifest), "fixture")
     with live_server(
         seeded_database_url,
         planner_enabled=False,

@@ -20,7 +20,7 @@ CARS = [
     (VehicleSpec(vehicle_id="SF-001", make="Nissan", model="Rogue", year=2023, lane=1,
                  token="", position_m=500.0), "microaccel_acc"),
     (VehicleSpec(vehicle_id="SF-098", make="Toyota", model="RAV4", year=2020, lane=1,
-                 token="", position_m=3000.0), "microaccel"),
+                 token="", position_m=3000.0), "rl_accel"),
 ]  # fmt: skip
 
 

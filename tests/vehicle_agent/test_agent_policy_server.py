@@ -1,6 +1,7 @@
 """A car and the real server's policies: the assigned policy is downloaded once over the API,
 verified, run and reported in pings and status; a corrupted download never replaces the good
-policy the car keeps, and leaves the car to its stock ACC until a good one arrives."""
+policy the car keeps, and leaves the car to its stock ACC until a good one arrives; a seeded
+RAV4 runs the recommended policy the seed stored."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import pytest
 from sqlalchemy import Engine, text
 
 from sim.emulator.rig import Rig
+from sim.recommended import RECOMMENDED_CONTROLLER
 from tests.support.cars import car_served_by
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
@@ -30,6 +32,8 @@ pytestmark = pytest.mark.slow
 
 ACC_FILE = BUNDLED_POLICIES / "rl_acc.npz"
 ACC_SHA256 = hashlib.sha256(ACC_FILE.read_bytes()).hexdigest()
+RECOMMENDED_FILE = BUNDLED_POLICIES / f"{RECOMMENDED_CONTROLLER.controller}.npz"
+RECOMMENDED_SHA256 = hashlib.sha256(RECOMMENDED_FILE.read_bytes()).hexdigest()
 
 
 def car_of_sf001(
@@ -158,6 +162,53 @@ def test_the_car_downloads_its_policy_once_runs_it_and_reports_its_hash(
     assert pings[3] <= 4  # at the start of each of the two runs, before the config arrived
     assert statuses[0] >= 2
     assert statuses[1] == statuses[0]  # every status with the controller names its policy
+
+
+def test_a_seeded_rav4_downloads_verifies_and_runs_the_recommended_policy(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The seed roster gives its RAV4s the simulator's recommended controller on the shipped
+    policy, and stores that policy: the car reads the assignment and fetches the file by sha256,
+    with no upload by an operator."""
+    publish_free_flow_plan(seeded_database_url, seeded_engine)
+    token = issue(seeded_engine, "vehicle", "SF-098")  # the first RAV4
+    policy_dir = tmp_path / "policies"
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+    ):
+        config = http.get("/api/v1/vehicles/SF-098/config", headers=bearer(token))
+        assert config.status_code == 200, config.text
+        assert config.json()["controller"] == {
+            "name": RECOMMENDED_CONTROLLER.controller,
+            "params": {**RECOMMENDED_CONTROLLER.params, "policy_sha256": RECOMMENDED_SHA256},
+        }
+        with car_served_by(
+            http,
+            "SF-098",
+            token,
+            tmp_path,
+            dbc_cache,
+            make="toyota_rav4",
+            speed_mps=24.0,
+            policies=PolicyStore(policy_dir),
+        ) as r:
+            r.run(1.0, network=True)
+            assert r.agent.stats.policy_downloads == 1
+            # kept only because it hashed to its name and loaded as an accel policy
+            assert (policy_dir / f"{RECOMMENDED_SHA256}.npz").read_bytes() == (
+                RECOMMENDED_FILE.read_bytes()
+            )
+            assignment = r.agent.assignment
+            assert assignment is not None
+            assert assignment.controller.name == RECOMMENDED_CONTROLLER.controller
+            assert assignment.controller.policy_sha256 == RECOMMENDED_SHA256  # as loaded
+            r.emulator.driver_engage(set_speed_mph=54)
+            r.run(20.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+            assert r.agent.state.mode is Mode.ENGAGED, r.agent.state.reason
+            assert r.agent.snapshot is not None
+            assert r.agent.snapshot.policy_sha256 == RECOMMENDED_SHA256  # what its pings say
+            assert r.agent.stats.server_errors == {}
 
 
 @contextmanager

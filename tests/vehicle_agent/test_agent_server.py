@@ -39,7 +39,7 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
     seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
 ) -> None:
     plan_id = publish_free_flow_plan(seeded_database_url, seeded_engine)
-    token = issue(seeded_engine, "vehicle", "SF-098")  # a RAV4 running microaccel in lane 2
+    token = issue(seeded_engine, "vehicle", "SF-098")  # a RAV4 running rl_accel in lane 2
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base) as http,
@@ -50,7 +50,7 @@ def test_agent_takes_its_assignment_from_the_server_and_reports(
         r.run(1.0, network=True)
         config = r.agent.config
         assert config is not None
-        assert (config.controller.name, config.assigned_lane) == ("microaccel", 2)
+        assert (config.controller.name, config.assigned_lane) == ("rl_accel", 2)
         assert r.agent.lane_plan is not None
         assert r.agent.lane_plan.plan_id == plan_id
         r.emulator.driver_engage(set_speed_mph=54)
@@ -200,9 +200,11 @@ def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes
         r.emulator.driver_engage(set_speed_mph=54)
         r.run(10.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
         assert r.agent.state.mode is Mode.ENGAGED
+        assert r.agent.config is not None
+        controller = r.agent.config.controller.model_dump()  # kept: only the lane changes
         changed = http.put(
             "/api/v1/vehicles/SF-098/assignment",
-            json={"lane": 3, "route": "B", "controller": {"name": "microaccel", "params": {}}},
+            json={"lane": 3, "route": "B", "controller": controller},
             headers={"Authorization": f"Bearer {operator}"},
         )
         assert changed.status_code == 200, changed.text
