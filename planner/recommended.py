@@ -14,14 +14,12 @@ what the simulator evaluates is what the cars follow.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from types import MappingProxyType
 from typing import Any
 
 RECOMMENDED_PLANNER = "kernel_smooth"
-# Read-only: every caller starts from the same figures.
-RECOMMENDED_PLANNER_PARAMS: Mapping[str, Any] = MappingProxyType(
-    {
-        "window_m": 1500,
-        "speed_limit_allowance_mps": 1.34112,  # 3 mph
-    }
-)
+# Typed read-only, so every caller starts from the same figures; a plain dict, because the
+# simulator pickles it to its worker processes.
+RECOMMENDED_PLANNER_PARAMS: Mapping[str, Any] = {
+    "window_m": 1500,
+    "speed_limit_allowance_mps": 1.34112,  # 3 mph
+}
