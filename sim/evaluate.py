@@ -139,7 +139,7 @@ class RunResult:
     # Where every platoon vehicle ended (0 = the leader), and which columns were AVs.
     final_position_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     av_columns: tuple[int, ...] = ()
-    gaps: GapKpis = GapKpis(0.0, 0.0, 0.0, 1.0)
+    gaps: GapKpis = GapKpis(0.0, 0.0, 0.0, 1.0, 1.0)
     takeovers: int = 0
     driver_seconds: float = 0.0
     cut_ins: int = 0
@@ -272,6 +272,9 @@ class Evaluation:
                 row["within_bounds_share"] = float(
                     np.mean([r.gaps.within_bounds_share for r in runs])
                 )
+                row["within_reachable_bounds_share"] = float(
+                    np.mean([r.gaps.within_reachable_bounds_share for r in runs])
+                )
                 row["distance_lost_m"] = float(np.mean([self.distance_lost_m(r) for r in runs]))
                 rows.append(row)
         return rows
@@ -328,6 +331,7 @@ class Evaluation:
                 "gap_out_of_bounds_s": r.gaps.gap_out_of_bounds_s,
                 "time_gap_violation_s": r.gaps.time_gap_violation_s,
                 "within_bounds_share": r.gaps.within_bounds_share,
+                "within_reachable_bounds_share": r.gaps.within_reachable_bounds_share,
                 "distance_lost_m": self.distance_lost_m(r),
                 "optimum_fuel_saving_pct": self.optimum_pct(r),
                 "plans_run": r.plans_run,
@@ -435,7 +439,11 @@ def run_case(
             final_position_m=run.position_m[-1],
             av_columns=av_columns,
             gaps=gap_kpis(
-                run.gap_m[:, av_index], run.speed_mps[:, list(av_columns)], run.dt_s, realism.bounds
+                run.gap_m[:, av_index],
+                run.speed_mps[:, list(av_columns)],
+                run.position_m[:, list(av_columns)],
+                run.dt_s,
+                realism.bounds,
             ),
             takeovers=run.takeovers,
             driver_seconds=run.driver_seconds,

@@ -533,7 +533,7 @@ def optimal_trajectory(
     baseline_fuel_g = platoon_fuel_g(baseline, model)
     economy = platoon_kpis(run, model).fuel_economy_mpg
     baseline_economy = platoon_kpis(baseline, model).fuel_economy_mpg
-    envelope = gap_kpis(run.gap_m[:, 0], run.speed_mps[:, 1], dt, bounds)
+    envelope = gap_kpis(run.gap_m[:, 0], run.speed_mps[:, 1], run.position_m[:, 1], dt, bounds)
     return OptimumResult(
         drive_name=drive.name,
         accel_mps2=accel,

@@ -66,6 +66,7 @@ SUMMARY_COLUMNS = (
     "cut-ins",
     "max AV gap",
     "in bounds",
+    "in reachable bounds",
     "distance lost",
 )
 
@@ -93,6 +94,7 @@ def _summary_cells(row: dict[str, Any]) -> list[str]:
         str(row["cut_ins"]),
         f"{row['max_av_gap_m']:.0f} m",
         f"{100.0 * row['within_bounds_share']:.1f} %",
+        f"{100.0 * row['within_reachable_bounds_share']:.1f} %",
         f"{row['distance_lost_m']:+.0f} m",
     ]
 

@@ -198,6 +198,9 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
                 "takeovers": sum(int(row["takeovers"]) for row in every),
                 "cut_ins": sum(int(row["cut_ins"]) for row in rows),
                 "within_bounds_share": measured_mean(rows, "within_bounds_share"),
+                "within_reachable_bounds_share": measured_mean(
+                    rows, "within_reachable_bounds_share"
+                ),
                 "distance_lost_m": measured_mean(rows, "distance_lost_m"),
             }
         )
@@ -231,6 +234,9 @@ def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
                 "collisions": sum(int(row["collisions"]) for row in every),
                 "takeovers": sum(int(row["takeovers"]) for row in every),
                 "within_bounds_share": measured_mean(own, "within_bounds_share"),
+                "within_reachable_bounds_share": measured_mean(
+                    own, "within_reachable_bounds_share"
+                ),
                 "shockwave_distance_lost_m": measured_mean(shock, "distance_lost_m"),
             }
         )

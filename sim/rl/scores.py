@@ -171,7 +171,13 @@ def score_drives(
                 base.throughput_vph if points is None else run_throughput_vph(base_run, points)
             )
             av = np.flatnonzero(run.is_av[1:])
-            envelope_kpis = gap_kpis(run.gap_m[:, av], run.speed_mps[:, av + 1], run.dt_s, envelope)
+            envelope_kpis = gap_kpis(
+                run.gap_m[:, av],
+                run.speed_mps[:, av + 1],
+                run.position_m[:, av + 1],
+                run.dt_s,
+                envelope,
+            )
             scores.append(
                 _score(
                     drive,

@@ -359,7 +359,7 @@ def test_distance_lost_and_gap_figures_per_run() -> None:
                 avs=1,
                 final_position_m=np.array([1000.0, 820.0, 790.0]),
                 av_columns=(1,),
-                gaps=GapKpis(175.0, 30.0, 2.0, 0.9),
+                gaps=GapKpis(175.0, 30.0, 2.0, 0.9, 0.95),
                 takeovers=1,
             ),
         ],

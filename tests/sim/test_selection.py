@@ -42,6 +42,7 @@ def row(candidate: str, drive: str, scenario: str = "shockwave", **values: float
         "takeovers": 0,
         "cut_ins": 0,
         "within_bounds_share": 1.0,
+        "within_reachable_bounds_share": 1.0,
         "distance_lost_m": 0.0,
     }
     return base | values
@@ -233,7 +234,14 @@ def test_the_candidate_summary_splits_each_candidate_by_scenario() -> None:
     rows = [
         row("b", "2021-03-08-a", fuel_saving_pct=4.0, distance_lost_m=100.0),
         row("b", "2021-03-09-a", fuel_saving_pct=2.0, distance_lost_m=300.0, takeovers=1),
-        row("b", "2021-03-12-a", "freeflow", fuel_saving_pct=-1.0, within_bounds_share=0.5),
+        row(
+            "b",
+            "2021-03-12-a",
+            "freeflow",
+            fuel_saving_pct=-1.0,
+            within_bounds_share=0.5,
+            within_reachable_bounds_share=0.8,
+        ),
         row("a", "2021-03-08-a", throughput_change_pct=-3.0, collisions=1),
     ]
     a, b = candidate_summary(rows)
@@ -243,6 +251,7 @@ def test_the_candidate_summary_splits_each_candidate_by_scenario() -> None:
     assert b["shockwave_distance_lost_m"] == pytest.approx(200.0)
     # the envelope share and the counts are over all of a candidate's drives
     assert b["within_bounds_share"] == pytest.approx(2.5 / 3)
+    assert b["within_reachable_bounds_share"] == pytest.approx(2.8 / 3)
     assert (b["takeovers"], b["collisions"], a["collisions"]) == (1, 0, 1)
     assert a["shockwave_throughput_change_pct"] == pytest.approx(-3.0)
     # a candidate without freeflow drives has no freeflow figure
@@ -298,6 +307,12 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
         fuel[candidate, drive] != fuel[f"{candidate}, engaged pings behind_leader", drive]
         for candidate, drive in fuel
         if "behind_leader" not in candidate
+    )
+    # judged to the leader a car held to the top speed could follow, the envelope is kept at
+    # least as often as judged to the leader itself
+    assert all(
+        float(row["within_reachable_bounds_share"]) >= float(row["within_bounds_share"])
+        for row in rows
     )
     with (out / "held_out.csv").open() as handle:
         held_out = {row["scenario"]: row for row in csv.DictReader(handle)}
