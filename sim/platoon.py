@@ -222,7 +222,11 @@ class HandBack:
     the tyres' limit (`MAX_BRAKING_MPS2`). The agent takes over again once the stop
     need has stayed below `release_share` of its authority for `reengage_after_s`: the agent's
     own override hold-off (3 s after the driver's last touch) plus its engage delay (1 s),
-    `vehicle_agent.engage.EngagePolicy`. Every hand-back is a takeover in the KPIs.
+    `vehicle_agent.engage.EngagePolicy`. Every hand-back is a takeover in the KPIs. Not
+    modelled: the agent also takes over no `accel` car above 75 mph
+    (`EngageInputs.within_commandable_speed`): an engaged car stays so over the top, so it can
+    bind only when an `accel` AV faster than that is taken over after driving on its own, here
+    or once a plan is fresh (`sim.av`) (docs/simulation.md, the hand-back row).
 
     The radar sees a leader within `radar_range_m`: the paper's "minicar" flag is nominally
     80-100 m (Table 2); the RAV4's radar reported leaders up to 113-250 m on 27 of the 32 shared

@@ -360,6 +360,11 @@ class Agent:
                 commands_sent=self._fault_clear("commands_sent", now),
                 presses_confirmed=self._fault_clear("presses_confirmed", now),
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
+                within_commandable_speed=self.buttons is not None
+                or (
+                    reading is not None
+                    and reading.speed_mps <= self.safety.limits.more_speed_refused_over_mps
+                ),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
             self.engage_policy,

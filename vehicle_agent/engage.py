@@ -11,7 +11,9 @@ corridor, in the assigned lane, plan fresh, controller working, actuator healthy
 reaching the bus, button presses confirmed by the car, and the stop the leader ahead needs
 within the braking the agent may command. Taking over needs all of them to have held for
 `engage_after_s` without interruption, so a flickering input cannot
-toggle control on and off at the loop rate.
+toggle control on and off at the loop rate, and, for that whole wait, the car slow enough for
+the agent to command (`within_commandable_speed`). That one only bars taking over: a car
+the agent commands that goes faster stays commanded.
 """
 
 from __future__ import annotations
@@ -53,6 +55,13 @@ class EngageInputs:
     # The stop the radar's leader needs is within the braking the agent may command
     # (vehicle_agent.stopping).
     stop_within_authority: bool
+    # The agent could command the car from its speed: an accel car at most 2 mph over the
+    # fleet's top speed (`SafetyLimits.more_speed_refused_over_mps`; always true for a button
+    # car, whose own ACC slows it to any setting). Faster, the safety layer refuses the first
+    # requests, which start from the car's own acceleration, and the car would be handed back
+    # at once. It bars only taking over: a commanded car that goes over the top (downhill) is
+    # slowed back by the limiter, whose requests there are at most 0, so it is not in CHECKS.
+    within_commandable_speed: bool
     driver_active: bool
 
 
@@ -72,6 +81,8 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("presses_confirmed", "button presses not confirmed by the car"),
     ("stop_within_authority", "stopping needs more braking than the agent may command"),
 )
+# The reason reported while every check passes but the car is too fast to take over.
+TOO_FAST = "above the fleet's top speed"
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,13 +129,16 @@ def failed(state: EngageState, now: float, reason: str) -> EngageState:
 
 
 def step(state: EngageState, inputs: EngageInputs, policy: EngagePolicy) -> EngageState:
-    """The next state; never ENGAGED while a check fails or the driver is active."""
+    """The next state; never ENGAGED while a check fails or the driver is active, nor taking
+    over a car too fast to command."""
     now = inputs.time_s
     if inputs.driver_active:
         return EngageState(Mode.OVERRIDDEN, now, None, "driver override")
     if state.mode is Mode.OVERRIDDEN and now - state.since_s < policy.override_holdoff_s:
         return state
     failure = first_failure(inputs)
+    if failure is None and state.mode is not Mode.ENGAGED and not inputs.within_commandable_speed:
+        failure = TOO_FAST
     if failure is not None:
         if state.mode is Mode.STOCK and state.reason == failure:
             return state

@@ -75,6 +75,13 @@ class SafetyLimits:
     # (2 mph) comes from a frame built without the limiter.
     over_top_speed_tolerance_mps: float = 2.0 * MPS_PER_MPH
 
+    @property
+    def more_speed_refused_over_mps(self) -> float:
+        """The speed over which no acceleration frame may ask for more: the fleet's top speed
+        and its tolerance (75 mph). The agent takes over no accel car faster than this, as its
+        first requests, starting from the car's own acceleration, would be refused."""
+        return self.accel.top_speed_mps + self.over_top_speed_tolerance_mps
+
 
 @dataclass(frozen=True, slots=True)
 class Refusal:
@@ -240,11 +247,7 @@ class SafetyLayer:
             return Refusal("cancel", "cancel request")
         speed = context.car_state.speed_mps
         top = limits.top_speed_mps
-        if (
-            accel > 0.0
-            and speed is not None
-            and speed > top + self.limits.over_top_speed_tolerance_mps
-        ):
+        if accel > 0.0 and speed is not None and speed > self.limits.more_speed_refused_over_mps:
             return Refusal(
                 "top speed",
                 f"acceleration {accel} m/s^2 at {speed * MPH_PER_MPS:.1f} mph, over the fleet's "

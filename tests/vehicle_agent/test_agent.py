@@ -14,6 +14,7 @@ import can
 import pytest
 
 from contract.corridor import CorridorGeometry
+from contract.units import MPS_PER_MPH
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import Rig, rig, seed_corridor_document, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
@@ -23,7 +24,7 @@ from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.engage import CHECKS, Mode
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.ports import GpioButtonBoard
-from vehicle_agent.safety import SafetyLayer
+from vehicle_agent.safety import SafetyLayer, SafetyLimits
 
 CONTROL_PERIOD_S = 0.1
 
@@ -636,6 +637,103 @@ def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
         assert r.agent.safety.refused == {}
         back = play_the_pcm(r, listener, 6 * period, cruise_state=8)
         assert {request["RELEASE_STANDSTILL"] for request in back} == {1}
+
+
+# The speed over which the safety layer refuses every acceleration request asking for more
+# speed: the fleet's top speed (73 mph) and its tolerance (2 mph).
+REFUSED_OVER_MPS = SafetyLimits().accel.top_speed_mps + SafetyLimits().over_top_speed_tolerance_mps
+
+
+def test_an_accel_car_over_the_top_speed_is_taken_over_only_once_under_it(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A RAV4 its ACC drove at 78 mph, accelerating, was taken over and handed back at once:
+    the limiter starts from the car's measured acceleration (+0.8 m/s^2) and brings its
+    request down within the jerk limit, and the safety layer refused that first, still
+    positive, request over 75 mph ("actuator refused by the safety layer"), again after every
+    hold. The agent now waits, saying why, until the car is under 75 mph, then the usual
+    `engage_after_s`."""
+    with rig(
+        "toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=77 * MPS_PER_MPH
+    ) as r:
+        r.emulator.driver_engage(set_speed_mph=83)  # its ACC accelerates the car at ~1 m/s^2
+        r.run(4.0, until=lambda: bool(r.agent.stats.handbacks))
+        assert r.agent.stats.handbacks == {}, f"refused: {dict(r.agent.safety.refused)}"
+        assert not engaged(r)  # never taken over: every engagement ends in a hand-back
+        assert r.emulator.speed_mps > REFUSED_OVER_MPS
+        assert r.emulator.accel_mps2 > 0.0  # still accelerating
+        assert r.agent.state.reason == "above the fleet's top speed"
+        assert r.agent.status_report()["engage_reason"] == "above the fleet's top speed"
+        r.emulator.driver_engage(set_speed_mph=65)  # the driver sets a lower speed: ACC slows
+        read: list[tuple[float, float]] = []
+
+        def reads_then_engaged() -> bool:
+            snapshot = r.agent.snapshot
+            assert snapshot is not None
+            assert snapshot.reading is not None
+            read.append((snapshot.time_s, snapshot.reading.speed_mps))
+            return engaged(r)
+
+        r.run(30.0, until=reads_then_engaged)
+        assert engaged(r), r.agent.state.reason
+        under_since = next(
+            time_s
+            for index, (time_s, _) in enumerate(read)
+            if all(speed <= REFUSED_OVER_MPS for _, speed in read[index:])
+        )
+        waited = r.agent.state.since_s - under_since
+        engage_after_s = r.agent.engage_policy.engage_after_s
+        assert engage_after_s <= waited < engage_after_s + 2 * r.agent.command_period_s
+        r.run(5.0)
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.safety.refused == {}
+        assert r.agent.stats.handbacks == {}
+
+
+def test_an_engaged_accel_car_going_over_the_top_speed_stays_engaged(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The top speed bars only taking over: a car the agent commands that a downhill pushes
+    over it is slowed back by the limiter (at up to 1 m/s^2), whose requests are at most 0 by
+    the time the car is 2 mph over, so handing it back would gain nothing."""
+    with rig(
+        "toyota_rav4",
+        tmp_path,
+        dbc_cache,
+        controller="microaccel",
+        speed_mps=72 * MPS_PER_MPH,
+        target_speed_mps=40.0,  # 89 mph: the controller asks for more, the limiter holds 73
+    ) as r:
+        engage_and_settle(r, set_speed_mph=72)
+        r.run(5.0, until=lambda: not engaged(r))
+        top_mps = SafetyLimits().accel.top_speed_mps
+        assert r.emulator.speed_mps == pytest.approx(top_mps, abs=0.3)
+        # a downhill the emulator does not model: 1.5 m/s^2 more than the powertrain makes
+        period = r.agent.command_period_s
+        for _ in range(round(5.0 / period)):
+            r.emulator.speed_mps += 1.5 * period
+            r.run(period)
+            assert engaged(r), r.agent.state.reason
+        assert r.emulator.speed_mps > REFUSED_OVER_MPS
+        r.run(20.0, until=lambda: not engaged(r))
+        assert engaged(r), r.agent.state.reason
+        assert r.emulator.speed_mps == pytest.approx(top_mps, abs=0.3)
+        assert r.agent.safety.refused == {}
+        assert r.agent.stats.handbacks == {}
+
+
+def test_a_button_car_over_the_top_speed_is_taken_over(tmp_path: Path, dbc_cache: Path) -> None:
+    """A button car has no top speed of the agent's to wait for: its own ACC slows it to any
+    setting, and the controllers' clip keeps the setting at 73 mph at most."""
+    with rig(
+        "nissan_rogue", tmp_path, dbc_cache, controller="simple", speed_mps=80 * MPS_PER_MPH
+    ) as r:
+        engage_and_settle(r, set_speed_mph=80)
+        r.run(30.0, until=lambda: not engaged(r))
+        assert engaged(r), r.agent.state.reason
+        assert r.emulator.acc.set_speed_mph is not None
+        assert r.emulator.acc.set_speed_mph <= 73
+        assert r.emulator.speed_mps < 74 * MPS_PER_MPH
 
 
 def test_leaving_the_corridor_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) -> None:

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from vehicle_agent.engage import (
     CHECKS,
     INITIAL,
+    TOO_FAST,
     EngageInputs,
     EngagePolicy,
     EngageState,
@@ -20,11 +21,15 @@ from vehicle_agent.engage import (
 )
 
 POLICY = EngagePolicy(engage_after_s=1.0, override_holdoff_s=3.0)
-FLAGS = [name for name, _ in CHECKS] + ["driver_active"]
+FLAGS = [name for name, _ in CHECKS] + ["within_commandable_speed", "driver_active"]
 
 
 def inputs(time_s: float, **flags: bool) -> EngageInputs:
-    values = {name: True for name, _ in CHECKS} | {"driver_active": False} | flags
+    values = (
+        {name: True for name, _ in CHECKS}
+        | {"within_commandable_speed": True, "driver_active": False}
+        | flags
+    )
     return EngageInputs(time_s=time_s, **values)
 
 
@@ -52,7 +57,14 @@ def test_every_state_against_every_combination_of_inputs(state: EngageState) -> 
             first = next(reason for name, reason in CHECKS if not flags[name])
             assert result.mode is Mode.STOCK
             assert result.reason == first
-        elif state.mode is Mode.ENGAGED or state.ready_since_s == 0.0:
+        elif state.mode is Mode.ENGAGED:
+            # A car commanded stays commanded however fast: the speed bars only taking over.
+            assert result == state
+        elif not flags["within_commandable_speed"]:
+            assert result.mode is Mode.STOCK
+            assert result.reason == TOO_FAST
+            assert result.ready_since_s is None  # the wait starts anew once slow enough
+        elif state.ready_since_s == 0.0:
             assert result.mode is Mode.ENGAGED
         else:
             # Conditions just started to hold: wait engage_after_s before taking over.
@@ -62,6 +74,8 @@ def test_every_state_against_every_combination_of_inputs(state: EngageState) -> 
         if result.mode is Mode.ENGAGED:
             assert all_pass
             assert not flags["driver_active"]
+            if state.mode is not Mode.ENGAGED:
+                assert flags["within_commandable_speed"]
 
 
 @pytest.mark.parametrize("state", STATES, ids=lambda s: f"{s.mode.value}-{s.since_s}")
@@ -101,6 +115,36 @@ def test_a_flickering_input_restarts_the_wait() -> None:
     assert step(state, inputs(1.6), POLICY).mode is Mode.ENGAGED
 
 
+def test_a_car_too_fast_to_command_is_not_taken_over_but_a_commanded_one_is_kept() -> None:
+    # Every check passes from 0 s, the car too fast until 2 s: it waits, saying why, and the
+    # wait for steady conditions starts only once it is slow enough.
+    state = step(INITIAL, inputs(0.0, within_commandable_speed=False), POLICY)
+    assert (state.mode, state.since_s, state.ready_since_s, state.reason) == (
+        Mode.STOCK,
+        0.0,
+        None,
+        TOO_FAST,
+    )
+    assert step(state, inputs(1.5, within_commandable_speed=False), POLICY) == state
+    state = step(state, inputs(2.0), POLICY)
+    assert (state.mode, state.ready_since_s) == (Mode.STOCK, 2.0)
+    assert step(state, inputs(2.9), POLICY).mode is Mode.STOCK
+    state = step(state, inputs(3.0), POLICY)
+    assert state.mode is Mode.ENGAGED
+    # Going over while commanded (downhill): still commanded, the limiter slows it back.
+    assert step(state, inputs(3.1, within_commandable_speed=False), POLICY) == state
+    # A failing check hands it back with its own reason; once it passes again, the speed
+    # keeps the car from being taken over.
+    state = step(state, inputs(3.2, plan_fresh=False, within_commandable_speed=False), POLICY)
+    assert (state.mode, state.reason) == (Mode.STOCK, "no fresh plan")
+    state = step(state, inputs(3.3, within_commandable_speed=False), POLICY)
+    assert (state.mode, state.since_s, state.reason) == (Mode.STOCK, 3.3, TOO_FAST)
+    # After a driver's override too, the hold-off over.
+    state = step(state, inputs(4.0, driver_active=True), POLICY)
+    state = step(state, inputs(7.0, within_commandable_speed=False), POLICY)
+    assert (state.mode, state.reason) == (Mode.STOCK, TOO_FAST)
+
+
 def test_driver_override_holds_off_after_the_last_touch() -> None:
     engaged = EngageState(Mode.ENGAGED, 0.0, 0.0, "engaged")
     state = step(engaged, inputs(5.0, driver_active=True), POLICY)
@@ -124,6 +168,7 @@ def test_any_sequence_of_inputs_never_commands_while_anything_is_wrong(
     state = INITIAL
     now = 0.0
     last_touch: float | None = None
+    too_fast_at: float | None = None
     for advance, flags in events:
         now += advance
         current = inputs(now, **flags)
@@ -131,6 +176,8 @@ def test_any_sequence_of_inputs_never_commands_while_anything_is_wrong(
         state = step(state, current, POLICY)
         if flags["driver_active"]:
             last_touch = now
+        if not flags["within_commandable_speed"]:
+            too_fast_at = now
         if state.mode is Mode.ENGAGED:
             assert all(flags[name] for name, _ in CHECKS)
             assert not flags["driver_active"]
@@ -138,3 +185,5 @@ def test_any_sequence_of_inputs_never_commands_while_anything_is_wrong(
             if previous.mode is not Mode.ENGAGED:
                 assert state.ready_since_s is not None
                 assert now - state.ready_since_s >= POLICY.engage_after_s
+                # slow enough to command over the whole wait
+                assert too_fast_at is None or too_fast_at < state.ready_since_s
