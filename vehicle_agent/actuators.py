@@ -193,6 +193,14 @@ class AccelLimits:
     top_speed_approach_s: float = 2.0
     over_top_speed_decel_mps2: float = 1.0
 
+    def speed_gain_while_easing_off_mps(self, accel_mps2: float) -> float:
+        """The speed a car accelerating at `accel_mps2` may still gain once taken over, while
+        the requests, starting from that acceleration, fall to 0 at `max_jerk_down_mps3`: the
+        whole ramp's time at the starting acceleration, a^2 / jerk. That is twice what a car
+        following its request at once gains, which covers the car's lag behind its request."""
+        accelerating = max(accel_mps2, 0.0)
+        return accelerating * accelerating / self.max_jerk_down_mps3
+
     def top_speed_accel_mps2(self, speed_mps: float) -> float:
         """The most a request may ask for at `speed_mps` to keep the car under the top speed."""
         toward_top = (self.top_speed_mps - speed_mps) / self.top_speed_approach_s

@@ -361,10 +361,7 @@ class Agent:
                 presses_confirmed=self._fault_clear("presses_confirmed", now),
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 within_commandable_speed=self.buttons is not None
-                or (
-                    reading is not None
-                    and reading.speed_mps <= self.safety.limits.more_speed_refused_over_mps
-                ),
+                or self._commandable_speed(reading, measured_accel),
                 driver_active=self._driver_active(reading, now, previous.commanding),
             ),
             self.engage_policy,
@@ -395,6 +392,16 @@ class Agent:
             policy_sha256=None if assignment is None else assignment.controller.policy_sha256,
             config_version=None if assignment is None else assignment.config.config_version,
         )
+
+    def _commandable_speed(self, reading: CarReading | None, accel_mps2: float | None) -> bool:
+        """Whether an accel car could be taken over at its speed (`EngageInputs`): at most the
+        speed the safety layer refuses more over, counting what it gains while the requests
+        ease off its own acceleration."""
+        if reading is None:
+            return False
+        limits = self.safety.limits
+        gain = limits.accel.speed_gain_while_easing_off_mps(accel_mps2 or 0.0)
+        return reading.speed_mps + gain <= limits.more_speed_refused_over_mps
 
     def _enabled(self, assignment: Assignment | None) -> bool:
         if assignment is None:

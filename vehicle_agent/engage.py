@@ -56,11 +56,13 @@ class EngageInputs:
     # (vehicle_agent.stopping).
     stop_within_authority: bool
     # The agent could command the car from its speed: an accel car at most 2 mph over the
-    # fleet's top speed (`SafetyLimits.more_speed_refused_over_mps`; always true for a button
-    # car, whose own ACC slows it to any setting). Faster, the safety layer refuses the first
-    # requests, which start from the car's own acceleration, and the car would be handed back
-    # at once. It bars only taking over: a commanded car that goes over the top (downhill) is
-    # slowed back by the limiter, whose requests there are at most 0, so it is not in CHECKS.
+    # fleet's top speed once it has gained what it will while its requests ease off its own
+    # acceleration (`SafetyLimits.more_speed_refused_over_mps`,
+    # `AccelLimits.speed_gain_while_easing_off_mps`; always true for a button car, whose own
+    # ACC slows it to any setting). Faster, the safety layer refuses the first requests, which
+    # start from the car's own acceleration, and the car would be handed back at once. It bars
+    # only taking over: a commanded car that goes over the top (downhill) is slowed back by the
+    # limiter, whose requests there are at most 0, so it is not in CHECKS.
     within_commandable_speed: bool
     driver_active: bool
 

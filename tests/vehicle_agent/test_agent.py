@@ -690,6 +690,29 @@ def test_an_accel_car_over_the_top_speed_is_taken_over_only_once_under_it(
         assert r.agent.stats.handbacks == {}
 
 
+@pytest.mark.parametrize("start_mph", [70.8, 71.0, 71.2, 71.4, 71.6])
+def test_an_accel_car_accelerating_toward_the_top_speed_is_not_taken_over_into_a_refusal(
+    tmp_path: Path, dbc_cache: Path, start_mph: float
+) -> None:
+    """Its ACC accelerating it toward 83 mph, a RAV4 was taken over just under 75 mph at
+    +1 m/s^2 or more; the requests, easing off that acceleration at the jerk limit, were still
+    positive when it passed 75 mph, and the first of those was refused and the car handed back
+    (from each of these starts, before the agent counted the speed gained while easing off).
+    Now the agent waits: no request is refused, no car handed back."""
+    with rig(
+        "toyota_rav4",
+        tmp_path,
+        dbc_cache,
+        controller="microaccel",
+        speed_mps=start_mph * MPS_PER_MPH,
+    ) as r:
+        r.emulator.driver_engage(set_speed_mph=83)
+        r.run(12.0, until=lambda: bool(r.agent.stats.handbacks))
+        assert r.agent.safety.refused == {}
+        assert r.agent.stats.handbacks == {}
+        assert r.agent.state.reason == "above the fleet's top speed"
+
+
 def test_an_engaged_accel_car_going_over_the_top_speed_stays_engaged(
     tmp_path: Path, dbc_cache: Path
 ) -> None:

@@ -682,6 +682,15 @@ def test_the_limiter_keeps_the_car_under_the_fleets_top_speed() -> None:
     assert AccelLimiter().limit(0.0, -2.5, speed_mps=top + 10.0) == -2.5
 
 
+def test_the_speed_a_car_gains_while_its_requests_ease_off() -> None:
+    """Worked by hand: from +1 m/s^2 the requests fall to 0 in 1 / 5 s; counted at +1 m/s^2
+    throughout, that is 0.2 m/s. From +2 m/s^2, 0.8 m/s; a braking car gains nothing."""
+    limits = AccelLimiter().limits
+    assert limits.speed_gain_while_easing_off_mps(1.0) == pytest.approx(0.2)
+    assert limits.speed_gain_while_easing_off_mps(2.0) == pytest.approx(0.8)
+    assert limits.speed_gain_while_easing_off_mps(-1.0) == 0.0
+
+
 def test_no_frame_asks_for_more_speed_well_over_the_fleets_top_speed(
     buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
 ) -> None:
