@@ -46,6 +46,9 @@ class SeedCounts:
     inrix_segments: int
     i24_segments: int
     vehicles: int
+    # controller -> sha256 of the shipped policy each RL controller of the roster runs (held by
+    # the server, for the cars to download)
+    policies: dict[str, str]
 
 
 def seed_corridor_document() -> dict[str, Any]:
@@ -61,9 +64,11 @@ def _upsert(session: Session, model: type[Any], rows: list[dict[str, Any]], key:
     session.execute(statement.on_conflict_do_update(index_elements=[key], set_=updates))
 
 
-def _store_shipped_policies(session: Session, rows: Sequence[RosterRow]) -> None:
+def _store_shipped_policies(session: Session, rows: Sequence[RosterRow]) -> dict[str, str]:
     """Store the shipped policy of each RL controller the roster runs: a row may name a policy
-    only when the server holds it (the car downloads it from here by that sha256)."""
+    only when the server holds it (the car downloads it from here by that sha256). Returns
+    controller -> the sha256 the roster's rows name."""
+    stored: dict[str, str] = {}
     for controller in sorted({row.controller_name for row in rows} & RL_CONTROLLERS.keys()):
         try:
             store_shipped_policy(session, controller, "seed")
@@ -71,6 +76,12 @@ def _store_shipped_policies(session: Session, rows: Sequence[RosterRow]) -> None
             # The bytes the rows name are held, which is all the roster and its cars need; a
             # stored policy's manifest never changes, so the one it was first stored with stands.
             log.warning("seed: %s; it is kept as stored", conflict)
+        stored[controller] = next(
+            str(row.controller_params["policy_sha256"])
+            for row in rows
+            if row.controller_name == controller
+        )
+    return stored
 
 
 def seed(session: Session) -> SeedCounts:
@@ -85,11 +96,13 @@ def seed(session: Session) -> SeedCounts:
     _upsert(session, I24Segment, subs, "i24_segment_id")
     with resources.as_file(resources.files("seed_data").joinpath("roster.csv")) as roster:
         rows = parse_roster_csv(roster)
-    _store_shipped_policies(session, rows)
+    policies = _store_shipped_policies(session, rows)
     upsert_vehicles(session, rows, update_existing=False, label="seed")
     session.flush()
 
     def count(model: type[Any]) -> int:
         return int(session.scalar(select(func.count()).select_from(model)) or 0)
 
-    return SeedCounts(count(Corridor), count(InrixSegment), count(I24Segment), count(Vehicle))
+    return SeedCounts(
+        count(Corridor), count(InrixSegment), count(I24Segment), count(Vehicle), policies
+    )

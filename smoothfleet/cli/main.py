@@ -172,6 +172,8 @@ def seed_command() -> None:
         f"seeded: {counts.corridors} corridor(s), {counts.inrix_segments} INRIX segments, "
         f"{counts.i24_segments} sub-segments, {counts.vehicles} vehicles"
     )
+    for controller, sha256 in counts.policies.items():
+        console.print(f"{controller}: policy {sha256[:12]} held for the roster's cars that run it")
 
 
 @cli.group()
@@ -580,6 +582,8 @@ def _demo_on(
     public = (current.public_url or f"http://{current.host}:{current.port}").rstrip("/")
     console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
     console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+    for controller, sha256 in counts.policies.items():
+        _say_whole(f"{controller}: policy {sha256[:12]} held for the seeded cars that run it")
     for controller, sha256 in policies.items():
         _say_whole(f"{controller}: policy {sha256[:12]} assigned to every car it can drive")
     console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")

@@ -16,6 +16,7 @@ from sqlalchemy import Engine, text
 
 from app.migrate import current_revision, head_revision
 from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 ROSTER_HEADER = (
     "vehicle_id,vin,make,model,year,actuation,corridor_id,route,assigned_lane,"
@@ -38,6 +39,9 @@ def test_seed_then_list(database_url: str, engine: Engine) -> None:
     seeded = run_cli("seed", env=env)
     assert seeded.returncode == 0, seeded.stderr
     assert "100 vehicles" in seeded.stdout
+    # the seed's RAV4s run rl_accel on the shipped policy, which the seed stores for them
+    shipped = hashlib.sha256((BUNDLED_POLICIES / "rl_accel.npz").read_bytes()).hexdigest()
+    assert f"rl_accel: policy {shipped[:12]} held" in seeded.stdout
     listed = run_cli("vehicles", "list", env=env)
     assert listed.returncode == 0
     assert "SF-100" in listed.stdout

@@ -38,6 +38,9 @@ def test_seeding_twice_leaves_the_same_row_counts(engine: Engine) -> None:
         second = seed(session)
     assert counts(engine) == after_first
     assert first == second
+    # the seed reports the policy it holds for its RAV4s, by the sha256 their rows name
+    shipped = hashlib.sha256((BUNDLED_POLICIES / "rl_accel.npz").read_bytes()).hexdigest()
+    assert first.policies == {"rl_accel": shipped}
     assert after_first == {
         "dim_corridor": 1,
         "dim_inrix_segment": 18,
