@@ -61,8 +61,16 @@ class Ping(BaseModel):
     policy_sha256: str | None = Field(
         None, pattern=POLICY_SHA256_PATTERN, description="the policy the controller runs"
     )
+    config_version: int | None = Field(
+        None,
+        ge=1,
+        le=2**31 - 1,
+        description="the version of the vehicle's config the car held when it took the ping",
+    )
 
-    _integers = field_validator("lane", "acc_gap_setting", "plan_id", mode="before")(json_number)
+    _integers = field_validator(
+        "lane", "acc_gap_setting", "plan_id", "config_version", mode="before"
+    )(json_number)
 
 
 class PingBatch(BaseModel):

@@ -631,6 +631,7 @@ class Agent:
             "controller": snapshot.controller,
             "plan_id": snapshot.plan_id,
             "policy_sha256": snapshot.policy_sha256,
+            "config_version": snapshot.config_version,
         }
         if reading is not None:
             optional |= {

@@ -7,10 +7,13 @@ the request reload the directory, at most once per `MIN_RELOAD_INTERVAL_S` so th
 bad ids cannot turn into a stream of queries. A request that meets an unknown id sooner after a
 load waits for the next reload rather than answering "unknown vehicle" from a snapshot older
 than the car: the agent drops the pings the server rejects, so a car added just after a reload
-would lose its first ones. In the last `REFRESH_AHEAD_SHARE` of a snapshot's
-life the next request starts its reload in the background and goes on with the snapshot, so
-under traffic no request waits for a reload (every request in flight used to wait for one
-every `roster_cache_ttl_s`: a stall in the ingest tail, docs/performance.md).
+would lose its first ones. A ping naming its car's config version (`contract.vehicles.Ping`)
+newer than the snapshot's reloads it the same way: the car was moved since, and judged on the
+corridor it left its ping would be refused or stored off the road. In the last
+`REFRESH_AHEAD_SHARE` of a snapshot's life the next request starts its reload in the background
+and goes on with the snapshot, so under traffic no request waits for a reload (every request in
+flight used to wait for one every `roster_cache_ttl_s`: a stall in the ingest tail,
+docs/performance.md).
 
 A car spools its pings while offline and sends them later, possibly after an operator moved it
 to another corridor: each ping is checked and map-matched on the corridor the car was assigned
@@ -25,7 +28,7 @@ from __future__ import annotations
 import asyncio
 import time
 from bisect import bisect_right
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 
@@ -42,7 +45,7 @@ REFRESH_AHEAD_SHARE = 0.2
 # before it, and a wall clock may step back; a day more of history costs next to nothing.
 HISTORY_MARGIN = timedelta(days=1)
 
-VEHICLES_SQL = text("SELECT vehicle_id, corridor_id FROM dim_vehicle")
+VEHICLES_SQL = text("SELECT vehicle_id, corridor_id, config_version FROM dim_vehicle")
 # The end of each corridor a vehicle was assigned before its current one, if the assignment
 # ended after `since`: a row whose next row names the same corridor (a change of lane or route
 # only) is no end of a corridor. The window function sees the later rows (valid_to > since
@@ -111,6 +114,9 @@ class FleetDirectory:
     """A snapshot of the roster, the recent corridor changes and the corridors."""
 
     vehicle_corridor: dict[str, str] = field(default_factory=dict)
+    # each vehicle's config version when loaded: a ping naming a newer one was taken under an
+    # assignment this snapshot does not know
+    config_versions: dict[str, int] = field(default_factory=dict)
     # only the vehicles moved to another corridor within the retention window: most have none
     earlier_corridors: dict[str, CorridorEnds] = field(default_factory=dict)
     corridors: dict[str, CorridorInfo] = field(default_factory=dict)
@@ -156,25 +162,55 @@ class FleetDirectoryCache:
         self._loaded_at = -float("inf")
         self._lock = asyncio.Lock()
         self._refresh: asyncio.Task[FleetDirectory] | None = None
+        # Config versions pings named that a reload found the roster still behind (a database
+        # restored from an older backup): no reason to load again for them.
+        self._ahead: dict[str, int] = {}
 
     async def directory(
-        self, vehicle_ids: Collection[str] = (), *, reload: bool = False
+        self,
+        vehicle_ids: Collection[str] = (),
+        *,
+        config_versions: Mapping[str, int] | None = None,
+        reload: bool = False,
     ) -> FleetDirectory:
-        """A fresh enough directory that knows `vehicle_ids` if the roster does."""
+        """A fresh enough directory that knows `vehicle_ids` if the roster does, and each
+        vehicle's assignment as of at least the config version `config_versions` names."""
         current = self._directory
         now = self._clock()
         age = now - self._loaded_at
         if not reload and current is not None and age < self._ttl_s:
-            if any(v not in current.vehicle_corridor for v in vehicle_ids):
+            if any(v not in current.vehicle_corridor for v in vehicle_ids) or self._behind(
+                current, config_versions
+            ):
                 if age < MIN_RELOAD_INTERVAL_S:
                     await asyncio.sleep(MIN_RELOAD_INTERVAL_S - age)
                     now = self._clock()
-                return await self._reload(now)
+                fresh = await self._reload(now)
+                self._remember_ahead(fresh, config_versions)
+                return fresh
             if age > self._ttl_s * (1 - REFRESH_AHEAD_SHARE) and self._refresh is None:
                 self._refresh = asyncio.create_task(self._reload(now))
                 self._refresh.add_done_callback(self._refresh_done)
             return current
         return await self._reload(now)
+
+    def _behind(self, directory: FleetDirectory, config_versions: Mapping[str, int] | None) -> bool:
+        """Whether a ping names a config version of a known vehicle newer than the snapshot's
+        (and than any a reload already failed to find)."""
+        if not config_versions:
+            return False
+        known = directory.config_versions
+        return any(
+            version > known.get(vehicle, version) and version > self._ahead.get(vehicle, -1)
+            for vehicle, version in config_versions.items()
+        )
+
+    def _remember_ahead(
+        self, directory: FleetDirectory, config_versions: Mapping[str, int] | None
+    ) -> None:
+        for vehicle, version in (config_versions or {}).items():
+            if version > directory.config_versions.get(vehicle, version):
+                self._ahead[vehicle] = max(version, self._ahead.get(vehicle, -1))
 
     async def close(self, timeout_s: float) -> None:
         """Give a background reload up to `timeout_s` to finish (at shutdown, before the engine
@@ -225,6 +261,7 @@ class FleetDirectoryCache:
             )
         return FleetDirectory(
             vehicle_corridor={str(row.vehicle_id): str(row.corridor_id) for row in vehicles},
+            config_versions={str(row.vehicle_id): int(row.config_version) for row in vehicles},
             earlier_corridors={
                 vehicle_id: CorridorEnds(
                     tuple(end for end, _ in spans), tuple(corridor for _, corridor in spans)

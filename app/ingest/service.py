@@ -54,7 +54,14 @@ class Ingest:
         except ForeignVehicle as refusal:
             metrics.PINGS_REFUSED.inc(refusal.pings)
             raise
-        directory = await self.directory.directory({ping.vehicle_id for _, ping in pings})
+        config_versions: dict[str, int] = {}
+        for _, ping in pings:
+            if ping.config_version is not None:
+                held = config_versions.get(ping.vehicle_id, ping.config_version)
+                config_versions[ping.vehicle_id] = max(held, ping.config_version)
+        directory = await self.directory.directory(
+            {ping.vehicle_id for _, ping in pings}, config_versions=config_versions
+        )
         window = TimeWindow.around(
             received_at, retention_days=self.retention_days, max_future_s=self.max_future_s
         )

@@ -295,3 +295,42 @@ def test_a_late_ping_is_checked_and_placed_on_the_corridor_assigned_at_its_ts(
     assert stored[moved_at + timedelta(seconds=2)] == pytest.approx(
         length_m - ON_CORRIDOR_X_M, abs=0.5
     )
+
+
+def test_a_ping_from_a_newer_assignment_than_ingest_holds_is_judged_on_it(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Ingest keeps the fleet's corridors for `roster_cache_ttl_s` (30 s). A car moved within
+    that time fetches its new config and sends pings on the new corridor: judged on the held,
+    older one, their lane was refused for good (the car dropped them) or their position put on
+    the wrong road. A ping names the config version it was taken under, and one newer than
+    ingest holds makes ingest load the roster again first."""
+    length_m = open_reversed_corridor(seeded_engine, "I-24-EB", lanes=4)
+    (sf001,) = [row for row in seed_roster() if row.vehicle_id == "SF-001"]
+    car = bearer(issue(seeded_engine, "vehicle", "SF-001"))
+
+    with serving(seeded_database_url) as api:
+        first = api.post("/api/v1/pings", json=ping(heading_deg=323.0), headers=car)
+        assert first.status_code == 200, first.text  # ingest now holds the roster
+        with session_scope(seeded_engine) as session:  # the operator's move
+            upsert_vehicles(
+                session, [sf001.model_copy(update={"corridor_id": "I-24-EB"})], update_existing=True
+            )
+        with seeded_engine.connect() as connection:
+            version = connection.execute(
+                text("SELECT config_version FROM dim_vehicle WHERE vehicle_id = 'SF-001'")
+            ).scalar_one()
+        moved_at = history(seeded_engine, "SF-001")[-1]["from"]
+        after = ping(
+            ts=moved_at + timedelta(seconds=2), lane=4, heading_deg=143.0, config_version=version
+        )
+        answer = api.post("/api/v1/pings", json=after, headers=car)
+
+    assert answer.status_code == 200, answer.text
+    assert answer.json() == {"accepted": 1, "duplicates": 0, "rejected": []}
+    with seeded_engine.connect() as connection:
+        x_m = connection.execute(
+            text("SELECT x_m FROM fact_vehicle_ping WHERE vehicle_id = 'SF-001' AND ts = :ts"),
+            {"ts": moved_at + timedelta(seconds=2)},
+        ).scalar_one()
+    assert x_m == pytest.approx(length_m - ON_CORRIDOR_X_M, abs=0.5)

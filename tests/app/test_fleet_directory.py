@@ -124,6 +124,52 @@ def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
     assert loads <= 3  # the bad id's, the new car's, and one for the 20 bad requests together
 
 
+def test_a_newer_config_version_reloads_once_even_when_the_roster_stays_behind(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """A ping naming a config version newer than the snapshot's reloads it (the car was moved
+    since). A version the reloaded roster is still behind (a database restored from an older
+    backup) costs no further reload: it would only make every ping of that car wait."""
+
+    async def scenario() -> tuple[int, int, int, bool]:
+        engine = make_async_engine(seeded_database_url)
+        try:
+            cache = FleetDirectoryCache(engine, ttl_s=30, retention_days=RETENTION_DAYS)
+            loads = 0
+            original = cache._load
+
+            async def counted() -> FleetDirectory:
+                nonlocal loads
+                loads += 1
+                return await original()
+
+            cache._load = counted  # type: ignore[method-assign]
+            first = await cache.directory(["SF-001"])
+            held = first.config_versions["SF-001"]
+            await cache.directory(["SF-001"], config_versions={"SF-001": held})
+            same = loads
+            with seeded_engine.begin() as connection:
+                connection.execute(
+                    text(
+                        "UPDATE dim_vehicle SET config_version = config_version + 1 "
+                        "WHERE vehicle_id = 'SF-001'"
+                    )
+                )
+            moved = await cache.directory(["SF-001"], config_versions={"SF-001": held + 1})
+            after_move = loads
+            for _ in range(3):  # a version the roster never reaches
+                await cache.directory(["SF-001"], config_versions={"SF-001": held + 5})
+            return same, after_move, loads, moved.config_versions["SF-001"] == held + 1
+        finally:
+            await engine.dispose()
+
+    same, after_move, loads, seen = asyncio.run(scenario())
+    assert same == 1  # the version it holds: no reload
+    assert after_move == 2  # a newer one: reloaded,
+    assert seen  # and the move is known
+    assert loads == 3  # the version ahead of the roster: one reload, then none
+
+
 def test_a_lone_fix_is_placed_where_the_vectorised_match_places_it(
     seeded_database_url: str,
 ) -> None:

@@ -883,6 +883,7 @@ def test_pings_are_spooled_once_a_second(tmp_path: Path, dbc_cache: Path) -> Non
         dbc_cache,
         controller="microaccel",
         leader=ConstantSpeedLeader(1050.0, 22.0, 100.0),
+        config_fields={"config_version": 7},
     ) as r:
         engage_and_settle(r)
         r.run(10.0)
@@ -895,6 +896,8 @@ def test_pings_are_spooled_once_a_second(tmp_path: Path, dbc_cache: Path) -> Non
         assert ping["acc_engaged"] is True
         assert ping["controller"] == "microaccel"
         assert ping["plan_id"] == 1
+        # the config it drove under, so ingest knows whether it holds that assignment yet
+        assert ping["config_version"] == 7
         assert ping["lead_present"] is True
         assert 0 < ping["lead_distance_m"] < 100
         timestamps = [row[1]["ts"] for row in rows]
