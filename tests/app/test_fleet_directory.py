@@ -38,6 +38,19 @@ async def load_directory(database_url: str) -> FleetDirectory:
         await engine.dispose()
 
 
+def count_loads(cache: FleetDirectoryCache) -> list[int]:
+    """A one-item list the cache's loads from the database are counted in."""
+    loads = [0]
+    original = cache._load
+
+    async def counted() -> FleetDirectory:
+        loads[0] += 1
+        return await original()
+
+    cache._load = counted  # type: ignore[method-assign]
+    return loads
+
+
 def test_a_directory_near_its_expiry_is_reloaded_in_the_background(
     seeded_database_url: str, seeded_engine: Engine
 ) -> None:
@@ -88,15 +101,7 @@ def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
         engine = make_async_engine(seeded_database_url)
         try:
             cache = FleetDirectoryCache(engine, ttl_s=30, retention_days=RETENTION_DAYS)
-            loads = 0
-            original = cache._load
-
-            async def counted() -> FleetDirectory:
-                nonlocal loads
-                loads += 1
-                return await original()
-
-            cache._load = counted  # type: ignore[method-assign]
+            loads = count_loads(cache)
             await cache.directory(["SF-NOBODY"])  # a bad id: this reload is its answer
             with seeded_engine.begin() as connection:
                 connection.execute(
@@ -113,7 +118,7 @@ def test_a_car_added_just_after_a_reload_is_known_to_its_first_ping(
             return (
                 new_car.corridor_of("SF-777", NOW) is not None,
                 all(directory.corridor_of("SF-NOBODY", NOW) is None for directory in bad_ids),
-                loads,
+                loads[0],
             )
         finally:
             await engine.dispose()
@@ -135,19 +140,11 @@ def test_a_newer_config_version_reloads_once_even_when_the_roster_stays_behind(
         engine = make_async_engine(seeded_database_url)
         try:
             cache = FleetDirectoryCache(engine, ttl_s=30, retention_days=RETENTION_DAYS)
-            loads = 0
-            original = cache._load
-
-            async def counted() -> FleetDirectory:
-                nonlocal loads
-                loads += 1
-                return await original()
-
-            cache._load = counted  # type: ignore[method-assign]
+            loads = count_loads(cache)
             first = await cache.directory(["SF-001"])
             held = first.config_versions["SF-001"]
             await cache.directory(["SF-001"], config_versions={"SF-001": held})
-            same = loads
+            same = loads[0]
             with seeded_engine.begin() as connection:
                 connection.execute(
                     text(
@@ -156,10 +153,10 @@ def test_a_newer_config_version_reloads_once_even_when_the_roster_stays_behind(
                     )
                 )
             moved = await cache.directory(["SF-001"], config_versions={"SF-001": held + 1})
-            after_move = loads
+            after_move = loads[0]
             for _ in range(3):  # a version the roster never reaches
                 await cache.directory(["SF-001"], config_versions={"SF-001": held + 5})
-            return same, after_move, loads, moved.config_versions["SF-001"] == held + 1
+            return same, after_move, loads[0], moved.config_versions["SF-001"] == held + 1
         finally:
             await engine.dispose()
 
