@@ -158,12 +158,15 @@ class CanButtonPort(CanCommandPort):
         nothing more. The module reading the buttons acts on the last frame it received, so
         an agent stopping mid-press must end with a release, as every press does (one frame:
         the agent waits no more periods on its way out), unless it would only repeat one the
-        car has read from a stale copy (`_repeats_stale_release`)."""
+        car has read from a stale copy (`_repeats_stale_release`) or one it read less than a
+        period ago (the rate would refuse it, and that release is the car's last frame)."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
             if not self._release_frames or self._repeats_stale_release(context):
+                return
+            if not self._pressed_last and not self.due(context.time_s):
                 return
             if not self._send(None, context):
                 log.warning("the release frame on closing was not sent: the car may see a press")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import time
 from collections.abc import Iterator, Mapping
@@ -509,6 +510,33 @@ def test_from_a_stale_copy_only_the_release_ending_a_press_goes_out(
     plus = frozenset({CruiseButton.PLUS})
     assert sent == [(0.0, plus), (0.05, plus), (0.1, plus), (0.2, frozenset())]
     assert safety.refused == {"copy": 1}  # the press at 0.15 s
+
+
+def test_an_agent_stopping_just_after_a_release_sends_no_repeat_the_rate_refuses(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A release repeats for a few periods so the car sees one even if a frame is lost. The
+    agent stopping in the same period as a release tried one more: the safety layer refused it
+    for the rate ("rate: sent 0.000 s after the previous frame", seen stopping the demo's fleet
+    in `bench.fleet_step`) and the port warned that the car may see a press, which it could
+    not: the car had just read the release. Now the repeat waits for its period, and a port
+    stopping before it is due sends nothing and says nothing."""
+    agent_bus, car_bus = buses
+    car = car_for("nissan_rogue")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    copy.read_s = 0.0
+    port.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
+    copy.read_s = 0.05
+    port.hold(None, SafetyContext(0.05, car_state(0.05)))  # the release ending the press
+    assert len(received(car_bus)) == 2
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.ports"):
+        port.close(SafetyContext(0.05, car_state(0.05)))
+    assert received(car_bus) == []
+    assert safety.refused == {}
+    assert "may see a press" not in caplog.text
 
 
 def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
