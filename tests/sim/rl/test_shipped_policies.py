@@ -91,7 +91,13 @@ def test_the_shipped_policy_drives_a_real_stop_and_go_drive_without_collision(
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
     )
     assert mixed.collisions == 0
-    envelope = gap_kpis(mixed.gap_m[:, :1], mixed.speed_mps[:, 1:2], mixed.dt_s, GapBounds())
+    envelope = gap_kpis(
+        mixed.gap_m[:, :1],
+        mixed.speed_mps[:, 1:2],
+        mixed.position_m[:, 1:2],
+        mixed.dt_s,
+        GapBounds(),
+    )
     assert envelope.within_bounds_share >= within_bounds
     # less fuel per distance than the all-human platoon behind the same drive
     assert platoon_kpis(mixed).fuel_economy_mpg > platoon_kpis(humans).fuel_economy_mpg
