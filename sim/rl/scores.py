@@ -25,7 +25,7 @@ from sim.drives import Drive
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
-from sim.gaps import GapBounds, gap_kpis
+from sim.gaps import GapBounds, GapKpis, gap_kpis
 from sim.kpi import (
     Kpis,
     change_pct,
@@ -94,6 +94,10 @@ class DriveScore:
     # UNMEASURED_COLUMN`): left out of those KPIs' group means for every controller alike.
     # Empty in manifests written before the field existed (no shared drive needed it).
     unmeasured_by_baseline: str = ""
+    # The share within the envelope judged to the reachable leader (`sim.gaps`): what of the
+    # time outside the fleet's top speed leaves the AV no way to avoid. NaN in manifests written
+    # before the field existed.
+    gap_within_reachable_share: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values (manifest, CSV)."""
@@ -184,7 +188,7 @@ def score_drives(
                     entry.label,
                     base,
                     kpis,
-                    envelope_kpis.within_bounds_share,
+                    envelope_kpis,
                     base_throughput,
                 )
             )
@@ -194,7 +198,12 @@ def score_drives(
 
 
 def _score(
-    drive: Drive, label: str, base: Kpis, kpis: Kpis, within: float, base_throughput: float
+    drive: Drive,
+    label: str,
+    base: Kpis,
+    kpis: Kpis,
+    envelope: GapKpis,
+    base_throughput: float,
 ) -> DriveScore:
     return DriveScore(
         drive=drive.name,
@@ -207,8 +216,9 @@ def _score(
         network_speed_change_pct=change_pct(kpis.network_speed_mps, base.network_speed_mps),
         accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,
-        gap_within_share=within,
+        gap_within_share=envelope.within_bounds_share,
         unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
+        gap_within_reachable_share=envelope.within_reachable_bounds_share,
     )
 
 
@@ -259,6 +269,9 @@ def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
                     ),
                     "collisions": sum(s.collisions for s in chosen),
                     "min_gap_within_share": min(s.gap_within_share for s in chosen),
+                    "min_gap_within_reachable_share": group_worst(
+                        chosen, "gap_within_reachable_share"
+                    ),
                 }
             )
     return rows

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shlex
 import sys
 from collections import Counter
@@ -601,6 +602,11 @@ def select_command(
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
 
 
+def _share_text(share: float) -> str:
+    """A share of time in % for people; "n/a" where it is undefined."""
+    return f"{100 * share:.1f} %" if math.isfinite(share) else "n/a"
+
+
 def _planner_setting(params: Mapping[str, Any]) -> str:
     """A candidate's planner setting as the selection names it: the window, and the
     `engaged_pings` rule when it is not the paper's (every ping fused)."""
@@ -852,6 +858,7 @@ def train_command(
             f"{percent_text(row['network_speed_change_pct'])} (worst "
             f"{percent_text(row['worst_network_speed_change_pct'])}), collisions "
             f"{row['collisions']}, gap within bounds >= {100 * row['min_gap_within_share']:.1f} %"
+            f" (to the reachable leader >= {_share_text(row['min_gap_within_reachable_share'])})"
         )
     console.print(
         f"wrote {result.policy_path} (sha256 {result.sha256[:12]}) and {result.manifest_path}"

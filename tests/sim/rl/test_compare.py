@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +65,22 @@ def test_group_means_count_only_the_manifests_own_policy() -> None:
     assert groups["freeflow"]["network_speed_change_pct"] == pytest.approx(-0.04)
     assert groups["shockwave"]["min_gap_within_share"] == pytest.approx(0.99)
     assert groups["all"]["within_mean"] == pytest.approx((0.99 + 1.0 + 0.97) / 3)
+
+
+def test_a_manifest_written_before_the_reachable_share_reads_it_as_unknown() -> None:
+    """Manifests of policies trained before `gap_within_reachable_share` existed (the shipped
+    ones) load with it undefined, and a group's worst is undefined with them, never 0 % or
+    100 %; one that has it gives its worst drive's."""
+    old = group_figures(policy_scores(manifest("aa", (2.0, 1.0, -0.4)), "old.json"))
+    assert math.isnan(old["shockwave"]["min_gap_within_reachable_share"])
+    new = manifest("bb", (2.0, 1.0, -0.4))
+    for row, reachable in zip(
+        new["cross_validation"]["drives"], (0.995, 0.2, 1.0, 0.98), strict=True
+    ):
+        row["gap_within_reachable_share"] = reachable
+    groups = group_figures(policy_scores(new, "new.json"))
+    assert groups["shockwave"]["min_gap_within_reachable_share"] == pytest.approx(0.995)
+    assert groups["freeflow"]["min_gap_within_reachable_share"] == pytest.approx(0.98)
 
 
 def test_paired_differences_are_other_minus_base_per_pair() -> None:

@@ -127,6 +127,7 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     scored = {(row["drive"], row["controller"]) for row in manifest["cross_validation"]["drives"]}
     assert len(scored) == 8  # 4 drives x (rl_accel, microaccel), each on its held-out fold
     assert "rl_accel" in result.stdout
+    assert "to the reachable leader >= " in result.stdout
     assert "sha256" in result.stdout
 
 
@@ -151,6 +152,9 @@ def test_held_out_scores_judge_the_envelope_the_policy_was_trained_to_keep(
     assert manifest["environment"]["gap_bounds"]["max_gap_m"] == 1.0
     shares = {row["gap_within_share"] for row in manifest["cross_validation"]["drives"]}
     assert shares == {0.0}
+    # judged to the reachable leader too, never less often within
+    rows = manifest["cross_validation"]["drives"]
+    assert all(row["gap_within_share"] <= row["gap_within_reachable_share"] <= 1.0 for row in rows)
 
 
 def test_cli_train_names_a_missing_folder(tmp_path: Path) -> None:
