@@ -92,6 +92,22 @@ def replaced_on_success(path: Path) -> Iterator[Path]:
         raise
 
 
+def write_output(path: Path, content: str | bytes) -> None:
+    """Write a command's whole output file beside `path` and rename it there
+    (`replaced_on_success`): a write that fails (a full disk, a file-size limit) keeps an
+    earlier file whole, where writing in place truncated it; the failure is a CliError."""
+    try:
+        with replaced_on_success(path) as partial:
+            if isinstance(content, str):
+                partial.write_text(content)
+            else:
+                partial.write_bytes(content)
+    except OSError as error:
+        raise CliError(
+            f"{path}: cannot be written ({error.strerror or error}); an earlier file there is kept"
+        ) from None
+
+
 @contextmanager
 def database(settings: Settings) -> Iterator[str]:
     """The URL of the database to use, starting the embedded server if none is configured."""

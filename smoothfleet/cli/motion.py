@@ -38,6 +38,7 @@ from smoothfleet.cli.common import (
     output_file,
     replaced_on_success,
     settings,
+    write_output,
 )
 
 # Real stop-and-go drives whose speeds set the traffic downstream of a generated hour.
@@ -263,7 +264,7 @@ def motion_edie(
     if output is None:
         click.echo(text, nl=False)
     else:
-        output.write_text(text)
+        write_output(output, text)
         console.print(f"{output}: {len(field)} boxes")
 
 
@@ -289,7 +290,7 @@ def motion_plot(day_text: str, output: Path, corridor_id: str, store: Path | Non
             raise CliError(str(error)) from None
         finally:
             engine.dispose()
-    output.write_bytes(png)
+    write_output(output, png)
     console.print(f"{output}: figure of {day.isoformat()}")
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import io
+import resource
 import signal
 import subprocess
 import time
@@ -75,6 +76,32 @@ def test_generate_import_twice_fields_and_plot(
     nothing = run_cli("motion", "plot", "--date", "2001-01-01", "-o", str(figure), env=env)
     assert nothing.returncode == 1
     assert "no MOTION trajectories imported for 2001-01-01" in " ".join(nothing.stderr.split())
+
+    # A write that fails half-way (here a 1,000-byte file-size limit, as a full disk would)
+    # kept none of the earlier file: the figure and the CSV were written in place. Now the
+    # earlier file stays whole and the command says what failed.
+    table = tmp_path / "fields.csv"
+    table.write_text("an earlier field")
+    edie_window = ["--since", "2022-11-16T12:00", "--until", "2022-11-16T12:01"]
+    for output, command in (
+        (figure, ["motion", "plot", "--date", "2022-11-16", "-o", str(figure)]),
+        (table, ["motion", "edie", *edie_window, "--to-m", "13000", "-o", str(table)]),
+    ):
+        earlier = output.read_bytes()
+        limited = subprocess.run(
+            [*smoothfleet_command(), *command],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000)),
+        )
+        assert limited.returncode == 1, limited.stderr
+        assert output.read_bytes() == earlier
+        assert "cannot be written (File too large); an earlier file there is kept" in " ".join(
+            limited.stderr.split()
+        )
+        assert not [path for path in tmp_path.iterdir() if path.name.endswith(".partial")]
 
 
 def test_a_missing_file_and_a_bad_window_say_what_is_wrong(tmp_path: Path) -> None:
