@@ -9,6 +9,7 @@ import time
 from collections.abc import Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import can
 import pytest
@@ -20,7 +21,7 @@ from tests.vehicle_agent.test_state import frame as car_frame
 from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.cars.base import Signals
-from vehicle_agent.codec import codec_for
+from vehicle_agent.codec import Codec, codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
 from vehicle_agent.safety import Refusal, SafeSender, SafetyContext, SafetyLayer, SafetyLimits
 from vehicle_agent.state import CarStateReader
@@ -153,6 +154,26 @@ def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache
     assert board.held is None
 
 
+class ButtonPortRig(NamedTuple):
+    """A button car's port on the agent's bus, with what a test reads beside it."""
+
+    car: CarInterface
+    codec: Codec
+    safety: SafetyLayer
+    copy: CarCopy
+    port: CanButtonPort
+
+
+def button_port(key: str, agent_bus: can.BusABC, dbc_cache: Path) -> ButtonPortRig:
+    """The make's button port sending through its own safety layer, copying `CarCopy`."""
+    car = car_for(key)
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    copy = CarCopy(car)
+    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    return ButtonPortRig(car, codec, safety, copy, port)
+
+
 @settings(
     max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
@@ -234,11 +255,7 @@ def test_no_button_frame_leaves_out_of_limits(
 ) -> None:
     agent_bus, car_bus = buses
     received(car_bus)
-    car = car_for(key)
-    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    safety = SafetyLayer(car, codec)
-    copy = CarCopy(car)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    car, codec, _, copy, port = button_port(key, agent_bus, dbc_cache)
     held: frozenset[CruiseButton] = frozenset()
     press_started: float | None = None
     last_onset: float | None = None
@@ -429,11 +446,7 @@ def test_a_press_needs_a_real_release_before_it(
     frame and another 1.1 s hold all passed, which a car that misses the blip reads as one
     2.25 s hold, past the 1.2 s of a second 5 mph step."""
     agent_bus, car_bus = buses
-    car = car_for("nissan_rogue")
-    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    safety = SafetyLayer(car, codec)
-    copy = CarCopy(car)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    car, codec, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
     now = 0.0
     while now < 1.1 - 1e-9:  # the longest hold allowed
         copy.read_s = now
@@ -491,11 +504,7 @@ def test_from_a_stale_copy_only_the_release_ending_a_press_goes_out(
     telling the car the driver's inputs of a moment ago. The release ending the press still
     goes out: no press may stand in the last frame the car read."""
     agent_bus, car_bus = buses
-    car = car_for("nissan_rogue")
-    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    safety = SafetyLayer(car, codec)
-    copy = CarCopy(car)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    car, codec, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
     copy.read_s = 0.0  # the car's last CRUISE_THROTTLE the agent reads
     sent: list[tuple[float, frozenset[CruiseButton]]] = []
     for step in range(9 if not stops else 5):
@@ -522,11 +531,7 @@ def test_an_agent_stopping_just_after_a_release_sends_no_repeat_the_rate_refuses
     not: the car had just read the release. Now the repeat waits for its period, and a port
     stopping before it is due sends nothing and says nothing."""
     agent_bus, car_bus = buses
-    car = car_for("nissan_rogue")
-    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
-    safety = SafetyLayer(car, codec)
-    copy = CarCopy(car)
-    port = CanButtonPort(car, codec, SafeSender(agent_bus, safety), copy.latest, copy.received_at)
+    _, _, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
     copy.read_s = 0.0
     port.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
     copy.read_s = 0.05
