@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
+from contract.units import MPS_PER_MPH
 from contract.values import StorableText, json_number
 
 Actuation = Literal["acc", "accel"]
@@ -30,6 +31,7 @@ AGENT_MIN_ACCEL_MPS2 = -3.0
 # clipped setting; an `accel` car has no setting holding it, so the agent's acceleration limiter
 # keeps it under this speed (vehicle_agent.actuators.AccelLimits).
 FLEET_TOP_SPEED_MPH = 73.0
+FLEET_TOP_SPEED_MPS = FLEET_TOP_SPEED_MPH * MPS_PER_MPH
 
 # Parameters arrive as JSON: a number is a JSON number and a flag a JSON boolean, as the schema
 # (`controller_choice_schema`) says; lax coercion would take "0.5" or 1 and so accept what the

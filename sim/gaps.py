@@ -23,16 +23,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from contract.controllers import FLEET_TOP_SPEED_MPH
-from contract.units import MPS_PER_MPH
+from contract.controllers import FLEET_TOP_SPEED_MPS
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 # Below this speed (m/s) a time gap means nothing (a queue at standstill).
 MIN_TIME_GAP_SPEED_MPS = 1.0
-# The fastest an AV may follow its leader: the fleet's top speed.
-FLEET_TOP_SPEED_MPS = FLEET_TOP_SPEED_MPH * MPS_PER_MPH
 
 
 @dataclass(frozen=True, slots=True)

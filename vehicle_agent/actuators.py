@@ -21,11 +21,10 @@ from dataclasses import dataclass
 
 from contract.controllers import (
     AGENT_MIN_ACCEL_MPS2,
-    FLEET_TOP_SPEED_MPH,
+    FLEET_TOP_SPEED_MPS,
     MAX_GAP_SETTING,
     MIN_GAP_SETTING,
 )
-from contract.units import MPS_PER_MPH
 from vehicle_agent.cars import CruiseButton
 
 # One press of the gap button moves to the next shorter gap, from the shortest back to the
@@ -189,7 +188,7 @@ class AccelLimits:
     # 66 mph untouched. Over it (downhill) the request slows the car back, by at most
     # `over_top_speed_decel_mps2`: returning to the top is no emergency, and any harder braking
     # a leader needs is the controller's own request, which the limiter keeps.
-    top_speed_mps: float = FLEET_TOP_SPEED_MPH * MPS_PER_MPH
+    top_speed_mps: float = FLEET_TOP_SPEED_MPS
     top_speed_approach_s: float = 2.0
     over_top_speed_decel_mps2: float = 1.0
 

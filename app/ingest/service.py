@@ -54,11 +54,12 @@ class Ingest:
         except ForeignVehicle as refusal:
             metrics.PINGS_REFUSED.inc(refusal.pings)
             raise
+        # each car's newest config version among its pings (versions start at 1)
         config_versions: dict[str, int] = {}
         for _, ping in pings:
             if ping.config_version is not None:
-                held = config_versions.get(ping.vehicle_id, ping.config_version)
-                config_versions[ping.vehicle_id] = max(held, ping.config_version)
+                newest = max(config_versions.get(ping.vehicle_id, 0), ping.config_version)
+                config_versions[ping.vehicle_id] = newest
         directory = await self.directory.directory(
             {ping.vehicle_id for _, ping in pings}, config_versions=config_versions
         )

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.gaps import FLEET_TOP_SPEED_MPS, GapBounds, gap_kpis, reachable_leader_excess_m
+from contract.controllers import FLEET_TOP_SPEED_MPS
+from sim.gaps import GapBounds, gap_kpis, reachable_leader_excess_m
 
 
 def test_defaults_are_the_field_teams_envelope() -> None:
