@@ -81,9 +81,10 @@ def replaced_on_success(path: Path) -> Iterator[Path]:
     instead: `motion generate` used to leave a truncated JSON array under the output's name,
     which `motion import` then read as a broken file, and an earlier good file is kept. The
     same folder keeps the rename atomic (one file system). The name holds the process id, so
-    two runs writing the same output do not share one; the writer creates the file, with the
+    two runs writing the same output do not share one, and ends in the output's suffix, from
+    which a writer such as matplotlib takes the format; the writer creates the file, with the
     permissions any output of the user gets (mkstemp's would be 0600)."""
-    partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
+    partial = path.with_name(f".{path.stem}.{os.getpid()}.partial{path.suffix}")
     try:
         yield partial
         partial.replace(path)
@@ -94,14 +95,20 @@ def replaced_on_success(path: Path) -> Iterator[Path]:
 
 def write_output(path: Path, content: str | bytes) -> None:
     """Write a command's whole output file beside `path` and rename it there
-    (`replaced_on_success`): a write that fails (a full disk, a file-size limit) keeps an
-    earlier file whole, where writing in place truncated it; the failure is a CliError."""
+    (`write_output_with`)."""
+    if isinstance(content, str):
+        write_output_with(path, lambda partial: partial.write_text(content))
+    else:
+        write_output_with(path, lambda partial: partial.write_bytes(content))
+
+
+def write_output_with(path: Path, write: Callable[[Path], object]) -> None:
+    """Run `write` on a file beside `path` and rename it there (`replaced_on_success`): a
+    write that fails (a full disk, a file-size limit) keeps an earlier file whole, where
+    writing in place truncated it; the failure is a CliError that names the file."""
     try:
         with replaced_on_success(path) as partial:
-            if isinstance(content, str):
-                partial.write_text(content)
-            else:
-                partial.write_bytes(content)
+            write(partial)
     except OSError as error:
         raise CliError(
             f"{path}: cannot be written ({error.strerror or error}); an earlier file there is kept"

@@ -78,6 +78,8 @@ from smoothfleet.cli.common import (
     fleet_options,
     output_file,
     output_folder,
+    write_output,
+    write_output_with,
 )
 from vehicle_agent.controllers.registry import build_controller
 
@@ -414,9 +416,9 @@ def evaluate_command(
         except ValueError as error:
             raise click.ClickException(str(error)) from None
     evaluation = Evaluation(evaluation.results, optimum)
-    write_csv(evaluation, out_dir / "evaluation.csv")
-    write_heatmap(evaluation, out_dir / "heatmap.png")
-    (out_dir / "summary.md").write_text(markdown_table(evaluation))
+    write_output_with(out_dir / "evaluation.csv", lambda path: write_csv(evaluation, path))
+    write_output_with(out_dir / "heatmap.png", lambda path: write_heatmap(evaluation, path))
+    write_output(out_dir / "summary.md", markdown_table(evaluation))
     if runs_dir is not None:
         evaluation.write_runs_index(runs_dir)
         console.print(f"wrote {len(evaluation.results)} runs to {runs_dir}")
@@ -597,8 +599,8 @@ def select_command(
         f"chosen on every date (the deployment pair; its score here is not a result): "
         f"{deployed.candidate}"
     )
-    write_rows(rows, out_dir / "selection.csv")
-    write_rows(summary, out_dir / "held_out.csv")
+    write_output_with(out_dir / "selection.csv", lambda path: write_rows(rows, path))
+    write_output_with(out_dir / "held_out.csv", lambda path: write_rows(summary, path))
     console.print(f"wrote {out_dir / 'selection.csv'}, {out_dir / 'held_out.csv'}")
 
 
@@ -672,10 +674,13 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
         f"{percent_text(evaluation.change_pct(chosen, 'network_speed_mps'))}, "
         f"{chosen.cut_ins} cut-ins, {chosen.takeovers} takeovers"
     )
-    write_time_space(
-        [("all human\n(25 IDM drivers)", runs[BASELINE]), (label, runs[chosen.controller])],
+    write_output_with(
         output,
-        f"{drive.name}: leader + 25 followers (the AV thick, cars merging in dashed)",
+        lambda path: write_time_space(
+            [("all human\n(25 IDM drivers)", runs[BASELINE]), (label, runs[chosen.controller])],
+            path,
+            f"{drive.name}: leader + 25 followers (the AV thick, cars merging in dashed)",
+        ),
     )
     console.print(f"{label}\nwrote {output}")
 
@@ -984,7 +989,7 @@ def optimum_command(
                 for row in solved
             ]
             rows.append(best_row(solved))
-            write_optimum_csv(rows, out_dir / "optimum.csv")
+            write_output_with(out_dir / "optimum.csv", lambda path: write_optimum_csv(rows, path))
     for row in rows:
         console.print(
             f"{row['drive']}: fuel saving {float(row['fuel_saving_pct']):+.2f} %, largest gap "

@@ -457,3 +457,46 @@ def test_a_leader_that_never_moves_has_no_fuel_saving_rather_than_a_crash(
     cells = dict(zip(header.split("|"), row.split("|"), strict=True))
     assert cells[" fuel saving "].strip() == "n/a"
     assert best_pair(evaluation) is None
+
+
+def test_a_failed_write_keeps_the_earlier_evaluation_whole(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    """Written in place, a write that failed half-way (here a 1,000-byte file-size limit, as a
+    full disk would) left a truncated evaluation.csv over the earlier run's, and the command
+    ended on "unexpected OSError". Now the earlier files stay whole and the command says what
+    failed."""
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    write_drive(short_drives(shared_dir)[0], drives / "wave.csv")
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = {name: f"an earlier {name}".encode() for name in ("evaluation.csv", "summary.md")}
+    for name, content in earlier.items():
+        (out / name).write_bytes(content)
+    limited = run_cli(
+        "sim",
+        "evaluate",
+        "--drives",
+        str(drives),
+        "--scenario",
+        "shockwave",
+        "--planner",
+        "kernel_smooth",
+        "--controller",
+        "microaccel:accel",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=300,
+        file_size_limit_bytes=1000,
+    )
+    assert limited.returncode == 1, limited.stderr
+    assert "evaluation.csv: cannot be written (File too large); an earlier file there is kept" in (
+        " ".join(limited.stderr.split())
+    )
+    assert "Traceback" not in limited.stderr
+    for name, content in earlier.items():
+        assert (out / name).read_bytes() == content
+    # no partial file is left beside them
+    assert sorted(path.name for path in out.iterdir()) == ["evaluation.csv", "summary.md"]

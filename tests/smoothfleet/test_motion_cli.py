@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import io
-import resource
 import signal
 import subprocess
 import time
@@ -88,20 +87,13 @@ def test_generate_import_twice_fields_and_plot(
         (table, ["motion", "edie", *edie_window, "--to-m", "13000", "-o", str(table)]),
     ):
         earlier = output.read_bytes()
-        limited = subprocess.run(
-            [*smoothfleet_command(), *command],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=120,
-            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (1000, 1000)),
-        )
+        limited = run_cli(*command, env=env, file_size_limit_bytes=1000)
         assert limited.returncode == 1, limited.stderr
         assert output.read_bytes() == earlier
         assert "cannot be written (File too large); an earlier file there is kept" in " ".join(
             limited.stderr.split()
         )
-        assert not [path for path in tmp_path.iterdir() if path.name.endswith(".partial")]
+        assert not [path for path in tmp_path.iterdir() if ".partial" in path.name]
 
 
 def test_a_missing_file_and_a_bad_window_say_what_is_wrong(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import resource
 import socket
 import subprocess
 import sys
@@ -75,9 +76,23 @@ def smoothfleet_command() -> list[str]:
 
 
 def run_cli(
-    *args: str, env: dict[str, str], timeout: float = 120, stdin: str | None = None
+    *args: str,
+    env: dict[str, str],
+    timeout: float = 120,
+    stdin: str | None = None,
+    file_size_limit_bytes: int | None = None,
 ) -> subprocess.CompletedProcess[str]:
-    """Run `smoothfleet ARGS...` (optionally feeding `stdin`) and capture its output."""
+    """Run `smoothfleet ARGS...` (optionally feeding `stdin`) and capture its output.
+
+    `file_size_limit_bytes` caps every file the command writes (RLIMIT_FSIZE), so a write
+    fails half-way as it would on a full disk."""
+
+    limit = file_size_limit_bytes
+
+    def limit_file_size() -> None:
+        assert limit is not None
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
     return subprocess.run(
         [*smoothfleet_command(), *args],
         env=env,
@@ -85,6 +100,8 @@ def run_cli(
         capture_output=True,
         text=True,
         timeout=timeout,
+        # only where asked: a preexec_fn is not safe in a process that runs threads
+        preexec_fn=None if limit is None else limit_file_size,
     )
 
 
