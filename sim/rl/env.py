@@ -22,6 +22,14 @@ AV and every vehicle behind it, and the gap bounds of `sim.gaps.GapBounds` (spac
 [h_min, h_max] and time gap at least its minimum). An AV that touches its leader ends the
 episode with `collision` taken once more for every step the episode had left (so crashing never
 pays off against the gap penalty). The coefficients are in `RewardWeights`, with why.
+
+Cut-ins (`EnvConfig.cut_ins`): drivers from the next lane merge into the AV's gap by the
+evaluation simulator's rule (`sim.platoon.CutIns`), then drive as I-24 IDM humans ahead of it,
+so the AV's leader is the nearest of them. Trained without them, a policy paid for a wide gap
+only beyond h_max; in slow traffic a gap well inside 120 m invites cars (3 s beyond the 19 m a
+merging car needs: 64 m at 15 m/s), and in `sim evaluate` such a policy let them in and fell
+ever further behind its leader while its own gap stayed in bounds. Only the AV's gap invites
+them here: the humans behind it keep the I-24 IDM's 1.24 s.
 """
 
 from __future__ import annotations
@@ -45,7 +53,7 @@ from sim.emulator.acc import MIN_SET_SPEED_MPH, SimulatedAccCar, stock_acc_accel
 from sim.energy import RAV4_2019
 from sim.gaps import GapBounds
 from sim.plans import SimulatedPlanner, simulated_grid, simulated_inrix
-from sim.platoon import MAX_BRAKING_MPS2, MAX_SPACING_SPEED_SHARE, VEHICLE_LENGTH_M
+from sim.platoon import MAX_BRAKING_MPS2, MAX_SPACING_SPEED_SHARE, VEHICLE_LENGTH_M, CutIns
 from sim.traffic import InrixFeed
 from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.controllers import clip_speed_setting
@@ -75,6 +83,11 @@ DEFAULT_PLANNER_PARAMS: Mapping[str, Any] = {
     "window_m": 4000.0,
     "speed_limit_allowance_mps": 1.34112,
 }
+
+# Room for the cars that merge ahead of the AV in one episode. While it is full no car merges
+# (the merge clock waits): at the rate of `CutIns` a full room takes a policy that kept its gap
+# seconds beyond the accepted one for most of the episode.
+MAX_MERGED_CARS = 16
 
 
 @dataclass(frozen=True)
@@ -111,6 +124,8 @@ class EnvConfig:
     reward: RewardWeights = RewardWeights()
     gap_bounds: GapBounds = GapBounds()
     idm: IdmParams = I24_IDM
+    # None trains without cut-ins, as every policy before 2026-12-03 22:30 UTC was.
+    cut_ins: CutIns | None = CutIns()
 
     def __post_init__(self) -> None:
         if self.actuation not in FEATURE_SIZES:
@@ -179,6 +194,13 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.elapsed = np.zeros(num_envs, dtype=np.int64)
         self.target_here = np.zeros(num_envs)
         self.target_ahead = np.zeros(num_envs)
+        # The cars that merged ahead of each AV, front to back (NaN: room for more), each
+        # AV's integrated merge hazard and the exponential draw it must reach.
+        self.merged_position = np.full((num_envs, MAX_MERGED_CARS), np.nan)
+        self.merged_speed = np.full((num_envs, MAX_MERGED_CARS), np.nan)
+        self.merged = np.zeros(num_envs, dtype=np.int64)
+        self.merge_clock = np.zeros(num_envs)
+        self.merge_threshold = np.zeros(num_envs)
         self.planners: list[SimulatedPlanner] = []
         self.cars: list[SimulatedAccCar] = []
         self.lead_accel = [LeadAccelEstimator(SAFETY.lead_accel_filter_s) for _ in range(num_envs)]
@@ -187,6 +209,8 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             deque(maxlen=CLIP_WINDOW_STEPS) for _ in range(num_envs)
         ]
         self._rng = np.random.default_rng()
+        # its own stream, so the windows drawn are the same with cut-ins as without
+        self._merge_rng = np.random.default_rng()
         self.render_mode = None
 
     # -- episodes ---------------------------------------------------------------------------
@@ -199,6 +223,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             seed = seed[0] if seed else None
         if seed is not None:
             self._rng = np.random.default_rng(seed)
+            self._merge_rng = np.random.default_rng([seed, 1])
         started = [self._start(env) for env in range(self.num_envs)]
         self.planners = [planner for planner, _ in started]
         self.cars = [car for _, car in started]
@@ -227,6 +252,12 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         vehicles = self.position.shape[1]
         self.position[env] = entry.position_m[first] - spacing * np.arange(vehicles)
         self.speed[env] = lead_speed
+        self.merged_position[env] = np.nan
+        self.merged_speed[env] = np.nan
+        self.merged[env] = 0
+        self.merge_clock[env] = 0.0
+        if self.config.cut_ins is not None:
+            self.merge_threshold[env] = self._merge_rng.exponential()
         car = SimulatedAccCar()
         car.acc.engage(max(lead_speed, MIN_SET_SPEED_MPH * MPS_PER_MPH))
         self.lead_accel[env].reset()
@@ -238,16 +269,70 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
     def _time_s(self, env: int) -> float:
         return float(self.start_step[env] + self.elapsed[env]) * self.dt_s
 
+    def _av_leader(self) -> tuple[FloatArray, FloatArray]:
+        """Each AV's leader's position and speed: the last car that merged ahead, else the
+        drive's leader."""
+        last = np.maximum(self.merged - 1, 0)
+        rows = np.arange(self.num_envs)
+        has_merged = self.merged > 0
+        position = np.where(has_merged, self.merged_position[rows, last], self.position[:, 0])
+        speed = np.where(has_merged, self.merged_speed[rows, last], self.speed[:, 0])
+        return position, speed
+
+    def _merge_cut_ins(self) -> BoolArray:
+        """Cars from the next lane merge into the AV's gap (`sim.platoon.CutIns`, as
+        `simulate_platoon` applies it): each in the middle of the gap at the mean of the AV's
+        and its leader's speeds. Which environments had one merge."""
+        cut_ins = self.config.cut_ins
+        merging = np.zeros(self.num_envs, dtype=np.bool_)
+        if cut_ins is None:
+            return merging
+        lead_position, lead_speed = self._av_leader()
+        gap = lead_position - self.position[:, 1] - VEHICLE_LENGTH_M
+        speed = self.speed[:, 1]
+        if not cut_ins.invites_any(gap, speed):
+            return merging
+        room = self.merged < MAX_MERGED_CARS
+        self.merge_clock += np.where(room, cut_ins.hazard_per_s(gap, speed), 0.0) * self.dt_s
+        merging = self.merge_clock >= self.merge_threshold
+        for env in np.flatnonzero(merging):
+            slot = int(self.merged[env])
+            self.merged_position[env, slot] = lead_position[env] - 0.5 * (
+                gap[env] + VEHICLE_LENGTH_M
+            )
+            self.merged_speed[env, slot] = 0.5 * (lead_speed[env] + speed[env])
+            self.merged[env] += 1
+            self.merge_clock[env] = 0.0
+            self.merge_threshold[env] = self._merge_rng.exponential()
+        return merging
+
+    def _move_merged_cars(self, dt: float) -> None:
+        """The merged cars drive one step as I-24 IDM humans, each behind the car ahead of
+        it (the first behind the drive's leader as the step starts)."""
+        if not self.merged.any():
+            return
+        ahead_position = np.hstack([self.position[:, :1], self.merged_position[:, :-1]])
+        ahead_speed = np.hstack([self.speed[:, :1], self.merged_speed[:, :-1]])
+        speed = self.merged_speed
+        with np.errstate(invalid="ignore"):  # the NaN of empty room stays NaN
+            gap = ahead_position - self.merged_position - VEHICLE_LENGTH_M
+            accel = idm_accel(self.config.idm, gap, speed, ahead_speed)
+            accel = np.maximum(accel, -MAX_BRAKING_MPS2)
+            accel = np.maximum(accel, -speed / dt)
+            self.merged_position += speed * dt + 0.5 * accel * dt * dt
+            self.merged_speed = np.maximum(speed + accel * dt, 0.0)
+
     # -- observation ------------------------------------------------------------------------
 
     def _lookup(self, rows: Iterable[int]) -> None:
         """The plan at each AV now (its pings go to its planner first, once a second)."""
+        lead_position, _ = self._av_leader()
         for env in rows:
             time_s = self._time_s(env)
             x = float(self.position[env, 1])
             planner = self.planners[env]
             if self.elapsed[env] % PING_EVERY_STEPS == 0:
-                gap = float(self.position[env, 0]) - x - VEHICLE_LENGTH_M
+                gap = float(lead_position[env]) - x - VEHICLE_LENGTH_M
                 planner.record_ping(
                     time_s,
                     x,
@@ -262,7 +347,8 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
     def _features(self) -> FloatArray:
         """Every AV's observation, as the car builds it."""
         speed = self.speed[:, 1]
-        gap = self.position[:, 0] - self.position[:, 1] - VEHICLE_LENGTH_M
+        lead_position, lead_speed = self._av_leader()
+        gap = lead_position - self.position[:, 1] - VEHICLE_LENGTH_M
         lead_present = gap <= RADAR_RANGE_M
         if self.config.actuation == "accel":
             return accel_features(
@@ -271,7 +357,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                 self.target_ahead,
                 lead_present,
                 gap,
-                self.speed[:, 0] - speed,
+                lead_speed - speed,
             )
         setting = np.array([car.acc.set_speed_mph or 0.0 for car in self.cars], dtype=np.float64)
         bars = np.array([car.acc.gap_setting for car in self.cars], dtype=np.float64)
@@ -279,10 +365,9 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
 
     # -- dynamics ---------------------------------------------------------------------------
 
-    def _av_accel(self, actions: FloatArray, gap: FloatArray) -> FloatArray:
+    def _av_accel(self, actions: FloatArray, gap: FloatArray, lead_speed: FloatArray) -> FloatArray:
         """What each AV's car makes of the policy's action this step."""
         speed = self.speed[:, 1]
-        lead_speed = self.speed[:, 0]
         if self.config.actuation == "accel":
             request = requested_accel_mps2(actions[:, 0])
             margin = (
@@ -349,13 +434,18 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             raise ValueError("the policy gave a non-finite action")
         weights = self.config.reward
         dt = self.dt_s
+        merging_now = self._merge_cut_ins()
+        lead_position, lead_speed = self._av_leader()
         gaps = self.position[:, :-1] - self.position[:, 1:] - VEHICLE_LENGTH_M
+        gaps[:, 0] = lead_position - self.position[:, 1] - VEHICLE_LENGTH_M
         follower_speed = self.speed[:, 1:].copy()  # the speeds the step starts from
+        # the AV's IDM acceleration is replaced below: only its gap reads its leader
         accel = idm_accel(self.config.idm, gaps, follower_speed, self.speed[:, :-1])
-        av = self._av_accel(actions, gaps[:, 0])
+        av = self._av_accel(actions, gaps[:, 0], lead_speed)
         av = np.minimum(av, RAV4_2019.max_accel_mps2(follower_speed[:, 0]))
         accel[:, 0] = np.maximum(av, -MAX_BRAKING_MPS2)
         accel = np.maximum(accel, -follower_speed / dt)  # cars do not reverse
+        self._move_merged_cars(dt)
         self.elapsed += 1
         lead_steps = self.start_step + self.elapsed
         for env in range(self.num_envs):
@@ -366,7 +456,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.speed[:, 1:] = np.maximum(follower_speed + accel * dt, 0.0)
 
         fuel = RAV4_2019.fuel_rate_gps(follower_speed, accel).mean(axis=1)
-        av_gap = self.position[:, 0] - self.position[:, 1] - VEHICLE_LENGTH_M
+        av_gap = self._av_leader()[0] - self.position[:, 1] - VEHICLE_LENGTH_M
         bounds = self.config.gap_bounds
         outside = bounds.outside_space_bounds(av_gap) | bounds.under_time_gap(
             av_gap, self.speed[:, 1]
@@ -397,6 +487,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             observation = self._features()
         infos["fuel_gps"] = fuel
         infos["gap_outside"] = outside
+        infos["cut_ins"] = merging_now
         return observation, reward, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:

@@ -251,4 +251,12 @@ def _config_record(config: EnvConfig) -> Mapping[str, Any]:
             "max_gap_m": config.gap_bounds.max_gap_m,
             "min_time_gap_s": config.gap_bounds.min_time_gap_s,
         },
+        # manifests written before cut-ins were trained with have no such key
+        "cut_ins": None
+        if config.cut_ins is None
+        else {
+            "accept_time_gap_s": config.cut_ins.accept_time_gap_s,
+            "rate_per_s_per_s": config.cut_ins.rate_per_s_per_s,
+            "min_gap_m": config.cut_ins.min_gap_m,
+        },
     }

@@ -51,7 +51,7 @@ from sim.evaluate import (
     run_case,
 )
 from sim.folds import drive_date
-from sim.platoon import HandBack, PlatoonRun
+from sim.platoon import CutIns, HandBack, PlatoonRun
 from sim.recommended import RECOMMENDED_CONTROLLER, registered_variants
 from sim.recorded import RecordedDrive, load_recorded_drives
 from sim.report import (
@@ -768,6 +768,13 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option("--episode-s", type=FiniteFloatRange(min=1.0), default=300.0, show_default=True)
 @click.option(
+    "--cut-ins/--no-cut-ins",
+    default=True,
+    show_default=True,
+    help="Cars from the next lane merge into the AV's gap in training, as `sim evaluate` has "
+    "them (sim.platoon.CutIns); --no-cut-ins trains as every policy before 2026-12-03 was.",
+)
+@click.option(
     "--reward-candidates",
     default=None,
     help='JSON list of reward weight changes, e.g. \'[{"fuel": 0.6}, {"accel": 0.3}]\': '
@@ -794,6 +801,7 @@ def train_command(
     gamma: float | None,
     humans: int,
     episode_s: float,
+    cut_ins: bool,
     reward_candidates: str | None,
     out_dir: Path,
 ) -> None:
@@ -819,6 +827,7 @@ def train_command(
             "request_time_margin" if accel_action == "request_time_margin" else "request",
             humans=humans,
             episode_s=episode_s,
+            cut_ins=CutIns() if cut_ins else None,
         )
     except ValueError as error:
         raise click.ClickException(str(error)) from None

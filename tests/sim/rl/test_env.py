@@ -5,20 +5,31 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from contract.idm import I24_IDM, idm_accel
 from sim.drives import Drive, drive_from_speeds
 from sim.energy import RAV4_2019
-from sim.platoon import VEHICLE_LENGTH_M
-from sim.rl.env import EnvConfig, PlatoonVecEnv, RewardWeights
+from sim.platoon import VEHICLE_LENGTH_M, CutIns
+from sim.rl.env import MAX_MERGED_CARS, EnvConfig, PlatoonVecEnv, RewardWeights
 
 STEADY = drive_from_speeds("2021-01-01-steady", np.full(6001, 20.0))
 ONLY_GAP = RewardWeights(accel=0.0, speed=0.0, fuel=0.0, gap=1.0, collision=1.0)
 
 
 def steady_env(
-    actuation: str, reward: RewardWeights, envs: int = 2, episode_s: float = 60.0
+    actuation: str,
+    reward: RewardWeights,
+    envs: int = 2,
+    episode_s: float = 60.0,
+    cut_ins: CutIns | None = None,
 ) -> PlatoonVecEnv:
+    """A platoon behind a steady 20 m/s leader; without cut-ins unless asked, so a test of
+    one term does not meet a car merging into a gap it set."""
     config = EnvConfig(
-        "acc" if actuation == "acc" else "accel", humans=3, episode_s=episode_s, reward=reward
+        "acc" if actuation == "acc" else "accel",
+        humans=3,
+        episode_s=episode_s,
+        reward=reward,
+        cut_ins=cut_ins,
     )
     env = PlatoonVecEnv([STEADY], envs, config)
     env.reset(seed=1)
@@ -203,3 +214,70 @@ def test_configuration_errors_say_what_is_wrong() -> None:
         PlatoonVecEnv([STEADY], 2, EnvConfig("acc", episode_s=1000.0))
     with pytest.raises(ValueError, match="non-finite action"):
         steady_env("accel", ONLY_GAP).step(np.full((2, 1), np.nan))
+
+
+def test_a_car_merges_into_the_middle_of_a_wide_gap_and_leads_the_av() -> None:
+    """Hand-worked: 200 m behind a steady 20 m/s leader the AV leaves (200 - 19) / 20 = 9.05 s,
+    6.05 s beyond the 3 s a merging driver accepts: a hazard of 0.605 merges/s. A car merges
+    at the gap's middle (97.5 m to either side, 5 m cars) at 20 m/s and becomes the AV's
+    leader: its gap is in the envelope, where 200 m was beyond h_max."""
+    env = steady_env("accel", ONLY_GAP, cut_ins=CutIns())
+    place_av(env, 200.0)
+    env.merge_threshold[:] = [0.0, np.inf]  # the first env's draw is reached at once
+    leader_x = env.position[:, 0].copy()
+    features, reward, _, _, infos = env.step(np.zeros((2, 1)))
+    assert infos["cut_ins"].tolist() == [True, False]
+    assert env.merged.tolist() == [1, 0]
+    np.testing.assert_allclose(env.merge_clock, [0.0, 0.0605])
+    # merged at leader - 102.5 m, then one step from 20 m/s as an I-24 IDM driver 97.5 m
+    # behind a car as fast as it
+    pull = float(idm_accel(I24_IDM, np.array(97.5), np.array(20.0), np.array(20.0)))
+    assert env.merged_position[0, 0] == pytest.approx(leader_x[0] - 102.5 + 2.0 + 0.005 * pull)
+    assert env.merged_speed[0, 0] == pytest.approx(20.0 + 0.1 * pull)
+    # the AV's radar sees the merged car 97.5 m ahead (features: l, gap / 100 m); the other
+    # AV's leader is beyond its 100 m range
+    np.testing.assert_allclose(features[:, 3], [1.0, 0.0])
+    assert features[0, 4] == pytest.approx((97.5 + 0.005 * pull) / 100.0)
+    np.testing.assert_allclose(reward, [1.0, 0.0])
+
+
+def test_no_car_merges_into_a_gap_the_av_keeps_short() -> None:
+    """50 m at 20 m/s is 1.55 s beyond the merging car's room: no hazard, the clock stays."""
+    env = steady_env("accel", ONLY_GAP, cut_ins=CutIns())
+    place_av(env, 50.0)
+    for _ in range(100):
+        _, _, _, _, infos = env.step(np.zeros((2, 1)))
+        assert not infos["cut_ins"].any()
+    np.testing.assert_array_equal(env.merge_clock, 0.0)
+    assert env.merged.tolist() == [0, 0]
+
+
+def test_the_av_follows_the_last_car_that_merged_and_a_new_episode_has_none() -> None:
+    env = steady_env("accel", ONLY_GAP, envs=1, episode_s=1.0, cut_ins=CutIns())
+    place_av(env, 300.0)
+    for expected in (1, 2):
+        env.merge_threshold[:] = 0.0
+        env.step(np.zeros((1, 1)))
+        assert env.merged[0] == expected
+    # the second merged into the middle of the AV's gap to the first: ~72 m from the AV
+    lead_position, _ = env._av_leader()
+    assert lead_position[0] == env.merged_position[0, 1]
+    gap = lead_position[0] - env.position[0, 1] - VEHICLE_LENGTH_M
+    assert gap == pytest.approx((300.0 - 5.0) / 4 - 2.5, abs=0.5)
+    # the room is bounded; the episode's end (10 steps) clears it
+    assert MAX_MERGED_CARS >= 8
+    for _ in range(8):
+        env.step(np.zeros((1, 1)))
+    assert env.elapsed[0] == 0
+    assert env.merged[0] == 0
+    assert np.isnan(env.merged_position[0]).all()
+
+
+def test_cut_ins_leave_the_windows_drawn_as_without_them() -> None:
+    drives: list[Drive] = [STEADY, drive_from_speeds("2021-01-02-b", np.linspace(10, 30, 9001))]
+    plain = PlatoonVecEnv(drives, 8, EnvConfig("accel", humans=2, episode_s=60.0, cut_ins=None))
+    merging = PlatoonVecEnv(drives, 8, EnvConfig("accel", humans=2, episode_s=60.0))
+    plain.reset(seed=5)
+    merging.reset(seed=5)
+    np.testing.assert_array_equal(plain.start_step, merging.start_step)
+    np.testing.assert_array_equal(plain.road_index, merging.road_index)

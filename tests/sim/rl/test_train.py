@@ -114,6 +114,12 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         "max_gap_m": 120.0,
         "min_time_gap_s": 1.0,
     }
+    # trained with cars merging into the AV's gap, as sim evaluate has them
+    assert manifest["environment"]["cut_ins"] == {
+        "accept_time_gap_s": 3.0,
+        "rate_per_s_per_s": 0.1,
+        "min_gap_m": 19.0,
+    }
     folds = manifest["cross_validation"]["folds"]
     assert [fold["held_out_dates"] for fold in folds] == [
         ["2021-03-09", "2021-04-19"],
@@ -144,12 +150,13 @@ def test_held_out_scores_judge_the_envelope_the_policy_was_trained_to_keep(
         for name, start in (("2021-04-05-a", 0.0), ("2021-03-09-a", 220.0))
     ]
     bounds = GapBounds(min_gap_m=0.0, max_gap_m=1.0, min_time_gap_s=0.0)
-    config = EnvConfig("accel", humans=4, episode_s=60.0, gap_bounds=bounds)
+    config = EnvConfig("accel", humans=4, episode_s=60.0, gap_bounds=bounds, cut_ins=None)
     run = run_training(
         drives, config, TINY, timesteps=512, seed=3, folds=2, out_dir=tmp_path, final=False
     )
     manifest = json.loads(run.manifest_path.read_text())
     assert manifest["environment"]["gap_bounds"]["max_gap_m"] == 1.0
+    assert manifest["environment"]["cut_ins"] is None  # trained without cut-ins, and says so
     shares = {row["gap_within_share"] for row in manifest["cross_validation"]["drives"]}
     assert shares == {0.0}
     # judged to the reachable leader too, never less often within
