@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import re
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,28 @@ def write_drive(drive: Drive, path: Path) -> None:
     time_s = drive.start_unix_s + np.arange(drive.steps + 1) * drive.dt_s
     rows = "".join(f"{t:.1f},{v * 3.6:.6f}\n" for t, v in zip(time_s, drive.speed_mps, strict=True))
     path.write_text("Time,Velocity\n" + rows)
+
+
+def evaluate_microaccel(
+    drives: Path, out: Path, *options: str, file_size_limit_bytes: int | None = None
+) -> subprocess.CompletedProcess[str]:
+    """`sim evaluate` of kernel_smooth x microaccel on `drives` into `out`, with `options`."""
+    return run_cli(
+        "sim",
+        "evaluate",
+        "--drives",
+        str(drives),
+        *options,
+        "--planner",
+        "kernel_smooth",
+        "--controller",
+        "microaccel:accel",
+        "--out",
+        str(out),
+        env=cli_env(),
+        timeout=300,
+        file_size_limit_bytes=file_size_limit_bytes,
+    )
 
 
 def test_variant_parsing() -> None:
@@ -193,22 +216,7 @@ def test_cli_evaluate_writes_the_table_csv_and_heatmap(shared_dir: Path, tmp_pat
             lines = lines[:1] + [line for line in lines[1:] if float(line.split(",")[0]) > 120.0]
         (recorded / late / path.name).write_text("".join(lines))
     out = tmp_path / "out"
-    result = run_cli(
-        "sim",
-        "evaluate",
-        "--drives",
-        str(drives),
-        "--inrix-drives",
-        str(recorded),
-        "--planner",
-        "kernel_smooth",
-        "--controller",
-        "microaccel:accel",
-        "--out",
-        str(out),
-        env=cli_env(),
-        timeout=300,
-    )
+    result = evaluate_microaccel(drives, out, "--inrix-drives", str(recorded))
     assert result.returncode == 0, result.stderr
     # until the late feed's first plan (the cycle at 180 s) the AV drives on its stock ACC
     assert (
@@ -317,23 +325,8 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     # run on its own scenario, it names no best pair on the shockwave drives it did not run
     bound = tmp_path / "optimum.csv"
     bound.write_text("drive,fuel_saving_pct\nfast,0.4\nelsewhere,9.0\n")
-    freeflow = run_cli(
-        "sim",
-        "evaluate",
-        "--drives",
-        str(drives),
-        "--scenario",
-        "freeflow",
-        "--planner",
-        "kernel_smooth",
-        "--controller",
-        "microaccel:accel",
-        "--optimum",
-        str(bound),
-        "--out",
-        str(tmp_path / "out"),
-        env=cli_env(),
-        timeout=300,
+    freeflow = evaluate_microaccel(
+        drives, tmp_path / "out", "--scenario", "freeflow", "--optimum", str(bound)
     )
     assert freeflow.returncode == 0, freeflow.stderr
     assert "the best pair is named on the shockwave scenario, which was not run" in freeflow.stdout
@@ -474,22 +467,8 @@ def test_a_failed_write_keeps_the_earlier_evaluation_whole(
     earlier = {name: f"an earlier {name}".encode() for name in ("evaluation.csv", "summary.md")}
     for name, content in earlier.items():
         (out / name).write_bytes(content)
-    limited = run_cli(
-        "sim",
-        "evaluate",
-        "--drives",
-        str(drives),
-        "--scenario",
-        "shockwave",
-        "--planner",
-        "kernel_smooth",
-        "--controller",
-        "microaccel:accel",
-        "--out",
-        str(out),
-        env=cli_env(),
-        timeout=300,
-        file_size_limit_bytes=1000,
+    limited = evaluate_microaccel(
+        drives, out, "--scenario", "shockwave", file_size_limit_bytes=1000
     )
     assert limited.returncode == 1, limited.stderr
     assert "evaluation.csv: cannot be written (File too large); an earlier file there is kept" in (
