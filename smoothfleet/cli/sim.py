@@ -863,6 +863,11 @@ def train_command(
             )
         except ValueError as error:
             raise click.ClickException(str(error)) from None
+    console.print(
+        "held out (each fold's policy on the dates it was not trained on; one AV behind the "
+        "leader, simulated INRIX, no cut-ins or hand-backs: sim select and sim evaluate, which "
+        "have them, give the verdict):"
+    )
     for row in result.summary:
         console.print(
             f"{row['controller']:>15} {row['group']:>12} ({row['drives']} drives): fuel saving "
