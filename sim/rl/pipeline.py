@@ -223,6 +223,7 @@ def _cross_validate(
         planner=config.planner,
         planner_params=config.planner_params,
         bounds=config.gap_bounds,  # the envelope the policy was trained to keep, as recorded
+        cut_ins=config.cut_ins,  # the cars that merged in training merge here too
         progress=scoring_progress(progress, f"{stage} held-out", len(fold.held_out) * len(tested)),
     )
     record = {

@@ -6,7 +6,7 @@ training dates only. It splits them again by date (`sim.folds.date_folds`, two i
 trains every candidate on one inner fold's dates and scores it on the other's, both ways, and
 pools the two inner held-out halves. The outer fold's held-out dates are never read, so the
 policy the outer fold then trains with the chosen weights is scored on dates the choice did not
-see.
+see. The inner scores have the cut-ins the training had (`EnvConfig.cut_ins`).
 
 The rule (`admissibility`, `choose`) is the issue's: a candidate is admissible when, in every
 group of drives, mean throughput and network speed stay within `MAX_LOSS_PCT`, on the freeflow
@@ -214,6 +214,7 @@ def select_reward(
                     planner=config.planner,
                     planner_params=config.planner_params,
                     bounds=config.gap_bounds,
+                    cut_ins=config.cut_ins,
                     progress=scoring_progress(progress, f"{label} held-out", len(fold.held_out)),
                 )
             )

@@ -38,7 +38,7 @@ from sim.kpi import (
     unmeasured_paper_kpis,
 )
 from sim.plans import SimulatedPlanner
-from sim.platoon import PlatoonRun, platoon_roles, simulate_platoon
+from sim.platoon import CutIns, PlatoonRun, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import AccClip, Controller, build_controller
 from vehicle_agent.controllers.rl_acc import RlAccController
 from vehicle_agent.controllers.rl_accel import RlAccelController
@@ -98,6 +98,10 @@ class DriveScore:
     # time outside the fleet's top speed leaves the AV no way to avoid. NaN in manifests written
     # before the field existed.
     gap_within_reachable_share: float = math.nan
+    # How much further behind the leader the AV ended than the human in its place (as
+    # `sim evaluate`'s distance lost): what a policy that drops back gives away. NaN in
+    # manifests written before the field existed.
+    distance_lost_m: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values (manifest, CSV)."""
@@ -116,9 +120,11 @@ def simulate_one_av(
     planner: str,
     planner_params: Mapping[str, Any],
     humans: int = 24,
+    cut_ins: CutIns | None = None,
 ) -> PlatoonRun:
     """The drive with one AV right behind the leader, run by `entry` with the real planner in
-    the loop (its ACC car on `acc`), and `humans` I-24 IDM drivers behind it."""
+    the loop (its ACC car on `acc`), and `humans` I-24 IDM drivers behind it; with `cut_ins`,
+    cars from the next lane merge into wide gaps as in `sim evaluate`."""
     schedule = SimulatedPlanner.for_drive(drive, planner, planner_params)
     policy = AgentPolicy(
         entry.build(),
@@ -131,6 +137,7 @@ def simulate_one_av(
         platoon_roles(humans, 1),
         [policy],
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
+        cut_ins=cut_ins,
     )
 
 
@@ -156,17 +163,24 @@ def score_drives(
     planner_params: Mapping[str, Any],
     humans: int = 24,
     bounds: GapBounds | None = None,
+    cut_ins: CutIns | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> list[DriveScore]:
-    """Every controller on every drive (one AV behind the leader, `humans` behind it)."""
+    """Every controller on every drive (one AV behind the leader, `humans` behind it), with
+    `cut_ins` in both the AV's and the all-human platoon, as `sim evaluate` has them."""
     envelope = bounds or GapBounds()
     scores = []
     for drive in drives:
-        base_run = simulate_platoon(drive, platoon_roles(humans + 1, 0))
+        base_run = simulate_platoon(drive, platoon_roles(humans + 1, 0), cut_ins=cut_ins)
         base = platoon_kpis(base_run)
         for entry in controllers:
             run = simulate_one_av(
-                drive, entry, planner=planner, planner_params=planner_params, humans=humans
+                drive,
+                entry,
+                planner=planner,
+                planner_params=planner_params,
+                humans=humans,
+                cut_ins=cut_ins,
             )
             # both runs' throughput at the same road locations (`sim.kpi.shared_points_m`)
             points = throughput_points_m([run, base_run])
@@ -182,6 +196,7 @@ def score_drives(
                 run.dt_s,
                 envelope,
             )
+            lost = base_run.position_m[-1, av + 1] - run.position_m[-1, av + 1]
             scores.append(
                 _score(
                     drive,
@@ -190,6 +205,7 @@ def score_drives(
                     kpis,
                     envelope_kpis,
                     base_throughput,
+                    float(np.max(lost)),
                 )
             )
             if progress is not None:
@@ -204,6 +220,7 @@ def _score(
     kpis: Kpis,
     envelope: GapKpis,
     base_throughput: float,
+    distance_lost_m: float,
 ) -> DriveScore:
     return DriveScore(
         drive=drive.name,
@@ -219,6 +236,7 @@ def _score(
         gap_within_share=envelope.within_bounds_share,
         unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
         gap_within_reachable_share=envelope.within_reachable_bounds_share,
+        distance_lost_m=distance_lost_m,
     )
 
 
@@ -248,7 +266,7 @@ def group_worst(scores: Sequence[DriveScore], column: str) -> float:
 def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
     """Per controller and group: mean fuel saving, mean and worst throughput and network speed
     changes (drives the all-human platoon cannot measure left out), collisions, the smallest
-    share of time within the gap envelope."""
+    share of time within the gap envelope, the mean distance lost."""
     rows = []
     for label in dict.fromkeys(score.controller for score in scores):
         for group, member in GROUPS.items():
@@ -272,6 +290,7 @@ def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
                     "min_gap_within_reachable_share": group_worst(
                         chosen, "gap_within_reachable_share"
                     ),
+                    "distance_lost_m": group_mean(chosen, "distance_lost_m"),
                 }
             )
     return rows

@@ -865,8 +865,8 @@ def train_command(
             raise click.ClickException(str(error)) from None
     console.print(
         "held out (each fold's policy on the dates it was not trained on; one AV behind the "
-        "leader, simulated INRIX, no cut-ins or hand-backs: sim select and sim evaluate, which "
-        "have them, give the verdict):"
+        "leader, simulated INRIX, cut-ins as in training, no hand-backs: sim select and sim "
+        "evaluate, which have them, give the verdict):"
     )
     for row in result.summary:
         console.print(
@@ -878,6 +878,7 @@ def train_command(
             f"{percent_text(row['worst_network_speed_change_pct'])}), collisions "
             f"{row['collisions']}, gap within bounds >= {100 * row['min_gap_within_share']:.1f} %"
             f" (to the reachable leader >= {_share_text(row['min_gap_within_reachable_share'])})"
+            f", distance lost {row['distance_lost_m']:+.0f} m"
         )
     console.print(
         f"wrote {result.policy_path} (sha256 {result.sha256[:12]}) and {result.manifest_path}"

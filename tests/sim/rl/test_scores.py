@@ -3,9 +3,17 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from pathlib import Path
 
-from sim.rl.scores import summarise
+import pytest
+
+from sim.drives import load_drive
+from sim.platoon import CutIns, platoon_roles, simulate_platoon
+from sim.rl.env import DEFAULT_PLANNER_PARAMS
+from sim.rl.scores import ControllerUnderTest, score_drives, simulate_one_av, summarise
 from tests.sim.rl.test_reward_selection import score
+from tests.sim.test_evaluate import STOP_AND_GO
 
 
 def test_a_drive_the_controller_left_undefined_leaves_the_group_figure_undefined() -> None:
@@ -42,3 +50,27 @@ def test_a_drive_the_all_human_platoon_cannot_measure_is_left_out_of_that_kpis_f
     [row] = summarise([short])
     assert math.isnan(row["throughput_change_pct"])
     assert math.isnan(row["worst_throughput_change_pct"])
+
+
+def test_scores_say_how_far_behind_the_av_ended_with_the_cut_ins_of_training(
+    shared_dir: Path,
+) -> None:
+    """Distance lost is the human's final position in the all-human platoon minus the AV's in
+    its own, as `sim evaluate` reads it; with cut-ins both platoons meet them. microaccel
+    (k = 0.05) keeps wide gaps on a stop-and-go slice, so cars merge in."""
+    drive = replace(
+        load_drive(shared_dir / "data" / STOP_AND_GO).slice(300.0, 300.0), name="2021-04-05-a"
+    )
+    reference = ControllerUnderTest.registered("microaccel", "accel", {"k": 0.05})
+    settings = {"planner": "kernel_smooth", "planner_params": DEFAULT_PLANNER_PARAMS}
+    for cut_ins in (None, CutIns()):
+        [scored] = score_drives([drive], [reference], humans=4, cut_ins=cut_ins, **settings)
+        base = simulate_platoon(drive, platoon_roles(5, 0), cut_ins=cut_ins)
+        run = simulate_one_av(drive, reference, humans=4, cut_ins=cut_ins, **settings)
+        assert (run.cut_ins > 0) == (cut_ins is not None)
+        # the AV is column 1 of both platoons
+        expected = float(base.position_m[-1, 1] - run.position_m[-1, 1])
+        assert scored.distance_lost_m == pytest.approx(expected)
+        assert scored.distance_lost_m > 0.0  # its wide gaps leave it behind the human
+    for row in summarise([scored]):  # its groups: stop-and-go and shockwave
+        assert row["distance_lost_m"] == scored.distance_lost_m

@@ -133,9 +133,10 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     scored = {(row["drive"], row["controller"]) for row in manifest["cross_validation"]["drives"]}
     assert len(scored) == 8  # 4 drives x (rl_accel, microaccel), each on its held-out fold
     assert "rl_accel" in result.stdout
-    assert "no cut-ins or hand-backs: sim select and sim evaluate" in " ".join(
+    assert "cut-ins as in training, no hand-backs: sim select and sim evaluate" in " ".join(
         result.stdout.split()
     )
+    assert "distance lost " in result.stdout
     assert "to the reachable leader >= " in result.stdout
     assert "sha256" in result.stdout
 
