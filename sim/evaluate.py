@@ -34,6 +34,7 @@ from sim.kpi import (
     UNMEASURED_COLUMN,
     Kpis,
     change_pct,
+    distance_lost_m,
     fuel_saving_pct,
     measured_mean,
     platoon_kpis,
@@ -196,8 +197,7 @@ class Evaluation:
         if not result.av_columns:
             return 0.0
         base = self.baseline(result.case.name).final_position_m
-        columns = list(result.av_columns)
-        return float(np.max(base[columns] - result.final_position_m[columns]))
+        return distance_lost_m(base, result.final_position_m, result.av_columns)
 
     def optimum_pct(self, result: RunResult) -> float:
         """The optimal bound's fuel saving on this run's drive (NaN when not computed)."""

@@ -134,6 +134,16 @@ def change_pct(value: float, baseline: float) -> float:
     return 100.0 * (value / baseline - 1.0)
 
 
+def distance_lost_m(
+    baseline_final_m: FloatArray, final_m: FloatArray, av_columns: Sequence[int]
+) -> float:
+    """How much further behind the leader the AVs ended than the humans in their places: the
+    largest of the AV columns' final positions in the all-human platoon minus their own (a
+    controller may not win fuel by dropping back)."""
+    columns = list(av_columns)
+    return float(np.max(baseline_final_m[columns] - final_m[columns]))
+
+
 def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> FloatArray:
     """When each vehicle passes `point_m` (linear between steps; positions never decrease).
 

@@ -29,6 +29,7 @@ from sim.gaps import GapBounds, GapKpis, gap_kpis
 from sim.kpi import (
     Kpis,
     change_pct,
+    distance_lost_m,
     fuel_saving_pct,
     measured_mean,
     measured_values,
@@ -196,7 +197,6 @@ def score_drives(
                 run.dt_s,
                 envelope,
             )
-            lost = base_run.position_m[-1, av + 1] - run.position_m[-1, av + 1]
             scores.append(
                 _score(
                     drive,
@@ -205,7 +205,7 @@ def score_drives(
                     kpis,
                     envelope_kpis,
                     base_throughput,
-                    float(np.max(lost)),
+                    distance_lost_m(base_run.position_m[-1], run.position_m[-1], (av + 1).tolist()),
                 )
             )
             if progress is not None:
@@ -220,7 +220,7 @@ def _score(
     kpis: Kpis,
     envelope: GapKpis,
     base_throughput: float,
-    distance_lost_m: float,
+    lost_m: float,
 ) -> DriveScore:
     return DriveScore(
         drive=drive.name,
@@ -236,7 +236,7 @@ def _score(
         gap_within_share=envelope.within_bounds_share,
         unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
         gap_within_reachable_share=envelope.within_reachable_bounds_share,
-        distance_lost_m=distance_lost_m,
+        distance_lost_m=lost_m,
     )
 
 
