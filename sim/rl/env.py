@@ -294,7 +294,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             return merging
         room = self.merged < MAX_MERGED_CARS
         self.merge_clock += np.where(room, cut_ins.hazard_per_s(gap, speed), 0.0) * self.dt_s
-        merging = self.merge_clock >= self.merge_threshold
+        merging = room & (self.merge_clock >= self.merge_threshold)
         for env in np.flatnonzero(merging):
             slot = int(self.merged[env])
             self.merged_position[env, slot] = lead_position[env] - 0.5 * (
