@@ -177,6 +177,9 @@ class AgentPolicy:
         self._engaged = True
         measured = lead_present and self.senses_lead_state
         rel_speed = observation.lead_speed_mps - observation.speed_mps
+        if self.controller.actuation == "accel" and not self._limiting:
+            self.accel_limiter.reset(self._measured_accel_mps2, time_s)
+            self._limiting = True
         action = self.controller.step(
             Observation(
                 time_s=time_s,
@@ -189,12 +192,10 @@ class AgentPolicy:
                 lead_rel_speed_mps=rel_speed if measured else None,
                 acc_speed_setting_mph=self.stock_acc.speed_setting_mph if self.stock_acc else None,
                 acc_gap_setting=self.stock_acc.gap_setting if self.stock_acc else None,
+                commanded_accel_mps2=self.accel_limiter.reference_mps2 if self._limiting else None,
             )
         )
         if isinstance(action, AccelCommand):
-            if not self._limiting:
-                self.accel_limiter.reset(self._measured_accel_mps2, time_s)
-                self._limiting = True
             return self.accel_limiter.limit(
                 time_s, action.accel_mps2, speed_mps=observation.speed_mps
             )

@@ -222,6 +222,12 @@ class AccelLimiter:
         """Start again from the car's current acceleration (None: from no reference)."""
         self._last = None if accel_mps2 is None or now is None else (now, accel_mps2)
 
+    @property
+    def reference_mps2(self) -> float | None:
+        """The acceleration the next request's jerk limits start from: the last one let
+        through, or the one `reset` started from (None: no reference)."""
+        return None if self._last is None else self._last[1]
+
     def limit(self, now: float, requested_mps2: float, *, speed_mps: float) -> float:
         """The request as it may be sent now, with the car at `speed_mps`."""
         limits = self.limits

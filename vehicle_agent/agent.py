@@ -527,6 +527,7 @@ class Agent:
             lead_rel_speed_mps=reading.lead_rel_speed_mps,
             acc_speed_setting_mph=reading.acc_speed_setting_mph,
             acc_gap_setting=reading.acc_gap_setting,
+            commanded_accel_mps2=self.limiter.reference_mps2,
         )
         try:
             action: Action = require_finite(running.controller.step(observation))

@@ -61,13 +61,15 @@ from vehicle_agent.controllers.acc_clip import CLIP_WINDOW_STEPS
 from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 from vehicle_agent.controllers.policy import (
     ACCEL_ACTION_SIZES,
-    FEATURE_SIZES,
+    ACCEL_OBSERVATION_SIZES,
     PLAN_LOOKAHEAD_M,
     AccelAction,
+    AccelObservation,
     PolicyActuation,
     acc_features,
     accel_features,
     action_size,
+    observation_size,
     requested_accel_mps2,
     requested_gap_setting,
     requested_speed_mph,
@@ -112,11 +114,12 @@ class RewardWeights:
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """One training set-up: actuation (and how an `accel` action is read), platoon, episode
-    window, planner, reward, gap bounds."""
+    """One training set-up: actuation (and how an `accel` action is read and what an `accel`
+    policy observes), platoon, episode window, planner, reward, gap bounds."""
 
     actuation: PolicyActuation
     accel_action: AccelAction = "request"
+    accel_observation: AccelObservation = "radar"
     humans: int = 10
     episode_s: float = 300.0
     planner: str = "kernel_smooth"
@@ -128,7 +131,7 @@ class EnvConfig:
     cut_ins: CutIns | None = CutIns()
 
     def __post_init__(self) -> None:
-        if self.actuation not in FEATURE_SIZES:
+        if self.actuation not in ("acc", "accel"):
             raise ValueError(f"actuation {self.actuation!r} is not one of acc, accel")
         if self.accel_action not in ACCEL_ACTION_SIZES:
             raise ValueError(
@@ -137,6 +140,15 @@ class EnvConfig:
         if self.actuation == "acc" and self.accel_action != "request":
             raise ValueError(
                 f"the accel action {self.accel_action!r} is for accel policies, not acc"
+            )
+        if self.accel_observation not in ACCEL_OBSERVATION_SIZES:
+            raise ValueError(
+                f"accel observation {self.accel_observation!r} is not one of "
+                f"{', '.join(ACCEL_OBSERVATION_SIZES)}"
+            )
+        if self.actuation == "acc" and self.accel_observation != "radar":
+            raise ValueError(
+                f"the accel observation {self.accel_observation!r} is for accel policies, not acc"
             )
         if self.humans < 1:
             raise ValueError(
@@ -180,7 +192,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
             raise ValueError(f"no drive is longer than an episode ({config.episode_s:g} s)")
         self.roads = [_DriveRoad(drive, drive.position_m) for drive in usable]
         self.planner_params = PlannerParams.parse(dict(config.planner_params))
-        size = FEATURE_SIZES[config.actuation]
+        size = observation_size(config.actuation, config.accel_observation)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float64)
         self.action_size = action_size(config.actuation, config.accel_action)
         self.single_action_space = gym.spaces.Box(-1.0, 1.0, (self.action_size,), np.float64)
@@ -351,6 +363,11 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         gap = lead_position - self.position[:, 1] - VEHICLE_LENGTH_M
         lead_present = gap <= RADAR_RANGE_M
         if self.config.actuation == "accel":
+            commanded = None
+            if self.config.accel_observation == "commanded_accel":
+                commanded = np.array(
+                    [limiter.reference_mps2 for limiter in self.limiters], dtype=np.float64
+                )
             return accel_features(
                 speed,
                 self.target_here,
@@ -358,6 +375,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
                 lead_present,
                 gap,
                 lead_speed - speed,
+                commanded,
             )
         setting = np.array([car.acc.set_speed_mph or 0.0 for car in self.cars], dtype=np.float64)
         bars = np.array([car.acc.gap_setting for car in self.cars], dtype=np.float64)

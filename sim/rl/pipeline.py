@@ -237,11 +237,17 @@ def _cross_validate(
 
 
 def _config_record(config: EnvConfig) -> Mapping[str, Any]:
-    # Recorded only when not the plain request, as in the policy file: the manifests of
-    # policies trained before the margin action existed reproduce unchanged.
+    # Recorded only when not the plain request or the radar observation, as in the policy file:
+    # the manifests of policies trained before either existed reproduce unchanged.
     action = {"accel_action": config.accel_action} if config.accel_action != "request" else {}
+    observation = (
+        {"accel_observation": config.accel_observation}
+        if config.accel_observation != "radar"
+        else {}
+    )
     return {
         **action,
+        **observation,
         "humans": config.humans,
         "episode_s": config.episode_s,
         "planner": config.planner,

@@ -188,4 +188,6 @@ def export_policy(model: PPO, path: Path, config: EnvConfig) -> str:
     linear.append(head)
     weights = [layer.weight.detach().cpu().numpy().astype(np.float64).T for layer in linear]
     biases = [layer.bias.detach().cpu().numpy().astype(np.float64) for layer in linear]
-    return save_policy(path, config.actuation, weights, biases, config.accel_action)
+    return save_policy(
+        path, config.actuation, weights, biases, config.accel_action, config.accel_observation
+    )

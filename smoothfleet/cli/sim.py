@@ -753,6 +753,14 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     "margin (0-1.5 s) a_safe adds to its gap.",
 )
 @click.option(
+    "--accel-observation",
+    type=click.Choice(["radar", "commanded_accel"]),
+    default="radar",
+    show_default=True,
+    help="accel policies: the paper's observation with the radar's gap and relative speed, "
+    "or that and the acceleration the agent's limiter last let through.",
+)
+@click.option(
     "--gamma",
     type=FiniteFloatRange(0.0, 1.0, max_open=True),
     default=None,
@@ -798,6 +806,7 @@ def train_command(
     final: bool,
     num_envs: int,
     accel_action: str,
+    accel_observation: str,
     gamma: float | None,
     humans: int,
     episode_s: float,
@@ -825,6 +834,7 @@ def train_command(
         config = EnvConfig(
             "acc" if actuation == "acc" else "accel",
             "request_time_margin" if accel_action == "request_time_margin" else "request",
+            "commanded_accel" if accel_observation == "commanded_accel" else "radar",
             humans=humans,
             episode_s=episode_s,
             cut_ins=CutIns() if cut_ins else None,

@@ -237,7 +237,22 @@ def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api
     )
     assert loc == ["body", "policy"]
     assert "accel action 'time_gap_only'" in msg
+    # an observation this agent does not build
+    content = accel_policy_bytes(accel_observation="lidar")
+    loc, msg = rejected(
+        api.upload(content, {"sha256": hashlib.sha256(content).hexdigest(), "actuation": "accel"})
+    )
+    assert loc == ["body", "policy"]
+    assert "observation 'lidar', which this agent does not build" in msg
     assert held_policies(api.engine) == SEEDED
+
+
+def test_an_accel_policy_reading_the_commanded_accel_is_stored(api: Api) -> None:
+    content = accel_policy_bytes(accel_observation="commanded_accel")
+    digest = hashlib.sha256(content).hexdigest()
+    response = api.upload(content, {"sha256": digest, "actuation": "accel"})
+    assert response.status_code == 201, response.text
+    assert api.get(f"/api/v1/policies/{digest}", role="vehicle").content == content
 
 
 def test_who_may_upload_and_download(api: Api) -> None:

@@ -147,6 +147,34 @@ def test_each_engagement_starts_the_limiter_from_the_cars_acceleration() -> None
     assert second == pytest.approx(1.0)  # then falling 5 m/s^3
 
 
+class RecordingRequest(Requesting):
+    """Requesting, keeping the commanded acceleration each observation carries."""
+
+    def __init__(self, request_mps2: float) -> None:
+        super().__init__(request_mps2)
+        self.commanded: list[float | None] = []
+
+    def step(self, observation: Observation) -> AccelCommand:
+        self.commanded.append(observation.commanded_accel_mps2)
+        return super().step(observation)
+
+
+def test_the_controller_sees_what_the_limiter_let_through_and_the_car_at_take_over() -> None:
+    """The first observation of an engagement carries the car's acceleration (its speed
+    rising 0.1 m/s a step: 1 m/s^2), each next one the limiter's last output as it brakes
+    toward -3 m/s^2 at 5 m/s^3."""
+    controller = RecordingRequest(-3.0)
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=True)
+    policy.driver_drives(AvObservation(0.0, 0.0, 20.0, 200.0, 25.0))
+    policy.driver_drives(AvObservation(0.1, 0.0, 20.1, 200.0, 25.0))
+    made = [
+        policy.accel_mps2(AvObservation(0.2 + step / 10, 0.0, 20.2, 200.0, 25.0))
+        for step in range(3)
+    ]
+    assert controller.commanded == pytest.approx([1.0, 1.0, 0.5])
+    assert made == pytest.approx([1.0, 0.5, 0.0])
+
+
 class Recording(Controller):
     """Records what it is shown and asks for nothing."""
 

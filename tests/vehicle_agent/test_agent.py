@@ -11,6 +11,7 @@ from datetime import datetime, timedelta
 from pathlib import Path
 
 import can
+import numpy as np
 import pytest
 
 from contract.corridor import CorridorGeometry
@@ -21,6 +22,7 @@ from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
 from vehicle_agent.cars import CarReading, CruiseButton
 from vehicle_agent.controllers import AccelCommand, Action, Observation
 from vehicle_agent.controllers.microaccel import MicroAccelController
+from vehicle_agent.controllers.policy import save_policy
 from vehicle_agent.engage import CHECKS, Mode
 from vehicle_agent.gps import GpsFix
 from vehicle_agent.ports import GpioButtonBoard
@@ -637,6 +639,40 @@ def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
         assert r.agent.safety.refused == {}
         back = play_the_pcm(r, listener, 6 * period, cruise_state=8)
         assert {request["RELEASE_STANDSTILL"] for request in back} == {1}
+
+
+def test_a_policy_reading_the_commanded_accel_gets_what_the_limiter_let_through(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A policy asking for 1.5 x (its commanded-acceleration input x 3 + 0.2) m/s^2, the last
+    command plus 0.2 (x 1.5): it feeds on the agent's limiter, which raises it at 2.5 m/s^3 to
+    the range's 1.5 m/s^2. An agent that left the figure out would fail the controller and hand
+    the car back; one that fed the car's measured acceleration would lag the ramp."""
+    weight = np.zeros((7, 1))
+    weight[6, 0] = 3.0
+    policy = tmp_path / "commanded.npz"
+    save_policy(policy, "accel", [weight], [np.array([0.2])], accel_observation="commanded_accel")
+    with rig(
+        "toyota_rav4",
+        tmp_path,
+        dbc_cache,
+        controller="rl_accel",
+        params={"policy": str(policy)},
+        speed_mps=20.0,
+    ) as r:
+        engage_and_settle(r, 45)  # 20.1 m/s: the ACC holds the car's speed, about 0 m/s^2
+        commanded = []
+        for _ in range(8):
+            r.run(CONTROL_PERIOD_S)
+            commanded.append(r.agent.limiter.reference_mps2)
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.stats.controller_errors == 0
+        steps = np.diff(commanded)
+        rising = steps[np.asarray(commanded[1:]) < 1.5]
+        assert len(rising) >= 4
+        np.testing.assert_allclose(rising, 0.25, atol=1e-9)
+        r.run(1.0)
+        assert r.agent.limiter.reference_mps2 == pytest.approx(1.5)
 
 
 # The speed over which the safety layer refuses every acceleration request asking for more

@@ -43,6 +43,14 @@ def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed(
     np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
 
 
+def test_the_commanded_accel_observation_adds_the_limiters_last_output_over_three() -> None:
+    features = accel_features(30.0, 30.0, 30.0, True, 40.0, -5.0, -1.5)
+    np.testing.assert_allclose(features, [1.0, 1.0, 1.0, 1.0, 0.4, -0.5, -0.5])
+    batch = accel_features([30.0, 12.0], 30.0, 30.0, True, 40.0, -5.0, [0.75, -1.5])
+    np.testing.assert_array_equal(batch[1, :6], accel_features(12.0, 30.0, 30.0, True, 40.0, -5.0))
+    np.testing.assert_allclose(batch[:, 6], [0.25, -0.5])
+
+
 def test_one_cars_features_are_its_row_of_a_batch_bit_for_bit() -> None:
     # the car's step builds its one row without broadcasting; the training environment's
     # batches broadcast: the network must see the same numbers from both
@@ -245,6 +253,58 @@ def test_rl_accel_with_a_time_margin_policy_adds_its_margin_to_the_bound(tmp_pat
     assert command.requested_accel_mps2 == pytest.approx(0.0)
     assert command.accel_mps2 == pytest.approx(bounded_request(0.0, 15.0, 20.0, 0.0, 0.0, 0.75))
     assert command.accel_mps2 < bounded_request(0.0, 15.0, 20.0, 0.0, 0.0) - 0.1
+
+
+def commanded_accel_policy(tmp_path: Path, inputs: int = 7) -> Path:
+    """One linear layer reading the commanded acceleration only: action = 2 x its feature."""
+    weight = np.zeros((inputs, 1))
+    weight[-1, 0] = 2.0
+    path = tmp_path / f"commanded-{inputs}.npz"
+    save_policy(path, "accel", [weight], [np.zeros(1)], accel_observation="commanded_accel")
+    return path
+
+
+def test_accel_files_say_what_they_observe(tmp_path: Path) -> None:
+    """A radar file records no observation (the bytes written before the commanded
+    acceleration existed) and has six inputs; a commanded_accel file records it and needs a
+    seventh; one this agent does not build, or one recorded on an acc file, is refused."""
+    radar = two_layer_policy(tmp_path, "accel", 1)
+    with np.load(radar) as archive:
+        assert "accel_observation" not in archive.files
+    assert load_policy(radar, "accel").accel_observation == "radar"
+    network = load_policy(commanded_accel_policy(tmp_path), "accel")
+    assert network.accel_observation == "commanded_accel"
+    with pytest.raises(PolicyFileError, match=r"layer 0 has shape \(6, 1\) .* expected \(7, n\)"):
+        load_policy(commanded_accel_policy(tmp_path, inputs=6), "accel")
+    for actuation, observation in (("accel", "lidar"), ("acc", "commanded_accel")):
+        arrays = dict(np.load(two_layer_policy(tmp_path, actuation, 2)))
+        arrays["accel_observation"] = np.array(observation)
+        odd = tmp_path / f"odd-observation-{actuation}.npz"
+        np.savez(odd, **arrays)
+        with pytest.raises(
+            PolicyFileError, match=f"observation '{observation}', which this agent does not build"
+        ):
+            load_policy(odd, actuation)  # type: ignore[arg-type]
+
+
+def test_rl_accel_feeds_a_commanded_accel_policy_what_the_limiter_let_through(
+    tmp_path: Path,
+) -> None:
+    """-1.5 m/s^2 let through reads -0.5, the network asks -1 (-3 m/s^2); +0.75 reads +0.25,
+    it asks +0.5 (+0.75 m/s^2). Without the figure the controller fails, so the agent hands
+    the car back rather than guess it."""
+    path = commanded_accel_policy(tmp_path)
+    controller = RlAccelController("accel", RlParams(policy=str(path)))
+    braking = controller.step(
+        Observation(time_s=0.0, speed_mps=20.0, target_speed_mps=20.0, commanded_accel_mps2=-1.5)
+    )
+    assert braking == AccelCommand(pytest.approx(-3.0))
+    easing = controller.step(
+        Observation(time_s=0.1, speed_mps=20.0, target_speed_mps=20.0, commanded_accel_mps2=0.75)
+    )
+    assert easing == AccelCommand(pytest.approx(0.75))
+    with pytest.raises(ValueError, match="reads the commanded acceleration"):
+        controller.step(Observation(time_s=0.2, speed_mps=20.0, target_speed_mps=20.0))
 
 
 @given(

@@ -52,6 +52,9 @@ class Observation:
     lead_rel_speed_mps: float | None = None
     acc_speed_setting_mph: float | None = None
     acc_gap_setting: int | None = None
+    # The acceleration the agent's limiter last let through (m/s^2), which its jerk limits
+    # start the next request from; the car's own at a take-over. `accel` cars only.
+    commanded_accel_mps2: float | None = None
 
     @property
     def has_lead_state(self) -> bool:

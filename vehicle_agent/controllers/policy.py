@@ -11,7 +11,11 @@ position, the "minicar" flag l, and on `acc` cars the ACC speed setting s and ga
 Added, because the car really holds it: the plan's target `PLAN_LOOKAHEAD_M` ahead (the agent has
 the whole lane plan; the anticipation it allows is what smooths a wave before the car meets it).
 Added on `accel` cars only (the RAV4 measures them, paper Table 2): the space gap and the leader's
-relative speed.
+relative speed. Files that record `accel_observation` = `commanded_accel` also read the
+acceleration the agent last commanded (its `AccelLimiter`'s reference; at a take-over the car's
+measured acceleration): the limiter's jerk limits make that a state of the car the request acts
+from, and without it the network cannot tell a request that takes effect at once from one that
+needs a second to ramp in. Files without `accel_observation` (the `radar` observation) read six.
 
 Action, in [-1, 1] per component (PPO's Gaussian, clipped):
 - `acc`: component 0 is the requested speed setting itself, around the plan's target at the
@@ -49,6 +53,7 @@ from vehicle_agent.controllers.acc_clip import MAX_SETTING_MPH
 FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
 AccelAction = Literal["request", "request_time_margin"]
+AccelObservation = Literal["radar", "commanded_accel"]
 
 # Speeds enter the network divided by this (m/s; the 73 mph ceiling is 32.6 m/s).
 SPEED_SCALE_MPS = 30.0
@@ -62,6 +67,8 @@ REL_SPEED_SCALE_MPS = 10.0
 # `accel` action bounds (m/s^2): the agent's AccelLimiter range.
 ACCEL_ACTION_MIN_MPS2 = -3.0
 ACCEL_ACTION_MAX_MPS2 = 1.5
+# The commanded acceleration enters divided by this (m/s^2): the range's braking end reads -1.
+COMMANDED_ACCEL_SCALE_MPS2 = 3.0
 
 # `acc` speed action: the requested setting is the plan's target plus this much times the output
 # (mph) while a leader is detected, the clip's ceiling while none is; the name acc policy files
@@ -78,10 +85,14 @@ TIME_MARGIN_MAX_S = 1.5
 MAX_POLICY_UNPACKED_BYTES = 16 * 1024 * 1024
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
-# Outputs of an `acc` policy (speed setting, gap bars), and of an `accel` one per action.
+# Inputs of an `accel` policy per observation, and outputs of an `acc` policy (speed setting,
+# gap bars) and of an `accel` one per action.
+ACCEL_OBSERVATION_SIZES: dict[AccelObservation, int] = {
+    "radar": ACCEL_FEATURES,
+    "commanded_accel": ACCEL_FEATURES + 1,
+}
 ACC_ACTION_SIZE = 2
 ACCEL_ACTION_SIZES: dict[AccelAction, int] = {"request": 1, "request_time_margin": 2}
-FEATURE_SIZES: dict[PolicyActuation, int] = {"acc": ACC_FEATURES, "accel": ACCEL_FEATURES}
 
 
 class PolicyFileError(ValueError):
@@ -115,8 +126,10 @@ def accel_features(
     lead_present: ArrayLike,
     gap_m: ArrayLike,
     rel_speed_mps: ArrayLike,
+    commanded_accel_mps2: ArrayLike | None = None,
 ) -> FloatArray:
-    """The `accel` observation (v, v_s, v_s ahead, l, gap, lead - ego speed), scaled.
+    """The `accel` observation (v, v_s, v_s ahead, l, gap, lead - ego speed and, given it, the
+    commanded acceleration), scaled: the `radar` observation, or `commanded_accel`'s.
 
     Without a leader in radar range the gap reads as the range and the relative speed as 0.
     """
@@ -124,14 +137,19 @@ def accel_features(
     measured = np.minimum(np.asarray(gap_m, dtype=np.float64), GAP_SCALE_M)
     gap = np.where(present, measured, GAP_SCALE_M)
     rel = np.where(present, np.asarray(rel_speed_mps, dtype=np.float64), 0.0)
-    return _feature_columns(
+    columns = [
         np.asarray(speed_mps, dtype=np.float64) / SPEED_SCALE_MPS,
         np.asarray(target_mps, dtype=np.float64) / SPEED_SCALE_MPS,
         np.asarray(target_ahead_mps, dtype=np.float64) / SPEED_SCALE_MPS,
         present.astype(np.float64),
         gap / GAP_SCALE_M,
         rel / REL_SPEED_SCALE_MPS,
-    )
+    ]
+    if commanded_accel_mps2 is not None:
+        columns.append(
+            np.asarray(commanded_accel_mps2, dtype=np.float64) / COMMANDED_ACCEL_SCALE_MPS2
+        )
+    return _feature_columns(*columns)
 
 
 def _feature_columns(*columns: FloatArray) -> FloatArray:
@@ -190,6 +208,13 @@ def requested_time_margin_s(action: ArrayLike) -> FloatArray:
     return margin
 
 
+def observation_size(actuation: PolicyActuation, accel_observation: AccelObservation) -> int:
+    """How many inputs a policy of `actuation` (and, for `accel`, `accel_observation`) reads."""
+    if actuation == "accel":
+        return ACCEL_OBSERVATION_SIZES[accel_observation]
+    return ACC_FEATURES
+
+
 def action_size(actuation: PolicyActuation, accel_action: AccelAction) -> int:
     """How many outputs a policy of `actuation` (and, for `accel`, `accel_action`) has."""
     if actuation == "accel":
@@ -203,7 +228,8 @@ class PolicyNetwork:
 
     `weights[i]` has shape (inputs, outputs), so a batch of observations (rows) multiplies on
     the left. `sha256` is the file's digest: what the car reports it runs. `accel_action` says
-    how an `accel` policy's outputs are read (`request` for `acc` policies, which have one way).
+    how an `accel` policy's outputs are read (`request` for `acc` policies, which have one way),
+    `accel_observation` what its inputs are (`radar` for `acc` policies).
     """
 
     actuation: PolicyActuation
@@ -211,6 +237,7 @@ class PolicyNetwork:
     biases: tuple[FloatArray, ...]
     sha256: str
     accel_action: AccelAction = "request"
+    accel_observation: AccelObservation = "radar"
 
     def action(self, features: FloatArray) -> FloatArray:
         """The mean action for one observation (1-D) or a batch (rows), clipped to [-1, 1]."""
@@ -231,17 +258,22 @@ def save_policy(
     weights: list[FloatArray],
     biases: list[FloatArray],
     accel_action: AccelAction = "request",
+    accel_observation: AccelObservation = "radar",
 ) -> str:
     """Write a policy `.npz` (layer_i_weight / layer_i_bias, the actuation and, for `acc`, the
-    speed action it was trained with, for `accel` any action but the plain request); its sha256.
+    speed action it was trained with, for `accel` any action but the plain request and any
+    observation but `radar`); its sha256.
 
-    A `request` file records no `accel_action`, so it has the bytes (and sha256) it had before
-    the time margin existed."""
+    A `request` file records no `accel_action` and a `radar` one no `accel_observation`, so such
+    a file has the bytes (and sha256) it had before either existed."""
     arrays: dict[str, FloatArray | NDArray[np.str_]] = {"actuation": np.array(actuation)}
     if actuation == "acc":
         arrays["speed_action"] = np.array(ACC_SPEED_ACTION)
-    elif accel_action != "request":
-        arrays["accel_action"] = np.array(accel_action)
+    else:
+        if accel_action != "request":
+            arrays["accel_action"] = np.array(accel_action)
+        if accel_observation != "radar":
+            arrays["accel_observation"] = np.array(accel_observation)
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         arrays[f"layer_{index}_weight"] = np.asarray(weight, dtype=np.float64)
         arrays[f"layer_{index}_bias"] = np.asarray(bias, dtype=np.float64)
@@ -281,6 +313,11 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             speed_action = str(archive["speed_action"]) if "speed_action" in archive.files else None
             stored_accel_action = (
                 str(archive["accel_action"]) if "accel_action" in archive.files else "request"
+            )
+            stored_observation = (
+                str(archive["accel_observation"])
+                if "accel_observation" in archive.files
+                else "radar"
             )
             layers = sum(1 for name in archive.files if name.endswith("_weight"))
             weights = tuple(
@@ -328,9 +365,20 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             f"{stored_accel_action!r}, which this agent does not read "
             f"(accel policies: one of {', '.join(ACCEL_ACTION_SIZES)}; acc policies: none)"
         )
+    accel_observation: AccelObservation
+    if stored_observation == "radar":
+        accel_observation = "radar"
+    elif actuation == "accel" and stored_observation == "commanded_accel":
+        accel_observation = "commanded_accel"
+    else:
+        raise PolicyFileError(
+            f"{label}: an {actuation} policy trained on the observation "
+            f"{stored_observation!r}, which this agent does not build "
+            f"(accel policies: one of {', '.join(ACCEL_OBSERVATION_SIZES)}; acc policies: none)"
+        )
     if not weights:
         raise PolicyFileError(f"{label}: no layers")
-    inputs = FEATURE_SIZES[actuation]
+    inputs = observation_size(actuation, accel_observation)
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         if weight.ndim != 2 or weight.shape[0] != inputs or bias.shape != (weight.shape[1],):
             raise PolicyFileError(
@@ -349,5 +397,10 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         )
         raise PolicyFileError(f"{label}: {inputs} outputs, {kind} has {outputs}")
     return PolicyNetwork(
-        actuation, weights, biases, hashlib.sha256(content).hexdigest(), accel_action
+        actuation,
+        weights,
+        biases,
+        hashlib.sha256(content).hexdigest(),
+        accel_action,
+        accel_observation,
     )

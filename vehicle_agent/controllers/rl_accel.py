@@ -1,7 +1,9 @@
 """RL-Accel: the PPO-trained policy's acceleration request, for cars that take one (RAV4).
 
 The policy reads v, v_s (and the plan ahead), the minicar flag and, as the RAV4 measures them
-(paper Table 2), the space gap and the leader's relative speed (`policy.accel_features`). Its
+(paper Table 2), the space gap and the leader's relative speed (`policy.accel_features`); a
+policy trained on the `commanded_accel` observation also the acceleration the agent's limiter
+last let through, which the agent puts in every observation. Its
 request is bounded by MicroAccel's safety term a_safe (paper eq. a_safe: never faster than the
 speed from which braking at a_min stops behind a leader braking at a_l,min), the same bound the
 training environment applies, then by the agent's limiter and safety layer like every request.
@@ -104,6 +106,14 @@ class RlAccelController(Controller):
             )
         else:
             self.lead_accel.reset()
+        commanded: float | None = None
+        if self.network.accel_observation == "commanded_accel":
+            commanded = observation.commanded_accel_mps2
+            if commanded is None:
+                raise ValueError(
+                    f"policy {self.network.sha256[:12]} reads the commanded acceleration, "
+                    "which this observation does not carry"
+                )
         features = accel_features(
             observation.speed_mps,
             observation.target_speed_mps,
@@ -111,6 +121,7 @@ class RlAccelController(Controller):
             gap is not None,
             math.inf if gap is None else gap,
             0.0 if rel is None else rel,
+            commanded,
         )
         action = self.network.action(features)
         request = float(requested_accel_mps2(action[0]))

@@ -205,11 +205,31 @@ def test_accel_requests_reach_the_car_through_the_agents_limiter() -> None:
     np.testing.assert_allclose(made, [[0.0] * 2, [-0.5] * 2, [-1.0] * 2, [-1.5] * 2], atol=1e-9)
 
 
+def test_the_commanded_accel_observation_reads_what_the_limiter_let_through() -> None:
+    """A seventh input, the limiter's last output / 3 m/s^2: 0 as the episode starts (the car
+    taken over in equilibrium), then the -3 m/s^2 request's ramp, 0, -0.5, -1.0 m/s^2."""
+    config = EnvConfig("accel", accel_observation="commanded_accel", humans=3, episode_s=60.0)
+    env = PlatoonVecEnv([STEADY], 2, config)
+    observation, _ = env.reset(seed=1)
+    assert env.observation_space.shape == (2, 7)
+    np.testing.assert_array_equal(observation[:, 6], 0.0)
+    seen = []
+    for _ in range(3):
+        observation, *_ = env.step(np.full((2, 1), -1.0))
+        seen.append(observation[:, 6].copy())
+    np.testing.assert_allclose(seen, [[0.0] * 2, [-0.5 / 3] * 2, [-1.0 / 3] * 2], atol=1e-12)
+    radar = PlatoonVecEnv([STEADY], 2, EnvConfig("accel", humans=3, episode_s=60.0))
+    first, _ = radar.reset(seed=1)
+    assert first.shape == (2, 6)
+
+
 def test_configuration_errors_say_what_is_wrong() -> None:
     with pytest.raises(ValueError, match="at least one human"):
         EnvConfig("acc", humans=0)
     with pytest.raises(ValueError, match="for accel policies, not acc"):
         EnvConfig("acc", "request_time_margin")
+    with pytest.raises(ValueError, match="observation 'commanded_accel' is for accel policies"):
+        EnvConfig("acc", accel_observation="commanded_accel")
     with pytest.raises(ValueError, match="no drive is longer than an episode"):
         PlatoonVecEnv([STEADY], 2, EnvConfig("acc", episode_s=1000.0))
     with pytest.raises(ValueError, match="non-finite action"):

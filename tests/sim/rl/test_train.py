@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drives import Drive, load_drive
+from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.gaps import GapBounds
 from sim.rl.env import EnvConfig
 from sim.rl.pipeline import run_training
@@ -49,11 +49,19 @@ def stop_and_go(shared_dir: Path) -> Drive:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("actuation", ["acc", "accel"])
+@pytest.mark.parametrize(
+    ("actuation", "observation", "inputs"),
+    [("acc", "radar", 6), ("accel", "radar", 6), ("accel", "commanded_accel", 7)],
+)
 def test_a_tiny_policy_trains_and_the_car_runs_exactly_its_actions(
-    shared_dir: Path, tmp_path: Path, actuation: str
+    shared_dir: Path, tmp_path: Path, actuation: str, observation: str, inputs: int
 ) -> None:
-    config = EnvConfig("acc" if actuation == "acc" else "accel", humans=4, episode_s=60.0)
+    config = EnvConfig(
+        "acc" if actuation == "acc" else "accel",
+        accel_observation="commanded_accel" if observation == "commanded_accel" else "radar",
+        humans=4,
+        episode_s=60.0,
+    )
     seen: list[int] = []
     model = train_policy([stop_and_go(shared_dir)], config, TINY, 2048, 7, seen.append)
     assert seen[-1] >= 2048
@@ -61,12 +69,15 @@ def test_a_tiny_policy_trains_and_the_car_runs_exactly_its_actions(
     digest = export_policy(model, path, config)
     assert digest == hashlib.sha256(path.read_bytes()).hexdigest()
     network = load_policy(path, config.actuation)
-    features = np.random.default_rng(0).uniform(-1.0, 1.5, size=(64, 6))
+    assert network.accel_observation == observation
+    features = np.random.default_rng(0).uniform(-1.0, 1.5, size=(64, inputs))
     expected, _ = model.predict(features, deterministic=True)
     np.testing.assert_allclose(network.action(features), expected, atol=1e-5)
     # the controller the scores run reads the same file
     controller = ControllerUnderTest.policy_file("rl", actuation, path).build()
-    controller.step(Observation(time_s=0.0, speed_mps=20.0, target_speed_mps=22.0))
+    controller.step(
+        Observation(time_s=0.0, speed_mps=20.0, target_speed_mps=22.0, commanded_accel_mps2=0.5)
+    )
 
 
 @pytest.mark.slow
@@ -100,10 +111,14 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         "4",
         "--episode-s",
         "60",
+        "--accel-observation",
+        "commanded_accel",
         "--no-final",
     )
     assert result.returncode == 0, result.stderr
     manifest = json.loads((out / "rl_accel.json").read_text())
+    assert manifest["environment"]["accel_observation"] == "commanded_accel"
+    assert load_policy(out / "rl_accel.npz", "accel").accel_observation == "commanded_accel"
     assert manifest["sha256"] == hashlib.sha256((out / "rl_accel.npz").read_bytes()).hexdigest()
     assert manifest["seed"] == 5
     assert manifest["ppo"]["num_envs"] == 4
@@ -175,3 +190,26 @@ def test_cli_train_names_a_missing_folder(tmp_path: Path) -> None:
     assert missing.returncode != 0
     assert "no drive CSV files" in missing.stderr
     assert "Traceback" not in missing.stderr
+
+
+def test_cli_train_refuses_an_accel_observation_for_an_acc_policy(tmp_path: Path) -> None:
+    drives = tmp_path / "drives"
+    drives.mkdir()
+    write_drive(drive_from_speeds("2021-04-05-a", np.full(100, 20.0)), drives / "2021-04-05-a.csv")
+    refused = run_cli(
+        "sim",
+        "train",
+        "--actuation",
+        "acc",
+        "--accel-observation",
+        "commanded_accel",
+        "--drives",
+        str(drives),
+        "--out",
+        str(tmp_path / "out"),
+        env=cli_env(),
+    )
+    assert refused.returncode != 0
+    assert "observation 'commanded_accel' is for accel policies, not acc" in refused.stderr
+    assert "Traceback" not in refused.stderr
+    assert not (tmp_path / "out").exists()
