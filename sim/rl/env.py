@@ -54,6 +54,7 @@ from sim.energy import RAV4_2019
 from sim.gaps import GapBounds
 from sim.plans import SimulatedPlanner, simulated_grid, simulated_inrix
 from sim.platoon import MAX_BRAKING_MPS2, MAX_SPACING_SPEED_SHARE, VEHICLE_LENGTH_M, CutIns
+from sim.recorded import RecordedDrive
 from sim.traffic import InrixFeed
 from vehicle_agent.actuators import AccelLimiter
 from vehicle_agent.controllers import clip_speed_setting
@@ -160,7 +161,8 @@ class EnvConfig:
 
 @dataclass
 class _DriveRoad:
-    """A training drive with what every episode on it shares (leader, road, simulated INRIX)."""
+    """A training drive with what every episode on it shares (leader, road, and its INRIX: the
+    recorded minutes of a recorded drive, else simulated once, when first needed)."""
 
     drive: Drive
     position_m: FloatArray
@@ -176,7 +178,15 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
 
     metadata = {"autoreset_mode": gym.vector.AutoresetMode.SAME_STEP}
 
-    def __init__(self, drives: Sequence[Drive], num_envs: int, config: EnvConfig) -> None:
+    def __init__(
+        self,
+        drives: Sequence[Drive],
+        num_envs: int,
+        config: EnvConfig,
+        recorded: Sequence[RecordedDrive] = (),
+    ) -> None:
+        """Platoons behind `drives` (on simulated INRIX) and, beside them, behind `recorded`
+        (each on its real INRIX minutes, as `sim evaluate`'s recorded scenarios drive)."""
         if not drives:
             raise ValueError("training needs at least one drive")
         if num_envs < 1:
@@ -184,13 +194,15 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.config = config
         self.num_envs = num_envs
         self.dt_s = drives[0].dt_s
-        if any(abs(drive.dt_s - self.dt_s) > 1e-9 for drive in drives):
+        every = [*drives, *(one.drive for one in recorded)]
+        if any(abs(drive.dt_s - self.dt_s) > 1e-9 for drive in every):
             raise ValueError("every training drive must have the same time step")
         self.episode_steps = int(round(config.episode_s / self.dt_s))
-        usable = [drive for drive in drives if drive.steps > self.episode_steps]
-        if not usable:
+        roads = [_DriveRoad(drive, drive.position_m) for drive in drives]
+        roads += [_DriveRoad(one.drive, one.drive.position_m, one.feed) for one in recorded]
+        self.roads = [road for road in roads if road.drive.steps > self.episode_steps]
+        if not self.roads:
             raise ValueError(f"no drive is longer than an episode ({config.episode_s:g} s)")
-        self.roads = [_DriveRoad(drive, drive.position_m) for drive in usable]
         self.planner_params = PlannerParams.parse(dict(config.planner_params))
         size = observation_size(config.actuation, config.accel_observation)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float64)

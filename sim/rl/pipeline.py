@@ -29,6 +29,7 @@ import torch
 
 from sim.drives import Drive
 from sim.folds import Fold, date_folds, drive_date
+from sim.recorded import RecordedDrive
 from sim.rl.env import EnvConfig, RewardWeights
 from sim.rl.reward_selection import select_reward
 from sim.rl.scores import (
@@ -38,7 +39,13 @@ from sim.rl.scores import (
     scoring_progress,
     summarise,
 )
-from sim.rl.train import PpoSettings, export_policy, stage_progress, train_policy
+from sim.rl.train import (
+    PpoSettings,
+    export_policy,
+    recorded_on_dates_of,
+    stage_progress,
+    train_policy,
+)
 
 # What each RL controller is scored beside: the hand-designed controller of the same actuation
 # with the gain docs/simulation.md's evaluation found best.
@@ -88,6 +95,7 @@ def run_training(
     out_dir: Path,
     final: bool = True,
     reward_candidates: Sequence[RewardWeights] = (),
+    recorded: Sequence[RecordedDrive] = (),
     command: str = "",
     progress: Callable[[str, int, int], None] | None = None,
 ) -> TrainingRun:
@@ -95,8 +103,10 @@ def run_training(
 
     With `reward_candidates` (the first is the fallback), every fold, and the final policy,
     trains with the weights `select_reward` chooses on its own training dates; without, with
-    `config.reward`. `command` is recorded in the manifest (how to reproduce it);
-    `progress(stage, done, total)` hears the timesteps of each training and each scored drive.
+    `config.reward`. Every training also drives the `recorded` drives of its own dates on
+    their real INRIX (`train.recorded_on_dates_of`). `command` is recorded in the manifest (how
+    to reproduce it); `progress(stage, done, total)` hears the timesteps of each training and
+    each scored drive.
     """
     commit = source_commit()  # now: the code that trains, whatever changes meanwhile
     actuation = config.actuation
@@ -119,6 +129,7 @@ def run_training(
             out_dir=out_dir / "reward_selection" / stage.replace(" ", ""),
             stage=stage,
             progress=progress,
+            recorded=recorded,
         )
         return replace(config, reward=selection.chosen), selection.as_dict()
 
@@ -126,7 +137,7 @@ def run_training(
     for fold in splits:
         fold_config, selection_record = chosen_reward(f"fold {fold.index}", fold.train)
         fold_scores, record = _cross_validate(
-            fold, fold_config, settings, timesteps, seed, out_dir, progress
+            fold, fold_config, settings, timesteps, seed, out_dir, progress, recorded
         )
         scores.extend(fold_scores)
         if selection_record:
@@ -143,16 +154,19 @@ def run_training(
             timesteps,
             seed,
             stage_progress(progress, "final", timesteps),
+            recorded,
         )
         digest = export_policy(model, policy_path, shipped_config)
         shipped_dates = sorted({drive_date(drive) for drive in drives})
         shipped = "trained on every date"
+        shipped_recorded = recorded_on_dates_of(recorded, drives)
     else:
         shipped_config, final_selection = fold_configs[0], {}
         shutil.copyfile(_fold_path(out_dir, name, 0), policy_path)
         digest = hashlib.sha256(policy_path.read_bytes()).hexdigest()
         shipped_dates = splits[0].train_dates
         shipped = "fold 0's policy"
+        shipped_recorded = recorded_on_dates_of(recorded, splits[0].train)
     summary = summarise(scores)
     manifest = {
         "policy": policy_path.name,
@@ -160,6 +174,12 @@ def run_training(
         "actuation": actuation,
         "shipped": shipped,
         "training_dates": shipped_dates,
+        # manifests of policies trained on simulated INRIX alone have no such key
+        **(
+            {"recorded_inrix_drives": [one.drive.name for one in shipped_recorded]}
+            if recorded
+            else {}
+        ),
         "seed": seed,
         "timesteps": timesteps,
         "folds": folds,
@@ -203,14 +223,22 @@ def _cross_validate(
     seed: int,
     out_dir: Path,
     progress: Callable[[str, int, int], None] | None,
+    recorded: Sequence[RecordedDrive],
 ) -> tuple[list[DriveScore], dict[str, Any]]:
-    """Train on the fold's dates, score on its held-out dates beside the reference."""
+    """Train on the fold's dates (and the recorded drives of those dates), score on its
+    held-out dates beside the reference."""
     actuation = config.actuation
     name = f"rl_{actuation}"
     stage = f"fold {fold.index}"
     path = _fold_path(out_dir, name, fold.index)
     model = train_policy(
-        fold.train, config, settings, timesteps, seed, stage_progress(progress, stage, timesteps)
+        fold.train,
+        config,
+        settings,
+        timesteps,
+        seed,
+        stage_progress(progress, stage, timesteps),
+        recorded,
     )
     digest = export_policy(model, path, config)
     tested = [
@@ -230,6 +258,15 @@ def _cross_validate(
         "fold": fold.index,
         "train_dates": fold.train_dates,
         "held_out_dates": fold.held_out_dates,
+        **(
+            {
+                "recorded_inrix_drives": [
+                    one.drive.name for one in recorded_on_dates_of(recorded, fold.train)
+                ]
+            }
+            if recorded
+            else {}
+        ),
         "policy_sha256": digest,
         "held_out": summarise(scores),
     }

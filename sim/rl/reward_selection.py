@@ -29,6 +29,7 @@ import numpy as np
 
 from sim.drives import Drive
 from sim.folds import date_folds, drive_date
+from sim.recorded import RecordedDrive
 from sim.rl.env import EnvConfig, RewardWeights
 from sim.rl.scores import (
     GROUPS,
@@ -181,9 +182,11 @@ def select_reward(
     out_dir: Path,
     stage: str,
     progress: Callable[[str, int, int], None] | None = None,
+    recorded: Sequence[RecordedDrive] = (),
 ) -> RewardSelection:
     """Train and score every candidate across `drives`' inner date folds; choose by the rule.
 
+    Each inner training also drives the `recorded` drives of its own dates on their real INRIX.
     The inner policies are written under `out_dir` (one file per candidate and inner fold).
     """
     if not candidates:
@@ -203,7 +206,13 @@ def select_reward(
             label = f"{stage} reward {index} inner {fold.index}"
             report = stage_progress(progress, label, timesteps)
             model = train_policy(
-                fold.train, replace(config, reward=weights), settings, timesteps, seed, report
+                fold.train,
+                replace(config, reward=weights),
+                settings,
+                timesteps,
+                seed,
+                report,
+                recorded,
             )
             path = out_dir / f"{name}_reward{index}_inner{fold.index}.npz"
             export_policy(model, path, config)

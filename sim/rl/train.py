@@ -22,6 +22,8 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from sim.drives import Drive
+from sim.folds import drive_date
+from sim.recorded import RecordedDrive
 from sim.rl.env import EnvConfig, PlatoonVecEnv
 from vehicle_agent.controllers.policy import FloatArray, save_policy
 
@@ -137,6 +139,15 @@ def stage_progress(
     return report
 
 
+def recorded_on_dates_of(
+    recorded: Sequence[RecordedDrive], drives: Sequence[Drive]
+) -> list[RecordedDrive]:
+    """The recorded drives of the dates `drives` are of: what a policy trained on `drives` may
+    also see with its real INRIX, so that no date held out of its training reaches it so."""
+    dates = {drive_date(drive) for drive in drives}
+    return [one for one in recorded if drive_date(one.drive) in dates]
+
+
 def train_policy(
     drives: Sequence[Drive],
     config: EnvConfig,
@@ -144,11 +155,15 @@ def train_policy(
     timesteps: int,
     seed: int,
     progress: Callable[[int], None] | None = None,
+    recorded: Sequence[RecordedDrive] = (),
 ) -> PPO:
-    """PPO on platoons behind `drives`; deterministic for a seed on one machine (1 thread)."""
+    """PPO on platoons behind `drives` and the recorded drives of their dates (on their real
+    INRIX); deterministic for a seed on one machine (1 thread)."""
     torch.manual_seed(seed)
     torch.set_num_threads(1)
-    env = Sb3Platoons(PlatoonVecEnv(drives, settings.num_envs, config))
+    env = Sb3Platoons(
+        PlatoonVecEnv(drives, settings.num_envs, config, recorded_on_dates_of(recorded, drives))
+    )
     model = PPO(
         "MlpPolicy",
         env,

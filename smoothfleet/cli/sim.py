@@ -783,6 +783,21 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     "them (sim.platoon.CutIns); --no-cut-ins trains as every policy before 2026-12-03 was.",
 )
 @click.option(
+    "--recorded-inrix",
+    is_flag=True,
+    help="Also train on the drives recorded with their INRIX minutes (--inrix-drives), each "
+    "on its real feed, each training only on those of its own dates "
+    "[default: every plan from simulated INRIX, as every policy before 2026-12-04 was].",
+)
+@click.option(
+    "--inrix-drives",
+    "inrix_dir",
+    type=click.Path(path_type=Path),
+    default=lambda: _default_folder("trajectories_with_inrix"),
+    help="Folder of drives recorded with their INRIX minutes, read with --recorded-inrix "
+    "[default: shared/data/trajectories_with_inrix beside the checkout].",
+)
+@click.option(
     "--reward-candidates",
     default=None,
     help='JSON list of reward weight changes, e.g. \'[{"fuel": 0.6}, {"accel": 0.3}]\': '
@@ -811,6 +826,8 @@ def train_command(
     humans: int,
     episode_s: float,
     cut_ins: bool,
+    recorded_inrix: bool,
+    inrix_dir: Path | None,
     reward_candidates: str | None,
     out_dir: Path,
 ) -> None:
@@ -829,7 +846,12 @@ def train_command(
         raise click.ClickException(
             f"sim train needs the train extra (pip install -e '.[train]'): {error}"
         ) from None
+    if recorded_inrix and inrix_dir is None:
+        raise click.ClickException(
+            "no shared data found beside the checkout: pass --inrix-drives with --recorded-inrix"
+        )
     drives = _read_drives(drives_dir)
+    recorded = _read_recorded_drives(inrix_dir) if recorded_inrix and inrix_dir is not None else []
     try:
         config = EnvConfig(
             "acc" if actuation == "acc" else "accel",
@@ -868,6 +890,7 @@ def train_command(
                 out_dir=out_dir,
                 final=final,
                 reward_candidates=candidates,
+                recorded=recorded,
                 command=shlex.join(["smoothfleet", *sys.argv[1:]]),
                 progress=advance,
             )

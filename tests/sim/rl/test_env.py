@@ -8,8 +8,11 @@ import pytest
 from contract.idm import I24_IDM, idm_accel
 from sim.drives import Drive, drive_from_speeds
 from sim.energy import RAV4_2019
+from sim.plans import MIN_TARGET_SPEED_MPS
 from sim.platoon import VEHICLE_LENGTH_M, CutIns
+from sim.recorded import RecordedDrive
 from sim.rl.env import MAX_MERGED_CARS, EnvConfig, PlatoonVecEnv, RewardWeights
+from sim.traffic import InrixFeed, segment_bounds
 
 STEADY = drive_from_speeds("2021-01-01-steady", np.full(6001, 20.0))
 ONLY_GAP = RewardWeights(accel=0.0, speed=0.0, fuel=0.0, gap=1.0, collision=1.0)
@@ -221,6 +224,26 @@ def test_the_commanded_accel_observation_reads_what_the_limiter_let_through() ->
     radar = PlatoonVecEnv([STEADY], 2, EnvConfig("accel", humans=3, episode_s=60.0))
     first, _ = radar.reset(seed=1)
     assert first.shape == (2, 6)
+
+
+def test_a_recorded_drive_plans_from_its_own_inrix_minutes() -> None:
+    """Beside a drive on simulated INRIX, a recorded one whose feed read 8 m/s everywhere, from
+    ten minutes before the drive on: its platoons' plans hold the planner's 20 mph floor, while
+    those on the simulated feed of a steady 20 m/s leader stay well above it."""
+    recorded_drive = drive_from_speeds("2021-01-01-recorded", np.full(6001, 20.0))
+    bounds = segment_bounds(-2000.0, 14000.0)
+    stamps = np.arange(-600.0, 601.0, 60.0)
+    feed = InrixFeed(
+        bounds[:-1], bounds[1:], stamps, np.full((len(stamps), len(bounds) - 1), 8.0), 0.0
+    )
+    config = EnvConfig("accel", humans=3, episode_s=60.0)
+    env = PlatoonVecEnv([STEADY], 8, config, [RecordedDrive(recorded_drive, feed)])
+    env.reset(seed=1)
+    assert env.roads[1].feed is feed
+    on_recorded = env.road_index == 1
+    assert 0 < on_recorded.sum() < 8
+    np.testing.assert_allclose(env.target_here[on_recorded], MIN_TARGET_SPEED_MPS)
+    assert np.all(env.target_here[~on_recorded] > 12.0)
 
 
 def test_configuration_errors_say_what_is_wrong() -> None:

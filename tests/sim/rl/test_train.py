@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import subprocess
 from dataclasses import replace
 from pathlib import Path
@@ -24,6 +25,9 @@ from vehicle_agent.controllers.policy import load_policy
 
 STOP_AND_GO = "data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
 FREEFLOW = "data/trajectories/2021-03-09-13-35-04_masterArray_0_4633.csv"
+RECORDED = Path(
+    "data/trajectories_with_inrix/2021-03-09-13-35-04_2T3MWRFVXLW056972_masterArray_0_6825"
+)
 TINY = PpoSettings(num_envs=4, n_steps=128, batch_size=256, n_epochs=2)
 
 
@@ -95,10 +99,16 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         ("2021-04-19-a", fast.slice(330.0, 120.0)),
     ):
         write_drive(drive, drives / f"{name}.csv")
+    # one drive recorded with its INRIX minutes, on 2021-03-09: fold 1 trains on that date
+    recorded = tmp_path / "inrix"
+    shutil.copytree(shared_dir / RECORDED, recorded / RECORDED.name)
     out = tmp_path / "out"
     result = train_accel(
         drives,
         out,
+        "--recorded-inrix",
+        "--inrix-drives",
+        str(recorded),
         "--timesteps",
         "1024",
         "--seed",
@@ -142,6 +152,9 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     ]
     for fold in folds:
         assert not set(fold["train_dates"]) & set(fold["held_out_dates"])
+    # each fold drove the recorded drive on its real feed only where it trained on its date
+    assert [fold["recorded_inrix_drives"] for fold in folds] == [[], [RECORDED.name]]
+    assert manifest["recorded_inrix_drives"] == []
     # fold 0's policy is shipped: trained on fold 0's dates only
     assert manifest["shipped"] == "fold 0's policy"
     assert manifest["training_dates"] == ["2021-04-05"]
