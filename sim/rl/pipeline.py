@@ -31,6 +31,7 @@ from sim.drives import Drive
 from sim.folds import Fold, date_folds, drive_date
 from sim.recorded import RecordedDrive
 from sim.rl.env import EnvConfig, RewardWeights
+from sim.rl.restarts import RestartScores, choose_restart
 from sim.rl.reward_selection import select_reward
 from sim.rl.scores import (
     ControllerUnderTest,
@@ -96,6 +97,7 @@ def run_training(
     final: bool = True,
     reward_candidates: Sequence[RewardWeights] = (),
     recorded: Sequence[RecordedDrive] = (),
+    restarts: int = 1,
     command: str = "",
     progress: Callable[[str, int, int], None] | None = None,
 ) -> TrainingRun:
@@ -104,10 +106,14 @@ def run_training(
     With `reward_candidates` (the first is the fallback), every fold, and the final policy,
     trains with the weights `select_reward` chooses on its own training dates; without, with
     `config.reward`. Every training also drives the `recorded` drives of its own dates on
-    their real INRIX (`train.recorded_on_dates_of`). `command` is recorded in the manifest (how
+    their real INRIX (`train.recorded_on_dates_of`). With `restarts` > 1 every fold's policy and
+    the final one are the restart `sim.rl.restarts` keeps on their training drives (the reward
+    selection's inner policies are one seed each). `command` is recorded in the manifest (how
     to reproduce it); `progress(stage, done, total)` hears the timesteps of each training and
     each scored drive.
     """
+    if restarts < 1:
+        raise ValueError(f"restarts must be at least 1, got {restarts}")
     commit = source_commit()  # now: the code that trains, whatever changes meanwhile
     actuation = config.actuation
     name = f"rl_{actuation}"
@@ -137,7 +143,7 @@ def run_training(
     for fold in splits:
         fold_config, selection_record = chosen_reward(f"fold {fold.index}", fold.train)
         fold_scores, record = _cross_validate(
-            fold, fold_config, settings, timesteps, seed, out_dir, progress, recorded
+            fold, fold_config, settings, timesteps, seed, restarts, out_dir, progress, recorded
         )
         scores.extend(fold_scores)
         if selection_record:
@@ -147,21 +153,24 @@ def run_training(
     policy_path = out_dir / f"{name}.npz"
     if final:
         shipped_config, final_selection = chosen_reward("final", drives)
-        model = train_policy(
+        digest, final_restarts = _train_kept_restart(
             drives,
             shipped_config,
             settings,
             timesteps,
             seed,
-            stage_progress(progress, "final", timesteps),
+            restarts,
+            policy_path,
+            "final",
+            progress,
             recorded,
         )
-        digest = export_policy(model, policy_path, shipped_config)
         shipped_dates = sorted({drive_date(drive) for drive in drives})
         shipped = "trained on every date"
         shipped_recorded = recorded_on_dates_of(recorded, drives)
     else:
         shipped_config, final_selection = fold_configs[0], {}
+        final_restarts = fold_records[0].get("restarts", {})
         shutil.copyfile(_fold_path(out_dir, name, 0), policy_path)
         digest = hashlib.sha256(policy_path.read_bytes()).hexdigest()
         shipped_dates = splits[0].train_dates
@@ -182,6 +191,8 @@ def run_training(
         ),
         "seed": seed,
         "timesteps": timesteps,
+        # manifests of policies trained from one seed have no such key
+        **({"restarts": final_restarts} if final_restarts else {}),
         "folds": folds,
         "ppo": settings.as_dict(),
         "environment": _config_record(shipped_config),
@@ -215,32 +226,90 @@ def _fold_path(out_dir: Path, name: str, index: int) -> Path:
     return out_dir / "folds" / f"{name}_fold{index}.npz"
 
 
+def _train_kept_restart(
+    drives: Sequence[Drive],
+    config: EnvConfig,
+    settings: PpoSettings,
+    timesteps: int,
+    seed: int,
+    restarts: int,
+    path: Path,
+    stage: str,
+    progress: Callable[[str, int, int], None] | None,
+    recorded: Sequence[RecordedDrive],
+) -> tuple[str, dict[str, Any]]:
+    """Train on `drives` from seeds seed, seed + 1, ... (`restarts` of them), write the restart
+    `sim.rl.restarts` keeps to `path`; its sha256 and, with more than one restart, the record
+    of every restart's scores on its training drives (an empty record with one)."""
+    if restarts == 1:
+        model = train_policy(
+            drives,
+            config,
+            settings,
+            timesteps,
+            seed,
+            stage_progress(progress, stage, timesteps),
+            recorded,
+        )
+        return export_policy(model, path, config), {}
+    scored = []
+    for restart in range(restarts):
+        restart_seed = seed + restart
+        label = f"{stage} restart {restart}"
+        model = train_policy(
+            drives,
+            config,
+            settings,
+            timesteps,
+            restart_seed,
+            stage_progress(progress, label, timesteps),
+            recorded,
+        )
+        restart_path = path.with_name(f"{path.stem}_seed{restart_seed}{path.suffix}")
+        export_policy(model, restart_path, config)
+        policy = ControllerUnderTest.policy_file(
+            f"rl_{config.actuation}", config.actuation, restart_path
+        )
+        scores = score_drives(
+            drives,
+            [policy],
+            planner=config.planner,
+            planner_params=config.planner_params,
+            bounds=config.gap_bounds,
+            cut_ins=config.cut_ins,
+            progress=scoring_progress(progress, f"{label} training drives", len(drives)),
+        )
+        scored.append((restart_path, RestartScores(restart_seed, tuple(scores))))
+    kept = choose_restart([restart for _, restart in scored])
+    shutil.copyfile(scored[kept][0], path)
+    record = {
+        "kept_seed": scored[kept][1].seed,
+        "rule": "fewest collisions, then the least mean distance lost, on the training drives",
+        "restarts": [restart.as_dict() for _, restart in scored],
+    }
+    return hashlib.sha256(path.read_bytes()).hexdigest(), record
+
+
 def _cross_validate(
     fold: Fold,
     config: EnvConfig,
     settings: PpoSettings,
     timesteps: int,
     seed: int,
+    restarts: int,
     out_dir: Path,
     progress: Callable[[str, int, int], None] | None,
     recorded: Sequence[RecordedDrive],
 ) -> tuple[list[DriveScore], dict[str, Any]]:
-    """Train on the fold's dates (and the recorded drives of those dates), score on its
-    held-out dates beside the reference."""
+    """Train on the fold's dates (and the recorded drives of those dates; the restart kept on
+    them), score on its held-out dates beside the reference."""
     actuation = config.actuation
     name = f"rl_{actuation}"
     stage = f"fold {fold.index}"
     path = _fold_path(out_dir, name, fold.index)
-    model = train_policy(
-        fold.train,
-        config,
-        settings,
-        timesteps,
-        seed,
-        stage_progress(progress, stage, timesteps),
-        recorded,
+    digest, restart_record = _train_kept_restart(
+        fold.train, config, settings, timesteps, seed, restarts, path, stage, progress, recorded
     )
-    digest = export_policy(model, path, config)
     tested = [
         ControllerUnderTest.policy_file(name, actuation, path),
         REFERENCES[actuation],
@@ -267,6 +336,7 @@ def _cross_validate(
             if recorded
             else {}
         ),
+        **({"restarts": restart_record} if restart_record else {}),
         "policy_sha256": digest,
         "held_out": summarise(scores),
     }

@@ -745,6 +745,14 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
 )
 @click.option("--num-envs", type=click.IntRange(1, 256), default=16, show_default=True)
 @click.option(
+    "--restarts",
+    type=click.IntRange(1, 16),
+    default=1,
+    show_default=True,
+    help="Train each policy from this many seeds (--seed, --seed + 1, ...) and keep the one "
+    "that drops back least on its own training drives (sim.rl.restarts).",
+)
+@click.option(
     "--accel-action",
     type=click.Choice(["request", "request_time_margin"]),
     default="request",
@@ -820,6 +828,7 @@ def train_command(
     folds: int,
     final: bool,
     num_envs: int,
+    restarts: int,
     accel_action: str,
     accel_observation: str,
     gamma: float | None,
@@ -891,6 +900,7 @@ def train_command(
                 final=final,
                 reward_candidates=candidates,
                 recorded=recorded,
+                restarts=restarts,
                 command=shlex.join(["smoothfleet", *sys.argv[1:]]),
                 progress=advance,
             )

@@ -123,6 +123,8 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
         "60",
         "--accel-observation",
         "commanded_accel",
+        "--restarts",
+        "2",
         "--no-final",
     )
     assert result.returncode == 0, result.stderr
@@ -152,6 +154,16 @@ def test_cli_train_cross_validates_by_date_and_writes_the_manifest(
     ]
     for fold in folds:
         assert not set(fold["train_dates"]) & set(fold["held_out_dates"])
+    # each fold trained seeds 5 and 6 and kept the one the rule keeps on its training drives
+    for fold in folds:
+        restarts = fold["restarts"]["restarts"]
+        assert [restart["seed"] for restart in restarts] == [5, 6]
+        kept = fold["restarts"]["kept_seed"]
+        ranked = min(restarts, key=lambda r: (r["collisions"], r["mean_distance_lost_m"]))
+        assert kept == ranked["seed"]
+        kept_file = out / "folds" / f"rl_accel_fold{fold['fold']}_seed{kept}.npz"
+        assert fold["policy_sha256"] == hashlib.sha256(kept_file.read_bytes()).hexdigest()
+    assert manifest["restarts"] == folds[0]["restarts"]
     # each fold drove the recorded drive on its real feed only where it trained on its date
     assert [fold["recorded_inrix_drives"] for fold in folds] == [[], [RECORDED.name]]
     assert manifest["recorded_inrix_drives"] == []
