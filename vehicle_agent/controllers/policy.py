@@ -40,9 +40,10 @@ import hashlib
 import io
 import zipfile
 import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,6 +55,8 @@ FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
 AccelAction = Literal["request", "request_time_margin"]
 AccelObservation = Literal["radar", "commanded_accel"]
+# An `accel` file's recorded variant (its action or its observation).
+Variant = TypeVar("Variant", bound=str)
 
 # Speeds enter the network divided by this (m/s; the 73 mph ceiling is 32.6 m/s).
 SPEED_SCALE_MPS = 30.0
@@ -86,7 +89,8 @@ MAX_POLICY_UNPACKED_BYTES = 16 * 1024 * 1024
 ACC_FEATURES = 6
 ACCEL_FEATURES = 6
 # Inputs of an `accel` policy per observation, and outputs of an `acc` policy (speed setting,
-# gap bars) and of an `accel` one per action.
+# gap bars) and of an `accel` one per action; the first observation and the first action are
+# what a file that records none has.
 ACCEL_OBSERVATION_SIZES: dict[AccelObservation, int] = {
     "radar": ACCEL_FEATURES,
     "commanded_accel": ACCEL_FEATURES + 1,
@@ -292,6 +296,25 @@ def load_policy(path: Path, actuation: PolicyActuation) -> PolicyNetwork:
     return read_policy(content, actuation, str(path))
 
 
+def _accel_variant(
+    label: str,
+    actuation: PolicyActuation,
+    stored: str,
+    known: Mapping[Variant, int],
+    trained: str,
+    verb: str,
+) -> Variant:
+    """The variant of `known` a file records (`stored`): any of them on an `accel` file, only
+    the first (the one a file without the record has) on an `acc` file; else the refusal."""
+    for variant in known:
+        if stored == variant and (actuation == "accel" or variant == next(iter(known))):
+            return variant
+    raise PolicyFileError(
+        f"{label}: an {actuation} policy trained {trained} {stored!r}, which this agent does "
+        f"not {verb} (accel policies: one of {', '.join(known)}; acc policies: none)"
+    )
+
+
 def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> PolicyNetwork:
     """A policy from the bytes of its `.npz` (`label` names it in errors): the server checks an
     upload and the agent a download with this before either is kept."""
@@ -354,28 +377,12 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             f"{SPEED_AROUND_PLAN_MPH:.0f} mph, the clip's ceiling with no leader detected): "
             "retrain it"
         )
-    accel_action: AccelAction
-    if stored_accel_action == "request":
-        accel_action = "request"
-    elif actuation == "accel" and stored_accel_action == "request_time_margin":
-        accel_action = "request_time_margin"
-    else:
-        raise PolicyFileError(
-            f"{label}: an {actuation} policy trained for the accel action "
-            f"{stored_accel_action!r}, which this agent does not read "
-            f"(accel policies: one of {', '.join(ACCEL_ACTION_SIZES)}; acc policies: none)"
-        )
-    accel_observation: AccelObservation
-    if stored_observation == "radar":
-        accel_observation = "radar"
-    elif actuation == "accel" and stored_observation == "commanded_accel":
-        accel_observation = "commanded_accel"
-    else:
-        raise PolicyFileError(
-            f"{label}: an {actuation} policy trained on the observation "
-            f"{stored_observation!r}, which this agent does not build "
-            f"(accel policies: one of {', '.join(ACCEL_OBSERVATION_SIZES)}; acc policies: none)"
-        )
+    accel_action = _accel_variant(
+        label, actuation, stored_accel_action, ACCEL_ACTION_SIZES, "for the accel action", "read"
+    )
+    accel_observation = _accel_variant(
+        label, actuation, stored_observation, ACCEL_OBSERVATION_SIZES, "on the observation", "build"
+    )
     if not weights:
         raise PolicyFileError(f"{label}: no layers")
     inputs = observation_size(actuation, accel_observation)
