@@ -20,6 +20,6 @@ RECOMMENDED_PLANNER = "kernel_smooth"
 # Typed read-only, so every caller starts from the same figures; a plain dict, because the
 # simulator pickles it to its worker processes.
 RECOMMENDED_PLANNER_PARAMS: Mapping[str, Any] = {
-    "window_m": 1500,
+    "window_m": 4000,
     "speed_limit_allowance_mps": 1.34112,  # 3 mph
 }

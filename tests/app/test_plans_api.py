@@ -51,15 +51,23 @@ def tokens_for(engine: Engine) -> dict[str, str]:
     }
 
 
+# The window the slowdowns' figures in these tests were worked out for (the recommended
+# planner's is `planner.recommended.RECOMMENDED_PLANNER_PARAMS`).
+HAND_WORKED_WINDOW = {"window_m": 1500.0}
+
+
 @pytest.fixture
 def served(seeded_database_url: str, seeded_engine: Engine) -> Iterator[Served]:
     """Four planner cycles a minute apart over a standing slowdown at 8.25-9.7 km."""
     now = datetime.now(UTC).replace(microsecond=0)
     for minute in range(12, 2, -1):
         inrix_snapshot(seeded_engine, now - timedelta(minutes=minute), standing_slowdown())
-    # The full pipeline with its buffer, which these tests are about (not the default planner).
+    # The full pipeline with its buffer, which these tests are about (not the default planner),
+    # over the 1,500 m window the positions below were worked out for.
     settings = load_settings(
-        database_url=seeded_database_url, planner_algorithm="kernel_smooth_buffer"
+        database_url=seeded_database_url,
+        planner_algorithm="kernel_smooth_buffer",
+        planner_params=HAND_WORKED_WINDOW,
     )
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
@@ -174,7 +182,8 @@ def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None
     assert [run["plan_id"] for run in runs] == served.plan_ids[::-1]
     newest = runs[0]
     assert newest["status"] == "published"
-    assert newest["params"]["window_m"] == 1500.0
+    # the run records the parameters it planned with
+    assert newest["params"]["window_m"] == HAND_WORKED_WINDOW["window_m"]
     assert newest["inputs"]["previous_plans"] == served.plan_ids[-2::-1]
     assert newest["inputs"]["inrix_age_s"] == 180.0
     window = served.get(
@@ -237,7 +246,8 @@ def test_two_databases_served_from_one_process_never_mix_their_plans(
             now = datetime.now(UTC).replace(microsecond=0)
             for minute in range(8, 2, -1):
                 inrix_snapshot(engine, now - timedelta(minutes=minute), speeds)
-            (outcome,) = run_planner(engine, load_settings(database_url=url), now=now)
+            settings = load_settings(database_url=url, planner_params=HAND_WORKED_WINDOW)
+            (outcome,) = run_planner(engine, settings, now=now)
             viewer = bearer(issue(engine, "viewer"))
             engine.dispose()
             with live_server(url, planner_enabled=False) as base:
