@@ -238,3 +238,32 @@ def test_cli_train_refuses_an_accel_observation_for_an_acc_policy(tmp_path: Path
     assert "observation 'commanded_accel' is for accel policies, not acc" in refused.stderr
     assert "Traceback" not in refused.stderr
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_the_final_policy_is_the_restart_kept_on_every_date(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    """With a final policy, its restarts train on every date and the shipped file is the one
+    the rule keeps on them (each fold chooses its own, as the CLI test checks)."""
+    fast = load_drive(shared_dir / FREEFLOW)
+    drives = [
+        replace(fast.slice(start, 120.0), name=name)
+        for name, start in (("2021-04-05-a", 0.0), ("2021-03-09-a", 220.0))
+    ]
+    config = EnvConfig("accel", humans=4, episode_s=60.0)
+    run = run_training(
+        drives, config, TINY, timesteps=512, seed=3, folds=2, out_dir=tmp_path, restarts=2
+    )
+    manifest = json.loads(run.manifest_path.read_text())
+    final = manifest["restarts"]
+    assert [restart["seed"] for restart in final["restarts"]] == [3, 4]
+    ranked = min(final["restarts"], key=lambda r: (r["collisions"], r["mean_distance_lost_m"]))
+    assert final["kept_seed"] == ranked["seed"]
+    kept_file = tmp_path / f"rl_accel_seed{final['kept_seed']}.npz"
+    assert run.sha256 == hashlib.sha256(kept_file.read_bytes()).hexdigest()
+    assert manifest["shipped"] == "trained on every date"
+    with pytest.raises(ValueError, match="restarts must be at least 1"):
+        run_training(
+            drives, config, TINY, timesteps=512, seed=3, folds=2, out_dir=tmp_path, restarts=0
+        )
