@@ -586,6 +586,12 @@ def _demo_on(
         _say_whole(f"{controller}: policy {sha256[:12]} held for the seeded cars that run it")
     for controller, sha256 in policies.items():
         _say_whole(f"{controller}: policy {sha256[:12]} assigned to every car it can drive")
+        if controller not in counts.policies:
+            # The roster follows the simulator's verdict; --rl overrides it, and says so.
+            _say_whole(
+                f"{controller}: the seed roster does not run it (the simulator's verdict is not "
+                "to assign it: docs/simulation.md); --rl runs it as the paper's fleet did"
+            )
     console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
     console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
     try:

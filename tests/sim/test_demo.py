@@ -39,6 +39,9 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
     assert result.returncode == 0, result.stdout + result.stderr
     assert f"with {VEHICLES} vehicles" in result.stdout
     assert f"from {VEHICLES} vehicles" in result.stdout
+    # --rl puts the ACC cars on rl_acc, which the roster (the simulator's verdict) does not run
+    assert "rl_acc: the seed roster does not run it" in result.stdout
+    assert "rl_accel: the seed roster does not run it" not in result.stdout
     # the status line, every 5 s, in the pages' words
     reporting = re.findall(r"pings .* · reporting (\d+)/100 · cleared \d+ · ", result.stdout)
     assert reporting, result.stdout
