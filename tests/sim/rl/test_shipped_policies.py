@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import shlex
 from pathlib import Path
 
 import pytest
@@ -29,7 +30,16 @@ def test_the_manifest_describes_the_shipped_file(actuation: str) -> None:
     manifest = json.loads((BUNDLED_POLICIES / f"rl_{actuation}.json").read_text())
     assert manifest["sha256"] == hashlib.sha256(policy.read_bytes()).hexdigest()
     assert manifest["actuation"] == actuation
-    assert manifest["command"].startswith(f"smoothfleet sim train --actuation {actuation} --seed")
+    # the command that trains it, with the seed the manifest records
+    command = shlex.split(manifest["command"])
+    assert command[:3] == ["smoothfleet", "sim", "train"]
+    assert command[command.index("--actuation") + 1] == actuation
+    assert int(command[command.index("--seed") + 1]) == manifest["seed"]
+    # a policy trained on recorded INRIX drove only the recorded drives of its own training
+    # dates (the drives' names begin with their date)
+    recorded = manifest.get("recorded_inrix_drives", [])
+    assert ("--recorded-inrix" in command) == bool(recorded)
+    assert {name[:10] for name in recorded} <= set(manifest["training_dates"])
     # the commit that trained it (the policies of 763d9d9 carry "+dirty": an uncommitted edit
     # of bench/agent.py, which training never imports, was in the tree when the run began)
     assert len(manifest["source_commit"].split("+")[0]) == 40
