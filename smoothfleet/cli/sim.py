@@ -956,6 +956,13 @@ def train_command(
     "start's.",
 )
 @click.option(
+    "--max-iterations",
+    type=click.IntRange(min=1),
+    default=None,
+    help="L-BFGS-B iterations per penalty stage, the search's budget (four stages) "
+    "[default: OptimumSettings', 400].",
+)
+@click.option(
     "--out",
     "out_dir",
     type=click.Path(path_type=Path),
@@ -969,6 +976,7 @@ def optimum_command(
     humans: int,
     control_interval: float,
     starts: tuple[float, ...],
+    max_iterations: int | None,
     out_dir: Path,
 ) -> None:
     """The fuel-optimal AV trajectory per drive (the bound of every controller's saving).
@@ -1008,8 +1016,11 @@ def optimum_command(
                 f"no drive {', '.join(unknown)} in {drives_dir}", param_hint="--drive"
             )
         drives = [drive for drive in drives if drive.name in names]
+    budget = OptimumSettings().max_iterations if max_iterations is None else max_iterations
     every_start = [
-        OptimumSettings(control_interval_s=control_interval, start_smoothing_s=start)
+        OptimumSettings(
+            control_interval_s=control_interval, max_iterations=budget, start_smoothing_s=start
+        )
         for start in dict.fromkeys(starts)
     ]
     bounds = GapBounds()

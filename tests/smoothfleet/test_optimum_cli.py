@@ -80,6 +80,15 @@ def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Pat
     assert f"{from_zero:+.2f} % from 0 s" in both.stdout
     assert "from 20 s)" in both.stdout
 
+    # another budget is another bound: the cache is not read, and the search stops on it (one
+    # iteration in each of the four penalty stages)
+    capped = run_cli(*args, "--drive", "dip", "--max-iterations", "1", env=cli_env(), timeout=300)
+    assert capped.returncode == 0, capped.stderr
+    assert (out / "optimum" / "dip.json").stat().st_mtime_ns != cached
+    with (out / "optimum.csv").open(newline="") as handle:
+        [row] = list(csv.DictReader(handle))
+    assert 1 <= int(row["iterations"]) <= 4
+
 
 def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path) -> None:
     missing = run_cli(
@@ -100,6 +109,11 @@ def test_cli_optimum_names_an_unknown_drive_and_a_missing_folder(tmp_path: Path)
     )
     assert backwards.returncode != 0
     assert "--start-smoothing" in backwards.stderr
+    no_budget = run_cli(
+        "sim", "optimum", "--drives", str(drives), "--max-iterations", "0", env=cli_env()
+    )
+    assert no_budget.returncode != 0
+    assert "--max-iterations" in no_budget.stderr
 
 
 def test_a_drive_without_a_bound_is_named_and_the_others_are_written(tmp_path: Path) -> None:
