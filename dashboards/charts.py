@@ -15,7 +15,7 @@ import base64
 import io
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Literal
 from zoneinfo import ZoneInfo
@@ -234,6 +234,23 @@ def line_figure(
     axes.grid(alpha=0.3)
     axes.legend(fontsize=8, loc="best")
     return figure
+
+
+def over_time_figure(
+    title: str,
+    series: Series,
+    x_axis: Axis,
+    y_axis: Axis,
+    *,
+    zone: ZoneInfo = UTC_ZONE,
+    height: int = 240,
+) -> Figure:
+    """One quantity over time, drawn as points while there are fewer than three of them (a
+    line through one or two values hides them)."""
+    style: Literal["points", "line"] = "points" if len(series.x) < 3 else "line"
+    return line_figure(
+        title, [replace(series, style=style)], x_axis, y_axis, height=height, zone=zone
+    )
 
 
 def bar_figure(

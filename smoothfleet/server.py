@@ -6,7 +6,7 @@ from fastapi import FastAPI
 
 from app.core.config import Settings
 from app.main import create_api
-from dashboards.pages import install as install_dashboard
+from dashboards.site import install as install_dashboard
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

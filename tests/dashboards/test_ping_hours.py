@@ -1,4 +1,4 @@
-"""The analytics page's pings per hour, read from the warehouse (dashboards/pages.py)."""
+"""The analytics page's pings per hour, read from the warehouse (dashboards/pages/analytics.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.db import make_async_engine
 from dashboards import data
-from dashboards.pages import pings_per_hour
+from dashboards.pages.analytics import pings_per_hour
 from tests.planner.facts import pings
 
 # The view divides the hour in progress by the seconds it has run, and by at least a minute

@@ -16,19 +16,16 @@ from typing import Annotated
 from fastapi import APIRouter, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse, Response
-from fastapi.templating import Jinja2Templates
 from sqlalchemy.orm import Session
 
-from app.core.config import Settings
 from app.core.sessions import SessionDep
 from app.motion.edie import EdieWindow, day_window, edie_field
 from app.motion.figure import window_figure
 from app.motion.fleet import FleetDay, engagement_share, fleet_pings
 from app.motion.store import MotionStoreEmpty, imported_days, motion_store
 from dashboards.auth import PageError, UserDep
+from dashboards.rendering import render, settings_of
 
-HERE = Path(__file__).parent
-templates = Jinja2Templates(directory=HERE / "templates")
 router = APIRouter(include_in_schema=False)
 
 CORRIDOR_ID = "I-24-WB"
@@ -37,8 +34,7 @@ FIGURES_KEPT = 4
 
 
 def _store(request: Request) -> Path:
-    settings: Settings = request.app.state.settings
-    return motion_store(settings)
+    return motion_store(settings_of(request))
 
 
 def _day(value: str | None, days: list[str]) -> date | None:
@@ -66,17 +62,15 @@ async def motion_page(
         share = await session.run_sync(
             lambda sync_session: engagement_share(sync_session.connection(), on_day)
         )
-    return templates.TemplateResponse(
+    return render(
         request,
         "motion.html",
-        {
-            "user": user,
-            "page": "analytics",
-            "days": days,
-            "day": None if chosen is None else chosen.isoformat(),
-            "has_data": chosen is not None and chosen.isoformat() in days,
-            "engagement_share": share,
-        },
+        user,
+        page="analytics",
+        days=days,
+        day=None if chosen is None else chosen.isoformat(),
+        has_data=chosen is not None and chosen.isoformat() in days,
+        engagement_share=share,
     )
 
 
