@@ -23,19 +23,14 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import tempfile
 import time
 from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 
 from sqlalchemy import Engine, text
 
-from app.core.db import make_sync_engine, session_scope
-from app.core.embedded import database_url, embedded_server, ensure_database
 from app.ingest.directory import CORRIDOR_ENDS_SQL, HISTORY_MARGIN
-from app.migrate import upgrade
-from app.seed import seed
+from bench.warehouse import seeded_warehouse
 
 RETENTION = timedelta(days=90)  # Settings.ping_retention_days' default
 SECOND_CORRIDOR = "BENCH-EB"
@@ -145,21 +140,12 @@ def main() -> None:
     args = parser.parse_args()
     histories = [tuple(int(part) for part in item.split("x")) for item in args.histories.split(",")]
 
-    with (
-        tempfile.TemporaryDirectory(prefix="bench-assignment-") as scratch,
-        embedded_server(Path(scratch) / "pgdata", delete_on_exit=True) as server,
-    ):
-        ensure_database(server, "bench")
-        engine = make_sync_engine(database_url(server, "bench"))
-        upgrade(engine)
-        with session_scope(engine) as session:
-            seed(session)
+    with seeded_warehouse("bench-assignment-") as warehouse:
         for per_day, days in histories:
-            rows = build_history(engine, per_day, days)
+            rows = build_history(warehouse.engine, per_day, days)
             print(f"history {per_day} change(s) a day x {days} days: {rows:,} rows")
-            for name, (median, least) in measure(engine, args.repeat).items():
+            for name, (median, least) in measure(warehouse.engine, args.repeat).items():
                 print(f"    {name:<11} median {median * 1000:7.2f} ms  (min {least * 1000:.2f})")
-        engine.dispose()
 
 
 if __name__ == "__main__":

@@ -19,13 +19,11 @@ from __future__ import annotations
 import argparse
 import re
 import statistics
-import tempfile
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 
 import httpx
 import psycopg
@@ -34,12 +32,11 @@ from sqlalchemy import text
 
 from app.core.config import load_settings
 from app.core.db import libpq_url, make_sync_engine, session_scope
-from app.core.embedded import database_url, embedded_server, ensure_database
 from app.core.security import issue_token
-from app.migrate import upgrade
 from app.plans.jobs import run_planner
-from app.seed import seed, seed_corridor_document
+from app.seed import seed_corridor_document
 from app.users.service import save_user
+from bench.warehouse import seeded_warehouse
 from contract.corridor import CorridorGeometry
 from smoothfleet.server import create_app
 
@@ -211,16 +208,9 @@ def main() -> None:
     parser.add_argument("--requests", type=int, default=30)
     parser.add_argument("--minutes", type=int, default=10)
     args = parser.parse_args()
-    with (
-        tempfile.TemporaryDirectory() as scratch,
-        embedded_server(Path(scratch) / "pgdata", delete_on_exit=True) as server,
-    ):
-        ensure_database(server, "bench")
-        url = database_url(server, "bench")
-        engine = make_sync_engine(url)
-        upgrade(engine)
+    with seeded_warehouse("bench-dashboard-") as warehouse:
+        url, engine = warehouse.url, warehouse.engine
         with session_scope(engine) as session:
-            seed(session)
             save_user(session, "bench", "viewer", PASSWORD)
             token = issue_token(session, "admin", name="bench")
         with serving(url) as base, httpx.Client(base_url=base, timeout=60) as client:
@@ -260,7 +250,6 @@ def main() -> None:
                     f"{'GET ' + path:<28}{median:>10.1f}{p95(timings):>9.1f}"
                     f"{median / floor_median:>12.1f}"
                 )
-        engine.dispose()
 
 
 if __name__ == "__main__":

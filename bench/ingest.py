@@ -28,7 +28,6 @@ import io
 import os
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -41,12 +40,10 @@ import numpy as np
 import psycopg
 import uvloop
 
-from app.core.db import libpq_url, make_sync_engine, session_scope
-from app.core.embedded import database_url, embedded_server, ensure_database
+from app.core.db import libpq_url, session_scope
 from app.core.security import issue_token
-from app.migrate import upgrade
-from app.seed import seed
 from bench.load import Body, Latencies, constant_rate, saturate
+from bench.warehouse import seeded_warehouse
 from contract.corridor import CorridorGeometry
 
 REPO = Path(__file__).resolve().parents[1]
@@ -266,138 +263,132 @@ def main() -> None:
     batched = {size: Totals() for size in (100, 1000)}
     copy_rows = dict.fromkeys(batched, 0)
     copy_seconds = dict.fromkeys(batched, 0.0)
-    with tempfile.TemporaryDirectory(prefix="sf-bench-ingest-") as scratch:
-        scratch_dir = Path(scratch)
-        with embedded_server(scratch_dir / "pgdata", delete_on_exit=True) as server_url:
-            ensure_database(server_url, "bench")
-            url = database_url(server_url, "bench")
-            engine = make_sync_engine(url)
-            upgrade(engine)
-            with session_scope(engine) as session:
-                seed(session)
-                token = issue_token(session, "operator", name="bench")
-            engine.dispose()
-            pings = Pings(corridor_positions(url))
-            env = {
-                **os.environ,
-                "SMOOTHFLEET_DATABASE_URL": url,
-                "SMOOTHFLEET_WORKERS": str(args.workers),
-                # One operator token carries the whole load: measure ingest, not the limiter.
-                "SMOOTHFLEET_RATE_LIMIT_PER_TOKEN_PER_S": "0",
-            }
-            envs = {side: dict(env) for side in ("ours", "plain")}
-            if args.probe_stalls:
-                for side, side_env in envs.items():
-                    side_env["PYTHONPATH"] = os.pathsep.join(
-                        [str(STALL_PROBE), str(REPO), side_env.get("PYTHONPATH", "")]
+    with seeded_warehouse("sf-bench-ingest-") as warehouse:
+        scratch_dir, url = warehouse.scratch, warehouse.url
+        with session_scope(warehouse.engine) as session:
+            token = issue_token(session, "operator", name="bench")
+        warehouse.engine.dispose()  # the servers measured hold the database's connections
+        pings = Pings(corridor_positions(url))
+        env = {
+            **os.environ,
+            "SMOOTHFLEET_DATABASE_URL": url,
+            "SMOOTHFLEET_WORKERS": str(args.workers),
+            # One operator token carries the whole load: measure ingest, not the limiter.
+            "SMOOTHFLEET_RATE_LIMIT_PER_TOKEN_PER_S": "0",
+        }
+        envs = {side: dict(env) for side in ("ours", "plain")}
+        if args.probe_stalls:
+            for side, side_env in envs.items():
+                side_env["PYTHONPATH"] = os.pathsep.join(
+                    [str(STALL_PROBE), str(REPO), side_env.get("PYTHONPATH", "")]
+                )
+                side_env["SMOOTHFLEET_STALL_LOG"] = str(scratch_dir / f"stalls-{side}")
+        loaded: dict[str, list[tuple[float, float]]] = {"ours": [], "plain": []}
+        ours_port, plain_port = free_port(), free_port()
+        bases = {
+            "ours": f"http://127.0.0.1:{ours_port}",
+            "plain": f"http://127.0.0.1:{plain_port}",
+        }
+        ours = [
+            str(Path(sys.executable).parent / "smoothfleet"),
+            "serve",
+            "--no-migrate",
+            "--no-planner",
+            "--port",
+            str(ours_port),
+        ]
+        plain = [
+            sys.executable,
+            "-m",
+            "uvicorn",
+            "bench.naive_ingest:create_app",
+            "--factory",
+            "--port",
+            str(plain_port),
+            "--workers",
+            str(args.workers),
+            "--log-level",
+            "warning",
+            "--no-access-log",
+        ]
+
+        def run(load: object, side: str = "ours") -> Latencies:
+            truncate(url)
+            # The generator's own garbage collections would delay requests past their due
+            # time and count as the server's latency: none while the load runs. Its loop is
+            # uvloop, as the servers' is: the generator shares their two cores, so the less
+            # it spends a request, the less it weighs on what is measured.
+            gc.collect()
+            gc.disable()
+            started = time.time()
+            try:
+                result: Latencies = uvloop.run(load)  # type: ignore[arg-type]
+            finally:
+                gc.enable()
+            loaded[side].append((started, time.time()))
+            return result
+
+        with (
+            server(ours, envs["ours"], bases["ours"], scratch_dir / "serve.log"),
+            server(plain, envs["plain"], bases["plain"], scratch_dir / "plain.log"),
+        ):
+            for base in bases.values():  # warm-up
+                uvloop.run(
+                    saturate(
+                        f"{base}/api/v1/pings",
+                        token,
+                        pings.single(),
+                        connections=8,
+                        duration_s=2,
                     )
-                    side_env["SMOOTHFLEET_STALL_LOG"] = str(scratch_dir / f"stalls-{side}")
-            loaded: dict[str, list[tuple[float, float]]] = {"ours": [], "plain": []}
-            ours_port, plain_port = free_port(), free_port()
-            bases = {
-                "ours": f"http://127.0.0.1:{ours_port}",
-                "plain": f"http://127.0.0.1:{plain_port}",
-            }
-            ours = [
-                str(Path(sys.executable).parent / "smoothfleet"),
-                "serve",
-                "--no-migrate",
-                "--no-planner",
-                "--port",
-                str(ours_port),
-            ]
-            plain = [
-                sys.executable,
-                "-m",
-                "uvicorn",
-                "bench.naive_ingest:create_app",
-                "--factory",
-                "--port",
-                str(plain_port),
-                "--workers",
-                str(args.workers),
-                "--log-level",
-                "warning",
-                "--no-access-log",
-            ]
-
-            def run(load: object, side: str = "ours") -> Latencies:
+                )
                 truncate(url)
-                # The generator's own garbage collections would delay requests past their due
-                # time and count as the server's latency: none while the load runs. Its loop is
-                # uvloop, as the servers' is: the generator shares their two cores, so the less
-                # it spends a request, the less it weighs on what is measured.
-                gc.collect()
-                gc.disable()
-                started = time.time()
-                try:
-                    result: Latencies = uvloop.run(load)  # type: ignore[arg-type]
-                finally:
-                    gc.enable()
-                loaded[side].append((started, time.time()))
-                return result
-
-            with (
-                server(ours, envs["ours"], bases["ours"], scratch_dir / "serve.log"),
-                server(plain, envs["plain"], bases["plain"], scratch_dir / "plain.log"),
-            ):
-                for base in bases.values():  # warm-up
-                    uvloop.run(
+            for _ in range(args.rounds):
+                for side, base in bases.items():
+                    result = run(
                         saturate(
                             f"{base}/api/v1/pings",
                             token,
                             pings.single(),
-                            connections=8,
-                            duration_s=2,
-                        )
+                            connections=args.connections,
+                            duration_s=args.duration,
+                        ),
+                        side,
                     )
-                    truncate(url)
-                for _ in range(args.rounds):
+                    saturated[side].add(result, 1, count_pings(url))
+                for rate in rates:
                     for side, base in bases.items():
                         result = run(
-                            saturate(
+                            constant_rate(
                                 f"{base}/api/v1/pings",
                                 token,
                                 pings.single(),
-                                connections=args.connections,
+                                rate=rate,
                                 duration_s=args.duration,
                             ),
                             side,
                         )
-                        saturated[side].add(result, 1, count_pings(url))
-                    for rate in rates:
-                        for side, base in bases.items():
-                            result = run(
-                                constant_rate(
-                                    f"{base}/api/v1/pings",
-                                    token,
-                                    pings.single(),
-                                    rate=rate,
-                                    duration_s=args.duration,
-                                ),
-                                side,
-                            )
-                            offered[side, rate].add(result, 1, count_pings(url))
-                    for size in batched:
-                        result = run(
-                            saturate(
-                                f"{bases['ours']}/api/v1/pings",
-                                token,
-                                pings.batches(size),
-                                connections=4,
-                                duration_s=args.duration,
-                            )
+                        offered[side, rate].add(result, 1, count_pings(url))
+                for size in batched:
+                    result = run(
+                        saturate(
+                            f"{bases['ours']}/api/v1/pings",
+                            token,
+                            pings.batches(size),
+                            connections=4,
+                            duration_s=args.duration,
                         )
-                        batched[size].add(result, size, count_pings(url))
-                        copied_per_s, rows = copy_rate(url)
-                        copy_rows[size] += rows
-                        copy_seconds[size] += rows / copied_per_s
-            truncate(url)
-            stalls = {
-                side: stalls_during(scratch_dir / f"stalls-{side}", windows)
-                for side, windows in loaded.items()
-                if args.probe_stalls
-            }
+                    )
+                    batched[size].add(result, size, count_pings(url))
+                    copied_per_s, rows = copy_rate(url)
+                    copy_rows[size] += rows
+                    copy_seconds[size] += rows / copied_per_s
+        truncate(url)
+        stalls = {
+            side: stalls_during(scratch_dir / f"stalls-{side}", windows)
+            for side, windows in loaded.items()
+            if args.probe_stalls
+        }
 
     print(f"machine after the run:  {load_conditions()}")
     print(

@@ -24,19 +24,14 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import tempfile
 import time
 from collections.abc import Callable
 from datetime import UTC, datetime, timedelta
-from pathlib import Path
 
 from sqlalchemy import Engine, text
 from sqlalchemy.orm import Session
 
-from app.core.db import make_sync_engine, session_scope
-from app.core.embedded import database_url, embedded_server, ensure_database
-from app.migrate import upgrade
-from app.seed import seed
+from bench.warehouse import seeded_warehouse
 from planner import PlannerParams
 from planner.warehouse import CycleOutcome, run_cycle, store_window_observations
 
@@ -118,15 +113,8 @@ def main() -> None:
     fleets = [int(count) for count in args.fleets.split(",")]
     params = PlannerParams()
 
-    with (
-        tempfile.TemporaryDirectory(prefix="bench-planner-") as scratch,
-        embedded_server(Path(scratch) / "pgdata", delete_on_exit=True) as server,
-    ):
-        ensure_database(server, "bench")
-        engine = make_sync_engine(database_url(server, "bench"))
-        upgrade(engine)
-        with session_scope(engine) as session:
-            seed(session)
+    with seeded_warehouse("bench-planner-") as warehouse:
+        engine = warehouse.engine
         add_inrix(engine)
 
         outcomes: list[CycleOutcome] = []
