@@ -46,6 +46,10 @@ RECENT_PING_WINDOW = timedelta(days=2)
 STATUS_FIELDS = tuple(
     name for name in LastStatus.__dataclass_fields__ if name not in ("ts", "received_at")
 )
+# fact_vehicle_status's columns in LastStatus's field order (ts and received_at first).
+STATUS_COLUMNS = tuple(
+    getattr(VehicleStatus, name) for name in ("ts", "received_at", *STATUS_FIELDS)
+)
 
 
 class VehicleNotFound(LookupError):
@@ -223,8 +227,10 @@ async def _earlier_statuses(
     primary key's order)."""
     if not since:
         return {}
-    rows = await session.scalars(
-        select(VehicleStatus)
+    # Columns, not ORM objects: a fleet view reads about 18 reports a car, and building an ORM
+    # object for each (then copying it into a LastStatus) was a third of the view's time.
+    rows = await session.execute(
+        select(VehicleStatus.vehicle_id, *STATUS_COLUMNS)
         .where(
             or_(
                 *(
@@ -236,10 +242,8 @@ async def _earlier_statuses(
         .order_by(VehicleStatus.vehicle_id, VehicleStatus.ts)
     )
     history: dict[str, list[LastStatus]] = {}
-    for row in rows:
-        status = _to_last_status(row)
-        assert status is not None
-        history.setdefault(row.vehicle_id, []).append(status)
+    for vehicle_id, *values in rows:
+        history.setdefault(vehicle_id, []).append(LastStatus(*values))
     return history
 
 
