@@ -630,9 +630,8 @@ class ReportAsSent(NamedTuple):
 def _reports_as_sent(facts: VehicleFacts) -> tuple[ReportAsSent, ...]:
     """The car's reports, oldest first, each with the facts it stood for. Each report is graded
     as of when it was sent, so nothing it says has aged (graded as of its `ts`, a car whose
-    clock runs ahead would have its plans aged by its lead). Built once per car for all its
-    report-based checks: rebuilding the facts per check and report was most of the fleet
-    page's time."""
+    clock runs ahead would have its plans aged by its lead). Built once per car and shared by
+    all its report-based checks (the fleet page grades every car's reports on each view)."""
     if facts.last_status is None or not facts.earlier_statuses:
         return ()
     return tuple(

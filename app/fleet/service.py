@@ -227,8 +227,8 @@ async def _earlier_statuses(
     primary key's order)."""
     if not since:
         return {}
-    # Columns, not ORM objects: a fleet view reads about 18 reports a car, and building an ORM
-    # object for each (then copying it into a LastStatus) was a third of the view's time.
+    # Columns, not ORM objects: a fleet view reads every car's recent reports, and each is
+    # needed only as a LastStatus (an ORM object per report, then copied, cost the view time).
     rows = await session.execute(
         select(VehicleStatus.vehicle_id, *STATUS_COLUMNS)
         .where(
