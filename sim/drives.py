@@ -154,11 +154,30 @@ def replayable(recorded: RecordedTrajectory) -> Drive:
 
 
 def load_drives(directory: Path) -> list[Drive]:
-    """Every drive CSV of a directory, in name order."""
+    """Every drive CSV of a directory, in name order.
+
+    Every file is read before any is refused, so one error names every file that cannot be
+    replayed (one line each): a folder of new drives is mended in one pass, not one run per
+    bad file.
+    """
     files = sorted(directory.glob("*.csv"))
     if not files:
         raise DriveError(f"{directory}: no drive CSV files")
-    return [load_drive(path) for path in files]
+    drives: list[Drive] = []
+    refused: list[str] = []
+    for path in files:
+        try:
+            drives.append(load_drive(path))
+        except DriveError as error:
+            refused.append(str(error))
+    if len(refused) == 1:
+        raise DriveError(refused[0])
+    if refused:
+        raise DriveError(
+            f"{len(refused)} of the {len(files)} drives in {directory} cannot be replayed:\n"
+            + "\n".join(refused)
+        )
+    return drives
 
 
 # Where the shared data may be named explicitly (e.g. an installed copy of smoothfleet).

@@ -89,6 +89,22 @@ def test_a_recording_the_replay_cannot_use_is_named(
         load_drive(path)
 
 
+def test_every_refused_drive_of_a_folder_is_named_at_once(tmp_path: Path) -> None:
+    (tmp_path / "a_good.csv").write_text(HEADER + "100.0,36\n100.1,36\n")
+    (tmp_path / "b_gappy.csv").write_text(HEADER + "100.0,36\n101.3,36\n")
+    (tmp_path / "c_holes.csv").write_text(HEADER + "100.0,36\n100.1,\n")
+    with pytest.raises(DriveError) as refused:
+        load_drives(tmp_path)
+    lines = str(refused.value).splitlines()
+    assert lines[0] == f"2 of the 3 drives in {tmp_path} cannot be replayed:"
+    assert lines[1].startswith(f"{tmp_path / 'b_gappy.csv'} row 3: time step 1.300 s")
+    assert lines[2].startswith(f"{tmp_path / 'c_holes.csv'} row 3: Time and Velocity")
+    # one bad file alone is refused with its own message
+    (tmp_path / "b_gappy.csv").unlink()
+    with pytest.raises(DriveError, match=r"^\S+c_holes.csv row 3: Time and Velocity"):
+        load_drives(tmp_path)
+
+
 def test_a_file_without_the_columns_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "other.csv"
     path.write_text("a,b\n1,2\n")
