@@ -25,7 +25,7 @@ from sim.drives import Drive
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
-from sim.gaps import GapBounds, GapKpis, gap_kpis
+from sim.gaps import GapBounds, gap_kpis
 from sim.kpi import (
     Kpis,
     change_pct,
@@ -183,45 +183,33 @@ def score_drives(
                 humans=humans,
                 cut_ins=cut_ins,
             )
-            # both runs' throughput at the same road locations (`sim.kpi.shared_points_m`)
-            points = throughput_points_m([run, base_run])
-            kpis = platoon_kpis(run, throughput_points_m=points)
-            base_throughput = (
-                base.throughput_vph if points is None else run_throughput_vph(base_run, points)
-            )
-            av = np.flatnonzero(run.is_av[1:])
-            envelope_kpis = gap_kpis(
-                run.gap_m[:, av],
-                run.speed_mps[:, av + 1],
-                run.position_m[:, av + 1],
-                run.dt_s,
-                envelope,
-            )
-            scores.append(
-                _score(
-                    drive,
-                    entry.label,
-                    base,
-                    kpis,
-                    envelope_kpis,
-                    base_throughput,
-                    distance_lost_m(base_run.position_m[-1], run.position_m[-1], (av + 1).tolist()),
-                )
-            )
+            scores.append(score_run(drive, entry.label, base_run, base, run, envelope))
             if progress is not None:
                 progress(f"{drive.name} {entry.label}")
     return scores
 
 
-def _score(
+def score_run(
     drive: Drive,
     label: str,
+    base_run: PlatoonRun,
     base: Kpis,
-    kpis: Kpis,
-    envelope: GapKpis,
-    base_throughput: float,
-    lost_m: float,
+    run: PlatoonRun,
+    envelope: GapBounds,
 ) -> DriveScore:
+    """One run with AVs against the all-human run of the same drive (`base`, its KPIs): both
+    runs' throughput at the same road locations (`sim.kpi.shared_points_m`), the envelope and
+    the distance lost judged over every AV of the run."""
+    points = throughput_points_m([run, base_run])
+    kpis = platoon_kpis(run, throughput_points_m=points)
+    base_throughput = (
+        base.throughput_vph if points is None else run_throughput_vph(base_run, points)
+    )
+    av = np.flatnonzero(run.is_av[1:])
+    envelope_kpis = gap_kpis(
+        run.gap_m[:, av], run.speed_mps[:, av + 1], run.position_m[:, av + 1], run.dt_s, envelope
+    )
+    lost_m = distance_lost_m(base_run.position_m[-1], run.position_m[-1], (av + 1).tolist())
     return DriveScore(
         drive=drive.name,
         date=drive_date(drive),
@@ -233,9 +221,9 @@ def _score(
         network_speed_change_pct=change_pct(kpis.network_speed_mps, base.network_speed_mps),
         accel_rms_change_pct=change_pct(kpis.accel_rms_mps2, base.accel_rms_mps2),
         collisions=kpis.collisions,
-        gap_within_share=envelope.within_bounds_share,
+        gap_within_share=envelope_kpis.within_bounds_share,
         unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
-        gap_within_reachable_share=envelope.within_reachable_bounds_share,
+        gap_within_reachable_share=envelope_kpis.within_reachable_bounds_share,
         distance_lost_m=lost_m,
     )
 
