@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -34,10 +34,9 @@ from contract.controllers import (
     validate_controller,
 )
 from contract.corridor import MIN_SPEED_FOR_HEADING_MPS, CorridorGeometry
-from contract.vehicles import Ping, Rejection, VehicleConfig, VehicleStatusReport
+from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
-from vehicle_agent.batching import PingBatchSize
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
 from vehicle_agent.clock import Clock
 from vehicle_agent.codec import codec_for
@@ -61,7 +60,6 @@ from vehicle_agent.server import (
     NewPlan,
     NotAuthorized,
     NoValidPlan,
-    RequestRefused,
     ServerClient,
     ServerError,
     ServerUnavailable,
@@ -70,6 +68,7 @@ from vehicle_agent.server import (
 from vehicle_agent.spool import PingSpool
 from vehicle_agent.state import CarStateReader
 from vehicle_agent.stopping import StoppingCheck
+from vehicle_agent.uplink import PingUplink
 
 log = logging.getLogger(__name__)
 
@@ -105,24 +104,8 @@ CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
 # The longest Retry-After honoured (s): a server asking for more is polled again after this.
 MAX_RETRY_AFTER_S = 300.0
-# Upload at most this many batches per network() call, so status and plan polls stay timely.
-MAX_BATCHES_PER_CALL = 5
-# A ping the server refused for now (its clock or roster behind, `Rejection.retryable`) is sent
-# again for this long after its own time, a day's deployment: long enough for an operator to
-# mend the server's clock or add the car to the roster before it is given up.
-RETRYABLE_PING_KEEP_S = 12 * 3600.0
 # Low-pass time constant of the acceleration estimated from the speed (s).
 ACCEL_FILTER_S = 0.3
-
-
-def _age_s(ts: object, now: datetime) -> float:
-    """Seconds from a spooled ping's `ts` to `now`; infinite for one that does not read as a
-    time with its zone (the spool holds only what the contract built, so never in practice)."""
-    try:
-        stamped = datetime.fromisoformat(str(ts))
-        return (now - stamped).total_seconds()
-    except (ValueError, TypeError):
-        return math.inf
 
 
 def fix_is_current(fix: GpsFix | None, now_s: float) -> bool:
@@ -284,7 +267,7 @@ class Agent:
         self._plan_schedule = Schedule()
         self._status_schedule = Schedule()
         self._upload_schedule = Schedule()
-        self._ping_batch = PingBatchSize()
+        self.uplink = PingUplink(spool, clock.now)
         self._next_ping_s = 0.0
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
@@ -933,76 +916,22 @@ class Agent:
         )
 
     def upload(self, now: float | None = None) -> int:
-        """Send spooled pings, oldest first, in batches; returns how many left the spool."""
+        """Send spooled pings (`vehicle_agent.uplink`); returns how many left the spool,
+        answered for or given up. The next upload is a second away, or backs off when the
+        server stopped this one."""
         if self.server is None:
             return 0
         now = self.clock.monotonic() if now is None else now
-        uploaded = 0
-        for _ in range(MAX_BATCHES_PER_CALL):
-            batch_size = self._ping_batch.size
-            rows = self.spool.oldest(batch_size)
-            if not rows:
-                break
-            try:
-                answer = self.server.post_pings([ping for _, ping in rows])
-            except RequestRefused as error:
-                self._server_failed("pings", error)
-                uploaded += self._split_refused_batch(rows, error)
-                continue
-            except ServerError as error:
-                self._server_failed("pings", error)
-                self._upload_schedule.failed(now, 1.0)
-                return uploaded
-            self._ping_batch.taken()
-            kept = self._held_back(rows, answer.rejected)
-            gone = [row_id for row_id, _ in rows if row_id not in kept]
-            self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
-            uploaded += len(gone)
-            self.stats.pings_uploaded += len(gone)
-            if kept:
-                # the server cannot take them yet: try again later, backing off, not in a loop
-                self.stats.pings_held_back += len(kept)
-                self._upload_schedule.failed(now, 1.0)
-                return uploaded
-            if len(rows) < batch_size:
-                break
-        self._upload_schedule.done(now, 1.0)
-        return uploaded
-
-    def _split_refused_batch(
-        self, rows: Sequence[tuple[int, dict[str, Any]]], error: RequestRefused
-    ) -> int:
-        """After a batch refused whole (vehicle_agent/batching.py): the next batch is half as
-        large, and a lone ping refused whole leaves the spool as rejected, so that no ping
-        blocks the ones behind it. How many pings left the spool."""
-        if len(rows) > 1:
-            self._ping_batch.refused(len(rows), too_large=error.too_large)
-            return 0
-        [(row_id, ping)] = rows
-        log.warning("server refused ping %s on its own: given up", ping.get("ts"))
-        self.spool.remove([row_id], rejected=1)
-        return 1
-
-    def _held_back(
-        self, rows: Sequence[tuple[int, dict[str, Any]]], rejected: Sequence[Rejection]
-    ) -> set[int]:
-        """The spool rows of the pings refused for now and young enough to send again; a
-        final refusal, or a ping older than RETRYABLE_PING_KEEP_S, leaves the spool."""
-        now = self.clock.now()
-        kept: list[tuple[int, object, str]] = []
-        for rejection in rejected:
-            row_id, ping = rows[rejection.index]
-            ts = ping.get("ts")
-            if rejection.retryable and _age_s(ts, now) <= RETRYABLE_PING_KEEP_S:
-                kept.append((row_id, ts, rejection.error))
-            else:
-                log.warning("server rejected ping %s: %s", ts, rejection.error)
-        if kept:
-            # one line a retry, not one a ping: a server clock behind refuses every ping, again
-            # every back-off, and each line lands on the car's SD card
-            _, ts, error = kept[0]
-            log.warning("server refused %d pings for now (%s: %s): kept", len(kept), ts, error)
-        return {row_id for row_id, _, _ in kept}
+        outcome = self.uplink.upload(self.server)
+        for error in outcome.errors:
+            self._server_failed("pings", error)
+        self.stats.pings_uploaded += outcome.uploaded
+        self.stats.pings_held_back += outcome.held_back
+        if outcome.completed:
+            self._upload_schedule.done(now, 1.0)
+        else:
+            self._upload_schedule.failed(now, 1.0)
+        return outcome.uploaded + outcome.given_up
 
     def _fault(self, check: str, now: float) -> None:
         """A fault: the engage check `check` fails from now for its hold (FAULT_HOLDS_S)."""

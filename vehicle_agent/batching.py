@@ -8,10 +8,10 @@ such a batch is refused again, and since the spool sends oldest first, every lat
 wait behind it until the spool's bound dropped them all.
 
 So a refused batch is split: the next one is half its size, down to a single ping, which is then
-given up as rejected (`Agent.upload`). A body too large lowers the ceiling for the rest of the
-run (the limit will not move by itself, and each refused body costs the car's uplink its bytes);
-a refusal of the content does not: once the batches after the refused ping are taken, they grow
-back, doubling, to the ceiling.
+given up as rejected (`vehicle_agent.uplink`). A body too large lowers the ceiling for the rest
+of the run (the limit will not move by itself, and each refused body costs the car's uplink its
+bytes); a refusal of the content does not: once the batches after the refused ping are taken,
+they grow back, doubling, to the ceiling.
 """
 
 from __future__ import annotations

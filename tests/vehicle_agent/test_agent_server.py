@@ -249,7 +249,7 @@ def test_pings_a_server_refuses_for_now_stay_in_the_spool_until_it_takes_them(
         r.run(5.0)
         backlog = r.agent.spool.backlog()
         assert backlog >= 5
-        with caplog.at_level(logging.WARNING, logger="vehicle_agent.agent"):
+        with caplog.at_level(logging.WARNING, logger="vehicle_agent.uplink"):
             assert r.agent.upload() == 0
         assert r.agent.spool.backlog() == backlog
         # one line for the batch, not one a ping, every retry, on the car's SD card

@@ -1,0 +1,130 @@
+"""The spooled pings to the server: oldest first, in batches, until the spool is empty or the
+server cannot take more.
+
+Each batch the server answers ping by ping leaves the spool, but for the pings it refused for
+now (`Rejection.retryable`: its clock or roster behind) that are young enough to send again.
+A batch refused whole is split (`vehicle_agent.batching`), and a lone ping refused whole is
+given up, so that no ping blocks the ones behind it. The agent decides what an outcome means
+for its schedule and its counters (`Agent.upload`); this module only speaks the protocol.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from typing import Any
+
+from contract.vehicles import Rejection
+from vehicle_agent.batching import PingBatchSize
+from vehicle_agent.server import RequestRefused, ServerClient, ServerError
+from vehicle_agent.spool import PingSpool
+
+log = logging.getLogger(__name__)
+
+# Upload at most this many batches per call, so status and plan polls stay timely.
+MAX_BATCHES_PER_CALL = 5
+# A ping the server refused for now (its clock or roster behind, `Rejection.retryable`) is sent
+# again for this long after its own time, a day's deployment: long enough for an operator to
+# mend the server's clock or add the car to the roster before it is given up.
+RETRYABLE_PING_KEEP_S = 12 * 3600.0
+
+SpoolRows = Sequence[tuple[int, dict[str, Any]]]
+
+
+@dataclass
+class UploadOutcome:
+    """What one upload did: pings the server answered for (they left the spool), lone pings
+    it refused whole (given up: they left the spool as rejected), pings kept to send again,
+    the errors met on the way, and whether it ended on its own (the spool drained, or the
+    call's batches sent) rather than stopped by the server (a failure, or pings it cannot take
+    yet)."""
+
+    uploaded: int = 0
+    given_up: int = 0
+    held_back: int = 0
+    errors: list[ServerError] = field(default_factory=list)
+    completed: bool = True
+
+
+def ping_age_s(ts: object, now: datetime) -> float:
+    """Seconds from a spooled ping's `ts` to `now`; infinite for one that does not read as a
+    time with its zone (the spool holds only what the contract built, so never in practice)."""
+    try:
+        stamped = datetime.fromisoformat(str(ts))
+        return (now - stamped).total_seconds()
+    except (ValueError, TypeError):
+        return math.inf
+
+
+class PingUplink:
+    """Sends a spool's pings; holds the size of the next batch across calls."""
+
+    def __init__(self, spool: PingSpool, wall_clock: Callable[[], datetime]) -> None:
+        self.spool = spool
+        self.wall_clock = wall_clock
+        self.batch = PingBatchSize()
+
+    def upload(self, server: ServerClient) -> UploadOutcome:
+        """Up to MAX_BATCHES_PER_CALL batches, oldest pings first."""
+        outcome = UploadOutcome()
+        for _ in range(MAX_BATCHES_PER_CALL):
+            batch_size = self.batch.size
+            rows = self.spool.oldest(batch_size)
+            if not rows:
+                break
+            try:
+                answer = server.post_pings([ping for _, ping in rows])
+            except RequestRefused as error:
+                outcome.errors.append(error)
+                outcome.given_up += self._split_refused_batch(rows, error)
+                continue
+            except ServerError as error:
+                outcome.errors.append(error)
+                outcome.completed = False
+                return outcome
+            self.batch.taken()
+            kept = self._held_back(rows, answer.rejected)
+            gone = [row_id for row_id, _ in rows if row_id not in kept]
+            self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
+            outcome.uploaded += len(gone)
+            if kept:
+                # the server cannot take them yet: try again later, backing off, not in a loop
+                outcome.held_back += len(kept)
+                outcome.completed = False
+                return outcome
+            if len(rows) < batch_size:
+                break
+        return outcome
+
+    def _split_refused_batch(self, rows: SpoolRows, error: RequestRefused) -> int:
+        """After a batch refused whole: the next batch is half as large, and a lone ping
+        refused whole leaves the spool as rejected. How many pings left the spool."""
+        if len(rows) > 1:
+            self.batch.refused(len(rows), too_large=error.too_large)
+            return 0
+        [(row_id, ping)] = rows
+        log.warning("server refused ping %s on its own: given up", ping.get("ts"))
+        self.spool.remove([row_id], rejected=1)
+        return 1
+
+    def _held_back(self, rows: SpoolRows, rejected: Sequence[Rejection]) -> set[int]:
+        """The spool rows of the pings refused for now and young enough to send again; a
+        final refusal, or a ping older than RETRYABLE_PING_KEEP_S, leaves the spool."""
+        now = self.wall_clock()
+        kept: list[tuple[int, object, str]] = []
+        for rejection in rejected:
+            row_id, ping = rows[rejection.index]
+            ts = ping.get("ts")
+            if rejection.retryable and ping_age_s(ts, now) <= RETRYABLE_PING_KEEP_S:
+                kept.append((row_id, ts, rejection.error))
+            else:
+                log.warning("server rejected ping %s: %s", ts, rejection.error)
+        if kept:
+            # one line a retry, not one a ping: a server clock behind refuses every ping, again
+            # every back-off, and each line lands on the car's SD card
+            _, ts, error = kept[0]
+            log.warning("server refused %d pings for now (%s: %s): kept", len(kept), ts, error)
+        return {row_id for row_id, _, _ in kept}
