@@ -195,6 +195,11 @@ class RearAv:
     build: Callable[[FleetRelay], Controller]
 
 
+# The front AV in every run, and the rear AV of the reference runs the forecasts are fitted on.
+SHIPPED = ControllerUnderTest.registered("rl_accel", "accel", {})
+REFERENCE = RearAv("rl_accel (shipped)", LATENCY_S, lambda relay: SHIPPED.build())
+
+
 def relayed_run(drive: Drive, rear: RearAv) -> PlatoonRun:
     """The drive with the shipped rl_accel at follower 0 relaying its pings, `rear` at
     follower 24, I-24 IDM humans between and behind, the planner pinged by both AVs."""
@@ -210,10 +215,6 @@ def relayed_run(drive: Drive, rear: RearAv) -> PlatoonRun:
         policies,
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
     )
-
-
-SHIPPED = ControllerUnderTest.registered("rl_accel", "accel", {})
-REFERENCE = RearAv("rl_accel (shipped)", LATENCY_S, lambda relay: SHIPPED.build())
 
 
 def relayed_pings(run: PlatoonRun, latency_s: float) -> FleetRelay:
