@@ -203,11 +203,15 @@ def line_figure(
     y_low, y_high = fit(ys, y_axis.lower, y_axis.upper)
     if y_axis.upper is None:
         y_high = y_low + (y_high - y_low) * 1.08
-    for index, band in enumerate(bands):
-        axes.axvspan(
-            band.start,
-            band.end,
-            color=band.colour,
+    # One collection per colour, however many bands: a car whose engagement flickers shades
+    # hundreds of stretches, and one patch each cost ~0.3 ms to draw and ~0.25 ms to encode
+    # (`python -m bench.charts`).
+    for index, colour in enumerate(dict.fromkeys(band.colour for band in bands)):
+        axes.broken_barh(
+            [(band.start, band.end - band.start) for band in bands if band.colour == colour],
+            (0.0, 1.0),
+            transform=axes.get_xaxis_transform(),  # x in data, y the axes' full height
+            color=colour,
             alpha=0.45,
             linewidth=0,
             label=band_label if index == 0 and band_label else None,
@@ -232,7 +236,9 @@ def line_figure(
     axes.set_ylabel(y_axis.label)
     axes.set_title(title, fontsize=10)
     axes.grid(alpha=0.3)
-    axes.legend(fontsize=8, loc="best")
+    # Beside the axes, where it hides no data; "best" inside them searches every point and
+    # band for a free corner on each draw (bench.charts).
+    axes.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return figure
 
 
