@@ -12,6 +12,12 @@ Baselines, same server and database:
 - `GET /healthz`: the HTTP round trip with no database and no template (the floor);
 - the fleet snapshot query alone (last ping and last status of every car, the `fleet()` service
   without readiness or HTML), timed in-process with psycopg.
+
+Then what an operator's pages cost the fleet: one batch of pings (one per car, as the cars'
+uploads arrive every second) posted `--requests` times, 0.2 s apart, while a second client
+fetches a chart page over and over, and with no page fetched (the baseline). The dashboard and
+the ingest API share the server's event loop, so whatever a page does on it, every ping waits
+for.
 """
 
 from __future__ import annotations
@@ -85,9 +91,7 @@ def serving(url: str) -> Iterator[str]:
 def load_fleet(client: httpx.Client, token: str, url: str, minutes: int) -> int:
     """Post `minutes` of the fleet's pings, statuses and INRIX snapshots; returns pings sent."""
     document = seed_corridor_document()
-    geometry = CorridorGeometry.from_segments(
-        "I-24-WB", document["corridor"]["lanes"], document["i24_segments"]
-    )
+    geometry = corridor_geometry()
     headers = {"Authorization": f"Bearer {token}"}
     end = datetime.now(UTC).replace(microsecond=0)
     start = end - timedelta(minutes=minutes)
@@ -162,6 +166,62 @@ def load_fleet(client: httpx.Client, token: str, url: str, minutes: int) -> int:
                 headers=headers,
             ).raise_for_status()
     return sent
+
+
+def corridor_geometry() -> CorridorGeometry:
+    """The seed corridor, as the server has it."""
+    document = seed_corridor_document()
+    return CorridorGeometry.from_segments(
+        "I-24-WB", document["corridor"]["lanes"], document["i24_segments"]
+    )
+
+
+def ping_batch_while(
+    client: httpx.Client, token: str, path: str | None, requests: int
+) -> list[float]:
+    """Milliseconds to post each of `requests` batches (one ping per car, now), 0.2 s apart,
+    while another client with `client`'s login fetches `path` without pause (None: nothing)."""
+    geometry = corridor_geometry()
+    places = [geometry.position(100.0 + 130.0 * car) for car in range(1, 101)]
+    stop = threading.Event()
+
+    def operator() -> None:
+        with httpx.Client(
+            base_url=str(client.base_url), cookies=client.cookies, timeout=60
+        ) as viewer:
+            while not stop.is_set():
+                viewer.get(path).raise_for_status()  # type: ignore[arg-type]
+
+    viewing = threading.Thread(target=operator, daemon=True) if path else None
+    if viewing is not None:
+        viewing.start()
+        time.sleep(1.0)  # the page's first renders under way
+    timings = []
+    try:
+        for _ in range(requests):
+            ts = datetime.now(UTC).isoformat(timespec="milliseconds")
+            pings = [
+                {
+                    "vehicle_id": f"SF-{car:03d}",
+                    "ts": ts,
+                    "lat": float(lat),
+                    "lon": float(lon),
+                    "speed_mps": 25.0,
+                    "controller_engaged": True,
+                }
+                for car, (lat, lon) in enumerate(places, start=1)
+            ]
+            started = time.perf_counter()
+            client.post(
+                "/api/v1/pings", json={"pings": pings}, headers={"Authorization": f"Bearer {token}"}
+            ).raise_for_status()
+            timings.append((time.perf_counter() - started) * 1000.0)
+            time.sleep(0.2)
+    finally:
+        stop.set()
+        if viewing is not None:
+            viewing.join(timeout=60)
+    return timings
 
 
 def log_in(client: httpx.Client) -> None:
@@ -249,6 +309,15 @@ def main() -> None:
                 print(
                     f"{'GET ' + path:<28}{median:>10.1f}{p95(timings):>9.1f}"
                     f"{median / floor_median:>12.1f}"
+                )
+            del client.headers["Authorization"]  # the operator's pages go by their login
+            print(f"\n{'100 pings posted, while':<40}{'median ms':>10}{'p95 ms':>9}{'max ms':>9}")
+            for viewed in (None, "/vehicles/SF-001", "/plans", "/feeds"):
+                batches = ping_batch_while(client, token, viewed, args.requests)
+                label = "no page is viewed (baseline)" if viewed is None else f"GET {viewed} loops"
+                print(
+                    f"{label:<40}{statistics.median(batches):>10.1f}{p95(batches):>9.1f}"
+                    f"{max(batches):>9.1f}"
                 )
 
 
