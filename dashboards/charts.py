@@ -14,7 +14,7 @@ from __future__ import annotations
 import base64
 import io
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Literal
@@ -26,6 +26,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import Colormap, LinearSegmentedColormap
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
+from starlette.concurrency import run_in_threadpool
 
 WIDTH_IN = 7.6
 HEIGHT_IN = 3.0
@@ -170,6 +171,14 @@ def _label_x(axes: Axes, axis: Axis, low: float, high: float, zone: ZoneInfo) ->
         axes.set_xlabel(f"{axis.label} ({datetime.fromtimestamp(low, zone).tzname()})")
     else:
         axes.set_xlabel(axis.label)
+
+
+async def drawn(chart_id: str, figure: Callable[[], Figure]) -> Markup:
+    """`chart` of the figure `figure()` builds, both on a worker thread: matplotlib holds the
+    CPU for about 0.1 s a figure (`python -m bench.charts`), and on the event loop, which the
+    dashboard shares with the ingest API, every ping arriving meanwhile would wait for it
+    (`python -m bench.dashboard`, its last table)."""
+    return await run_in_threadpool(lambda: chart(chart_id, figure()))
 
 
 def chart(chart_id: str, figure: Figure) -> Markup:

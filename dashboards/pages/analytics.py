@@ -16,6 +16,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse
 from sqlalchemy import RowMapping
 from sqlalchemy.ext.asyncio import AsyncSession
+from starlette.concurrency import run_in_threadpool
 
 from app.core.sessions import SessionDep
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
@@ -28,6 +29,7 @@ from dashboards.charts import (
     Series,
     bar_figure,
     chart,
+    drawn,
     heatmap_figure,
     over_time_figure,
 )
@@ -111,7 +113,8 @@ async def _analytics_context(
     }
     charts = context["charts"]
     if engagement:
-        charts["engagement"] = engagement_chart(
+        charts["engagement"] = await run_in_threadpool(
+            engagement_chart,
             "engagement-share",
             "Share of fleet time with the controller engaged, per day",
             engagement,
@@ -119,9 +122,9 @@ async def _analytics_context(
         )
     if hourly:
         hours = [row["hour"].timestamp() + 1800.0 for row in hourly]  # middle of the hour
-        charts["pings"] = chart(
+        charts["pings"] = await drawn(
             "pings-hourly",
-            over_time_figure(
+            lambda: over_time_figure(
                 "Pings per hour (the hour in progress at its rate so far)",
                 Series("pings", hours, pings_per_hour(hourly), "#2563eb"),
                 Axis("hour", "time"),
@@ -130,9 +133,9 @@ async def _analytics_context(
                 height=220,
             ),
         )
-        charts["vehicles"] = chart(
+        charts["vehicles"] = await drawn(
             "vehicles-hourly",
-            over_time_figure(
+            lambda: over_time_figure(
                 "Vehicles heard per hour",
                 Series("vehicles", hours, [float(r["vehicles"]) for r in hourly], "#16a34a"),
                 Axis("hour", "time"),
@@ -142,9 +145,9 @@ async def _analytics_context(
             ),
         )
     if adherence:
-        charts["adherence"] = chart(
+        charts["adherence"] = await drawn(
             "plan-adherence",
-            bar_figure(
+            lambda: bar_figure(
                 "Mean |speed − plan target| per day",
                 [row["day"].strftime("%m-%d") for row in adherence],
                 [row["mean_abs_speed_error_mps"] * MPH_PER_MPS for row in adherence],
@@ -201,9 +204,9 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any], zone: ZoneI
     x_range = (t0, t0 + columns * h_t)
     context["edie_window"] = (since, until, corridor.corridor_id)
     upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
-    context["charts"]["edie_speed"] = chart(
+    context["charts"]["edie_speed"] = await drawn(
         "edie-speed",
-        heatmap_figure(
+        lambda: heatmap_figure(
             "Bulk speed u = q / ρ of the fleet's pings",
             speed,
             x_range,
@@ -216,9 +219,9 @@ async def _edie_charts(session: SessionDep, context: dict[str, Any], zone: ZoneI
     )
     finite = fuel[np.isfinite(fuel)]
     fuel_upper = float(np.percentile(finite, 95)) if finite.size else 1.0
-    context["charts"]["edie_fuel"] = chart(
+    context["charts"]["edie_fuel"] = await drawn(
         "edie-fuel",
-        heatmap_figure(
+        lambda: heatmap_figure(
             "Bulk fuel consumption ψ = f / q",
             fuel,
             x_range,

@@ -14,7 +14,7 @@ from sqlalchemy.ext.asyncio import AsyncSession
 from app.core.sessions import SessionDep
 from dashboards import data
 from dashboards.auth import UserDep
-from dashboards.charts import Axis, Series, chart, over_time_figure
+from dashboards.charts import Axis, Series, drawn, over_time_figure
 from dashboards.rendering import display_zone, figure_refresh_s, page, settings_of
 
 router = APIRouter(include_in_schema=False)
@@ -61,9 +61,9 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
     }
     zone = display_zone(settings_of(request))
     if snapshots:
-        context["inrix_chart"] = chart(
+        context["inrix_chart"] = await drawn(
             "inrix-latency",
-            over_time_figure(
+            lambda: over_time_figure(
                 "INRIX latency per snapshot",
                 Series(
                     "latency",
@@ -77,9 +77,9 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
             ),
         )
     if minutes:
-        context["ping_chart"] = chart(
+        context["ping_chart"] = await drawn(
             "ping-rate",
-            over_time_figure(
+            lambda: over_time_figure(
                 "Pings per second, per minute of GPS time",
                 Series(
                     "pings per second",

@@ -15,6 +15,7 @@ from fastapi import APIRouter, Request
 from fastapi import Path as PathParameter
 from fastapi.responses import HTMLResponse
 from sqlalchemy.ext.asyncio import AsyncSession
+from starlette.concurrency import run_in_threadpool
 
 from app.core.sessions import SessionDep
 from app.fleet.readiness import describe_age
@@ -163,7 +164,8 @@ async def _plans_context(
         return context
     context["inputs"] = dict(_readable_pair(name, value) for name, value in plan.inputs.items())
     context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
-    context["lane_charts"] = _plan_charts(await data.plan_profiles(session, plan))
+    profiles = await data.plan_profiles(session, plan)
+    context["lane_charts"] = await run_in_threadpool(_plan_charts, profiles)
     # The hour of plans up to this one, drawn until this plan stops being in force (or now).
     published = plan.published_at or plan.started_at
     until = max(
@@ -177,7 +179,8 @@ async def _plans_context(
         since = max(since, datetime.fromtimestamp(float(field.published_at[0]), UTC))
         upper = math.ceil(corridor.speed_limit_mps * MPH_PER_MPS / 5) * 5
         zone = display_zone(settings_of(request))
-        context["target_map"] = _time_space_chart(
+        context["target_map"] = await run_in_threadpool(
+            _time_space_chart,
             "plan-heatmap",
             f"Target speed of lane {lane}, recent plans",
             field,
@@ -188,7 +191,8 @@ async def _plans_context(
             zone,
         )
         if not np.all(np.isnan(field.tse_mps)):
-            context["tse_map"] = _time_space_chart(
+            context["tse_map"] = await run_in_threadpool(
+                _time_space_chart,
                 "tse-heatmap",
                 f"Fused traffic state (TSE) of lane {lane}",
                 field,

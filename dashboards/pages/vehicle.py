@@ -13,6 +13,7 @@ from fastapi import APIRouter, Form, Request
 from fastapi import Path as PathParameter
 from fastapi.responses import HTMLResponse, RedirectResponse, Response
 from sqlalchemy.ext.asyncio import AsyncSession
+from starlette.concurrency import run_in_threadpool
 
 from app.core.sessions import SessionDep
 from app.fleet.readiness import CHECKS, Thresholds
@@ -113,15 +114,19 @@ async def _vehicle_history(
     if entry.last_ping is not None:
         trace = await data.vehicle_trace(session, vehicle_id, entry.last_ping.ts, TRACE_WINDOW)
         if trace.ts:
-            context["speed_chart"] = _speed_chart(entry, trace, zone)
+            context["speed_chart"] = await run_in_threadpool(_speed_chart, entry, trace, zone)
     context["statuses"] = await data.status_history(session, vehicle_id)
     engagement = await data.engagement_per_day(
         session, local_days_ago(now, zone, ANALYTICS_DAYS), zone, vehicle_id=vehicle_id
     )
     context["engagement"] = engagement
     if engagement:
-        context["engagement_chart"] = engagement_chart(
-            "vehicle-engagement", f"Engagement of {vehicle_id} per day", engagement, zone
+        context["engagement_chart"] = await run_in_threadpool(
+            engagement_chart,
+            "vehicle-engagement",
+            f"Engagement of {vehicle_id} per day",
+            engagement,
+            zone,
         )
     return context
 
