@@ -4,9 +4,10 @@ and a page or only its live part.
 Speeds are shown in mph and places in postmiles (people's units on US roads); times in the
 corridor's local time (`dashboard_timezone`).
 
-Pages are rendered on the server with their charts drawn by matplotlib (PNG inside the page); a
-page that refreshes itself fetches its `.../live` path, which renders the same context into the
-page's live part (static/dashboard.js).
+Pages are rendered on the server with their charts drawn by matplotlib (PNG inside the page),
+on a worker thread (`charts.drawn`), never on the event loop the ingest API shares; a page that
+refreshes itself fetches its `.../live` path, which renders the same context into the page's
+live part (static/dashboard.js).
 """
 
 from __future__ import annotations
@@ -31,8 +32,9 @@ from dashboards.auth import PageUser
 DASHBOARD_DIR = Path(__file__).parent
 templates = Jinja2Templates(directory=DASHBOARD_DIR / "templates")
 
-# Parts of pages drawn with matplotlib refresh at most this often (s): a figure costs ~0.1 s of
-# the server's CPU, and what they show changes by the minute (plans, INRIX) or slowly.
+# Parts of pages drawn with matplotlib refresh at most this often (s): a figure costs about
+# 0.1 s of the server's CPU (the vehicle page's speed chart 87-100 ms, `python -m bench.charts`),
+# and what they show changes by the minute (plans, INRIX) or slowly.
 FIGURE_MIN_REFRESH_S = 15.0
 
 
