@@ -312,7 +312,7 @@ def main() -> None:
                 )
             del client.headers["Authorization"]  # the operator's pages go by their login
             print(f"\n{'100 pings posted, while':<40}{'median ms':>10}{'p95 ms':>9}{'max ms':>9}")
-            for viewed in (None, "/vehicles/SF-001", "/plans", "/feeds"):
+            for viewed in (None, "/fleet/live", "/vehicles/SF-001", "/plans", "/feeds"):
                 batches = ping_batch_while(client, token, viewed, args.requests)
                 label = "no page is viewed (baseline)" if viewed is None else f"GET {viewed} loops"
                 print(
