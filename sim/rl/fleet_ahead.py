@@ -1,4 +1,4 @@
-"""What a fleet car 25 vehicles ahead, relayed through the server, tells a car of its leader.
+"""What a fleet car 24 vehicles ahead, relayed through the server, tells a car of its leader.
 
     .venv/bin/python -m sim.rl.fleet_ahead skill      # forecast skill, held out by date
     .venv/bin/python -m sim.rl.fleet_ahead closed-loop  # the smoother driving each forecast
