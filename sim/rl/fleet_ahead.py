@@ -37,8 +37,8 @@ from sim.kpi import platoon_kpis
 from sim.leader_forecast import (
     DRIVE_GROUPS,
     FORECAST_S,
-    RIDGE,
     SAMPLE_EVERY_S,
+    fit_forecast,
     forecast_rows,
     forecast_steps,
     history_features,
@@ -154,10 +154,9 @@ class FleetForecast:
 
 
 def fit_fleet_forecast(features: FloatArray, change: FloatArray, with_fleet: bool) -> FleetForecast:
-    """Least squares with `sim.leader_forecast`'s ridge penalty on every weight."""
-    gram = features.T @ features + RIDGE * np.eye(features.shape[1])
-    weights = np.linalg.solve(gram, features.T @ change).astype(np.float64)
-    return FleetForecast(weights, lag_steps(), with_fleet)
+    """`sim.leader_forecast`'s ridge, on these rows."""
+    lags = lag_steps()
+    return FleetForecast(fit_forecast(features, change, lags).weights, lags, with_fleet)
 
 
 class FleetForecastFollower(LeaderAverageFollower):
