@@ -18,11 +18,19 @@ uploads arrive every second) posted `--requests` times, 0.2 s apart, while a sec
 fetches a chart page over and over, and with no page fetched (the baseline). The dashboard and
 the ingest API share the server's event loop, so whatever a page does on it, every ping waits
 for.
+
+With `--profile-fleet N`, last, the fleet view (`app.fleet.service.fleet`, what the piStatus
+page and `GET /api/v1/fleet` read) runs N times in this process's own event loop under cProfile,
+and the functions that took most of its time are printed, with the time on the event loop's
+thread (the profile) against the wall time of the N views.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
+import cProfile
+import pstats
 import re
 import statistics
 import threading
@@ -35,10 +43,13 @@ import httpx
 import psycopg
 import uvicorn
 from sqlalchemy import text
+from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.config import load_settings
-from app.core.db import libpq_url, make_sync_engine, session_scope
+from app.core.db import libpq_url, make_async_engine, make_sync_engine, session_scope
 from app.core.security import issue_token
+from app.fleet.readiness import Thresholds
+from app.fleet.service import fleet
 from app.plans.jobs import run_planner
 from app.seed import seed_corridor_document
 from app.users.service import save_user
@@ -224,6 +235,38 @@ def ping_batch_while(
     return timings
 
 
+def profile_fleet(url: str, views: int) -> None:
+    """`app.fleet.service.fleet` `views` times on this thread's event loop under cProfile; the
+    grading's worker thread is outside the profile, so the profile is what holds the loop."""
+    limits = Thresholds.from_settings(load_settings(database_url=url))
+
+    async def run() -> None:
+        engine = make_async_engine(url)
+        factory = async_sessionmaker(engine, expire_on_commit=False)
+        profiler = cProfile.Profile()
+        try:
+            async with factory() as session, session.begin():
+                await fleet(session, datetime.now(UTC), limits)  # warm-up
+            started = time.perf_counter()
+            for _ in range(views):
+                async with factory() as session, session.begin():
+                    profiler.enable()
+                    await fleet(session, datetime.now(UTC), limits)
+                    profiler.disable()
+            wall_s = time.perf_counter() - started
+        finally:
+            await engine.dispose()
+        stats = pstats.Stats(profiler)
+        loop_s = stats.total_tt  # type: ignore[attr-defined]
+        print(
+            f"\nfleet view x {views}: {1000 * wall_s / views:.1f} ms wall a view, "
+            f"{1000 * loop_s / views:.1f} ms of it profiled on the event loop's thread"
+        )
+        stats.sort_stats("cumulative").print_stats(25)
+
+    asyncio.run(run())
+
+
 def log_in(client: httpx.Client) -> None:
     form = client.get("/login")
     token = re.search(r'name="csrf_token" value="([^"]+)"', form.text)
@@ -267,6 +310,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--requests", type=int, default=30)
     parser.add_argument("--minutes", type=int, default=10)
+    parser.add_argument(
+        "--profile-fleet", type=int, default=0, metavar="N", help="profile N fleet views, last"
+    )
     args = parser.parse_args()
     with seeded_warehouse("bench-dashboard-") as warehouse:
         url, engine = warehouse.url, warehouse.engine
@@ -319,6 +365,8 @@ def main() -> None:
                     f"{label:<40}{statistics.median(batches):>10.1f}{p95(batches):>9.1f}"
                     f"{max(batches):>9.1f}"
                 )
+        if args.profile_fleet:
+            profile_fleet(url, args.profile_fleet)
 
 
 if __name__ == "__main__":
