@@ -270,6 +270,7 @@ def profile_fleet(url: str, views: int) -> None:
             f"{1000 * idle_s / views:.1f} ms waiting"
         )
         stats.sort_stats("cumulative").print_stats(25)
+        stats.sort_stats("tottime").print_stats(15)
 
     asyncio.run(run())
 
