@@ -214,7 +214,7 @@ def line_figure(
         y_high = y_low + (y_high - y_low) * 1.08
     # One collection per colour, however many bands: a car whose engagement flickers shades
     # hundreds of stretches, and with one patch each the speed chart took 483-598 ms for 600
-    # stretches against 87-113 ms for none (`python -m bench.charts`, docs/performance.md).
+    # stretches against 92-113 ms for none (`python -m bench.charts`, docs/performance.md).
     for index, colour in enumerate(dict.fromkeys(band.colour for band in bands)):
         axes.broken_barh(
             [(band.start, band.end - band.start) for band in bands if band.colour == colour],
