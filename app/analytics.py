@@ -16,8 +16,22 @@ import pandas as pd
 from sqlalchemy import Connection, text
 
 
-class UnknownView(ValueError):
+class ViewRequestError(ValueError):
+    """A request for a view that cannot be answered as asked; the message says why."""
+
+
+class UnknownView(ViewRequestError):
     """The name is not one of the analytics views; the message lists the known ones."""
+
+
+class NotPerVehicle(ViewRequestError):
+    """A vehicle was named for a view whose rows are not per vehicle."""
+
+
+class EmptyWindow(ViewRequestError):
+    """The window ends before it starts: reversed bounds are a mistake in the request, not a
+    question whose answer is no rows. (Equal bounds are a window: a day or hour view widens it
+    to the whole bucket it falls in.)"""
 
 
 @dataclass(frozen=True)
@@ -134,7 +148,12 @@ def view_query(
     """SQL and parameters selecting a view's rows in [since, until) (and for one vehicle)."""
     chosen = view(name)
     if vehicle_id is not None and not chosen.has_vehicle:
-        raise UnknownView(f"analytics view {name} has no vehicle_id column")
+        raise NotPerVehicle(f"analytics view {name} has no vehicle_id column")
+    if since is not None and until is not None and _as_utc(until) < _as_utc(since):
+        raise EmptyWindow(
+            f"the window ends before it starts: until {_as_utc(until).isoformat()} is before "
+            f"since {_as_utc(since).isoformat()}"
+        )
     params: dict[str, Any] = {}
     conditions: list[str] = []
     if chosen.window_function is not None and (since is not None or until is not None):
@@ -206,16 +225,9 @@ def _frame(connection: Connection, sql: str, params: dict[str, Any]) -> pd.DataF
     return pd.DataFrame(result.fetchall(), columns=list(result.keys()))
 
 
-def export_csv(
-    connection: Connection,
-    name: str,
-    out: IO[str],
-    *,
-    since: datetime | date | None = None,
-    until: datetime | date | None = None,
-    vehicle_id: str | None = None,
-) -> int:
-    """Write a view as CSV (header, ISO 8601 times) to `out`; returns the number of rows."""
-    frame = read_view(connection, name, since=since, until=until, vehicle_id=vehicle_id)
+def export_csv(frame: pd.DataFrame, out: IO[str]) -> int:
+    """Write a view's rows (`read_view`) as CSV (header, ISO 8601 times) to `out`; returns the
+    number of rows. The rows are read before anything is written, so a request refused or a
+    query that fails leaves an earlier export where it is."""
     frame.to_csv(out, index=False, date_format="%Y-%m-%dT%H:%M:%S.%f%z")
     return len(frame)

@@ -62,6 +62,7 @@ from smoothfleet.cli.common import (
     fleet_options,
     output_file,
     settings,
+    write_output_with,
 )
 
 # Command groups imported only when named (their imports are most of the start-up time).
@@ -362,7 +363,12 @@ def _moment(value: str | None, option: str) -> datetime | None:
         moment = datetime.fromisoformat(value)
     except ValueError:
         raise CliError(f"{option}: not an ISO 8601 date or time: {value!r}") from None
-    return moment if moment.tzinfo is not None else moment.replace(tzinfo=UTC)
+    moment = moment if moment.tzinfo is not None else moment.replace(tzinfo=UTC)
+    try:
+        moment.astimezone(UTC)
+    except OverflowError:
+        raise CliError(f"{option}: {value!r} is out of range once read in UTC") from None
+    return moment
 
 
 @cli.group("analytics")
@@ -397,22 +403,31 @@ def analytics_list() -> None:
 def analytics_export(
     view_name: str, since: str | None, until: str | None, vehicle_id: str | None, output: str
 ) -> None:
-    """Export one analytics view as CSV (header row, ISO 8601 times in UTC)."""
-    from app.analytics import UnknownView, export_csv, view
+    """Export one analytics view as CSV (header row, ISO 8601 times in UTC).
 
-    try:
-        view(view_name)
-    except UnknownView as error:
-        raise CliError(f"analytics export: {error}") from None
+    The rows are read before the file is written, and the file is replaced only when it is
+    whole: a refused request or a failed query leaves an earlier export as it was."""
+    from app.analytics import ViewRequestError, export_csv, read_view, view_query
+
     window = {"since": _moment(since, "--since"), "until": _moment(until, "--until")}
+    try:  # every mistake in the request named before the database starts
+        view_query(view_name, vehicle_id=vehicle_id, **window)
+    except ViewRequestError as error:
+        raise CliError(f"analytics export: {error}") from None
     if output != "-":
         output_file(Path(output), "--output")
     with database(settings()) as url, make_sync_engine(url).connect() as connection:
-        with click.open_file(output, "w", encoding="utf-8", lazy=False) as out:
-            try:
-                rows = export_csv(connection, view_name, out, vehicle_id=vehicle_id, **window)
-            except UnknownView as error:
-                raise CliError(f"analytics export: {error}") from None
+        frame = read_view(connection, view_name, vehicle_id=vehicle_id, **window)
+    if output == "-":
+        rows = export_csv(frame, sys.stdout)
+    else:
+
+        def write(path: Path) -> None:
+            with path.open("w", encoding="utf-8", newline="") as out:
+                export_csv(frame, out)
+
+        write_output_with(Path(output), write)
+        rows = len(frame)
     click.echo(f"{rows} row(s) of analytics.{view_name}", err=True)
 
 

@@ -565,8 +565,10 @@ def test_read_view_filters_by_time_and_vehicle(connection: Connection, store: St
     assert set(window["t_start"].dt.date) == {DAY1}
     with pytest.raises(analytics.UnknownView, match="choose one of: edie_boxes"):
         analytics.read_view(connection, "pings; DROP TABLE dim_vehicle")
-    with pytest.raises(analytics.UnknownView, match="no vehicle_id"):
+    with pytest.raises(analytics.NotPerVehicle, match="no vehicle_id"):
         analytics.read_view(connection, "fleet_ping_hourly", vehicle_id="SF-001")
+    with pytest.raises(analytics.EmptyWindow, match="is before since"):
+        analytics.read_view(connection, "engagement_daily", since=T0, until=T0 - timedelta(days=1))
 
 
 def test_a_date_or_naive_bound_is_utc_on_the_views_filtered_on_their_own_time(
@@ -609,7 +611,7 @@ def test_export_csv_writes_a_header_and_iso_times(connection: Connection, store:
     store(drive("SF-001", T0, 1010.0, 20.0, 3))
     out = io.StringIO()
 
-    rows = analytics.export_csv(connection, "ping_rate_hourly", out)
+    rows = analytics.export_csv(analytics.read_view(connection, "ping_rate_hourly"), out)
 
     lines = out.getvalue().splitlines()
     assert rows == 1

@@ -150,3 +150,51 @@ def test_analytics_export_names_the_views_when_one_is_unknown(database_url: str)
     bad_time = run_cli("analytics", "export", "edie_boxes", "--since", "yesterday", env=env)
     assert bad_time.returncode == 1
     assert "--since: not an ISO 8601 date or time: 'yesterday'" in bad_time.stderr
+    too_early = run_cli(
+        "analytics", "export", "edie_boxes", "--since", "0001-01-01T00:00:00+14:00", env=env
+    )
+    assert too_early.returncode == 1
+    assert "--since: '0001-01-01T00:00:00+14:00' is out of range once read in UTC" in (
+        too_early.stderr
+    )
+    reversed_window = run_cli(
+        "analytics",
+        "export",
+        "engagement_daily",
+        "--since",
+        "2026-02-01",
+        "--until",
+        "2026-01-01",
+        env=env,
+    )
+    assert reversed_window.returncode == 1
+    assert "the window ends before it starts: until 2026-01-01T00:00:00+00:00 is before since" in (
+        reversed_window.stderr
+    )
+
+
+def test_a_refused_export_leaves_the_earlier_file_whole(database_url: str, tmp_path: Path) -> None:
+    """The file used to be opened, and so emptied, before the request was checked."""
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    output = tmp_path / "hourly.csv"
+    assert (
+        run_cli("analytics", "export", "fleet_ping_hourly", "-o", str(output), env=env).returncode
+        == 0
+    )
+    earlier = output.read_bytes()
+    assert earlier.startswith(b"hour,")
+
+    refused = run_cli(
+        "analytics",
+        "export",
+        "fleet_ping_hourly",
+        "--vehicle",
+        "SF-001",
+        "-o",
+        str(output),
+        env=env,
+    )
+
+    assert refused.returncode == 1
+    assert "analytics view fleet_ping_hourly has no vehicle_id column" in refused.stderr
+    assert output.read_bytes() == earlier
