@@ -338,6 +338,9 @@ class Agent:
                 on_corridor=on_corridor,
                 in_lane=self._in_lane(fix, assignment),
                 plan_fresh=plan_fresh,
+                plan_reaches_car=lane_plan is not None
+                and x_m is not None
+                and lane_plan.reaches(x_m),
                 controller_ok=self._fault_clear("controller_ok", now),
                 actuator_ok=self._fault_clear("actuator_ok", now),
                 commands_sent=self._fault_clear("commands_sent", now),

@@ -45,6 +45,8 @@ class EngageInputs:
     on_corridor: bool
     in_lane: bool
     plan_fresh: bool
+    # The plan's lane covers the car's position (`LanePlan.reaches`).
+    plan_reaches_car: bool
     # The controller gave a command at its last steps (it raised none within the hold).
     controller_ok: bool
     actuator_ok: bool
@@ -77,6 +79,7 @@ CHECKS: tuple[tuple[str, str], ...] = (
     ("on_corridor", "off the assigned corridor"),
     ("in_lane", "not in the assigned lane"),
     ("plan_fresh", "no fresh plan"),
+    ("plan_reaches_car", "the plan does not reach the car's position"),
     ("controller_ok", "controller failed"),
     ("actuator_ok", "actuator refused by the safety layer"),
     ("commands_sent", "commands not reaching the CAN bus"),

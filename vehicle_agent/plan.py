@@ -27,6 +27,10 @@ MAX_TARGET_SPEED_MPS = 60.0
 # Sub-segment steps are drawn this far (m) before the next segment starts, so np.interp sees
 # strictly increasing positions.
 STEP_EDGE_M = 0.01
+# How far past a lane's first or last point the car may be and still take the plan's target
+# there: about a GPS fix's and the map-matching's error. Further out the lookup would hold the
+# end's target flat, a speed the plan never set for the car's place.
+PLAN_REACH_TOLERANCE_M = 50.0
 
 
 class PlanError(ValueError):
@@ -149,6 +153,16 @@ class LanePlan:
         if now_s is not None and self.received_s is not None:
             age = max(age, now_s - self.received_s)
         return age
+
+    def reaches(self, x_m: float) -> bool:
+        """Whether the lane's targets cover the car's position `x_m` (within
+        `PLAN_REACH_TOLERANCE_M` of their ends). A plan for a stretch the car is not on is no
+        plan for the car, however fresh."""
+        return (
+            float(self.x_m[0]) - PLAN_REACH_TOLERANCE_M
+            <= x_m
+            <= float(self.x_m[-1]) + PLAN_REACH_TOLERANCE_M
+        )
 
     def is_fresh(self, wall: datetime, stale_after_s: float, now_s: float | None = None) -> bool:
         """Before its own valid_until and published within `stale_after_s` (`age_s`).

@@ -23,8 +23,15 @@ from vehicle_agent.logs import ThrottledLog
 
 log = logging.getLogger(__name__)
 
-# Plausible ego speed range (m/s): beyond it a decoded value is garbage.
-MAX_PLAUSIBLE_SPEED_MPS = 90.0
+# Plausible ego speed range (m/s): beyond it a decoded value is garbage. 70 m/s (157 mph) is
+# over the top speed of every make the agent drives, and under the RAV4 DBC's 250 km/h range.
+MAX_PLAUSIBLE_SPEED_MPS = 70.0
+# No car on tyres changes its speed faster than about 1 g (emergency braking on dry asphalt):
+# a speed reading further from the last trusted one than this allows in the time between them
+# is a bad value that passed its frame's checks (a valid checksum over a wrong number), not
+# the car. The margin covers the signal's resolution and the frames' timing.
+MAX_SPEED_CHANGE_MPS2 = 10.0
+SPEED_CHANGE_MARGIN_MPS = 0.5
 
 
 @dataclass
@@ -52,6 +59,8 @@ class CarStateReader:
         self._problems: dict[str, str] = {}
         self._reported: set[str] = set()
         self._unknown_seen: set[int] = set()
+        # The last speed reading within reach of the one before it: (time, m/s).
+        self._trusted_speed: tuple[float, float] | None = None
         self.stats = CanStats()
         self._log = ThrottledLog(log)
 
@@ -133,4 +142,27 @@ class CarStateReader:
         speed = reading.speed_mps
         if not (math.isfinite(speed) and 0.0 <= speed <= MAX_PLAUSIBLE_SPEED_MPS):
             return CarState(time_s, False, f"implausible speed {speed} m/s", None)
+        unreachable = self._unreachable_speed(time_s, speed)
+        if unreachable is not None:
+            return CarState(time_s, False, unreachable, None)
         return CarState(time_s, True, None, reading, dict(self._received_at))
+
+    def _unreachable_speed(self, time_s: float, speed: float) -> str | None:
+        """Why `speed` cannot be the car's, given the last trusted reading (None: it can).
+
+        A jump beyond `MAX_SPEED_CHANGE_MPS2` leaves the trusted reading where it was, so a wrong
+        value that persists stays refused until the time since the last trusted reading could
+        have taken the car there; the car drives on its stock ACC meanwhile, and an `accel` car
+        is not taken over above the fleet's top speed (`EngageInputs.within_commandable_speed`).
+        """
+        trusted = self._trusted_speed
+        if trusted is not None:
+            since, last = trusted
+            reach = MAX_SPEED_CHANGE_MPS2 * max(time_s - since, 0.0) + SPEED_CHANGE_MARGIN_MPS
+            if abs(speed - last) > reach:
+                return (
+                    f"speed {speed:.1f} m/s is out of reach of {last:.1f} m/s "
+                    f"{time_s - since:.2f} s before"
+                )
+        self._trusted_speed = (time_s, speed)
+        return None

@@ -25,6 +25,7 @@ from vehicle_agent.controllers.microaccel import MicroAccelController
 from vehicle_agent.controllers.policy import save_policy
 from vehicle_agent.engage import CHECKS, Mode
 from vehicle_agent.gps import GpsFix
+from vehicle_agent.plan import Plan
 from vehicle_agent.ports import GpioButtonBoard
 from vehicle_agent.safety import SafetyLayer, SafetyLimits
 
@@ -854,6 +855,39 @@ def test_a_plan_without_our_lane_leaves_the_car_to_its_acc(tmp_path: Path, dbc_c
         assert r.agent.state.mode is Mode.STOCK
         assert r.agent.state.reason == "no fresh plan"
         assert r.emulator.agent_frames == 0
+
+
+def test_a_plan_that_does_not_reach_the_car_hands_back(tmp_path: Path, dbc_cache: Path) -> None:
+    """A lane covering 0-200 m of the corridor, the car at 1,000 m: the lookup held the lane's
+    last target flat past its end, and an engaged RAV4 slowed from 25 to 5 m/s on a target
+    the plan never set for its place."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=25.0) as r:
+        engage_and_settle(r)
+        now = r.clock.now()
+        short = Plan.model_validate(
+            {
+                "plan_id": 2,
+                "corridor": uniform_plan(25.0, published=now).corridor,
+                "published_at": now,
+                "valid_until": now + timedelta(minutes=10),
+                "lanes": [
+                    {
+                        "lane": lane,
+                        "x_m": [0.0, 100.0],
+                        "end_x_m": [100.0, 200.0],
+                        "target_speed_mps": [5.0, 5.0],
+                    }
+                    for lane in (1, 2, 3, 4)
+                ],
+            }
+        )
+        assert r.agent.accept_plan(short)
+        r.run(1.0)
+
+        assert not engaged(r)
+        assert r.agent.state.reason == "the plan does not reach the car's position"
+        r.run(5.0)
+        assert r.emulator.speed_mps > 20.0
 
 
 def test_a_car_moved_to_another_corridor_follows_no_plan_of_the_old_one(

@@ -221,6 +221,43 @@ def test_garbage_frames_are_counted_and_invalidate_until_a_good_one(dbc_cache: P
     assert reader.snapshot(10.07).valid
 
 
+def test_a_speed_no_car_could_reach_invalidates_the_state(dbc_cache: Path) -> None:
+    """A SPEED frame with a valid checksum over a wrong number (90 to 200 km/h at once) was
+    taken as the car's: an engaged RAV4 then braked itself to a stop on the highway."""
+    codec, reader = fresh_toyota(dbc_cache)  # 72 km/h, 20 m/s
+    assert reader.snapshot(10.01).valid
+    reader.ingest(frame(codec, "SPEED", {"SPEED": 200.0}), 10.02)
+    state = reader.snapshot(10.03)
+    assert not state.valid
+    assert state.problem == "speed 55.6 m/s is out of reach of 20.0 m/s 0.02 s before"
+    # The wrong value persisting is refused while no car could have got there: 35.6 m/s at
+    # 1 g takes 3.5 s; the agent does not take an accel car over above the fleet's top speed.
+    for step in range(1, 30):
+        reader.ingest(frame(codec, "SPEED", {"SPEED": 200.0}), 10.02 + 0.1 * step)
+        assert not reader.snapshot(10.03 + 0.1 * step).valid
+
+
+def test_hard_braking_is_the_car_not_a_bad_value(dbc_cache: Path) -> None:
+    codec, reader = fresh_toyota(dbc_cache)
+    for step in range(1, 21):  # 9 m/s^2 for 2 s, sampled at 100 Hz
+        kph = 72.0 - 3.6 * 9.0 * 0.01 * step
+        reader.ingest(frame(codec, "SPEED", {"SPEED": kph}), 10.0 + 0.01 * step)
+        state = reader.snapshot(10.0 + 0.01 * step)
+        assert state.valid, state.problem
+
+
+def test_a_speed_over_any_makes_top_speed_invalidates_the_state(dbc_cache: Path) -> None:
+    codec, reader = fresh_toyota(dbc_cache)
+    assert reader.snapshot(10.01).valid
+    reader.ingest(frame(codec, "SPEED", {"SPEED": 250.0}), 10.02)  # the DBC's top, 69.4 m/s
+    assert reader.snapshot(10.03).problem == (
+        "speed 69.4 m/s is out of reach of 20.0 m/s 0.02 s before"
+    )
+    codec, reader = fresh_toyota(dbc_cache)
+    reader.ingest(frame(codec, "SPEED", {"SPEED": 255.0}), 10.02)
+    assert (reader.snapshot(10.03).problem or "").startswith("implausible speed 70.8")
+
+
 def test_unknown_ids_are_counted_and_ignored(dbc_cache: Path) -> None:
     _, reader = fresh_toyota(dbc_cache)
     reader.ingest(
