@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import can
 
+from contract.controllers import FLEET_TOP_SPEED_MPH
 from contract.units import MPH_PER_MPS, MPS_PER_MPH
 from vehicle_agent.actuators import AccelLimits
 from vehicle_agent.cars import CarInterface, CarState, CruiseButton
@@ -74,6 +75,12 @@ class SafetyLimits:
     # the top and follows its bound within the jerk limits, so one still positive this far over
     # (2 mph) comes from a frame built without the limiter.
     over_top_speed_tolerance_mps: float = 2.0 * MPS_PER_MPH
+    # No press of + starts while the car's ACC is set at or over the fleet's top speed, and
+    # none goes on once the setting is this far over it (a held + that stepped past): the
+    # paper's clip keeps a button car's setting at 73 mph, and a request that skipped it (a
+    # bug upstream) must not become the car's setting.
+    top_setting_mph: float = FLEET_TOP_SPEED_MPH
+    over_top_setting_tolerance_mph: float = 2.0
 
     @property
     def more_speed_refused_over_mps(self) -> float:
@@ -305,6 +312,23 @@ class SafetyLayer:
             return Refusal("buttons", "buttons: switching without a release")
         elif started is not None and now - started > self.limits.max_hold_s:
             return Refusal("hold", f"hold: button held {now - started:.2f} s")
+        return self._check_setting(pressed, context)
+
+    def _check_setting(
+        self, pressed: frozenset[CruiseButton], context: SafetyContext
+    ) -> Refusal | None:
+        """+ refused at the fleet's top setting (`SafetyLimits.top_setting_mph`); a car that
+        does not report its setting is not pressed at all (`EngageInputs.set_point_reported`)."""
+        reading = context.car_state.reading
+        setting = None if reading is None else reading.acc_speed_setting_mph
+        if CruiseButton.PLUS not in pressed or setting is None:
+            return None
+        top = self.limits.top_setting_mph
+        limit = top if not self._held else top + self.limits.over_top_setting_tolerance_mph
+        if setting >= limit:
+            return Refusal(
+                "setting", f"setting: + with the ACC set to {setting:g} mph (top {top:g} mph)"
+            )
         return None
 
     def refuse(self, refusal: Refusal) -> None:

@@ -38,13 +38,19 @@ READING = CarReading(
 
 
 def car_state(
-    time_s: float, *, valid: bool = True, engaged: bool = True, speed_mps: float = 25.0
+    time_s: float,
+    *,
+    valid: bool = True,
+    engaged: bool = True,
+    speed_mps: float = 25.0,
+    setting_mph: float | None = None,
 ) -> CarState:
     reading = CarReading(
         **{
             **{f: getattr(READING, f) for f in READING.__slots__},  # type: ignore[attr-defined]
             "acc_engaged": engaged,
             "speed_mps": speed_mps,
+            **({} if setting_mph is None else {"acc_speed_setting_mph": setting_mph}),
         }
     )
     return CarState(time_s, valid, None if valid else "SPEED missing", reading if valid else None)
@@ -465,6 +471,35 @@ def test_a_press_needs_a_real_release_before_it(
         for frame in received(car_bus)
     ]
     assert sum(1 for buttons in pressed if buttons) == 22 + 1
+
+
+@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+def test_no_press_of_plus_sets_a_button_car_over_the_fleets_top_speed(
+    key: str, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """A controller whose request skipped the paper's clip (asking for 90 mph) had the ACC set
+    to 90 mph and the car driven there: the acceleration frames had a top speed, the presses
+    none."""
+    agent_bus, _ = buses
+    _, _, safety, copy, port = button_port(key, agent_bus, dbc_cache)
+
+    def press(now: float, button: CruiseButton | None, setting_mph: float) -> bool:
+        """Whether the frame holding `button` went out (was not refused)."""
+        copy.read_s = now
+        before = sum(safety.refused.values())
+        port.hold(button, SafetyContext(now, car_state(now, setting_mph=setting_mph)))
+        return sum(safety.refused.values()) == before
+
+    assert press(0.0, CruiseButton.PLUS, 72.0)  # to 73: let through
+    assert press(0.5, CruiseButton.PLUS, 73.0)  # held on, a step past the top: let through
+    assert press(0.55, None, 73.0)
+    assert not press(1.0, CruiseButton.PLUS, 73.0)  # a new press at the top: refused
+    assert safety.refused == {"setting": 1}
+    assert press(1.5, CruiseButton.MINUS, 80.0)  # slowing from over the top: let through
+    assert press(1.75, None, 80.0)
+    assert press(2.5, CruiseButton.PLUS, 60.0)
+    assert not press(2.55, CruiseButton.PLUS, 75.0)  # held on 2 mph past the top: refused
+    assert safety.refused == {"setting": 2}
 
 
 @pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
