@@ -12,6 +12,12 @@ given up as rejected (`vehicle_agent.uplink`). A body too large lowers the ceili
 of the run (the limit will not move by itself, and each refused body costs the car's uplink its
 bytes); a refusal of the content does not: once the batches after the refused ping are taken,
 they grow back, doubling, to the ceiling.
+
+A batch that gets no answer within the call's timeout is halved too, the ceiling kept: on a
+slow uplink (a weak cellular signal) a full batch of 1,000 pings (about 300 kB) takes longer to
+send than the timeout allows, and sent again at the same size it timed out again; the backlog
+only grew, and the server saw the same first pings resent while none after them arrived. A
+smaller batch gets through, and the size grows back with each answered one.
 """
 
 from __future__ import annotations
@@ -34,6 +40,11 @@ class PingBatchSize:
         if too_large:
             self.ceiling = min(self.ceiling, half)
         self.size = min(self.size, half)
+
+    def timed_out(self, sent: int) -> None:
+        """A batch of `sent` pings got no answer in time: the next is half as large (the link
+        may be slow rather than the body too large, so the ceiling stays)."""
+        self.size = min(self.size, max(1, sent // 2))
 
     def taken(self) -> None:
         """The server answered a batch ping by ping: the next may be twice as large."""

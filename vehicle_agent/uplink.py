@@ -19,7 +19,7 @@ from typing import Any
 
 from contract.vehicles import Rejection
 from vehicle_agent.batching import PingBatchSize
-from vehicle_agent.server import RequestRefused, ServerClient, ServerError
+from vehicle_agent.server import RequestRefused, ServerClient, ServerError, ServerTimeout
 from vehicle_agent.spool import PingSpool
 
 log = logging.getLogger(__name__)
@@ -82,6 +82,8 @@ class PingUplink:
                 outcome.given_up += self._split_refused_batch(rows, error)
                 continue
             except ServerError as error:
+                if isinstance(error, ServerTimeout):
+                    self.batch.timed_out(len(rows))
                 outcome.errors.append(error)
                 outcome.completed = False
                 return outcome

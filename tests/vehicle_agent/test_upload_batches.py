@@ -30,6 +30,51 @@ def test_a_refused_batch_halves_and_the_size_grows_back_to_its_ceiling() -> None
         PingBatchSize(0)
 
 
+def test_a_batch_with_no_answer_in_time_halves_and_keeps_its_ceiling() -> None:
+    batch = PingBatchSize(1000)
+    batch.timed_out(1000)
+    assert (batch.size, batch.ceiling) == (500, 1000)
+    batch.timed_out(1)
+    assert batch.size == 1
+    batch.taken()
+    assert batch.size == 2
+
+
+def test_on_an_uplink_too_slow_for_a_full_batch_the_backlog_drains(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A link that carries no more than 200 pings within the call's timeout: a 1,000-ping
+    batch timed out at every try and was sent again whole, so the server saw the same first
+    pings again and again and the backlog only grew."""
+    stored: list[str] = []
+
+    def slow_link(request: httpx.Request) -> httpx.Response:
+        pings = json.loads(request.content)["pings"]
+        if len(pings) > 200:
+            raise httpx.WriteTimeout("the body did not go out in time", request=request)
+        new = [ping["ts"] for ping in pings if ping["ts"] not in stored]
+        stored.extend(new)
+        return httpx.Response(
+            200,
+            json={"accepted": len(new), "duplicates": len(pings) - len(new), "rejected": []},
+        )
+
+    transport = httpx.MockTransport(slow_link)
+    with (
+        httpx.Client(base_url="http://server.test", transport=transport) as http,
+        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
+    ):
+        r.run(1500.0)
+        spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(2000)]
+        assert len(spooled) >= 1000
+        for _ in range(20):
+            r.agent.upload()
+            if not r.agent.spool.backlog():
+                break
+        assert r.agent.spool.backlog() == 0
+        assert stored[: len(spooled)] == spooled  # each once, in order
+
+
 def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
