@@ -260,6 +260,9 @@ class Agent:
         self._own_released: tuple[float, CruiseButton] | None = None
         # engage check (a key of FAULT_HOLDS_S) -> until when its last fault fails it
         self._faults_until: dict[str, float] = {}
+        # What the last control pass raised, while passes keep failing (None once one succeeds):
+        # the status names it rather than only the time since the last good pass.
+        self._step_failure: str | None = None
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -297,9 +300,11 @@ class Agent:
         """
         try:
             self._tick()
-        except Exception:
+        except Exception as error:
+            self._step_failure = f"{type(error).__name__}: {error}"
             self._fail_safe(STEP_FAILED)
             raise
+        self._step_failure = None
 
     def _tick(self) -> None:
         now = self.clock.monotonic()
@@ -675,6 +680,8 @@ class Agent:
             reason: str | None = current.reason
         elif snapshot is not None:
             reason = f"no control pass for {now - snapshot.time_s:.0f} s"
+            if self._step_failure is not None:
+                reason += f": every pass fails ({self._step_failure})"
         else:
             reason = None
         report: dict[str, Any] = {

@@ -24,12 +24,24 @@ class ThrottledLog:
 
     def warning(self, kind: str, message: str) -> None:
         """Log `message` unless a `kind` problem was logged within the interval."""
+        suffix = self._due(kind)
+        if suffix is not None:
+            self.logger.warning("%s%s", message, suffix)
+
+    def exception(self, kind: str, message: str) -> None:
+        """`warning` at ERROR with the traceback of the exception being handled: a step that
+        fails at its loop's rate (the CAN interface gone) wrote 30 tracebacks a second."""
+        suffix = self._due(kind)
+        if suffix is not None:
+            self.logger.exception("%s%s", message, suffix)
+
+    def _due(self, kind: str) -> str | None:
+        """The suffix to log a `kind` problem with now, or None while its interval runs."""
         now = self.clock()
         last = self._last.get(kind)
         if last is not None and now - last < self.interval_s:
             self._suppressed[kind] = self._suppressed.get(kind, 0) + 1
-            return
+            return None
         suppressed = self._suppressed.pop(kind, 0)
-        suffix = f" ({suppressed} more like it suppressed)" if suppressed else ""
-        self.logger.warning("%s%s", message, suffix)
         self._last[kind] = now
+        return f" ({suppressed} more like it suppressed)" if suppressed else ""

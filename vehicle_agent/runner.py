@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 
 from vehicle_agent.agent import Agent
+from vehicle_agent.logs import ThrottledLog
 from vehicle_agent.loop import RateKeeper
 
 log = logging.getLogger(__name__)
@@ -17,16 +18,20 @@ log = logging.getLogger(__name__)
 LAG_REPORT_S = 60.0
 
 
-def _loop(
+def run_loop(
     name: str, period_s: float, step: Callable[[], object], stop: threading.Event
 ) -> RateKeeper:
+    """Call `step` every `period_s` until `stop` is set; a step that raises is logged (at most
+    once per kind of error every 10 s) and the loop goes on. Returns the rate keeper, with the
+    loop's lag."""
     keeper = RateKeeper(period_s)
+    failures = ThrottledLog(log)
     reported = time.monotonic()
     while not stop.is_set():
         try:
             step()
-        except Exception:  # the loop must survive any single bad step; the step logged why
-            log.exception("%s step failed", name)
+        except Exception as error:  # the loop must survive any single bad step
+            failures.exception(type(error).__name__, f"{name} step failed")
         keeper.wait()
         if time.monotonic() - reported >= LAG_REPORT_S:
             reported = time.monotonic()
@@ -44,19 +49,19 @@ def run_agent(agent: Agent, stop: threading.Event) -> None:
     """Run until `stop` is set, then hand the car back and close the spool."""
     threads = [
         threading.Thread(
-            target=_loop,
+            target=run_loop,
             args=("control", agent.command_period_s, agent.tick, stop),
             name="control",
             daemon=True,
         ),
         threading.Thread(
-            target=_loop,
+            target=run_loop,
             args=("telemetry", 0.1, agent.record, stop),
             name="telemetry",
             daemon=True,
         ),
         threading.Thread(
-            target=_loop,
+            target=run_loop,
             args=("network", 0.2, agent.network, stop),
             name="network",
             daemon=True,

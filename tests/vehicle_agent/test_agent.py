@@ -305,7 +305,12 @@ def test_a_can_interface_going_down_hands_back_at_once(
         # no pass renews the position: once older than a fix may be, it is no longer pinged
         r.clock.advance(GPS_MAX_AGE_S)
         assert r.agent.ping() is None
-        assert r.agent.status_report()["gps_fix"] is False
+        status = r.agent.status_report()
+        assert status["gps_fix"] is False
+        # and the status names the cause, not only the time since the last good pass
+        assert status["engage_reason"].endswith(
+            "every pass fails (CanOperationError: Network is down)"
+        )
         # up again: the agent takes over by itself
         monkeypatch.undo()
         r.run(5.0, until=lambda: engaged(r))
