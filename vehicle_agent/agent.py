@@ -263,6 +263,9 @@ class Agent:
         # What the last control pass raised, while passes keep failing (None once one succeeds):
         # the status names it rather than only the time since the last good pass.
         self._step_failure: str | None = None
+        # The last config could not be adopted: its controller's policy could not be had or
+        # was refused, or its parameters do not build (the car's log says which).
+        self._controller_unbuilt = False
         self._last_settings: tuple[float | None, int | None] | None = None
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
@@ -330,6 +333,7 @@ class Agent:
             previous,
             engage.EngageInputs(
                 time_s=now,
+                controller_built=not self._controller_unbuilt,
                 enabled=self._enabled(assignment),
                 can_ok=car_state.valid,
                 acc_engaged=reading is not None and reading.acc_engaged,
@@ -800,6 +804,7 @@ class Agent:
             # the assigned policy could not be downloaded: no good policy, no controller
             self._server_failed("policy", error)
             self.assignment = None
+            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except PolicyFileError as error:
@@ -807,6 +812,7 @@ class Agent:
             log.error("vehicle %s: policy refused: %s", self.vehicle_id, error)
             self.stats.policies_refused += 1
             self.assignment = None
+            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except OSError as error:
@@ -815,12 +821,17 @@ class Agent:
             log.error("vehicle %s: policy not kept on disk: %s", self.vehicle_id, error)
             self.stats.policies_not_kept += 1
             self.assignment = None
+            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except (ControllerConfigError, ValueError) as error:
             log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
             self.stats.server_errors["config"] += 1
             self.assignment = None
+            self._controller_unbuilt = True
+            self._config_schedule.done(now, CONFIG_REFRESH_S)
+            return
+        self._controller_unbuilt = False
         self._config_schedule.done(now, CONFIG_REFRESH_S)
 
     def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:

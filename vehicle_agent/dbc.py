@@ -87,11 +87,18 @@ def generated_dbc_path(name: str, cache_dir: Path | None = None) -> Path:
     content = generated.get(f"{name}_generated") or generated.get(name)
     if content is None:
         raise DbcError(f"opendbc has no generated DBC named {name!r}")
-    directory.mkdir(parents=True, exist_ok=True)
     # Write-then-rename: agents starting together never read a half-written file.
     temporary = directory / f".{name}.{os.getpid()}.{threading.get_ident()}.tmp"
-    temporary.write_text(without_orphan_value_tables(content), encoding="utf-8")
-    temporary.replace(path)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        temporary.write_text(without_orphan_value_tables(content), encoding="utf-8")
+        temporary.replace(path)
+    except OSError as error:
+        raise DbcError(
+            f"cannot write the generated DBC {name} into {directory} "
+            f"({error.strerror or error}): set SMOOTHFLEET_AGENT_DBC_CACHE_DIR to a folder "
+            "the agent may write"
+        ) from None
     return path
 
 

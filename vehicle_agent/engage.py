@@ -35,6 +35,10 @@ class EngageInputs:
     """Everything the decision depends on, sampled at one instant."""
 
     time_s: float
+    # The assigned controller could be built: its policy downloaded, verified and kept, its
+    # parameters valid. Without it the car has no controller, and the reason says so rather
+    # than "not enabled", which is an operator's choice.
+    controller_built: bool
     enabled: bool
     can_ok: bool
     acc_engaged: bool
@@ -71,6 +75,7 @@ class EngageInputs:
 
 # The checks in order, with the reason reported when one fails.
 CHECKS: tuple[tuple[str, str], ...] = (
+    ("controller_built", "the assigned controller cannot run (its policy or parameters)"),
     ("enabled", "agent not enabled for this vehicle"),
     ("can_ok", "CAN inputs not healthy"),
     ("acc_engaged", "ACC not engaged by the driver"),

@@ -206,6 +206,7 @@ def check_env_file(env_file: Path) -> None:
     except (OSError, UnicodeDecodeError) as error:
         reason = error.strerror if isinstance(error, OSError) else "it is not UTF-8 text"
         raise AgentSettingsError(f"--env-file: cannot read {env_file}: {reason}") from None
+    seen: dict[str, int] = {}
     for binding in bindings:
         original = binding.original
         # a binding's text begins with the blank lines before it; its own line comes after them
@@ -220,3 +221,7 @@ def check_env_file(env_file: Path) -> None:
             raise AgentSettingsError(f"{where}: {name} is no agent setting")
         if binding.value is None:
             raise AgentSettingsError(f"{where}: {name} has no '=' and no value")
+        if name in seen:
+            # the last would win without a word: which one the car runs on is no guess to make
+            raise AgentSettingsError(f"{where}: {name} is set again (first on line {seen[name]})")
+        seen[name] = line

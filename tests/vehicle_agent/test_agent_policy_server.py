@@ -253,6 +253,10 @@ def test_a_corrupted_download_keeps_the_good_policy_and_hands_the_car_back(
         assert r.agent.assignment is None
         r.run(1.0, network=True)
         assert r.agent.state.mode is not Mode.ENGAGED
+        # said as what it is, not as a car the operators disabled
+        assert r.agent.state.reason == (
+            "the assigned controller cannot run (its policy or parameters)"
+        )
         assert sum(r.agent.stats.handbacks.values()) == 1
         assert store.holds(ACC_SHA256)  # the good policy is kept, untouched
         assert not store.path(small_sha256).exists()  # the bad download was never kept
@@ -299,6 +303,9 @@ def test_a_policy_the_car_cannot_keep_hands_back_and_backs_off(
         assert r.agent.assignment is None
         r.run(1.0, network=True)
         assert r.agent.state.mode is not Mode.ENGAGED
+        assert r.agent.status_report()["engage_reason"] == (
+            "the assigned controller cannot run (its policy or parameters)"
+        )
         # its status names no config it runs, beside no controller and no policy
         status = r.agent.status_report()
         assert "config_version" not in status

@@ -83,6 +83,41 @@ def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
+def test_a_dbc_cache_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
+    """It was a three-level FileNotFoundError traceback."""
+    (tmp_path / "a-file").write_text("")
+    script = Path(sys.executable).parent / "smoothfleet-agent"
+    result = subprocess.run(
+        [
+            str(script),
+            "--server",
+            "http://127.0.0.1:9",
+            "--token",
+            "abc",
+            "--vehicle-id",
+            "SF-001",
+            "--make",
+            "toyota_rav4",
+            "--can",
+            "virtual:dbc-test",
+            "--gps",
+            "none",
+            "--spool",
+            str(tmp_path / "s.sqlite"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={"PATH": "/usr/bin:/bin", "SMOOTHFLEET_AGENT_DBC_CACHE_DIR": str(tmp_path / "a-file")},
+    )
+    assert result.returncode == 1
+    assert result.stderr.startswith(
+        "smoothfleet-agent: cannot write the generated DBC toyota_nodsu_pt"
+    )
+    assert "SMOOTHFLEET_AGENT_DBC_CACHE_DIR" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
     result = run_agent_without_server("nosuch:can0", tmp_path / "s.sqlite")
     assert result.returncode == 1
@@ -118,6 +153,11 @@ def test_settings_from_an_env_file_with_the_command_line_winning(tmp_path: Path)
             "line 3: SMOOTHFLEET_AGENT_VEHICEL_ID is no agent",
         ),
         ("SMOOTHFLEET_AGENT_VEHICLE_ID\n", "line 3: SMOOTHFLEET_AGENT_VEHICLE_ID has no '='"),
+        # set twice, the last won without a word: the car ran as SF-002
+        (
+            "SMOOTHFLEET_AGENT_VEHICLE_ID=SF-001\nSMOOTHFLEET_AGENT_VEHICLE_ID=SF-002\n",
+            r"line 4: SMOOTHFLEET_AGENT_VEHICLE_ID is set again \(first on line 3\)$",
+        ),
     ],
 )
 def test_an_env_file_line_that_would_be_lost_is_refused(
