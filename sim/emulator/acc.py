@@ -146,8 +146,16 @@ class StockAcc:
         """Disengage (brake pedal, cancel button); the setting is kept for resume."""
         self.engaged = False
 
-    def buttons(self, now: float, pressed: frozenset[CruiseButton], speed_mps: float) -> None:
-        """Update from the buttons held at `now` (whoever holds them: driver or agent)."""
+    def buttons(
+        self,
+        now: float,
+        pressed: frozenset[CruiseButton],
+        speed_mps: float,
+        *,
+        brake_pressed: bool = False,
+    ) -> None:
+        """Update from the buttons held at `now` (whoever holds them: driver or agent); with the
+        brake pressed a set or resume does not engage, as no real ACC engages under the brake."""
         for button in pressed - set(self._pressed):
             self._pressed[button] = now
             self._long_steps[button] = 0
@@ -161,9 +169,9 @@ class StockAcc:
         for button in set(self._pressed) - pressed:
             del self._pressed[button]
             if not self._long_steps.pop(button, 0):
-                self._short_press(button, speed_mps)
+                self._short_press(button, speed_mps, brake_pressed)
 
-    def _short_press(self, button: CruiseButton, speed_mps: float) -> None:
+    def _short_press(self, button: CruiseButton, speed_mps: float, brake_pressed: bool) -> None:
         if button is CruiseButton.MAIN:
             self.main_on = not self.main_on
             self.engaged = False
@@ -172,6 +180,8 @@ class StockAcc:
         elif button is CruiseButton.GAP:
             self.gap_setting = next_gap_setting(self.gap_setting)
         elif not self.engaged:
+            if brake_pressed:
+                return
             if button is CruiseButton.MINUS:
                 self.engage(speed_mps)
             elif button is CruiseButton.PLUS and self.set_speed_mph is not None and self.main_on:

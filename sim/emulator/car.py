@@ -189,7 +189,7 @@ class CarEmulator:
         """Read the agent's frames, advance the car to `now`, send the frames that are due."""
         self._receive(now)
         held = self.driver.buttons | self._agent_buttons_at(now)
-        self.acc.buttons(now, held, self.speed_mps)
+        self.acc.buttons(now, held, self.speed_mps, brake_pressed=self.driver.brake)
         while self.time_s < now - 1e-9:
             dt = min(MAX_SUBSTEP_S, now - self.time_s)
             self._advance(dt)

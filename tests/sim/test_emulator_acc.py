@@ -110,6 +110,22 @@ def test_buttons_set_resume_step_and_cycle() -> None:
     assert acc.set_speed_mph == 52
 
 
+def test_no_set_or_resume_engages_under_the_brake() -> None:
+    """The emulated ACC took the release of a + the agent held as the driver braked for a
+    resume, and engaged with the brake pressed: no real ACC does, and the agent's brake
+    override tests then saw the car taken back 4.6 s later."""
+    acc = StockAcc()
+    press(acc, CruiseButton.MINUS, 0.0, 0.25)
+    acc.cancel()  # the driver brakes
+    for button, start in ((CruiseButton.PLUS, 1.0), (CruiseButton.MINUS, 2.0)):
+        acc.buttons(start, frozenset({button}), 25.0, brake_pressed=True)
+        acc.buttons(start + 0.25, frozenset(), 25.0, brake_pressed=True)
+        assert not acc.engaged
+    acc.buttons(3.0, frozenset({CruiseButton.PLUS}), 25.0)  # brake released: resumes
+    acc.buttons(3.25, frozenset(), 25.0)
+    assert acc.engaged
+
+
 def test_simulated_acc_car_reaches_the_set_point_through_presses() -> None:
     car = SimulatedAccCar()
     speed = 50 * MPH
