@@ -118,6 +118,13 @@ class VehicleStatusReport(BaseModel):
     plan_id: int | None = Field(None, ge=0, le=MAX_JSON_INTEGER)
     plan_age_s: JsonFloat | None = Field(None, ge=0, le=1e10)
     spool_backlog: int | None = Field(None, ge=0, le=2**31 - 1)
+    spool_dropped: int | None = Field(
+        None,
+        ge=0,
+        le=2**31 - 1,
+        description="pings the car's spool dropped unsent because it was full, in all since "
+        "the spool file was made",
+    )
     disk_free_mb: JsonFloat | None = Field(None, ge=0, le=1e12)
     cpu_temp_c: JsonFloat | None = Field(None, ge=-60, le=150)
     ups_on_battery: StrictBool | None = None
@@ -136,7 +143,12 @@ class VehicleStatusReport(BaseModel):
     )
 
     _integers = field_validator(
-        "gps_satellites", "plan_id", "spool_backlog", "config_version", mode="before"
+        "gps_satellites",
+        "plan_id",
+        "spool_backlog",
+        "spool_dropped",
+        "config_version",
+        mode="before",
     )(json_number)
     _real = field_validator(
         "can_msgs_per_s", "plan_age_s", "disk_free_mb", "cpu_temp_c", "server_rtt_ms"

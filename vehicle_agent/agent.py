@@ -705,6 +705,7 @@ class Agent:
             if snapshot and snapshot.plan_age_s is not None
             else None,
             "spool_backlog": self.spool.backlog(),
+            "spool_dropped": self.spool.counter("dropped"),
             "disk_free_mb": disk_free_mb(self.spool.path.parent),
             "cpu_temp_c": cpu_temp_c(),
             "server_rtt_ms": round(self.server.last_rtt_ms, 1)

@@ -17,12 +17,17 @@ without) would block their control loop for most of its 0.1 s period (docs/perfo
 from __future__ import annotations
 
 import json
+import logging
 import sqlite3
 import threading
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
+
+from vehicle_agent.logs import ThrottledLog
+
+log = logging.getLogger(__name__)
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS ping (
@@ -46,6 +51,7 @@ class PingSpool:
         self.path = path
         self.max_rows = max_rows
         self._lock = threading.Lock()
+        self._drop_log = ThrottledLog(log, interval_s=60.0)
         self._db = sqlite3.connect(path, check_same_thread=False, isolation_level=None)
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute(f"PRAGMA synchronous={'FULL' if power_safe else 'NORMAL'}")
@@ -73,6 +79,11 @@ class PingSpool:
                         (excess,),
                     ).rowcount
                     self._bump("dropped", excess)
+                    self._drop_log.warning(
+                        "dropped",
+                        f"ping spool full ({self.max_rows} pings): the oldest dropped unsent "
+                        "(counted in the status report's spool_dropped)",
+                    )
             self._backlog = backlog
 
     @contextmanager

@@ -139,6 +139,7 @@ class LastStatus:
     plan_id: int | None = None
     plan_age_s: float | None = None
     spool_backlog: int | None = None
+    spool_dropped: int | None = None
     disk_free_mb: float | None = None
     cpu_temp_c: float | None = None
     is_ups_on_battery: bool | None = None
@@ -461,11 +462,15 @@ def check_spool(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade
         return _unknown("spool", "its spool backlog")
     amber, red = limits.spool_backlog
     level = grade_rising(status.spool_backlog, limits.spool_backlog)
+    # Pings the full spool dropped are lost to the warehouse; said here, not graded: the total
+    # counts since the spool was made, and a car that dropped some on an old outage is fit now.
+    dropped = f", {status.spool_dropped} dropped unsent" if status.spool_dropped else ""
     return Grade(
         level,
-        str(status.spool_backlog),
-        f"amber from {amber:g}, red from {red:g} pings",
-        f"{status.spool_backlog} pings waiting to upload",
+        f"{status.spool_backlog}{dropped}",
+        f"amber from {amber:g}, red from {red:g} pings waiting; dropped: since the car's "
+        "spool was made",
+        f"{status.spool_backlog} pings waiting to upload{dropped}",
     )
 
 

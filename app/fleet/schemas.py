@@ -141,6 +141,9 @@ class StatusOut(BaseModel):
     plan_id: int | None
     plan_age_s: float | None
     spool_backlog: int | None
+    spool_dropped: int | None = Field(
+        None, description="pings the car's spool dropped unsent (full), since the spool was made"
+    )
     disk_free_mb: float | None
     cpu_temp_c: float | None
     ups_on_battery: bool | None
@@ -265,6 +268,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
             plan_id=status.plan_id,
             plan_age_s=status.plan_age_s,
             spool_backlog=status.spool_backlog,
+            spool_dropped=status.spool_dropped,
             disk_free_mb=status.disk_free_mb,
             cpu_temp_c=status.cpu_temp_c,
             ups_on_battery=status.is_ups_on_battery,

@@ -100,6 +100,7 @@ class VehicleStatus(Base):
     plan_id: Mapped[int | None] = mapped_column(BigInteger)
     plan_age_s: Mapped[float | None] = mapped_column(REAL)
     spool_backlog: Mapped[int | None] = mapped_column(Integer)
+    spool_dropped: Mapped[int | None] = mapped_column(Integer)
     disk_free_mb: Mapped[float | None] = mapped_column(REAL)
     cpu_temp_c: Mapped[float | None] = mapped_column(REAL)
     is_ups_on_battery: Mapped[bool | None]

@@ -175,6 +175,15 @@ def test_the_earlier_reports_of_a_car_whose_clock_runs_ahead_keep_their_plan_age
     assert readiness.is_cleared
 
 
+def test_pings_a_full_spool_dropped_are_shown_not_graded() -> None:
+    """A car's spool dropped its oldest pings unsent when full, counted only in its own file:
+    they were lost without a word. The total is since the spool was made, so a car that lost
+    some on an old outage is not held back for it now."""
+    readiness = assess(healthy_facts(last_status=healthy_status(spool_dropped=1201)), NOW, LIMITS)
+    [spool] = [check for check in readiness.checks if check.name == "spool"]
+    assert (spool.level, spool.value) == ("green", "0, 1201 dropped unsent")
+
+
 @pytest.mark.parametrize(
     ("change", "check", "level"),
     [

@@ -55,6 +55,7 @@ def test_a_status_report_is_stored_with_the_warehouse_names(
         plan_id=12,
         plan_age_s=14.0,
         spool_backlog=3,
+        spool_dropped=1201,
         disk_free_mb=20480.0,
         cpu_temp_c=61.5,
         ups_on_battery=False,
@@ -73,6 +74,7 @@ def test_a_status_report_is_stored_with_the_warehouse_names(
     assert (row["agent_version"], row["gps_satellites"], row["spool_backlog"]) == ("1.4.2", 11, 3)
     assert row["cpu_temp_c"] == 61.5
     assert row["engage_reason"] == "no fresh plan"
+    assert row["spool_dropped"] == 1201
     assert row["received_at"] is not None
 
     again = api.post("/api/v1/vehicles/SF-007/status", json=body, headers=car)

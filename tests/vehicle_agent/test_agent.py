@@ -28,6 +28,7 @@ from vehicle_agent.gps import GpsFix
 from vehicle_agent.plan import Plan
 from vehicle_agent.ports import GpioButtonBoard
 from vehicle_agent.safety import SafetyLayer, SafetyLimits
+from vehicle_agent.spool import PingSpool
 
 CONTROL_PERIOD_S = 0.1
 
@@ -1005,6 +1006,15 @@ def test_a_reading_outside_the_contract_costs_only_its_field(
         assert r.agent.stats.fields_dropped["ping"] == 1
         # a status report is always sent (only its ts is required)
         assert "ts" in r.agent.status_report()
+
+
+def test_the_status_reports_the_pings_a_full_spool_dropped(tmp_path: Path, dbc_cache: Path) -> None:
+    spool = PingSpool(tmp_path / "small.sqlite", max_rows=5)
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", spool=spool) as r:
+        r.run(10.5)  # a ping a second, no server to take them
+        status = r.agent.status_report()
+        assert status["spool_backlog"] == 5
+        assert status["spool_dropped"] == spool.counter("dropped") >= 5
 
 
 def test_no_ping_says_a_car_of_unknown_speed_stands(tmp_path: Path, dbc_cache: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import sqlite3
 from pathlib import Path
 
@@ -21,12 +22,20 @@ def test_pings_leave_oldest_first_and_only_when_removed(tmp_path: Path) -> None:
     assert spool.counter("rejected") == 1
 
 
-def test_the_spool_is_bounded_and_counts_what_it_dropped(tmp_path: Path) -> None:
+def test_the_spool_is_bounded_and_counts_what_it_dropped(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
     spool = PingSpool(tmp_path / "spool.sqlite", max_rows=3)
-    for index in range(5):
-        spool.add({"n": index})
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        for index in range(5):
+            spool.add({"n": index})
     assert [ping["n"] for _, ping in spool.oldest(10)] == [2, 3, 4]
     assert spool.counter("dropped") == 2
+    # said in the car's log (once a minute at most), not only counted in the file
+    assert [record.message for record in caplog.records] == [
+        "ping spool full (3 pings): the oldest dropped unsent (counted in the status report's "
+        "spool_dropped)"
+    ]
     with pytest.raises(ValueError, match="max_rows"):
         PingSpool(tmp_path / "other.sqlite", max_rows=0)
 
