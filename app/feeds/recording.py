@@ -35,6 +35,8 @@ class RecordedSnapshot:
 
     recorded_at: datetime
     response: dict[str, Any]
+    # Its line in the recording it was read from (None: fetched live), to name it in an error.
+    line: int | None = None
 
 
 def to_line(snapshot: RecordedSnapshot) -> bytes:
@@ -99,7 +101,7 @@ def read_recording(path: Path) -> list[RecordedSnapshot]:
             raise RecordingError(
                 f"{path.name} line {number}: recorded_at needs a zone and response an object"
             )
-        snapshots.append(RecordedSnapshot(recorded_at, response))
+        snapshots.append(RecordedSnapshot(recorded_at, response, number))
     # Stable: snapshots received at the same instant keep their order in the file.
     return sorted(snapshots, key=lambda snapshot: snapshot.recorded_at)
 

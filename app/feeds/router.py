@@ -12,7 +12,7 @@ from app.core.errors import error_responses
 from app.core.sessions import SessionDep
 from app.feeds.inrix import InrixFormatError, InrixResponse, readings_of
 from app.feeds.schemas import InrixAnswer, RefusedSegment
-from app.feeds.service import store_readings
+from app.feeds.service import SnapshotTimeRefused, refuse_future, store_readings
 
 router = APIRouter(prefix="/api/v1/feeds", tags=["feeds"])
 
@@ -34,15 +34,12 @@ async def post_inrix(
     except InrixFormatError as error:
         raise HTTPException(422, str(error)) from None
     settings: Settings = request.app.state.settings
+    try:
+        refuse_future(found, received_at, settings.ping_max_future_s)
+    except SnapshotTimeRefused as error:
+        raise HTTPException(422, str(error)) from None
     earliest = received_at - timedelta(days=settings.inrix_max_age_days)
-    latest = received_at + timedelta(seconds=settings.ping_max_future_s)
     for moment in sorted({reading.measured_at for reading in found.readings}):
-        if moment > latest:
-            raise HTTPException(
-                422,
-                f"timestamp {moment.isoformat()} is more than {settings.ping_max_future_s:g} s "
-                "in the future; nothing of this snapshot was stored",
-            )
         if moment < earliest:
             raise HTTPException(
                 422,

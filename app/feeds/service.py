@@ -92,11 +92,40 @@ async def store_readings(
     )
 
 
+class SnapshotTimeRefused(ValueError):
+    """A snapshot stamped where no feed can be: ahead of the server's clock, or (shifted for a
+    replay) past the calendar's end. Nothing of it is stored; the message says which stamp."""
+
+
 def shifted(snapshot: SnapshotReadings, by: timedelta) -> SnapshotReadings:
     """The readings with their provider timestamps moved by `by` (replaying old data as new)."""
-    return replace(
-        snapshot,
-        readings=[
-            replace(reading, measured_at=reading.measured_at + by) for reading in snapshot.readings
-        ],
-    )
+    try:
+        return replace(
+            snapshot,
+            readings=[
+                replace(reading, measured_at=reading.measured_at + by)
+                for reading in snapshot.readings
+            ],
+        )
+    except OverflowError:
+        raise SnapshotTimeRefused(
+            f"a timestamp moved by {by} is past the calendar's range; nothing of this snapshot "
+            "was stored"
+        ) from None
+
+
+def refuse_future(snapshot: SnapshotReadings, now: datetime, max_future_s: float) -> None:
+    """SnapshotTimeRefused when a reading is stamped more than `max_future_s` after `now`.
+
+    A feed cannot measure the future: such a stamp is a provider's or a recording's clock gone
+    wrong, and stored it would sit in the warehouse as the newest reading (a negative latency
+    in `analytics.inrix_latency`) and be read by the planner as current until the clock
+    caught up. Every path that stores readings checks it: the API, `inrix poll` and
+    `inrix replay`."""
+    latest = now + timedelta(seconds=max_future_s)
+    for moment in sorted({reading.measured_at for reading in snapshot.readings}):
+        if moment > latest:
+            raise SnapshotTimeRefused(
+                f"timestamp {moment.isoformat()} is more than {max_future_s:g} s in the "
+                "future; nothing of this snapshot was stored"
+            )

@@ -30,7 +30,13 @@ from app.feeds.recording import (
 )
 from app.feeds.replay import live_offset
 from app.feeds.replay import replay as replay_snapshots
-from app.feeds.service import StoreResult, shifted, store_readings
+from app.feeds.service import (
+    SnapshotTimeRefused,
+    StoreResult,
+    refuse_future,
+    shifted,
+    store_readings,
+)
 from contract.recorded import RecordingError
 from smoothfleet.cli.common import FiniteFloatRange, output_file
 
@@ -53,18 +59,25 @@ def _describe(result: StoreResult) -> str:
 
 
 def _storer(
-    sessions: async_sessionmaker[AsyncSession], shift: Callable[[RecordedSnapshot], timedelta]
+    sessions: async_sessionmaker[AsyncSession],
+    shift: Callable[[RecordedSnapshot], timedelta],
+    max_future_s: float,
 ) -> Callable[[RecordedSnapshot], Awaitable[None]]:
-    """Store one snapshot in its own transaction and print what became of it."""
+    """Store one snapshot in its own transaction and print what became of it; PollFailed
+    (naming the recording's line, for a replay) for a snapshot that is no response or is
+    stamped ahead of now by more than `max_future_s`, as the API refuses it."""
 
     async def store(snapshot: RecordedSnapshot) -> None:
+        where = "" if snapshot.line is None else f"line {snapshot.line}: "
+        now = datetime.now(UTC)
         try:
             found = shifted(readings(snapshot.response), shift(snapshot))
-        except InrixFormatError as error:
-            raise PollFailed(str(error)) from None
+            refuse_future(found, now, max_future_s)
+        except (InrixFormatError, SnapshotTimeRefused) as error:
+            raise PollFailed(f"{where}{error}") from None
         try:
             async with sessions() as session, session.begin():
-                result = await store_readings(session, found, datetime.now(UTC))
+                result = await store_readings(session, found, now)
         except (DBAPIError, OSError) as error:
             reason = str(error).strip().splitlines()[0] if str(error).strip() else "unreachable"
             raise PollFailed(f"database: {reason}") from None
@@ -117,7 +130,7 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
     logging.basicConfig(level=logging.INFO, format="smoothfleet inrix: %(message)s")
 
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
-        store = _storer(sessions, lambda snapshot: timedelta(0))
+        store = _storer(sessions, lambda snapshot: timedelta(0), current.ping_max_future_s)
         recording = record
 
         async def handle(snapshot: RecordedSnapshot) -> None:
@@ -172,13 +185,13 @@ def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
     except RecordingError as error:
         raise CliError(str(error)) from None
     offset = live_offset(snapshots, speed, datetime.now(UTC)) if shift_to_now else timedelta(0)
+    current = settings()
 
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
-        return await replay_snapshots(
-            snapshots, _storer(sessions, lambda snapshot: offset), speed=speed
-        )
+        store = _storer(sessions, lambda snapshot: offset, current.ping_max_future_s)
+        return await replay_snapshots(snapshots, store, speed=speed)
 
-    with database(settings()) as database_url:
+    with database(current) as database_url:
         try:
             count = asyncio.run(_with_database(database_url, work))
         except PollFailed as error:

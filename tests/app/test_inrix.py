@@ -8,6 +8,7 @@ the seed corridor, so the feed reports 3 codes we do not know.
 from __future__ import annotations
 
 import asyncio
+import json
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -349,6 +350,31 @@ def test_a_broken_recording_is_one_line_naming_the_line(
     assert len(result.stderr.strip().splitlines()) == 1
 
 
+def test_a_replayed_snapshot_stamped_in_the_future_stops_the_replay_naming_its_line(
+    seeded_database_url: str, seeded_engine: Engine, drive: Path, tmp_path: Path
+) -> None:
+    """Replays and polls stored readings a year ahead (and one shifted to the year 4216): only
+    the API refused a stamp in the future."""
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    recording = tmp_path / "inrix.jsonl"
+    run_cli("inrix", "convert", str(drive), str(recording), env=env)
+    lines = recording.read_text().splitlines()
+    ahead = (datetime.now(UTC) + timedelta(days=365)).strftime("%Y-%m-%dT%H:%M:%SZ")
+    entry = json.loads(lines[1])
+    entry["response"]["result"]["segmentspeeds"][0]["timestamp"] = ahead
+    lines[1] = json.dumps(entry)
+    recording.write_text("\n".join(lines) + "\n")
+
+    result = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
+
+    assert result.returncode == 1
+    assert "inrix.jsonl: line 2: timestamp " in result.stderr
+    assert "s in the future; nothing of this snapshot was stored" in result.stderr
+    stored = {measured for _, measured in estimates(seeded_engine)}
+    assert len(stored) == 1  # the snapshot before it, none from the future
+    assert max(stored) < datetime.now(UTC)
+
+
 def test_a_recorded_snapshot_that_is_not_a_response_stops_the_replay(
     seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
 ) -> None:
@@ -357,5 +383,5 @@ def test_a_recorded_snapshot_that_is_not_a_response_stops_the_replay(
     env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
     result = run_cli("inrix", "replay", str(recording), env=env)
     assert result.returncode == 1
-    assert "odd.jsonl: not an INRIX segment-speed response: result" in result.stderr
+    assert "odd.jsonl: line 1: not an INRIX segment-speed response: result" in result.stderr
     assert estimates(seeded_engine) == {}
