@@ -15,7 +15,14 @@ from datetime import UTC, datetime
 from typing import Annotated
 from urllib.parse import urlsplit
 
-from pydantic import AfterValidator, AwareDatetime, BeforeValidator, Field, Strict
+from pydantic import (
+    AfterValidator,
+    AwareDatetime,
+    BeforeValidator,
+    Field,
+    Strict,
+    StringConstraints,
+)
 
 # The JSON Schema side of StorableText, so clients and fuzzers know NUL is not text here.
 NO_NUL_PATTERN = "^[^\\u0000]*$"
@@ -109,5 +116,20 @@ JsonFloat = Annotated[float, Strict()]
 
 StorableText = Annotated[
     str, AfterValidator(storable_text), Field(json_schema_extra={"pattern": NO_NUL_PATTERN})
+]
+# StorableText of at most 64 / 120 characters. The bound sits on the string itself,
+# before the NUL check: a Field(max_length=...) on an optional StorableText is applied after
+# validation, and its error read "Value should have at most 64 items", not characters.
+Text64 = Annotated[
+    str,
+    StringConstraints(max_length=64),
+    AfterValidator(storable_text),
+    Field(json_schema_extra={"pattern": NO_NUL_PATTERN}),
+]
+Text120 = Annotated[
+    str,
+    StringConstraints(max_length=120),
+    AfterValidator(storable_text),
+    Field(json_schema_extra={"pattern": NO_NUL_PATTERN}),
 ]
 Timestamp = Annotated[AwareDatetime, BeforeValidator(time_text), AfterValidator(plausible_time)]

@@ -10,7 +10,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, field_validator
 
 from contract.controllers import POLICY_SHA256_PATTERN
-from contract.values import JsonFloat, StorableText, Timestamp, json_number, real
+from contract.values import JsonFloat, Text64, Text120, Timestamp, json_number, real
 
 VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 # A car holds its plan this long after publication by default, then hands the car back; the
@@ -51,7 +51,7 @@ class Ping(BaseModel):
     lane: int | None = Field(None, ge=1, le=12)
     acc_engaged: StrictBool | None = None
     controller_engaged: StrictBool | None = None
-    controller: StorableText | None = Field(None, max_length=64)
+    controller: Text64 | None = None
     acc_speed_setting_mph: JsonFloat | None = Field(None, ge=0, le=200)
     acc_gap_setting: int | None = Field(None, ge=1, le=3)
     lead_present: StrictBool | None = Field(None, description="the car's 'minicar' lead flag")
@@ -106,14 +106,14 @@ class VehicleStatusReport(BaseModel):
     model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
     ts: Timestamp = Field(description=REPORT_TIME_WINDOW)
-    agent_version: StorableText | None = Field(None, max_length=64)
+    agent_version: Text64 | None = None
     uptime_s: JsonFloat | None = Field(None, ge=0, le=1e10)  # ~300 years
     can_ok: StrictBool | None = None
     can_msgs_per_s: JsonFloat | None = Field(None, ge=0, le=1e7)
     gps_fix: StrictBool | None = None
     gps_satellites: int | None = Field(None, ge=0, le=255)
     acc_available: StrictBool | None = None
-    controller: StorableText | None = Field(None, max_length=64)
+    controller: Text64 | None = None
     controller_running: StrictBool | None = None
     plan_id: int | None = Field(None, ge=0, le=MAX_JSON_INTEGER)
     plan_age_s: JsonFloat | None = Field(None, ge=0, le=1e10)
@@ -135,9 +135,8 @@ class VehicleStatusReport(BaseModel):
     policy_sha256: str | None = Field(
         None, pattern=POLICY_SHA256_PATTERN, description="the policy the controller runs"
     )
-    engage_reason: StorableText | None = Field(
+    engage_reason: Text120 | None = Field(
         None,
-        max_length=120,
         description="why the agent commands the car or leaves it to its stock ACC, in the "
         "agent's words ('engaged', 'no fresh plan', 'controller failed', ...)",
     )

@@ -9,11 +9,20 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, BaseModel, ConfigDict, Field, StrictBool, WithJsonSchema
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StringConstraints,
+    WithJsonSchema,
+    field_validator,
+)
 
 from app.fleet.service import MAX_NOTE_LENGTH, MAX_ROUTE_LENGTH, FleetCounts, FleetEntry
 from contract.controllers import controller_choice_schema
-from contract.values import StorableText, storable_text
+from contract.values import NO_NUL_PATTERN, StorableText, json_number, storable_text
 
 
 class ControllerAssignment(BaseModel):
@@ -33,8 +42,24 @@ WHITE_SPACE = (
     "\\u2028\\u2029\\u202f\\u205f\\u3000"
 )
 # A route names something: no NUL, and at least one character that is not white space (the
-# service strips it).
+# service strips it). The pattern is the document's; the check is `_names_something`, whose
+# error says so in words where the pattern's quoted three hundred characters of it.
 ROUTE_PATTERN = f"^[{WHITE_SPACE}]*[^{WHITE_SPACE}\\u0000][^\\u0000]*$"
+
+
+def _names_something(route: str) -> str:
+    if not route.strip():
+        raise ValueError("a route needs a character that is not white space")
+    return route
+
+
+# A maintenance note: the bound on the string itself, so its error counts characters.
+NoteText = Annotated[
+    str,
+    StringConstraints(max_length=MAX_NOTE_LENGTH),
+    AfterValidator(storable_text),
+    Field(json_schema_extra={"pattern": NO_NUL_PATTERN}),
+]
 
 
 class AssignmentIn(BaseModel):
@@ -54,8 +79,10 @@ class AssignmentIn(BaseModel):
         description="Lane numbered from 1 at the left (median side); at most the number of "
         "lanes of the vehicle's corridor (409 otherwise).",
     )
-    route: Annotated[str, AfterValidator(storable_text)] = Field(
-        min_length=1, max_length=MAX_ROUTE_LENGTH, pattern=ROUTE_PATTERN
+    route: Annotated[str, AfterValidator(storable_text), AfterValidator(_names_something)] = Field(
+        min_length=1,
+        max_length=MAX_ROUTE_LENGTH,
+        json_schema_extra={"pattern": ROUTE_PATTERN},
     )
     controller: Annotated[
         ControllerAssignment, WithJsonSchema(controller_choice_schema(), mode="validation")
@@ -68,6 +95,9 @@ class AssignmentIn(BaseModel):
         "this field and nothing is saved, so two operators never silently overwrite each other. "
         "Left out, the change applies to whatever the vehicle holds.",
     )
+
+    # true is not lane 1, nor "2" lane 2: integers take JSON numbers only, as everywhere
+    _integers = field_validator("lane", "config_version", mode="before")(json_number)
 
 
 class AssignmentOut(AssignmentIn):
@@ -89,7 +119,7 @@ class MaintenanceIn(BaseModel):
 
     # strict: the document says boolean, so 0 or "yes" is refused, not read as a guess
     in_maintenance: StrictBool
-    note: StorableText | None = Field(None, max_length=MAX_NOTE_LENGTH)
+    note: NoteText | None = None
     config_version: int | None = Field(
         default=None,
         ge=1,
@@ -97,6 +127,8 @@ class MaintenanceIn(BaseModel):
         "assignment: a vehicle changed since is refused with 409 on this field and nothing is "
         "saved. Left out, the change applies to whatever the vehicle holds.",
     )
+
+    _integers = field_validator("config_version", mode="before")(json_number)
 
 
 class MaintenanceOut(MaintenanceIn):

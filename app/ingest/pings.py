@@ -7,6 +7,7 @@ ingest is testable on its own and the hot path allocates no ORM objects.
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timedelta
@@ -17,7 +18,7 @@ from pydantic import ValidationError
 
 from app.auth import Principal
 from app.ingest.directory import CorridorInfo, FleetDirectory
-from contract.vehicles import MAX_PINGS_PER_BATCH, Ping, PingBatch
+from contract.vehicles import MAX_PINGS_PER_BATCH, VEHICLE_ID_PATTERN, Ping, PingBatch
 
 REQUIRED_FIELDS = ("vehicle_id", "ts", "lat", "lon", "speed_mps")
 
@@ -129,6 +130,13 @@ def _lenient_json(body: bytes, strict_error: orjson.JSONDecodeError) -> object:
         raise BodyError(f"body is not JSON: {strict_error}") from None
 
 
+VEHICLE_ID_RE = re.compile(VEHICLE_ID_PATTERN)
+
+
+def _is_vehicle_id(value: object) -> bool:
+    return isinstance(value, str) and VEHICLE_ID_RE.fullmatch(value) is not None
+
+
 def _refuse_foreign(vehicle_ids: Iterable[object], principal: Principal, count: int) -> None:
     """Refuse the whole request if a vehicle token carries another vehicle's ping."""
     if principal.role != "vehicle":
@@ -177,8 +185,17 @@ def read_pings(body: bytes, principal: Principal) -> tuple[list[tuple[int, Ping]
         _refuse_foreign((ping.vehicle_id for ping in quick), principal, len(quick))
         return list(enumerate(quick)), []
     items, batch = parse_body(body)
+    # Only a vehicle id another car could have is another car's ping: a number or an empty
+    # string in the field is a malformed item, refused on its own below like any other, not
+    # the whole request refused as if the token had posted for someone else.
     _refuse_foreign(
-        (item.get("vehicle_id") for item in items if isinstance(item, dict)), principal, len(items)
+        (
+            item.get("vehicle_id")
+            for item in items
+            if isinstance(item, dict) and _is_vehicle_id(item.get("vehicle_id"))
+        ),
+        principal,
+        len(items),
     )
     pings: list[tuple[int, Ping]] = []
     rejected: list[Rejected] = []

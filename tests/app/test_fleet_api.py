@@ -268,7 +268,17 @@ def test_a_viewer_may_not_change_an_assignment(api: Api) -> None:
             ["controller", "params", "k"],
             "valid number",
         ),
-        ({**ASSIGNMENT, "route": " \t"}, 422, ["route"], "should match pattern"),
+        # said in words, where the pattern's error quoted three hundred characters of it
+        (
+            {**ASSIGNMENT, "route": " \t"},
+            422,
+            ["route"],
+            "a route needs a character that is not white space",
+        ),
+        # integers take JSON numbers only: true moved the car to lane 1, "2" to lane 2
+        ({**ASSIGNMENT, "lane": True}, 422, ["lane"], "must be a JSON number"),
+        ({**ASSIGNMENT, "lane": "2"}, 422, ["lane"], "must be a JSON number"),
+        ({**ASSIGNMENT, "config_version": True}, 422, ["config_version"], "JSON number"),
     ],
 )
 def test_an_assignment_the_car_cannot_take_is_refused_with_the_field(
@@ -303,6 +313,18 @@ def test_assignment_of_an_unknown_vehicle_is_404(api: Api) -> None:
 def test_an_incomplete_assignment_is_422(api: Api) -> None:
     response = api.put("/api/v1/vehicles/SF-001/assignment", {"lane": 2})
     assert response.status_code == 422
+
+
+def test_a_maintenance_note_too_long_is_counted_in_characters(api: Api) -> None:
+    answer = api.put(
+        "/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": True, "note": "x" * 501}
+    )
+    assert answer.status_code == 422
+    assert answer.json()["detail"][0]["msg"] == "String should have at most 500 characters"
+    version = api.put(
+        "/api/v1/vehicles/SF-001/maintenance", {"in_maintenance": True, "config_version": True}
+    )
+    assert version.status_code == 422
 
 
 @pytest.mark.parametrize("flag", [0, 1, "true", None])

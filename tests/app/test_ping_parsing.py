@@ -86,6 +86,19 @@ def test_a_foreign_ping_refuses_the_request_on_either_path() -> None:
         assert refusal.value.pings == 2
 
 
+@pytest.mark.parametrize("vehicle_id", [1, "", None, ["SF-001"], "SF 001"])
+def test_a_malformed_vehicle_id_is_that_items_error_not_another_cars_ping(
+    vehicle_id: object,
+) -> None:
+    """A number or an empty string in vehicle_id refused a car's whole batch as 403 ("may
+    not post pings of 1"), where an admin's same batch kept the good ping."""
+    body = orjson.dumps({"pings": [base_ping, {**base_ping, "vehicle_id": vehicle_id}]})
+    for principal in (CAR, ADMIN):
+        pings, rejected = read_pings(body, principal)
+        assert [index for index, _ in pings] == [0]
+        assert [(r.index, r.error.split(":")[0]) for r in rejected] == [(1, "vehicle_id")]
+
+
 def test_a_body_naming_pings_that_is_a_single_ping_still_parses() -> None:
     # The one-pass path guesses the shape from the bytes; a wrong guess falls back safely.
     pings, rejected = read_pings(orjson.dumps({**base_ping, "controller": '"pings"'}), ADMIN)
@@ -93,3 +106,11 @@ def test_a_body_naming_pings_that_is_a_single_ping_still_parses() -> None:
     assert rejected == []
     with pytest.raises(BodyError):
         read_pings(b'{"note": "\\"pings\\""}', ADMIN)
+
+
+def test_text_too_long_is_counted_in_characters() -> None:
+    """An optional text field's bound was applied after validation and said "Value should have
+    at most 64 items" of a ping's controller, a status's agent version or engage reason."""
+    with pytest.raises(ValidationError) as error:
+        Ping.model_validate({**base_ping, "controller": "x" * 65})
+    assert error.value.errors()[0]["msg"] == "String should have at most 64 characters"
