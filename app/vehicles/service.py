@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 from pydantic import ValidationError
 from sqlalchemy import case, select, tuple_
@@ -35,24 +35,34 @@ def parse_roster_csv(path: Path) -> list[RosterRow]:
         handle = path.open(newline="", encoding="utf-8-sig")
     except OSError as error:
         raise RosterError(f"{path}: {error.strerror}") from None
-    with handle:
-        reader = csv.DictReader(handle)
-        expected = set(RosterRow.model_fields)
-        header = set(reader.fieldnames or ())
-        missing = sorted(expected - header - {"controller_params"})
-        if missing:
-            raise RosterError(f"{path.name} row 1: missing column(s) {', '.join(missing)}")
-        unknown = sorted(header - expected)
-        if unknown:
-            raise RosterError(f"{path.name} row 1: unknown column(s) {', '.join(unknown)}")
-        rows = []
-        for number, record in enumerate(reader, start=2):
-            if None in record:
-                raise RosterError(f"{path.name} row {number}: more fields than the header")
-            try:
-                rows.append(RosterRow.model_validate(record))
-            except ValidationError as error:
-                raise RosterError(f"{path.name} row {number}: {first_error(error)}") from None
+    try:
+        with handle:
+            return _roster_rows(path, handle)
+    except UnicodeDecodeError as error:
+        raise RosterError(
+            f"{path.name}: not UTF-8 text ({error.reason}); save the roster as CSV UTF-8"
+        ) from None
+
+
+def _roster_rows(path: Path, handle: TextIO) -> list[RosterRow]:
+    """The rows of an open roster CSV, validated (`parse_roster_csv`)."""
+    reader = csv.DictReader(handle)
+    expected = set(RosterRow.model_fields)
+    header = set(reader.fieldnames or ())
+    missing = sorted(expected - header - {"controller_params"})
+    if missing:
+        raise RosterError(f"{path.name} row 1: missing column(s) {', '.join(missing)}")
+    unknown = sorted(header - expected)
+    if unknown:
+        raise RosterError(f"{path.name} row 1: unknown column(s) {', '.join(unknown)}")
+    rows = []
+    for number, record in enumerate(reader, start=2):
+        if None in record:
+            raise RosterError(f"{path.name} row {number}: more fields than the header")
+        try:
+            rows.append(RosterRow.model_validate(record))
+        except ValidationError as error:
+            raise RosterError(f"{path.name} row {number}: {first_error(error)}") from None
     return rows
 
 

@@ -38,7 +38,7 @@ from app.feeds.service import (
     store_readings,
 )
 from contract.recorded import RecordingError
-from smoothfleet.cli.common import FiniteFloatRange, output_file
+from smoothfleet.cli.common import FiniteFloatRange, output_file, write_output_with
 
 
 def _describe(result: StoreResult) -> str:
@@ -208,7 +208,9 @@ def convert(drive_dir: Path, recording: Path) -> None:
 
     output_file(recording, "RECORDING")
     try:
-        count = write_recording(recording, snapshots_from_drive(drive_dir))
+        snapshots = snapshots_from_drive(drive_dir)
     except RecordingError as error:
         raise CliError(str(error)) from None
-    click.echo(f"wrote {count} snapshot(s) to {recording}")
+    # beside the output and renamed when whole: a full disk keeps an earlier recording whole
+    write_output_with(recording, lambda path: write_recording(path, snapshots))
+    click.echo(f"wrote {len(snapshots)} snapshot(s) to {recording}")

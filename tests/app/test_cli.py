@@ -15,6 +15,7 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.migrate import current_revision, head_revision
+from app.vehicles.service import RosterError, parse_roster_csv
 from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
@@ -65,6 +66,17 @@ def test_import_with_a_bad_row_names_it_and_writes_nothing(
     assert "fleet.csv row 3" in lines[0]
     assert "cannot drive actuation 'acc'" in lines[0]
     assert vehicle_count(seeded_engine) == 100
+
+
+def test_a_roster_that_is_not_utf8_is_one_line_naming_it(tmp_path: Path) -> None:
+    """It was 'unexpected UnicodeDecodeError', naming neither the file nor what to do."""
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        "SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,1,microaccel_acc,{}",
+    )
+    roster.write_bytes(roster.read_bytes().replace(b"Rogue", "Rogué".encode("latin-1")))
+    with pytest.raises(RosterError, match=r"fleet.csv: not UTF-8 text \(invalid .*CSV UTF-8$"):
+        parse_roster_csv(roster)
 
 
 def test_a_reimport_that_changes_a_cars_assignment_is_a_new_config_version(
