@@ -82,6 +82,20 @@ async def status_history(
     )
 
 
+async def vehicle_changes(
+    session: AsyncSession, vehicle_id: str, limit: int = 10
+) -> Sequence[RowMapping]:
+    """The operators' newest changes to the vehicle's assignment and maintenance, newest first
+    (fact_vehicle_change: who, when, what)."""
+    return await _rows(
+        session,
+        "SELECT * FROM fact_vehicle_change WHERE vehicle_id = :vehicle "
+        "ORDER BY config_version DESC LIMIT :limit",
+        vehicle=vehicle_id,
+        limit=limit,
+    )
+
+
 async def engagement_per_day(
     session: AsyncSession, since: datetime, zone: ZoneInfo, *, vehicle_id: str | None = None
 ) -> Sequence[RowMapping]:

@@ -28,7 +28,7 @@ from app.fleet.readiness import (
     VehicleFacts,
     assess,
 )
-from app.models import Corridor, Vehicle, VehiclePing, VehicleStatus
+from app.models import Corridor, Vehicle, VehicleChange, VehiclePing, VehicleStatus
 from app.policies.service import policy_controller
 from contract.controllers import (
     ControllerConfigError,
@@ -463,6 +463,17 @@ async def change_assignment(
     vehicle.controller_name = controller_name
     vehicle.controller_params = controller_params
     vehicle.config_version += 1
+    session.add(
+        VehicleChange(
+            vehicle_id=vehicle_id,
+            config_version=vehicle.config_version,
+            changed_by=changed_by,
+            change="assignment",
+            lane=lane,
+            route=route,
+            controller_name=controller_name,
+        )
+    )
     await session.flush()
     log.info(
         "assignment of %s changed by %s: lane %s, route %s, controller %s",
@@ -511,6 +522,16 @@ async def set_maintenance(
     vehicle.is_in_maintenance = in_maintenance
     vehicle.maintenance_note = (note or "").strip() or None
     vehicle.config_version += 1
+    session.add(
+        VehicleChange(
+            vehicle_id=vehicle_id,
+            config_version=vehicle.config_version,
+            changed_by=changed_by,
+            change="maintenance",
+            in_maintenance=in_maintenance,
+            note=vehicle.maintenance_note,
+        )
+    )
     await session.flush()
     log.info("maintenance of %s set to %s by %s", vehicle_id, in_maintenance, changed_by)
     return vehicle

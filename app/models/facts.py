@@ -110,6 +110,30 @@ class VehicleStatus(Base):
     engage_reason: Mapped[str | None] = mapped_column(Text)
 
 
+class VehicleChange(Base):
+    """An operator's change to a vehicle's assignment or maintenance (API or dashboard), with
+    who made it and when: the record of each car's clearing and reassignment."""
+
+    __tablename__ = "fact_vehicle_change"
+    __table_args__ = (
+        CheckConstraint("change IN ('assignment', 'maintenance')", name="change_kind"),
+        {"comment": "One row per operator's change to a vehicle (the config version it produced)."},
+    )
+
+    vehicle_id: Mapped[str] = mapped_column(ForeignKey("dim_vehicle.vehicle_id"), primary_key=True)
+    config_version: Mapped[int] = mapped_column(Integer, primary_key=True)
+    changed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), server_default=func.now())
+    changed_by: Mapped[str] = mapped_column(Text)
+    change: Mapped[str] = mapped_column(Text)
+    # what an assignment set
+    lane: Mapped[int | None] = mapped_column(SmallInteger)
+    route: Mapped[str | None] = mapped_column(Text)
+    controller_name: Mapped[str | None] = mapped_column(Text)
+    # what a maintenance change set
+    in_maintenance: Mapped[bool | None]
+    note: Mapped[str | None] = mapped_column(Text)
+
+
 class InrixEstimate(Base):
     """A segment speed from the INRIX feed (speeds converted from mph to m/s at ingest)."""
 

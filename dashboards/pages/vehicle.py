@@ -131,13 +131,22 @@ async def _vehicle_history(
     return context
 
 
+async def _live_context(session: AsyncSession, entry: FleetEntry) -> dict[str, Any]:
+    """What the refreshed top of the page shows: the car's assignment and maintenance (who
+    changed them, when), its verdict and checks."""
+    return {
+        "entry": entry,
+        "generated_at": datetime.now(UTC),
+        "changes": await data.vehicle_changes(session, entry.vehicle.vehicle_id),
+    }
+
+
 async def _vehicle_context(
     request: Request, session: SessionDep, vehicle_id: str
 ) -> dict[str, Any]:
     entry = await _entry_or_404(request, session, vehicle_id)
     return {
-        "entry": entry,
-        "generated_at": datetime.now(UTC),
+        **await _live_context(session, entry),
         "refresh_s": settings_of(request).dashboard_refresh_s,
         "checks": CHECKS,
         "lanes": list(range(1, entry.corridor_lanes + 1)),
@@ -177,9 +186,10 @@ async def vehicle_page(
 async def vehicle_live(
     request: Request, user: UserDep, session: SessionDep, vehicle_id: VehicleId
 ) -> HTMLResponse:
-    """The vehicle's verdict and checks, for the page's periodic refresh."""
+    """The vehicle's assignment, maintenance, verdict and checks, for the page's periodic
+    refresh (the assignment too: another operator may change it while the page is open)."""
     entry = await _entry_or_404(request, session, vehicle_id)
-    return render(request, "_vehicle_live.html", user, entry=entry, generated_at=datetime.now(UTC))
+    return render(request, "_vehicle_live.html", user, **await _live_context(session, entry))
 
 
 @router.get("/vehicles/{vehicle_id}/history/live")
@@ -300,15 +310,25 @@ async def vehicle_maintenance(
     before someone else changed the car saves nothing (its checkbox would undo their change)."""
     check_form(user, csrf_token, needs_operator=True)
     await _entry_or_404(request, session, vehicle_id)
+    ticked = in_maintenance in ("on", "true", "1")
     try:
         await set_maintenance(
             session,
             vehicle_id,
-            in_maintenance=in_maintenance in ("on", "true", "1"),
+            in_maintenance=ticked,
             note=note,
             changed_by=f"dashboard user {user.username}",
             expected_config_version=_config_version_read(config_version),
         )
     except AssignmentError as error:
-        return await _not_saved(request, session, user, vehicle_id, error)
+        # the form as the operator filled it in: a refusal (a change someone saved meanwhile)
+        # must not throw away the note they typed
+        return await _not_saved(
+            request,
+            session,
+            user,
+            vehicle_id,
+            error,
+            maintenance_form={"in_maintenance": ticked, "note": note},
+        )
     return RedirectResponse(f"/vehicles/{vehicle_id}?saved=maintenance", status_code=303)

@@ -329,13 +329,43 @@ def test_a_stale_maintenance_form_does_not_put_a_car_back_in_service(site: str) 
             second,
             "/vehicles/SF-004",
             "/vehicles/SF-004/maintenance",
-            note="",
+            note="wheel alignment checked",
             config_version=opened.group(1),
         )
         assert stale.status_code == 422
         assert "the vehicle was changed since its config v" in stale.text
+        # what the second typed is still in the form to save again, not thrown away
+        assert 'name="note" value="wheel alignment checked"' in stale.text
         page = second.get("/vehicles/SF-004").text
-        assert "in maintenance: brake fault: do not deploy" in page
+        # the first's change stands, and says who made it and when
+        assert re.search(
+            r"in maintenance since [^<]+ by dashboard user operator: brake fault: do not deploy",
+            page,
+        )
+        assert "taken out for maintenance: brake fault: do not deploy" in page
+
+
+def test_an_open_page_shows_an_assignment_another_operator_saved(site: str) -> None:
+    """The line with the car's route and lane stood outside the refreshed part: an open page
+    went on saying lane 4 while its checks said the car was not in its assigned lane."""
+    with logged_in(site, "operator") as first, logged_in(site, "viewer") as watching:
+        assert '<strong data-field="route">B</strong>' not in watching.get("/vehicles/SF-005").text
+        saved = post_form(
+            first,
+            "/vehicles/SF-005",
+            "/vehicles/SF-005/assignment",
+            lane="1",
+            controller="simple",
+            params="{}",
+            route="B",
+        )
+        assert saved.status_code == 303
+        refreshed = watching.get("/vehicles/SF-005/live").text
+        assert '<strong data-field="route">B</strong>' in refreshed
+        assert '<strong data-field="lane">1</strong>' in refreshed
+        assert re.search(
+            r"dashboard user operator</td><td>v\d+</td>\s*<td>lane 1, route B", refreshed
+        )
 
 
 def test_a_form_sent_back_for_a_mistake_still_knows_which_config_its_operator_read(
