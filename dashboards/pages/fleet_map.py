@@ -67,6 +67,7 @@ async def _map_context(
         "plan": None,
         "plan_age_s": None,
         "states": {},
+        "unplaced": 0,
     }
     if corridor is None:
         return context
@@ -81,6 +82,10 @@ async def _map_context(
     if plan is not None and plan.published_at is not None:
         context["plan_age_s"] = (now - plan.published_at).total_seconds()
     context["states"] = {state: sum(car.state == state for car in cars) for state in CAR_COLOURS}
+    # The corridor's cars the map cannot draw (no ping yet, or none placed on the corridor):
+    # counted, so the map's figures add up to the fleet page's instead of leaving them out.
+    assigned = sum(entry.vehicle.corridor_id == corridor.corridor_id for entry in entries)
+    context["unplaced"] = assigned - len(cars)
     return context
 
 

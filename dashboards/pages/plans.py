@@ -79,27 +79,48 @@ def _lane_chart_cache(request: Request) -> LaneChartCache:
     return cache
 
 
-def _readable(value: object) -> str:
+def _readable(value: object, zone: ZoneInfo) -> str:
     """A provenance value for people: nested counts as "name n, ...", lists joined, seconds as
-    ages ("inrix age 237 s", not "inrix age s 236.936")."""
+    ages ("inrix age 237 s", not "inrix age s 236.936"), times in the page's zone as the rows
+    beside them are (not raw UTC ISO text), and nothing as a dash (not "None")."""
+    if value is None:
+        return "—"
     if isinstance(value, dict):
-        return ", ".join(_readable_item(name, item) for name, item in value.items())
+        return ", ".join(_readable_item(name, item, zone) for name, item in value.items())
     if isinstance(value, list):
-        return ", ".join(_readable(item) for item in value) or "none"
+        return ", ".join(_readable(item, zone) for item in value) or "none"
     if isinstance(value, float):
         return f"{value:.1f}"
+    if isinstance(value, str):
+        return _local_time_text(value, zone) or value
     return str(value)
 
 
-def _readable_pair(name: str, item: object) -> tuple[str, str]:
+def _local_time_text(text: str, zone: ZoneInfo) -> str | None:
+    """An ISO 8601 time with a zone, as the page's other times are written; None if `text` is
+    not one."""
+    if "T" not in text:
+        return None
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError:
+        return None
+    if moment.tzinfo is None:
+        return None
+    return moment.astimezone(zone).strftime("%Y-%m-%d %H:%M:%S %Z")
+
+
+def readable_input(name: str, item: object, zone: ZoneInfo) -> tuple[str, str]:
     """(name, value) for people: a name in seconds loses its unit to the value."""
     if name.endswith("_s") and isinstance(item, int | float) and not isinstance(item, bool):
         return name[:-2], describe_age(float(item))
-    return name, _readable(item)
+    if name.endswith("_s") and item is None:
+        return name[:-2], "—"
+    return name, _readable(item, zone)
 
 
-def _readable_item(name: str, item: object) -> str:
-    shown_name, shown = _readable_pair(name, item)
+def _readable_item(name: str, item: object, zone: ZoneInfo) -> str:
+    shown_name, shown = readable_input(name, item, zone)
     return f"{shown_name.replace('_', ' ')} {shown}"
 
 
@@ -203,7 +224,10 @@ async def _plans_context(
     context["lanes"] = list(range(1, corridor.lanes + 1))
     if plan is None:
         return context
-    context["inputs"] = dict(_readable_pair(name, value) for name, value in plan.inputs.items())
+    shown_in = display_zone(settings_of(request))
+    context["inputs"] = dict(
+        readable_input(name, value, shown_in) for name, value in plan.inputs.items()
+    )
     context["params"] = json.dumps(plan.params, indent=1, sort_keys=True)
     cache = _lane_chart_cache(request)
     lane_charts = cache.get(plan.plan_id)

@@ -734,6 +734,9 @@ def test_pages_show_the_data_posted_through_the_api(site: str, seeded_engine: En
 
         corridor_map = client.get("/map").text
         assert 'data-vehicle="SF-001" data-state="engaged"' in corridor_map
+        # the 99 cars that never pinged are counted, as the fleet page counts them (the map
+        # said "0 not reporting" while the fleet page said 1 of 100 reporting)
+        assert '<span class="number" data-state-count="not placed">99</span>' in corridor_map
         assert "lane 1: " in corridor_map
         assert "no plan" not in corridor_map
 
