@@ -299,7 +299,8 @@ def bar_figure(
     axes.set_ylim(low, high if y_axis.upper is not None else low + (high - low) * 1.12)
     axes.set_xlabel(x_label)
     axes.set_ylabel(y_axis.label)
-    axes.set_title(title, fontsize=10)
+    # Room above the axes for a value label at a fixed top (100 %), which wrote over the title.
+    axes.set_title(title, fontsize=10, pad=14)
     axes.grid(axis="y", alpha=0.3)
     return figure
 

@@ -64,7 +64,7 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
         context["inrix_chart"] = await drawn(
             "inrix-latency",
             lambda: over_time_figure(
-                "INRIX latency per snapshot",
+                "INRIX latency per snapshot (received − measured)",
                 Series(
                     "latency",
                     [row["measured_at"].timestamp() for row in snapshots],
@@ -72,7 +72,7 @@ async def _feeds_context(request: Request, session: AsyncSession) -> dict[str, A
                     "#9333ea",
                 ),
                 Axis("INRIX measurement time", "time"),
-                Axis("latency: received − measured (s)", lower=0.0),
+                Axis("latency (s)", lower=0.0),
                 zone=zone,
             ),
         )

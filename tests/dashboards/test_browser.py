@@ -106,6 +106,11 @@ def test_fleet_page_fills_live_and_a_stale_status_turns_red(
         ) as base,
         httpx.Client(base_url=base, timeout=30) as client,
     ):
+        # every request the pages make is answered (assets, live refreshes, the icon)
+        failed: list[str] = []
+        page.on(
+            "response", lambda r: failed.append(f"{r.status} {r.url}") if r.status >= 400 else None
+        )
         log_in(page, base, "viewer")
         row = page.locator('tr[data-vehicle="SF-001"]')
         expect(page.locator("tr[data-vehicle]")).to_have_count(100)
@@ -125,6 +130,7 @@ def test_fleet_page_fills_live_and_a_stale_status_turns_red(
         )
         assert page.evaluate("window.notReloaded") is True
         screenshot(page, "fleet-live.png")
+        assert failed == []
 
         # The car stops reporting: its status check goes amber, then red, and it loses clearance.
         status = row.locator('[data-check="status"]')

@@ -469,6 +469,18 @@ def test_an_operator_marks_a_car_in_maintenance(site: str) -> None:
 # --- unknown things and empty states ------------------------------------------------------------
 
 
+def test_every_asset_a_page_links_is_served_by_the_site_itself(site: str) -> None:
+    """The pages named no icon, so a browser asked for /favicon.ico and got a 404; and the
+    dashboard fetches nothing from the internet."""
+    with logged_in(site, "viewer") as client:
+        html = client.get("/fleet").text
+        assets = re.findall(r'<(?:link|script)[^>]+(?:href|src)="([^"]+)"', html)
+        assert "/static/favicon.svg" in assets
+        for asset in assets:
+            assert asset.startswith("/"), asset
+            assert client.get(asset).status_code == 200, asset
+
+
 def test_an_unknown_vehicle_is_a_404_page(site: str) -> None:
     with logged_in(site, "viewer") as client:
         response = client.get("/vehicles/SF-999")
