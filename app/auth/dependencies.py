@@ -46,7 +46,7 @@ def allow(*roles: TokenRole) -> Callable[..., Awaitable[Principal]]:
 
     async def admitted(principal: Annotated[Principal, Depends(authenticate)]) -> Principal:
         if principal.role not in allowed:
-            raise HTTPException(403, f"a {principal.role} token may not do this (needs {needed})")
+            raise HTTPException(403, f"{principal.token_words} may not do this (needs {needed})")
         return principal
 
     return admitted

@@ -67,6 +67,12 @@ class Principal:
     role: TokenRole
     vehicle_id: str | None
 
+    @property
+    def token_words(self) -> str:
+        """The token in an error's words: "an operator token", "a vehicle token"."""
+        article = "an" if self.role[0] in "aeiou" else "a"
+        return f"{article} {self.role} token"
+
     def may_report_for(self, vehicle_id: str) -> bool:
         """A vehicle token reports only for its own vehicle; operators and admins for any."""
         if self.role == "vehicle":

@@ -80,7 +80,7 @@ async def reply_to_pings(state: State, authorization: str | None, body: bytes) -
         if principal is None:
             return _error(401, "invalid or revoked token", CHALLENGE)
         if principal.role not in PING_WRITER_ROLES:
-            return _error(403, f"a {principal.role} token may not do this (needs {_NEEDED})")
+            return _error(403, f"{principal.token_words} may not do this (needs {_NEEDED})")
         wait_s = token_rate_limiter(state).wait_s(principal.token_id)
         if wait_s:
             return _error(429, "too many requests for this token", retry_after_header(wait_s))

@@ -150,7 +150,7 @@ async def get_vehicle_plan(
         principal.role == "vehicle" and principal.vehicle_id != vehicle_id
     ):
         raise HTTPException(
-            403, f"a {principal.role} token may not read the plan of vehicle {vehicle_id}"
+            403, f"{principal.token_words} may not read the plan of vehicle {vehicle_id}"
         )
     held = _held(request)
     try:

@@ -73,6 +73,10 @@ def check_policy(content: bytes, manifest: object, controller: str | None = None
     if not isinstance(actuation, str) or actuation not in named:
         raise PolicyError("manifest.actuation", f"must be one of {', '.join(sorted(named))}")
     implied = named[actuation]
+    if controller is not None and controller not in RL_CONTROLLERS:
+        raise PolicyError(
+            "controller", f"{controller!r} is no RL controller: one of {', '.join(RL_CONTROLLERS)}"
+        )
     if controller is not None and controller != implied:
         raise PolicyError(
             "controller", f"the manifest is of an {actuation} policy ({implied}), not {controller}"

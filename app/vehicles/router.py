@@ -72,7 +72,7 @@ def _settings(request: Request) -> Settings:
 
 def _may_act_for(principal: Principal, vehicle_id: str) -> None:
     if not principal.may_report_for(vehicle_id):
-        raise HTTPException(403, f"a {principal.role} token may not act for vehicle {vehicle_id}")
+        raise HTTPException(403, f"{principal.token_words} may not act for vehicle {vehicle_id}")
 
 
 @router.post(
@@ -145,7 +145,7 @@ async def get_config(
         principal.role == "vehicle" and principal.vehicle_id != vehicle_id
     ):
         raise HTTPException(
-            403, f"a {principal.role} token may not read the config of vehicle {vehicle_id}"
+            403, f"{principal.token_words} may not read the config of vehicle {vehicle_id}"
         )
     config = await vehicle_config(session, vehicle_id, _settings(request))
     if config is None:

@@ -114,3 +114,10 @@ def test_text_too_long_is_counted_in_characters() -> None:
     with pytest.raises(ValidationError) as error:
         Ping.model_validate({**base_ping, "controller": "x" * 65})
     assert error.value.errors()[0]["msg"] == "String should have at most 64 characters"
+
+
+def test_a_token_is_named_with_its_article() -> None:
+    assert Principal(token_id=3, role="operator", vehicle_id=None).token_words == (
+        "an operator token"
+    )
+    assert CAR.token_words == "a vehicle token"

@@ -215,6 +215,10 @@ def test_a_file_that_is_not_a_policy_of_the_named_controller_is_refused(api: Api
     loc, msg = rejected(api.upload(accel, manifest_of(ACCEL_FILE), controller="rl_acc"))
     assert loc == ["body", "controller"]
     assert "rl_accel" in msg
+    # a controller that is none names the ones there are (it said "an accel policy, not nope")
+    loc, msg = rejected(api.upload(accel, manifest_of(ACCEL_FILE), controller="nope"))
+    assert loc == ["body", "controller"]
+    assert msg.endswith("'nope' is no RL controller: one of rl_acc, rl_accel")
 
     loc, msg = rejected(api.upload(accel, b"{not json"))
     assert loc == ["body", "manifest"]
@@ -257,7 +261,9 @@ def test_an_accel_policy_reading_the_commanded_accel_is_stored(api: Api) -> None
 
 def test_who_may_upload_and_download(api: Api) -> None:
     content = ACC_FILE.read_bytes()
-    assert api.upload(content, manifest_of(ACC_FILE), role="viewer").status_code == 403
+    viewer = api.upload(content, manifest_of(ACC_FILE), role="viewer")
+    assert viewer.status_code == 403
+    assert viewer.json()["detail"].startswith("a viewer token may not do this")
     assert api.upload(content, manifest_of(ACC_FILE), role="vehicle").status_code == 403
     assert api.upload(content, manifest_of(ACC_FILE)).status_code == 201
     assert api.get(f"/api/v1/policies/{ACC_SHA256}", role="feed").status_code == 403
