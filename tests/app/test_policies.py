@@ -420,7 +420,10 @@ def test_the_roster_names_only_policies_the_server_holds(seeded_database_url: st
 
     missing = add({"policy_sha256": ACC_SHA256})
     assert missing.returncode == 1
-    assert f"controller_params.policy_sha256: no policy {ACC_SHA256}" in missing.stderr
+    # one vehicle on the command line is named, not "vehicle row 2" of a file it never had
+    assert (
+        f"vehicle SF-101: controller_params.policy_sha256: no policy {ACC_SHA256}" in missing.stderr
+    )
     bogus = add({"policy_sha256": ACC_SHA256, "temperature": 2})
     assert bogus.returncode == 1
     assert "controller_params.temperature: Extra inputs are not permitted" in bogus.stderr
