@@ -27,3 +27,21 @@ def test_finite_numbers_keep_the_ranges_bounds() -> None:
     assert FiniteFloatRange(min=0.1).convert("2.5", None, None) == 2.5
     with pytest.raises(click.BadParameter, match=">=0.1"):
         FiniteFloatRange(min=0.1).convert("0.05", None, None)
+
+
+@pytest.mark.parametrize(
+    ("server", "says"),
+    [
+        ("notaurl", "'notaurl' is no http(s) URL with a host"),
+        ("ftp://api:8000", "is no http(s) URL with a host"),
+        ("http://127.0.0.1:9", "no smoothfleet API answers at http://127.0.0.1:9"),
+    ],
+)
+def test_sim_fleet_names_a_server_it_cannot_use_before_any_car_starts(
+    server: str, says: str
+) -> None:
+    """It started the workers, retried for about 20 s and said only that a worker exited."""
+    from smoothfleet.cli.sim.fleet import check_server
+
+    with pytest.raises(click.BadParameter, match=says):
+        check_server(server)

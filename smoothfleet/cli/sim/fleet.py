@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from urllib.parse import urlsplit
+
 import click
+import httpx
 
 from smoothfleet.cli.common import fleet_options
 from smoothfleet.cli.sim.shared import console
@@ -25,13 +28,15 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
     from smoothfleet.cli.common import CliError, database, settings
     from smoothfleet.cli.demo import DemoError, new_run_dir, run_fleet
 
+    server_url = server_url.rstrip("/")
+    check_server(server_url)
     current = settings()
     with database(current) as url:
         try:
             summary = run_fleet(
                 url,
                 current,
-                server_url.rstrip("/"),
+                server_url,
                 run_dir=new_run_dir(current),
                 duration_s=duration,
                 vehicles=vehicles,
@@ -41,3 +46,27 @@ def fleet_command(server_url: str, duration: float | None, vehicles: int) -> Non
             raise CliError(f"sim fleet: {error}") from None
     for line in summary.lines():
         console.print(line)
+
+
+def check_server(server_url: str) -> None:
+    """A BadParameter naming what is wrong with `--server` before any car starts: it was
+    taken as given, the workers retried for about 20 s, and the command said only that a
+    worker exited."""
+    parts = urlsplit(server_url)
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise click.BadParameter(
+            f"{server_url!r} is no http(s) URL with a host, e.g. http://api:8000",
+            param_hint="--server",
+        )
+    try:
+        answer = httpx.get(f"{server_url}/healthz", timeout=5.0)
+    except httpx.HTTPError as error:
+        raise click.BadParameter(
+            f"no smoothfleet API answers at {server_url} ({type(error).__name__}: {error})",
+            param_hint="--server",
+        ) from None
+    if answer.status_code != 200:
+        raise click.BadParameter(
+            f"{server_url}/healthz answered HTTP {answer.status_code}: is it a smoothfleet API?",
+            param_hint="--server",
+        )
