@@ -462,17 +462,14 @@ async def change_assignment(
     vehicle.route = route
     vehicle.controller_name = controller_name
     vehicle.controller_params = controller_params
-    vehicle.config_version += 1
-    session.add(
-        VehicleChange(
-            vehicle_id=vehicle_id,
-            config_version=vehicle.config_version,
-            changed_by=changed_by,
-            change="assignment",
-            lane=lane,
-            route=route,
-            controller_name=controller_name,
-        )
+    _record_change(
+        session,
+        vehicle,
+        changed_by,
+        change="assignment",
+        lane=lane,
+        route=route,
+        controller_name=controller_name,
     )
     await session.flush()
     log.info(
@@ -484,6 +481,20 @@ async def change_assignment(
         controller_name,
     )
     return vehicle
+
+
+def _record_change(session: AsyncSession, vehicle: Vehicle, changed_by: str, **what: Any) -> None:
+    """A new config version of `vehicle`, and the row of fact_vehicle_change that says who
+    made it and what it set, in the change's own transaction."""
+    vehicle.config_version += 1
+    session.add(
+        VehicleChange(
+            vehicle_id=vehicle.vehicle_id,
+            config_version=vehicle.config_version,
+            changed_by=changed_by,
+            **what,
+        )
+    )
 
 
 def _check_unchanged_since(
@@ -521,16 +532,13 @@ async def set_maintenance(
     _check_unchanged_since(vehicle, expected_config_version, "maintenance")
     vehicle.is_in_maintenance = in_maintenance
     vehicle.maintenance_note = (note or "").strip() or None
-    vehicle.config_version += 1
-    session.add(
-        VehicleChange(
-            vehicle_id=vehicle_id,
-            config_version=vehicle.config_version,
-            changed_by=changed_by,
-            change="maintenance",
-            in_maintenance=in_maintenance,
-            note=vehicle.maintenance_note,
-        )
+    _record_change(
+        session,
+        vehicle,
+        changed_by,
+        change="maintenance",
+        in_maintenance=in_maintenance,
+        note=vehicle.maintenance_note,
     )
     await session.flush()
     log.info("maintenance of %s set to %s by %s", vehicle_id, in_maintenance, changed_by)

@@ -54,7 +54,9 @@ def test_missing_and_wrong_settings_name_the_variable() -> None:
     )
 
 
-def run_agent_without_server(can: str, spool: Path) -> subprocess.CompletedProcess[str]:
+def run_agent_without_server(
+    can: str, spool: Path, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     """A RAV4 agent on `can` and `spool`, with no GPS and no server to reach."""
     return run_agent_cli(
         "--server",
@@ -71,6 +73,7 @@ def run_agent_without_server(can: str, spool: Path) -> subprocess.CompletedProce
         "none",
         "--spool",
         str(spool),
+        env=env,
     )
 
 
@@ -86,29 +89,10 @@ def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
 def test_a_dbc_cache_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
     """It was a three-level FileNotFoundError traceback."""
     (tmp_path / "a-file").write_text("")
-    script = Path(sys.executable).parent / "smoothfleet-agent"
-    result = subprocess.run(
-        [
-            str(script),
-            "--server",
-            "http://127.0.0.1:9",
-            "--token",
-            "abc",
-            "--vehicle-id",
-            "SF-001",
-            "--make",
-            "toyota_rav4",
-            "--can",
-            "virtual:dbc-test",
-            "--gps",
-            "none",
-            "--spool",
-            str(tmp_path / "s.sqlite"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        env={"PATH": "/usr/bin:/bin", "SMOOTHFLEET_AGENT_DBC_CACHE_DIR": str(tmp_path / "a-file")},
+    result = run_agent_without_server(
+        "virtual:dbc-test",
+        tmp_path / "s.sqlite",
+        env={"SMOOTHFLEET_AGENT_DBC_CACHE_DIR": str(tmp_path / "a-file")},
     )
     assert result.returncode == 1
     assert result.stderr.startswith(
