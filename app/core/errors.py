@@ -30,6 +30,20 @@ log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a r
 RETRY_AFTER_S = 5
 
 
+def _unread_body(headers: Mapping[str, str]) -> str | None:
+    """Why a JSON body was not read as JSON, when the request says so in its headers (None:
+    it does not). FastAPI reads a body as JSON only under a JSON content type, and a form's
+    or a compressed body then failed as "Input should be a valid dictionary", which named
+    no cause."""
+    coding = headers.get("content-encoding", "").strip().lower()
+    if coding not in ("", "identity"):
+        return f"Content-Encoding {coding} is not accepted; send the body uncompressed"
+    media = headers.get("content-type", "").split(";")[0].strip().lower()
+    if media and media != "application/json" and not media.endswith("+json"):
+        return f"the body must be JSON sent as Content-Type: application/json (not {media})"
+    return None
+
+
 def error_responses(
     *codes: int, described: Mapping[int, str] | None = None
 ) -> dict[int | str, dict[str, Any]]:
@@ -125,7 +139,13 @@ def install_error_handlers(app: FastAPI) -> None:
             # at the limit is the body-size middleware's 413, as a declared length over it is
             raise error.__cause__
         if error.status_code == 400 and error.detail == UNREADABLE_BODY:
-            return JSONResponse({"detail": "request body is not valid JSON text"}, 422)
+            why = _unread_body(request.headers)
+            detail = (
+                f"request body cannot be read: {why}"
+                if why
+                else "request body is not valid JSON text"
+            )
+            return JSONResponse({"detail": detail}, 422)
         if error.status_code == 400:
             # Starlette's answer to a multipart or form body it cannot parse (the reason is
             # python-multipart's): as unreadable as bad JSON, so the same 422.
@@ -167,6 +187,11 @@ def install_error_handlers(app: FastAPI) -> None:
             {"loc": list(item["loc"]), "msg": item["msg"], "type": item["type"]}
             for item in error.errors()
         ]
+        whole_body = next((field for field in fields if field["loc"] == ["body"]), None)
+        if whole_body is not None:
+            why = _unread_body(request.headers)
+            if why is not None:
+                whole_body["msg"] = why
         return JSONResponse({"detail": fields}, 422)
 
     app.add_exception_handler(StarletteHTTPException, on_http_error)

@@ -46,12 +46,13 @@ class PingFastPath:
                 return
             chunks.append(message.get("body", b""))
             more = message.get("more_body", False)
-        authorization = None
+        authorization = encoding = None
         for name, value in scope["headers"]:
             if name == b"authorization":
                 authorization = value.decode("latin-1")
-                break
-        reply = await reply_to_pings(scope["app"].state, authorization, b"".join(chunks))
+            elif name == b"content-encoding":
+                encoding = value.decode("latin-1")
+        reply = await reply_to_pings(scope["app"].state, authorization, b"".join(chunks), encoding)
         headers = [JSON, (b"content-length", str(len(reply.body)).encode())]
         headers.extend(
             (name.lower().encode(), value.encode()) for name, value in reply.headers.items()

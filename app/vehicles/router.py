@@ -93,7 +93,10 @@ async def post_pings(request: Request) -> Response:
     before routing; this declaration documents it and answers the same way.
     """
     reply = await reply_to_pings(
-        request.app.state, request.headers.get("authorization"), await request.body()
+        request.app.state,
+        request.headers.get("authorization"),
+        await request.body(),
+        request.headers.get("content-encoding"),
     )
     return Response(
         reply.body, status_code=reply.status, headers=reply.headers, media_type="application/json"

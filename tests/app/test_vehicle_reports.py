@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gzip
 import hashlib
 import json
 import time
@@ -108,6 +109,37 @@ def test_a_bad_status_report_is_422_and_not_stored(
         fields = {**fields, "ts": (datetime.now(UTC) + fields["ts"]).isoformat()}
     answer = api.post("/api/v1/vehicles/SF-007/status", json=report(**fields), headers=car)
     assert answer.status_code == status
+    assert statuses(seeded_engine) == []
+
+
+def test_a_body_the_server_cannot_read_as_json_says_why(
+    api: httpx.Client, seeded_engine: Engine
+) -> None:
+    """curl's default form content type, or a gzip-compressed body, was answered "Input should
+    be a valid dictionary" on a status, and "str is not valid UTF-8" on pings."""
+    car = bearer(issue(seeded_engine, "vehicle", "SF-007"))
+    body = json.dumps(report()).encode()
+    form = api.post(
+        "/api/v1/vehicles/SF-007/status",
+        content=body,
+        headers={**car, "Content-Type": "application/x-www-form-urlencoded"},
+    )
+    assert form.status_code == 422
+    assert form.json()["detail"][0]["msg"] == (
+        "the body must be JSON sent as Content-Type: application/json "
+        "(not application/x-www-form-urlencoded)"
+    )
+    packed = gzip.compress(body)
+    for path in ("/api/v1/vehicles/SF-007/status", "/api/v1/pings"):
+        answer = api.post(
+            path,
+            content=packed,
+            headers={**car, "Content-Type": "application/json", "Content-Encoding": "gzip"},
+        )
+        assert answer.status_code == 422, path
+        assert "Content-Encoding gzip is not accepted; send the body uncompressed" in str(
+            answer.json()["detail"]
+        )
     assert statuses(seeded_engine) == []
 
 
