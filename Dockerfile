@@ -2,6 +2,8 @@
 FROM python:3.11-slim-bookworm AS build
 WORKDIR /src
 COPY pyproject.toml README.md ./
+COPY smoothfleet ./smoothfleet
+COPY contract ./contract
 COPY app ./app
 COPY planner ./planner
 COPY dashboards ./dashboards

@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 import subprocess
 import time
+import tomllib
 from collections.abc import Iterator
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -57,6 +58,18 @@ def test_postgres_is_the_official_image_pinned_with_volume_and_healthcheck(
     assert "pg_isready" in " ".join(db["healthcheck"]["test"])
     assert compose["services"]["api"]["depends_on"]["db"]["condition"] == "service_healthy"
     assert compose["services"]["planner"]["depends_on"]["api"]["condition"] == "service_healthy"
+
+
+def test_the_image_is_built_from_every_package_the_project_installs() -> None:
+    """The Dockerfile copied neither `smoothfleet` (the CLI its ENTRYPOINT runs) nor
+    `contract` (what server and car share), so the image's wheel lacked both and its
+    `smoothfleet` command could import nothing."""
+    root = Path(__file__).resolve().parents[2]
+    found = tomllib.loads((root / "pyproject.toml").read_text())["tool"]["setuptools"]
+    packages = {pattern.rstrip("*") for pattern in found["packages"]["find"]["include"]}
+    dockerfile = (root / "Dockerfile").read_text()
+    copied = set(re.findall(r"^COPY (\S+) \./\1$", dockerfile, flags=re.MULTILINE))
+    assert packages <= copied, f"not copied into the image: {sorted(packages - copied)}"
 
 
 def test_required_secrets_fail_fast() -> None:
