@@ -69,11 +69,19 @@ class InrixMinutes:
 
 
 def _header(path: Path) -> list[str]:
+    """The first row's names. A UTF-8 byte-order mark (what a spreadsheet writes) is no part of
+    the first name; text that is not UTF-8 is refused by the file's name."""
     try:
-        with path.open(newline="") as handle:
+        with path.open(newline="", encoding="utf-8-sig") as handle:
             return [name.strip() for name in next(csv.reader(handle), [])]
     except OSError as error:
         raise RecordingError(f"{path}: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise RecordingError(_not_utf8(path, error)) from None
+
+
+def _not_utf8(path: Path, error: UnicodeDecodeError) -> str:
+    return f"{path}: not UTF-8 text ({error.reason}); save it as CSV UTF-8"
 
 
 def _numbers(path: Path, indices: Sequence[int]) -> FloatArray:
@@ -86,10 +94,13 @@ def _numbers(path: Path, indices: Sequence[int]) -> FloatArray:
             return np.loadtxt(
                 path, delimiter=",", skiprows=1, usecols=list(indices), ndmin=2, dtype=np.float64
             )
-    except ValueError:
+    except ValueError:  # a decoding error among them: the path below names it
         pass
-    with path.open(newline="") as handle:
-        rows = list(csv.reader(handle))
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as handle:
+            rows = list(csv.reader(handle))
+    except UnicodeDecodeError as error:
+        raise RecordingError(_not_utf8(path, error)) from None
     values = np.full((len(rows) - 1, len(indices)), np.nan)
     for number, row in enumerate(rows[1:], start=2):
         for column, index in enumerate(indices):
@@ -149,6 +160,15 @@ def read_inrix_minutes(folder: Path) -> InrixMinutes:
     (time_s, speed), (score_time, score), (c_time, c_value) = tables
     if not (np.array_equal(time_s, score_time) and np.array_equal(time_s, c_time)):
         raise RecordingError(f"{folder.name}: speed, confidence and cvalue rows differ")
+    # A feed's minutes come one after another: a repeated or reversed minute was refused only
+    # once simulating had begun, by the planner, without naming the folder.
+    backwards = np.flatnonzero(~(np.diff(time_s) > 0))
+    if backwards.size:
+        row = int(backwards[0]) + 3  # the header is row 1
+        raise RecordingError(
+            f"{folder / 'speed.csv'} row {row}: time {time_s[row - 2]:g} s after "
+            f"{time_s[row - 3]:g} s; the minutes must increase"
+        )
     return InrixMinutes(
         segment_start_m=starts, time_s=time_s, speed_mps=speed, score=score, c_value=c_value
     )

@@ -585,9 +585,13 @@ def load_optimum(path: Path) -> dict[str, float]:
     import csv
 
     bounds: dict[str, float] = {}
-    with path.open(newline="") as handle:
+    # utf-8-sig: a spreadsheet's byte-order mark is no part of the first column's name
+    with path.open(newline="", encoding="utf-8-sig") as handle:
         reader = csv.DictReader(handle)
-        columns = reader.fieldnames or []
+        try:
+            columns = reader.fieldnames or []
+        except UnicodeDecodeError as error:
+            raise OptimumFileError(f"{path}: not UTF-8 text ({error.reason})") from None
         missing = [name for name in ("drive", "fuel_saving_pct") if name not in columns]
         if missing:
             raise OptimumFileError(
@@ -595,6 +599,11 @@ def load_optimum(path: Path) -> dict[str, float]:
             )
         for row in reader:
             saving = row["fuel_saving_pct"]
+            if row["drive"] in bounds:
+                # two bounds for one drive: which one was meant is no guess to make
+                raise OptimumFileError(
+                    f"{path}, line {reader.line_num}: drive {row['drive']} again"
+                )
             try:
                 bounds[row["drive"]] = float(saving)
             except (TypeError, ValueError):

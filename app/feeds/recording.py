@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -136,14 +137,19 @@ def snapshots_from_drive(directory: Path) -> list[RecordedSnapshot]:
         measured = _iso(start + relative)
         segments = []
         for column, speed_mps in enumerate(speed_row):
+            if not math.isfinite(speed_mps):
+                continue  # a minute the feed gave no speed for this segment: no reading
             segment: dict[str, Any] = {
                 "code": segment_code(column),
                 "type": "XDS",
                 "speed": round(speed_mps / MPS_PER_MPH, 3),
-                "score": int(score_row[column]),
-                "c-Value": c_row[column],
                 "segmentClosed": False,
             }
+            # an empty score or c-Value cell is left out, as a provider leaves out what it lacks
+            if math.isfinite(score_row[column]):
+                segment["score"] = int(score_row[column])
+            if math.isfinite(c_row[column]):
+                segment["c-Value"] = c_row[column]
             # The last column's end is not in segments.json, so its length is unknown.
             if column + 1 < len(starts) and speed_mps > 0:
                 length_m = starts[column + 1] - starts[column]

@@ -66,6 +66,36 @@ def test_inrix_minutes_beside_a_drive(tmp_path: Path) -> None:
     np.testing.assert_allclose(minutes.c_value, [[90, 50], [80, 70]])
 
 
+def test_a_spreadsheets_byte_order_mark_is_no_part_of_the_first_name(tmp_path: Path) -> None:
+    """Saved as "CSV UTF-8" with Time first, a drive was refused: "no column Time"."""
+    path = tmp_path / "excel.csv"
+    path.write_bytes("\ufeffTime,Velocity\r\n1.0,36.0\r\n1.1,36.0\r\n".encode())
+    assert read_trajectory(path).speed_mps.tolist() == [10.0, 10.0]
+
+
+@pytest.mark.parametrize("where", ["header", "rows"])
+def test_a_file_that_is_not_utf8_is_named(tmp_path: Path, where: str) -> None:
+    """It was "unexpected UnicodeDecodeError", naming no file among a folder of drives."""
+    path = tmp_path / "latin.csv"
+    if where == "header":
+        path.write_bytes("Time,Velocity,Température\n1.0,36.0,5\n".encode("cp1252"))
+    else:
+        path.write_bytes("Time,Velocity,Note\n1.0,36.0,é\n".encode("cp1252"))
+    with pytest.raises(RecordingError, match=r"latin.csv: not UTF-8 text \(.*CSV UTF-8$"):
+        read_trajectory(path)
+
+
+def test_inrix_minutes_that_do_not_increase_are_refused_by_file_and_row(tmp_path: Path) -> None:
+    """A repeated minute failed only once simulating had begun, in the planner, naming no
+    folder."""
+    folder = _inrix_folder(tmp_path / "drive")
+    for name in ("speed.csv", "confidence.csv", "cvalue.csv"):
+        lines = (folder / name).read_text().splitlines()
+        (folder / name).write_text("\n".join([lines[0], lines[1], lines[1], lines[2]]) + "\n")
+    with pytest.raises(RecordingError, match=r"speed.csv row 3: time -60 s after -60 s"):
+        read_inrix_minutes(folder)
+
+
 def test_inrix_tables_that_disagree_are_refused(tmp_path: Path) -> None:
     folder = _inrix_folder(tmp_path / "drive", cvalue_times="-60.0,60.0")
     with pytest.raises(RecordingError, match="speed, confidence and cvalue rows differ"):

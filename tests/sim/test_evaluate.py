@@ -257,7 +257,11 @@ def test_an_optimum_file_that_is_not_the_bounds_is_refused(tmp_path: Path) -> No
     bounds = load_optimum(good)
     assert bounds["a"] == 8.5
     assert math.isnan(bounds["b"])
+    excel = tmp_path / "excel.csv"  # a spreadsheet's "CSV UTF-8": a byte-order mark first
+    excel.write_bytes(b"\xef\xbb\xbf" + good.read_bytes())
+    assert load_optimum(excel)["a"] == 8.5
     for text, named in (
+        ("drive,fuel_saving_pct\na,8.5\na,3.0\n", "line 3: drive a again"),
         ('{"drive": "a"}\n', "not a `sim optimum` CSV (no column drive or fuel_saving_pct)"),
         ("drive,saving\na,1\n", "(no column fuel_saving_pct)"),
         ("drive,fuel_saving_pct\na,8.5\nb,lots\n", "line 3: fuel_saving_pct 'lots' is not a"),
@@ -479,3 +483,19 @@ def test_a_failed_write_keeps_the_earlier_evaluation_whole(
         assert (out / name).read_bytes() == content
     # no partial file is left beside them
     assert sorted(path.name for path in out.iterdir()) == ["evaluation.csv", "summary.md"]
+
+
+def test_a_folder_of_new_drives_is_evaluated_alone(shared_dir: Path, tmp_path: Path) -> None:
+    """`sim evaluate --drives NEW` added the shared drives recorded with their INRIX minutes
+    (the default --inrix-drives): the table's *_inrix rows held 9 drives not in NEW."""
+    drives = tmp_path / "new"
+    drives.mkdir()
+    write_drive(short_drives(shared_dir)[0], drives / "wave.csv")
+    result = evaluate_microaccel(drives, tmp_path / "out", "--workers", "1")
+    assert result.returncode == 0, result.stderr
+    flat = " ".join(result.stdout.split())
+    assert f"--drives {drives}: its drives only (scenarios shockwave, freeflow, bottleneck)" in (
+        flat
+    )
+    rows = list(csv.DictReader((tmp_path / "out" / "evaluation.csv").read_text().splitlines()))
+    assert {row["drive"] for row in rows} == {"wave"}

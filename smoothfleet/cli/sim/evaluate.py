@@ -235,6 +235,19 @@ def evaluate_command(
             f"{max(avs)} AVs leave no human in a platoon of {followers}", param_hint="--avs"
         )
     chosen = list(scenarios) or list(DEFAULT_SCENARIOS)
+    context = click.get_current_context()
+    given = click.core.ParameterSource.DEFAULT, click.core.ParameterSource.DEFAULT_MAP
+    own_drives = context.get_parameter_source("drives_dir") not in given
+    own_recordings = context.get_parameter_source("inrix_dir") not in given
+    if own_drives and not own_recordings and not scenarios:
+        # A folder of new drives is evaluated alone: the shared recordings of the default
+        # --inrix-drives came along and filled the table's *_inrix rows with drives that were
+        # not the folder's.
+        chosen = [name for name in chosen if name not in RECORDED_SCENARIOS]
+        console.print(
+            f"--drives {drives_dir}: its drives only (scenarios {', '.join(chosen)}); give "
+            "--inrix-drives or --scenario for the drives recorded with their INRIX minutes"
+        )
     on_recordings = bool(RECORDED_SCENARIOS.intersection(chosen))
     if drives_dir is None or (inrix_dir is None and on_recordings):
         raise click.ClickException(
