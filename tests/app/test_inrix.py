@@ -385,3 +385,24 @@ def test_a_recorded_snapshot_that_is_not_a_response_stops_the_replay(
     assert result.returncode == 1
     assert "odd.jsonl: line 1: not an INRIX segment-speed response: result" in result.stderr
     assert estimates(seeded_engine) == {}
+
+
+def test_a_feed_folder_with_empty_cells_converts_leaving_them_out(tmp_path: Path) -> None:
+    """An empty confidence cell made `inrix convert` stop with 'unexpected ValueError: cannot
+    convert float NaN to integer', where `sim evaluate` read the same folder."""
+    folder = tmp_path / "drive"
+    folder.mkdir()
+    (folder / "trajectory.csv").write_text("Time,Velocity\n1000.0,36.0\n1000.1,36.0\n")
+    (folder / "segments.json").write_text("[0.0, 800.0]")
+    (folder / "speed.csv").write_text("time,0,1\n-60.0,30.5,20.0\n0.0,29.0,\n")
+    (folder / "confidence.csv").write_text("time,0,1\n-60.0,30,\n0.0,30,30\n")
+    (folder / "cvalue.csv").write_text("time,0,1\n-60.0,90,50\n0.0,80,70\n")
+
+    first, second = (
+        snapshot.response["result"]["segmentspeeds"][0]["segments"]
+        for snapshot in snapshots_from_drive(folder)
+    )
+
+    assert "score" not in first[1]  # the empty score cell
+    assert first[1]["speed"] == pytest.approx(20.0 / MPH, abs=1e-3)
+    assert [segment["code"] for segment in second] == ["SF-I24WB-00"]  # the empty speed cell
