@@ -499,3 +499,18 @@ def test_a_folder_of_new_drives_is_evaluated_alone(shared_dir: Path, tmp_path: P
     )
     rows = list(csv.DictReader((tmp_path / "out" / "evaluation.csv").read_text().splitlines()))
     assert {row["drive"] for row in rows} == {"wave"}
+
+
+def test_drives_too_short_to_judge_name_no_pair_and_say_why(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    """On a 30 s drive no platoon's tail passes where its leader started, so throughput is not
+    measured; the command said every pair had missed the aims."""
+    drives = tmp_path / "short"
+    drives.mkdir()
+    write_drive(short_drives(shared_dir)[0].slice(0.0, 30.0), drives / "brief.csv")
+    result = evaluate_microaccel(drives, tmp_path / "out", "--scenario", "shockwave")
+    assert result.returncode == 0, result.stderr
+    flat = " ".join(result.stdout.split())
+    assert "no pair is named: throughput, network speed or fuel is not measured on these" in flat
+    assert "no pair kept throughput and speed within" not in flat

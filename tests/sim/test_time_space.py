@@ -54,3 +54,14 @@ def test_a_missing_drive_is_named(tmp_path: Path) -> None:
     )
     assert result.returncode != 0
     assert "none.csv' does not exist" in result.stderr
+
+
+def test_a_figure_name_without_a_known_format_is_refused_before_the_simulation(
+    tmp_path: Path,
+) -> None:
+    """`-o ts` ran both platoons and then failed "Format 'partial' is not supported"."""
+    for name in ("ts", "ts.xyz"):
+        result = run_cli("sim", "time-space", "-o", str(tmp_path / name), env=cli_env())
+        assert result.returncode == 2
+        assert "name the figure's format by its suffix, one of" in result.stderr
+        assert ".png" in result.stderr

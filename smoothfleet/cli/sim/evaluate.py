@@ -4,6 +4,7 @@ the real drives, as a table, a CSV and a heatmap."""
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -12,6 +13,7 @@ import click
 
 from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.evaluate import (
+    BASELINE,
     Evaluation,
     OptimumFileError,
     Realism,
@@ -308,6 +310,13 @@ def evaluate_command(
     best = best_pair(evaluation)
     if not any(result.case.scenario == "shockwave" for result in evaluation.results):
         console.print("the best pair is named on the shockwave scenario, which was not run")
+    elif best is None and not _judgeable_on_shockwave(evaluation):
+        # a drive too short for the platoon's tail to pass, or a leader that never moves: the
+        # aims cannot be judged, which is not the same as every pair missing them
+        console.print(
+            "no pair is named: throughput, network speed or fuel is not measured on these "
+            "shockwave drives (the lines above say which)"
+        )
     elif best is None:
         console.print(
             f"no pair kept throughput and speed within {MAX_LOSS_PCT:.0f} % on shockwave "
@@ -323,3 +332,13 @@ def evaluate_command(
             f"takeovers {best['takeovers']}"
         )
     console.print(f"wrote {out_dir / 'evaluation.csv'}, {out_dir / 'heatmap.png'}")
+
+
+def _judgeable_on_shockwave(evaluation: Evaluation) -> bool:
+    """Whether some pair's shockwave row has every figure the best pair is judged on."""
+    keys = ("throughput_vph_change_pct", "network_speed_mps_change_pct", "fuel_saving_pct")
+    return any(
+        all(math.isfinite(row[key]) for key in keys)
+        for row in evaluation.summary()
+        if row["scenario"] == "shockwave" and row["controller"] != BASELINE
+    )

@@ -35,6 +35,7 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
     except DriveError as error:
         raise click.ClickException(str(error)) from None
     output_file(output, "--output")
+    _check_figure_format(output)
     case = Case("shockwave", drive)
     runs: dict[str, PlatoonRun] = {}
 
@@ -67,3 +68,18 @@ def time_space_command(drive_path: Path | None, output: Path) -> None:
         ),
     )
     console.print(f"{label}\nwrote {output}")
+
+
+def _check_figure_format(output: Path) -> None:
+    """A BadParameter unless matplotlib writes the format `output`'s suffix names: without one
+    (`-o ts`), or with one it does not know, the whole simulation ran before the save failed
+    with "Format 'partial' is not supported"."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if output.suffix.lower().lstrip(".") not in formats:
+        known = ", ".join(f".{name}" for name in sorted(formats))
+        raise click.BadParameter(
+            f"{output}: name the figure's format by its suffix, one of {known}",
+            param_hint="--output",
+        )
