@@ -35,6 +35,10 @@ MAX_FILLED_GAP_S = 1.0
 # above 20 m/s (72 km/h, 45 mph). Every drive below that has at least one real slowdown wave.
 FREEFLOW_MIN_SPEED_MPS = 20.0
 FREEFLOW_PERCENTILE = 2.0
+# No car changes its speed faster than about 1 g: a step of the recording that does (a sample
+# of 0 in the middle of a highway drive) is a sensor's glitch, which a replay would hand to
+# the platoon as a braking no road made. The 32 shared drives stay under 6 m/s^2.
+MAX_LEADER_ACCEL_MPS2 = 9.81
 
 
 class DriveError(ValueError):
@@ -74,6 +78,14 @@ class Drive:
         """Acceleration over each step (forward difference; the last step repeats)."""
         diff = np.diff(self.speed_mps) / self.dt_s
         return np.concatenate([diff, diff[-1:]])
+
+    @property
+    def glitches(self) -> tuple[int, float]:
+        """How many steps change the speed faster than MAX_LEADER_ACCEL_MPS2, and the time
+        (s from the start) of the first; (0, nan) when none does. They are replayed as
+        recorded, and the commands that read drives say so."""
+        fast = np.flatnonzero(np.abs(np.diff(self.speed_mps)) > MAX_LEADER_ACCEL_MPS2 * self.dt_s)
+        return (len(fast), float(fast[0]) * self.dt_s) if len(fast) else (0, float("nan"))
 
     @property
     def kind(self) -> DriveKind:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.drives import DriveError, load_drive, load_drives
+from sim.drives import DriveError, drive_from_speeds, load_drive, load_drives
 
 HEADER = "Time,Velocity\n"
 
@@ -119,3 +119,14 @@ def test_slices_for_short_runs(shared_dir: Path) -> None:
     np.testing.assert_allclose(part.speed_mps, drive.speed_mps[1000:1601])
     with pytest.raises(DriveError, match="outside the drive"):
         drive.slice(500.0, 100.0)
+
+
+def test_a_speed_that_changes_faster_than_a_car_can_is_counted() -> None:
+    """A sample of 0 in a highway drive (170 m/s^2 each way) was replayed without a word, and
+    the platoon's one takeover was the glitch's."""
+    speeds = np.full(100, 17.0)
+    speeds[60] = 0.0
+    assert drive_from_speeds("glitch", speeds).glitches == (2, 5.9)
+    assert drive_from_speeds("steady", np.full(100, 17.0)).glitches[0] == 0
+    braking = 17.0 - 0.9 * np.arange(19)  # 9 m/s^2: hard, but a car
+    assert drive_from_speeds("braking", braking).glitches[0] == 0

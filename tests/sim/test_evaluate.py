@@ -514,3 +514,21 @@ def test_drives_too_short_to_judge_name_no_pair_and_say_why(
     flat = " ".join(result.stdout.split())
     assert "no pair is named: throughput, network speed or fuel is not measured on these" in flat
     assert "no pair kept throughput and speed within" not in flat
+
+
+def test_a_drive_with_a_glitch_is_named_before_its_figures(
+    shared_dir: Path, tmp_path: Path
+) -> None:
+    drives = tmp_path / "glitch"
+    drives.mkdir()
+    write_drive(short_drives(shared_dir)[1].slice(0.0, 60.0), drives / "fast.csv")
+    lines = (drives / "fast.csv").read_text().splitlines(keepends=True)
+    time_s = lines[300].split(",")[0]
+    lines[300] = f"{time_s},0.0\n"  # one sample of a standing car at 70 mph
+    (drives / "fast.csv").write_text("".join(lines))
+    result = evaluate_microaccel(drives, tmp_path / "out", "--scenario", "freeflow")
+    assert result.returncode == 0, result.stderr
+    flat = " ".join(result.stdout.split())
+    assert "fast: the leader's speed changes faster than 9.81 m/s^2 at 2 step(s), the first" in (
+        flat
+    )

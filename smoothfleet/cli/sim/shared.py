@@ -16,6 +16,7 @@ from sim.drives import (
     FREEFLOW_MIN_SPEED_MPS,
     FREEFLOW_PERCENTILE,
     MAX_FILLED_GAP_S,
+    MAX_LEADER_ACCEL_MPS2,
     STEP_S,
     Drive,
     DriveError,
@@ -78,12 +79,21 @@ def read_recorded_drives(inrix_dir: Path) -> list[RecordedDrive]:
 
 
 def say_filled(drives: Sequence[Drive]) -> None:
+    """Name each drive the loader filled, and each whose speed jumps faster than a car can."""
     for drive in drives:
         if drive.filled_s > 0.0:
             console.print(
                 f"{drive.name}: {drive.filled_s:.1f} s between samples off the "
                 f"{STEP_S:g} s grid, filled by linear interpolation (gaps up to "
                 f"{MAX_FILLED_GAP_S:g} s are)"
+            )
+        glitches, first_s = drive.glitches
+        if glitches:
+            console.print(
+                f"{drive.name}: the leader's speed changes faster than "
+                f"{MAX_LEADER_ACCEL_MPS2:g} m/s^2 at {glitches} step(s), the first {first_s:.1f} s "
+                "in, most likely a sensor's glitch; replayed as recorded, so the platoon brakes "
+                "for it (its takeovers and collisions may be the glitch's)"
             )
 
 
