@@ -30,14 +30,24 @@ log.addFilter(RepeatedMessages())  # an outage is one line a window, not one a r
 RETRY_AFTER_S = 5
 
 
+def content_encoding_refusal(content_encoding: str | None) -> str | None:
+    """Why a body sent with this Content-Encoding cannot be read (None: it can). The service
+    takes bodies as they are: a compressed one was read as text and refused as "not valid
+    UTF-8" (pings) or "Input should be a valid dictionary" (the other JSON bodies), which
+    named no cause."""
+    coding = (content_encoding or "").strip().lower()
+    if coding in ("", "identity"):
+        return None
+    return f"Content-Encoding {coding} is not accepted; send the body uncompressed"
+
+
 def _unread_body(headers: Mapping[str, str]) -> str | None:
     """Why a JSON body was not read as JSON, when the request says so in its headers (None:
     it does not). FastAPI reads a body as JSON only under a JSON content type, and a form's
-    or a compressed body then failed as "Input should be a valid dictionary", which named
-    no cause."""
-    coding = headers.get("content-encoding", "").strip().lower()
-    if coding not in ("", "identity"):
-        return f"Content-Encoding {coding} is not accepted; send the body uncompressed"
+    body then failed as "Input should be a valid dictionary", which named no cause."""
+    refusal = content_encoding_refusal(headers.get("content-encoding"))
+    if refusal is not None:
+        return refusal
     media = headers.get("content-type", "").split(";")[0].strip().lower()
     if media and media != "application/json" and not media.endswith("+json"):
         return f"the body must be JSON sent as Content-Type: application/json (not {media})"

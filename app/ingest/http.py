@@ -20,7 +20,7 @@ from starlette.datastructures import State
 
 from app.auth import CHALLENGE, PING_WRITER_ROLES, bearer_token, token_cache_for
 from app.auth.tokens import token_rate_limiter
-from app.core.errors import RETRY_AFTER_S
+from app.core.errors import RETRY_AFTER_S, content_encoding_refusal
 from app.core.logs import RepeatedMessages
 from app.core.ratelimit import retry_after_header
 from app.ingest.pings import BodyError, ForeignVehicle
@@ -68,19 +68,6 @@ def _is_outage(error: Exception) -> bool:
     return isinstance(error, DBAPIError) and bool(error.connection_invalidated)
 
 
-def unreadable_encoding(content_encoding: str | None) -> str | None:
-    """Why a body sent with this Content-Encoding cannot be read (None: it can). The service
-    takes bodies as they are; a compressed one was read as text and refused as "not valid
-    UTF-8", which named no cause."""
-    coding = (content_encoding or "").strip().lower()
-    if coding in ("", "identity"):
-        return None
-    return (
-        f"request body cannot be read: Content-Encoding {coding} is not accepted; "
-        "send the body uncompressed"
-    )
-
-
 async def reply_to_pings(
     state: State, authorization: str | None, body: bytes, content_encoding: str | None = None
 ) -> Reply:
@@ -99,9 +86,9 @@ async def reply_to_pings(
         wait_s = token_rate_limiter(state).wait_s(principal.token_id)
         if wait_s:
             return _error(429, "too many requests for this token", retry_after_header(wait_s))
-        unreadable = unreadable_encoding(content_encoding)
-        if unreadable is not None:
-            return _error(422, unreadable)
+        refusal = content_encoding_refusal(content_encoding)
+        if refusal is not None:
+            return _error(422, f"request body cannot be read: {refusal}")
         result = await ingest.pings(body, principal, received_at)
     except BodyError as error:
         return _error(422, str(error))
