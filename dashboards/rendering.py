@@ -47,12 +47,16 @@ def display_zone(settings: Settings) -> ZoneInfo:
     return ZoneInfo(settings.dashboard_timezone)
 
 
+def local_time(moment: datetime, zone: ZoneInfo) -> str:
+    """A moment as every page writes times: in the corridor's zone, to the second, zone named."""
+    return moment.astimezone(zone).strftime("%Y-%m-%d %H:%M:%S %Z")
+
+
 @pass_context
 def _localtime(context: Context, value: datetime | None) -> str:
     if value is None:
         return "—"
-    zone = display_zone(context["request"].app.state.settings)
-    return value.astimezone(zone).strftime("%Y-%m-%d %H:%M:%S %Z")
+    return local_time(value, display_zone(context["request"].app.state.settings))
 
 
 templates.env.filters["mph"] = _mph

@@ -27,7 +27,14 @@ from dashboards import data
 from dashboards.auth import PageError, UserDep
 from dashboards.charts import Axis, Band, ColourScale, Series, chart, heatmap_figure, line_figure
 from dashboards.pages.corridor_choice import LaneNumber, check_lane, chosen_corridor
-from dashboards.rendering import display_zone, figure_refresh_s, page, render, settings_of
+from dashboards.rendering import (
+    display_zone,
+    figure_refresh_s,
+    local_time,
+    page,
+    render,
+    settings_of,
+)
 
 router = APIRouter(include_in_schema=False)
 
@@ -107,7 +114,7 @@ def _local_time_text(text: str, zone: ZoneInfo) -> str | None:
         return None
     if moment.tzinfo is None:
         return None
-    return moment.astimezone(zone).strftime("%Y-%m-%d %H:%M:%S %Z")
+    return local_time(moment, zone)
 
 
 def readable_input(name: str, item: object, zone: ZoneInfo) -> tuple[str, str]:
