@@ -9,6 +9,7 @@ acceleration are consistent with each other (GPS distance is noisier than the wh
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -86,6 +87,15 @@ class Drive:
         recorded, and the commands that read drives say so."""
         fast = np.flatnonzero(np.abs(np.diff(self.speed_mps)) > MAX_LEADER_ACCEL_MPS2 * self.dt_s)
         return (len(fast), float(fast[0]) * self.dt_s) if len(fast) else (0, float("nan"))
+
+    @property
+    def fingerprint(self) -> str:
+        """sha256 of the replayed speeds and their step, the first 16 hex digits: what a result
+        computed on this drive (its optimal bound) was computed from. Two cuts or versions of a
+        drive under one name differ here."""
+        digest = hashlib.sha256(np.ascontiguousarray(self.speed_mps, dtype=np.float64).tobytes())
+        digest.update(repr(self.dt_s).encode())
+        return digest.hexdigest()[:16]
 
     @property
     def kind(self) -> DriveKind:

@@ -576,15 +576,27 @@ class OptimumFileError(ValueError):
     """A file that is not `smoothfleet sim optimum`'s CSV; the message names it and why."""
 
 
-def load_optimum(path: Path) -> dict[str, float]:
-    """Drive name -> optimal fuel saving (%) from `smoothfleet sim optimum`'s CSV.
+@dataclass(frozen=True, slots=True)
+class OptimumBound:
+    """One drive's row of `smoothfleet sim optimum`'s CSV: its saving and what it was computed
+    on. A file written before the provenance columns has None in both."""
+
+    fuel_saving_pct: float
+    # `Drive.fingerprint` of the speeds the bound was computed on.
+    drive_fingerprint: str | None
+    # Vehicles behind the leader in the bound's platoon (its AV and humans).
+    followers: int | None
+
+
+def load_optimum(path: Path) -> dict[str, OptimumBound]:
+    """Drive name -> optimal bound from `smoothfleet sim optimum`'s CSV.
 
     A file without the `drive` and `fuel_saving_pct` columns, without a row, or with a saving
     that is no number is refused: read as it stands, it would leave every "of optimum" n/a
-    without a word."""
+    without a word. So is a row whose `humans` is no whole number."""
     import csv
 
-    bounds: dict[str, float] = {}
+    bounds: dict[str, OptimumBound] = {}
     # utf-8-sig: a spreadsheet's byte-order mark is no part of the first column's name
     with path.open(newline="", encoding="utf-8-sig") as handle:
         reader = csv.DictReader(handle)
@@ -605,11 +617,22 @@ def load_optimum(path: Path) -> dict[str, float]:
                     f"{path}, line {reader.line_num}: drive {row['drive']} again"
                 )
             try:
-                bounds[row["drive"]] = float(saving)
+                saving_pct = float(saving)
             except (TypeError, ValueError):
                 raise OptimumFileError(
                     f"{path}, line {reader.line_num}: fuel_saving_pct {saving!r} is not a number"
                 ) from None
+            humans = row.get("humans") or None
+            if humans is not None and not humans.isdigit():
+                raise OptimumFileError(
+                    f"{path}, line {reader.line_num}: humans {humans!r} is not a whole number"
+                )
+            bounds[row["drive"]] = OptimumBound(
+                fuel_saving_pct=saving_pct,
+                drive_fingerprint=row.get("drive_fingerprint") or None,
+                # the bound's platoon: its one AV and the humans behind it
+                followers=None if humans is None else int(humans) + 1,
+            )
     if not bounds:
         raise OptimumFileError(f"{path}: no drive's bound in it")
     return bounds

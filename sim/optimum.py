@@ -567,6 +567,10 @@ OPTIMUM_COLUMNS = (
     "iterations",
     "seconds",
     "start_smoothing_s",
+    # What the bound was computed on (`Drive.fingerprint`, the humans behind the AV), so an
+    # evaluation cannot compare a controller with the bound of another cut of a drive.
+    "drive_fingerprint",
+    "humans",
 )
 CACHE_VERSION = 2
 

@@ -17,6 +17,7 @@ from sim.evaluate import (
     BASELINE,
     ControllerVariant,
     Evaluation,
+    OptimumBound,
     OptimumFileError,
     RunResult,
     evaluate,
@@ -255,16 +256,20 @@ def test_an_optimum_file_that_is_not_the_bounds_is_refused(tmp_path: Path) -> No
     good = tmp_path / "optimum.csv"
     good.write_text("drive,start_smoothing_s,fuel_saving_pct\na,0,8.5\nb,60,nan\n")
     bounds = load_optimum(good)
-    assert bounds["a"] == 8.5
-    assert math.isnan(bounds["b"])
+    assert bounds["a"] == OptimumBound(8.5, drive_fingerprint=None, followers=None)
+    assert math.isnan(bounds["b"].fuel_saving_pct)
     excel = tmp_path / "excel.csv"  # a spreadsheet's "CSV UTF-8": a byte-order mark first
     excel.write_bytes(b"\xef\xbb\xbf" + good.read_bytes())
-    assert load_optimum(excel)["a"] == 8.5
+    assert load_optimum(excel)["a"].fuel_saving_pct == 8.5
+    recorded = tmp_path / "recorded.csv"
+    recorded.write_text("drive,fuel_saving_pct,drive_fingerprint,humans\na,8.5,00ff,24\n")
+    assert load_optimum(recorded)["a"] == OptimumBound(8.5, "00ff", followers=25)
     for text, named in (
         ("drive,fuel_saving_pct\na,8.5\na,3.0\n", "line 3: drive a again"),
         ('{"drive": "a"}\n', "not a `sim optimum` CSV (no column drive or fuel_saving_pct)"),
         ("drive,saving\na,1\n", "(no column fuel_saving_pct)"),
         ("drive,fuel_saving_pct\na,8.5\nb,lots\n", "line 3: fuel_saving_pct 'lots' is not a"),
+        ("drive,fuel_saving_pct,humans\na,8.5,24.5\n", "line 2: humans '24.5' is not a whole"),
         ("drive,fuel_saving_pct\n", "no drive's bound in it"),
     ):
         bad = tmp_path / "bad.csv"
@@ -334,11 +339,31 @@ def test_cli_says_why_a_scenario_has_no_drive(shared_dir: Path, tmp_path: Path) 
     )
     assert freeflow.returncode == 0, freeflow.stderr
     assert "the best pair is named on the shockwave scenario, which was not run" in freeflow.stdout
+    said = " ".join(freeflow.stdout.split())
     assert (
         '--optimum: a bound for 1 of the 1 drives evaluated (the others\' "of optimum" is n/a)'
-        in (" ".join(freeflow.stdout.split()))
+        in said
     )
+    assert "1 of those bounds do not record the speeds or platoon" in said
     assert "no pair kept" not in freeflow.stdout
+    # a bound that records what it was computed on is checked against the drive evaluated
+    fast = load_drive(drives / "fast.csv")
+    for provenance, named in (
+        (f"{fast.fingerprint},24", None),
+        ("0123456789abcdef,24", "the bound for fast was computed on other speeds than the drive"),
+        (f"{fast.fingerprint},9", "the bound for fast is for 10 vehicles behind the leader, this"),
+    ):
+        bound.write_text(f"drive,fuel_saving_pct,drive_fingerprint,humans\nfast,0.4,{provenance}\n")
+        checked = evaluate_microaccel(
+            drives, tmp_path / "out", "--scenario", "freeflow", "--optimum", str(bound)
+        )
+        if named is None:
+            assert checked.returncode == 0, checked.stderr
+            assert "matched by drive name only" not in checked.stdout
+        else:
+            assert checked.returncode == 2
+            assert named in " ".join(checked.stderr.split())
+            assert "Traceback" not in checked.stderr
 
 
 def test_distance_lost_and_gap_figures_per_run() -> None:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sim.drives import load_drive
 from sim.optimum import OPTIMUM_COLUMNS
 from tests.support.servers import cli_env, run_cli
 
@@ -44,6 +45,9 @@ def test_cli_optimum_writes_one_row_per_drive_and_reuses_its_cache(tmp_path: Pat
     assert float(by_drive["dip"]["fuel_saving_pct"]) > 1.0
     assert abs(float(by_drive["steady"]["fuel_saving_pct"])) < 0.1
     for row in rows:
+        # what the bound was computed on, for `sim evaluate --optimum` to check
+        assert row["drive_fingerprint"] == load_drive(drives / f"{row['drive']}.csv").fingerprint
+        assert row["humans"] == "4"
         assert int(row["collisions"]) == 0
         assert float(row["gap_out_of_bounds_s"]) == 0.0
         accel = np.load(out / "optimum" / f"{row['drive']}.npy")

@@ -80,19 +80,47 @@ class IntListOption(click.Option):
         return sorted(set(counts))
 
 
-def _read_optimum(path: Path, cases: Sequence[Case]) -> dict[str, float]:
-    """The bound per drive from `--optimum`, and how many of the drives it covers (a drive
-    recorded with its INRIX has none, `sim optimum` runs on the trajectories only)."""
+def _read_optimum(path: Path, cases: Sequence[Case], followers: int) -> dict[str, float]:
+    """The bound's fuel saving per drive from `--optimum`, and how many of the drives it
+    covers (a drive recorded with its INRIX has none, `sim optimum` runs on the trajectories
+    only).
+
+    A bound computed on other speeds than the drive evaluated under its name (another cut or
+    version of the drive), or for a platoon of another length, is refused: its "of optimum"
+    would compare a controller with another road's bound. A file written before the bounds
+    recorded what they were computed on is matched by drive name, and the command says so."""
     try:
         optimum = load_optimum(path)
     except OptimumFileError as error:
         raise click.BadParameter(str(error), param_hint="--optimum") from None
-    drives = {case.drive.name for case in cases}
+    evaluated = {case.drive.name: case.drive for case in cases}
+    covered = sorted(evaluated.keys() & optimum.keys())
+    for name in covered:
+        bound = optimum[name]
+        if bound.drive_fingerprint not in (None, evaluated[name].fingerprint):
+            raise click.BadParameter(
+                f"the bound for {name} was computed on other speeds than the drive of that name "
+                f"evaluated here (fingerprint {bound.drive_fingerprint}, the drive's "
+                f"{evaluated[name].fingerprint}): another cut or version of the drive",
+                param_hint="--optimum",
+            )
+        if bound.followers not in (None, followers):
+            raise click.BadParameter(
+                f"the bound for {name} is for {bound.followers} vehicles behind the leader, "
+                f"this evaluation's platoon has {followers} (--vehicles)",
+                param_hint="--optimum",
+            )
     console.print(
-        f"--optimum: a bound for {len(drives & optimum.keys())} of the {len(drives)} drives "
+        f"--optimum: a bound for {len(covered)} of the {len(evaluated)} drives "
         'evaluated (the others\' "of optimum" is n/a)'
     )
-    return optimum
+    unchecked = [name for name in covered if optimum[name].drive_fingerprint is None]
+    if unchecked:
+        console.print(
+            f"--optimum: {len(unchecked)} of those bounds do not record the speeds or platoon "
+            "they were computed on (written before `sim optimum` did): matched by drive name only"
+        )
+    return {name: bound.fuel_saving_pct for name, bound in optimum.items()}
 
 
 def _planner_params(text: str | None) -> dict[str, Any]:
@@ -259,7 +287,7 @@ def evaluate_command(
     drives = read_drives(drives_dir)
     recorded = read_recorded_drives(inrix_dir) if on_recordings and inrix_dir is not None else []
     cases = chosen_cases(chosen, drives, recorded)
-    optimum = _read_optimum(optimum_csv, cases) if optimum_csv is not None else {}
+    optimum = _read_optimum(optimum_csv, cases, followers) if optimum_csv is not None else {}
     output_folder(out_dir, "--out")
     if runs_dir is not None:
         output_folder(runs_dir, "--save-runs")

@@ -132,7 +132,8 @@ def optimum_command(
                         progress.advance(task, len(every_start) - len(solved))
                         break
                     row = save_cached(cache, result, key)
-                solved.append(row)
+                # the key holds the drive's speeds and the humans: the row was computed on them
+                solved.append({**row, "drive_fingerprint": drive.fingerprint, "humans": humans})
                 progress.advance(task)
             if len(solved) < len(every_start):
                 continue
