@@ -19,7 +19,7 @@ from app.seed import seed_corridor_document
 from contract.corridor import CorridorGeometry
 from planner.evaluation import VARIANTS, evaluate_drive
 from planner.inputs import CorridorGrid
-from planner.params import PlannerParams
+from planner.pipeline import parse_params
 from planner.recorded import load_recorded_drive
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,7 +32,7 @@ def main() -> None:
     parser.add_argument("--param", action="append", default=[], help="name=value override")
     args = parser.parse_args()
     overrides = dict(item.split("=", 1) for item in args.param)
-    params = PlannerParams.parse(overrides)
+    params = parse_params(overrides)
 
     document = seed_corridor_document()
     grid = CorridorGrid.from_rows(document["corridor"], document["i24_segments"])

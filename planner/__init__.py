@@ -22,7 +22,7 @@ from planner.algorithms import ALGORITHMS, plan_speeds
 from planner.buffers import Buffer
 from planner.inputs import CorridorGrid, InrixHistory, LaneObservations
 from planner.params import InvalidParams, PlannerParams
-from planner.pipeline import Plan, PlannerInputs
+from planner.pipeline import Plan, PlannerInputs, parse_params
 from planner.predict import NoInrixEstimate
 from planner.registry import UnknownVariant
 
@@ -38,5 +38,6 @@ __all__ = [
     "PlannerInputs",
     "PlannerParams",
     "UnknownVariant",
+    "parse_params",
     "plan_speeds",
 ]

@@ -14,18 +14,44 @@ traffic, the warehouse with the database's.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from planner.bottlenecks import FINDERS, standing_bottlenecks
-from planner.buffers import Buffer
+from planner.buffers import DESIGNERS, Buffer
 from planner.fuse import FUSERS
 from planner.inputs import BoolArray, CorridorGrid, FloatArray, InrixHistory, LaneObservations
-from planner.params import PlannerParams
+from planner.params import InvalidParams, PlannerParams
 from planner.predict import PREDICTORS, usable_history
+from planner.registry import Registry, UnknownVariant
 from planner.smooth import KERNELS, forward_kernel_smooth
+
+# The parameters that name a stage's variant, and the registry each names one from.
+STAGE_REGISTRIES: dict[str, Registry[Any]] = {
+    "predictor": PREDICTORS,
+    "fuser": FUSERS,
+    "kernel": KERNELS,
+    "bottleneck_finder": FINDERS,
+    "buffer_designer": DESIGNERS,
+}
+
+
+def parse_params(values: Mapping[str, Any] | None) -> PlannerParams:
+    """User-given parameters, validated, each stage's variant among the registered ones.
+
+    `PlannerParams` holds a variant as its name (the name is stored with every plan); a name
+    nobody registered would pass it and fail every cycle from the first, so a server would
+    start and publish no plan. Raises InvalidParams naming the parameter."""
+    params = PlannerParams.parse(dict(values or {}))
+    for name, registry in STAGE_REGISTRIES.items():
+        try:
+            registry.get(getattr(params, name))
+        except UnknownVariant as error:
+            raise InvalidParams(f"planner parameter {name}: {error}") from None
+    return params
 
 
 @dataclass(frozen=True)

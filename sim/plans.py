@@ -30,6 +30,7 @@ from planner import (
     NoInrixEstimate,
     PlannerInputs,
     PlannerParams,
+    parse_params,
     plan_speeds,
 )
 from planner.inputs import traffic_pings
@@ -121,7 +122,7 @@ class SimulatedPlanner:
     ) -> SimulatedPlanner:
         """A planner over the drive's road, with validated parameters, reading `feed` (the real
         INRIX of the drive) or INRIX simulated from the drive."""
-        checked = PlannerParams.parse(dict(params or {}))
+        checked = parse_params(params)
         inrix = feed if feed is not None else simulated_inrix(drive, checked)
         return cls(algorithm, checked, simulated_grid(drive), inrix)
 

@@ -221,9 +221,9 @@ class Settings(BaseSettings):
     @field_validator("planner_params")
     @classmethod
     def _planner_params_are_valid(cls, value: dict[str, Any]) -> dict[str, Any]:
-        from planner import PlannerParams
+        from planner import parse_params
 
-        PlannerParams.parse({**_recommended_planner()[1], **value})
+        parse_params({**_recommended_planner()[1], **value})
         return value
 
     def planner_param_values(self) -> dict[str, Any]:

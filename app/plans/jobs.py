@@ -20,7 +20,7 @@ from sqlalchemy import Engine
 from app.core.config import Settings
 from app.core.db import make_sync_engine, session_scope
 from app.plans import metrics
-from planner import PlannerParams
+from planner import parse_params
 from planner.warehouse import (
     CycleOutcome,
     corridor_ids,
@@ -44,7 +44,7 @@ def run_planner(
 ) -> list[CycleOutcome]:
     """One cycle for each corridor (all of them unless named), each in its own transaction."""
     algorithm = settings.planner_algorithm
-    params = PlannerParams.parse(settings.planner_param_values())
+    params = parse_params(settings.planner_param_values())
     if corridors is None:
         with session_scope(engine) as session:
             corridors = corridor_ids(session)

@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 
 from contract.idm import I24_IDM, IdmParams, equilibrium_gap_m, idm_accel
 from contract.units import MPS_PER_MPH, mps_to_mph
-from planner import PlannerParams
+from planner import parse_params
 from sim.av import PING_EVERY_STEPS, RADAR_RANGE_M
 from sim.drives import Drive
 from sim.emulator.acc import MIN_SET_SPEED_MPH, SimulatedAccCar, stock_acc_accel
@@ -203,7 +203,7 @@ class PlatoonVecEnv(gym.vector.VectorEnv[FloatArray, FloatArray, NDArray[Any]]):
         self.roads = [road for road in roads if road.drive.steps > self.episode_steps]
         if not self.roads:
             raise ValueError(f"no drive is longer than an episode ({config.episode_s:g} s)")
-        self.planner_params = PlannerParams.parse(dict(config.planner_params))
+        self.planner_params = parse_params(config.planner_params)
         size = observation_size(config.actuation, config.accel_observation)
         self.single_observation_space = gym.spaces.Box(-np.inf, np.inf, (size,), np.float64)
         self.action_size = action_size(config.actuation, config.accel_action)

@@ -61,6 +61,13 @@ def test_the_server_plans_as_the_simulator_recommends(monkeypatch: pytest.Monkey
         ("READINESS_PING_AGE_S", "5, 60", "SMOOTHFLEET_READINESS_PING_AGE_S: not valid JSON"),
         ("READINESS_PING_AGE_S", "[60, 5]", "READINESS_PING_AGE_S: give .* amber below red"),
         ("PLANNER_PARAMS", '{"nosuch": 1}', "SMOOTHFLEET_PLANNER_PARAMS: planner parameter"),
+        # a stage nobody registered: accepted, it failed every planner cycle from the first
+        (
+            "PLANNER_PARAMS",
+            '{"kernel": "cosine"}',
+            "planner parameter kernel: unknown kernel 'cosine' \\(known: gaussian, quartic",
+        ),
+        ("PLANNER_PARAMS", '{"predictor": "x"}', "planner parameter predictor: unknown predictor"),
     ],
 )
 def test_a_wrong_json_setting_is_named(

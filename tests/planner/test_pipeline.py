@@ -14,8 +14,10 @@ from planner import (
     PlannerInputs,
     PlannerParams,
     UnknownVariant,
+    parse_params,
     plan_speeds,
 )
+from planner.pipeline import STAGE_REGISTRIES
 from tests.planner.grids import uniform_grid
 
 GRID = uniform_grid(150, lanes=2)  # 15 km, 2 lanes
@@ -110,6 +112,10 @@ def test_unknown_algorithm_and_bad_parameters_say_what_was_wrong() -> None:
         plan_speeds(inputs, "kernel_smooth", PlannerParams(kernel="box"))
     with pytest.raises(InvalidParams, match="planner parameter window_m"):
         PlannerParams.parse({"window_m": -5})
+    for stage in STAGE_REGISTRIES:
+        with pytest.raises(InvalidParams, match=f"planner parameter {stage}: unknown .* 'x'"):
+            parse_params({stage: "x"})
+    assert parse_params({"kernel": "quartic"}).kernel == "quartic"
     with pytest.raises(InvalidParams, match="planner parameter colour"):
         PlannerParams.parse({"colour": "red"})
     with pytest.raises(InvalidParams, match="standing_required"):

@@ -11,7 +11,8 @@ import click
 from rich.progress import TaskID
 from rich.table import Table
 
-from planner.params import InvalidParams, PlannerParams
+from planner.params import InvalidParams
+from planner.pipeline import parse_params
 from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.evaluate import BASELINE, ControllerVariant, PolicyDatesUnknown, default_workers, evaluate
 from sim.folds import drive_date
@@ -121,7 +122,7 @@ def select_command(
     ]
     for params in candidates:  # before anything is simulated
         try:
-            PlannerParams.parse(params)
+            parse_params(params)
         except InvalidParams as error:
             raise click.BadParameter(str(error), param_hint="--window") from None
     output_folder(out_dir, "--out")
