@@ -8,7 +8,8 @@ x + c h is the one arriving at x now:
 
 where dv/dt is the least-squares slope over the last `trend_snapshots` snapshots, g the share of
 the trend trusted, and D a damped horizon (a trend is not extrapolated for ever). The result
-stays within 0 and the fastest speed the history saw.
+stays within 0 and the fastest speed (any segment's) among the snapshots the trend is fitted
+on: a corridor recovering towards a speed none of them reached is held at their fastest.
 """
 
 from __future__ import annotations
