@@ -34,6 +34,10 @@ class PlanInputsOut(BaseModel):
 
     inrix_as_of: datetime | None
     inrix_age_s: float | None
+    # Age of the oldest reading the newest snapshot carried forward for a segment it did not
+    # read (a partial outage); inrix_age_s when it read them all. Absent on plans published
+    # before it was recorded.
+    inrix_oldest_reading_age_s: float | None = None
     ping_window_start: datetime
     ping_window_end: datetime
     vehicles: int

@@ -119,7 +119,7 @@ def evaluate_drive(
             found = {
                 variant: enhance_tse(
                     PlannerInputs(grid, history, observations, float(now_s)), variant_params
-                )[0]
+                ).tse_mps
                 for variant, (history, observations, variant_params) in cases.items()
             }
         except NoInrixEstimate:

@@ -25,7 +25,7 @@ from planner.buffers import DESIGNERS, Buffer
 from planner.fuse import FUSERS
 from planner.inputs import BoolArray, CorridorGrid, FloatArray, InrixHistory, LaneObservations
 from planner.params import InvalidParams, PlannerParams
-from planner.predict import PREDICTORS, usable_history
+from planner.predict import PREDICTORS, oldest_reading_used_s, usable_history
 from planner.registry import Registry, UnknownVariant
 from planner.smooth import KERNELS, forward_kernel_smooth
 
@@ -76,6 +76,9 @@ class Plan:
     algorithm: str
     params: PlannerParams
     inrix_as_of_s: float
+    # The oldest reading the newest snapshot carried forward for a segment it did not read
+    # (`oldest_reading_used_s`); inrix_as_of_s when it read them all.
+    inrix_oldest_used_s: float
     tse_mps: FloatArray
     smoothed_mps: FloatArray
     target_mps: FloatArray
@@ -85,14 +88,27 @@ class Plan:
     buffers: tuple[Buffer, ...] = ()
 
 
-def enhance_tse(inputs: PlannerInputs, params: PlannerParams) -> tuple[FloatArray, float]:
-    """Steps 1-2: the lane-level TSE and the time of the newest INRIX snapshot used."""
+@dataclass(frozen=True)
+class EnhancedTse:
+    """Steps 1-2's result: the lane-level TSE and how old the INRIX under it is."""
+
+    tse_mps: FloatArray
+    # The newest snapshot used, and the oldest reading it carried forward.
+    inrix_as_of_s: float
+    inrix_oldest_used_s: float
+
+
+def enhance_tse(inputs: PlannerInputs, params: PlannerParams) -> EnhancedTse:
+    """Steps 1-2: the lane-level TSE and the times of the INRIX it was made from."""
     history = usable_history(inputs.inrix, inputs.now_s, params)
     predictor = PREDICTORS.get(params.predictor)
     prior = predictor(history, inputs.grid.center_x_m, inputs.now_s, params)
     fuser = FUSERS.get(params.fuser)
-    tse = fuser(prior, inputs.observations, inputs.grid, params)
-    return tse, float(history.measured_at_s[-1])
+    return EnhancedTse(
+        tse_mps=fuser(prior, inputs.observations, inputs.grid, params),
+        inrix_as_of_s=float(history.measured_at_s[-1]),
+        inrix_oldest_used_s=oldest_reading_used_s(history, inputs.now_s, params),
+    )
 
 
 def smooth_tse(tse_mps: FloatArray, grid: CorridorGrid, params: PlannerParams) -> FloatArray:

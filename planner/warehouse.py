@@ -605,6 +605,7 @@ def run_cycle(
     inputs: dict[str, Any] = {
         "inrix_as_of": None,
         "inrix_age_s": None,
+        "inrix_oldest_reading_age_s": None,
         "inrix_snapshots": inrix.history.snapshots,
         "inrix_history_start": _iso(now - timedelta(seconds=params.inrix_history_s)),
         "inrix_received_by": _iso(now),
@@ -650,6 +651,9 @@ def run_cycle(
     as_of = datetime.fromtimestamp(plan.inrix_as_of_s, UTC)
     inputs["inrix_as_of"] = _iso(as_of)
     inputs["inrix_age_s"] = round((now - as_of).total_seconds(), 3)
+    # a partial outage: segments the newest snapshot did not read stand on older readings
+    oldest = datetime.fromtimestamp(plan.inrix_oldest_used_s, UTC)
+    inputs["inrix_oldest_reading_age_s"] = round((now - oldest).total_seconds(), 3)
     duration_ms = (time.perf_counter() - clock) * 1000
     published_at = now + timedelta(milliseconds=duration_ms)
     plan_id = _insert_run(

@@ -97,13 +97,15 @@ def _count(outcome: CycleOutcome) -> None:
     if outcome.status == "published":
         metrics.PLANNER_LAST_PUBLISHED.labels(corridor).set(time.time())
         log.info(
-            "planner: published plan %s for %s in %.0f ms (%s vehicles, %s pings, INRIX %s s old)",
+            "planner: published plan %s for %s in %.0f ms (%s vehicles, %s pings, INRIX %s s "
+            "old, its oldest reading in use %s s)",
             outcome.plan_id,
             corridor,
             outcome.duration_ms,
             outcome.inputs.get("vehicles"),
             outcome.inputs.get("pings"),
             outcome.inputs.get("inrix_age_s"),
+            outcome.inputs.get("inrix_oldest_reading_age_s"),
         )
     elif outcome.status == "skipped":
         log.warning("planner: no plan for %s: %s", corridor, outcome.reason)

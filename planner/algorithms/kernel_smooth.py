@@ -13,13 +13,15 @@ from planner.pipeline import Plan, PlannerInputs, clip_to_legal_range, enhance_t
 
 def kernel_smooth(inputs: PlannerInputs, params: PlannerParams) -> Plan:
     """Predict, fuse, smooth."""
-    tse, inrix_as_of_s = enhance_tse(inputs, params)
+    enhanced = enhance_tse(inputs, params)
+    tse = enhanced.tse_mps
     smoothed = smooth_tse(tse, inputs.grid, params)
     nothing = np.zeros(tse.shape, dtype=np.bool_)
     return Plan(
         algorithm="kernel_smooth",
         params=params,
-        inrix_as_of_s=inrix_as_of_s,
+        inrix_as_of_s=enhanced.inrix_as_of_s,
+        inrix_oldest_used_s=enhanced.inrix_oldest_used_s,
         tse_mps=tse,
         smoothed_mps=smoothed,
         target_mps=clip_to_legal_range(smoothed, inputs.grid, params),

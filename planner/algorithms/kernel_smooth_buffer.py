@@ -21,7 +21,8 @@ from planner.pipeline import (
 
 def kernel_smooth_buffer(inputs: PlannerInputs, params: PlannerParams) -> Plan:
     """Predict, fuse, smooth, find standing bottlenecks, buffer them."""
-    tse, inrix_as_of_s = enhance_tse(inputs, params)
+    enhanced = enhance_tse(inputs, params)
+    tse = enhanced.tse_mps
     smoothed = smooth_tse(tse, inputs.grid, params)
     candidates, standing = identify_bottlenecks(smoothed, inputs, params)
     designer = DESIGNERS.get(params.buffer_designer)
@@ -30,7 +31,8 @@ def kernel_smooth_buffer(inputs: PlannerInputs, params: PlannerParams) -> Plan:
     return Plan(
         algorithm="kernel_smooth_buffer",
         params=params,
-        inrix_as_of_s=inrix_as_of_s,
+        inrix_as_of_s=enhanced.inrix_as_of_s,
+        inrix_oldest_used_s=enhanced.inrix_oldest_used_s,
         tse_mps=tse,
         smoothed_mps=smoothed,
         target_mps=clip_to_legal_range(target, inputs.grid, params),

@@ -92,3 +92,17 @@ def usable_history(history: InrixHistory, now_s: float, params: PlannerParams) -
                 centers[missing], centers[~missing], speeds[row, ~missing]
             )
     return InrixHistory(times, speeds, centers, is_reading)
+
+
+def oldest_reading_used_s(usable: InrixHistory, now_s: float, params: PlannerParams) -> float:
+    """When the oldest reading the newest snapshot still stands on was measured.
+
+    In a `usable_history` a segment the newest snapshot did not read carries its last reading
+    forward (for at most `max_inrix_age_s`); the plan's INRIX age is the newest snapshot's, so
+    this is what tells an operator that most of the corridor is minutes older than that. A
+    segment whose last reading is older than the limit is interpolated, not carried, and does
+    not count. The newest snapshot's own time when it read every segment."""
+    read_at = np.where(usable.readings, usable.measured_at_s[:, None], -np.inf)
+    last_read_s = read_at.max(axis=0)
+    carried = last_read_s[now_s - last_read_s <= params.max_inrix_age_s]
+    return float(carried.min()) if len(carried) else float(usable.measured_at_s[-1])

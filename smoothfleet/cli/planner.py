@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from datetime import UTC, datetime
+from typing import Any
 
 import click
 
@@ -23,10 +24,19 @@ def describe(outcome: CycleOutcome) -> str:
         return (
             f"{outcome.corridor_id}: published plan {outcome.plan_id} in "
             f"{outcome.duration_ms:.0f} ms ({inputs['vehicles']} vehicles, {inputs['pings']} "
-            f"pings, INRIX {inputs['inrix_age_s']:.0f} s old)"
+            f"pings, INRIX {inputs['inrix_age_s']:.0f} s old{_carried(inputs)})"
         )
     label = {"skipped": "no plan", "failed": "failed", "busy": "left alone"}[outcome.status]
     return f"{outcome.corridor_id}: {label}: {outcome.reason}"
+
+
+def _carried(inputs: dict[str, Any]) -> str:
+    """', its oldest reading N s' when segments the newest snapshot did not read stand on
+    older readings (a partial outage), else nothing."""
+    oldest = inputs.get("inrix_oldest_reading_age_s")
+    if oldest is None or oldest - inputs["inrix_age_s"] < 1:
+        return ""
+    return f", some segments' reading {oldest:.0f} s old"
 
 
 @click.group("planner")

@@ -15,6 +15,8 @@ from sqlalchemy import Engine, text
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
 from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
+from planner.warehouse import CycleOutcome
+from smoothfleet.cli.planner import describe
 from tests.planner.facts import inrix_snapshot, standing_slowdown
 from tests.support.servers import (
     cli_env,
@@ -187,3 +189,15 @@ def test_serve_no_planner_publishes_nothing(
             server.send_signal(signal.SIGTERM)
             server.wait(timeout=30)
     assert runs(seeded_engine) == [], log.read_text()
+
+
+def test_a_plan_standing_on_old_readings_says_so() -> None:
+    """A partial outage: one segment read 8 s ago, the rest carried from 568 s ago. The line
+    said 'INRIX 8 s old' and nothing else (planner audit)."""
+    inputs = {"vehicles": 0, "pings": 0, "inrix_age_s": 8.1, "inrix_oldest_reading_age_s": 568.2}
+    line = describe(CycleOutcome("I-24-WB", "published", 7, None, 12.0, inputs))
+    assert line.endswith("INRIX 8 s old, some segments' reading 568 s old)")
+    whole = {**inputs, "inrix_oldest_reading_age_s": 8.1}
+    assert describe(CycleOutcome("I-24-WB", "published", 7, None, 12.0, whole)).endswith(
+        "INRIX 8 s old)"
+    )

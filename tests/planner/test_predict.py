@@ -9,7 +9,7 @@ import pytest
 
 from planner.inputs import InrixHistory
 from planner.params import PlannerParams
-from planner.predict import PREDICTORS, NoInrixEstimate, usable_history
+from planner.predict import PREDICTORS, NoInrixEstimate, oldest_reading_used_s, usable_history
 
 CENTERS = np.array([0.0, 1000.0, 2000.0])
 
@@ -85,6 +85,26 @@ def test_a_reading_is_carried_forward_no_longer_than_inrix_may_be_old() -> None:
     usable = usable_history(history, 550.0, PlannerParams(max_inrix_age_s=600))
     assert usable.speed_mps[-1].tolist() == [31.0, 12.0, 21.0]
     assert usable.readings.tolist() == [[True] * 3, [True, False, True]]
+
+
+def test_the_oldest_reading_a_plan_stands_on_is_known() -> None:
+    """A partial outage: the newest snapshot read one segment, the others stand on readings
+    500 s older. The plan said 'INRIX 8 s old' and nothing else (planner audit)."""
+    params = PlannerParams(max_inrix_age_s=600)
+    history = InrixHistory([0.0, 500.0], [[30.0, 12.0, 20.0], [31.0, np.nan, np.nan]], CENTERS)
+    assert oldest_reading_used_s(usable_history(history, 508.0, params), 508.0, params) == 0.0
+    # past the limit a reading is interpolated over, not carried, and does not count (segment
+    # 1's from 0 s); segment 2's from 500 s is carried
+    history = InrixHistory(
+        [0.0, 500.0, 650.0],
+        [[30.0, 12.0, 20.0], [31.0, np.nan, 21.0], [32.0, np.nan, np.nan]],
+        CENTERS,
+    )
+    usable = usable_history(history, 660.0, params)
+    assert oldest_reading_used_s(usable, 660.0, params) == 500.0
+    # every segment read in the newest snapshot: its own time
+    full = InrixHistory([0.0, 60.0], [[30.0, 12.0, 20.0], [31.0, 13.0, 21.0]], CENTERS)
+    assert oldest_reading_used_s(usable_history(full, 70.0, params), 70.0, params) == 60.0
 
 
 def test_one_fresh_segment_cannot_carry_a_corridor_read_long_ago() -> None:

@@ -91,6 +91,7 @@ def test_a_cycle_publishes_every_lane_with_its_provenance(seeded_engine: Engine)
     assert inputs["pings_off_corridor"] == 30
     assert inputs["pings_set_aside"] == 0  # the paper's rule fuses every ping
     assert inputs["inrix_age_s"] == 180.0
+    assert inputs["inrix_oldest_reading_age_s"] == 180.0  # the snapshot read every segment
     assert inputs["inrix_snapshots"] == 5
     assert inputs["ping_window_end"] == NOW.isoformat()
 
