@@ -62,7 +62,7 @@ class DriveErrors:
         return float(np.mean(np.abs(self.estimates_mps[variant] - self.truth_mps)))
 
 
-def _pings(
+def probe_pings(
     drive: ProbeDrive, start_s: float, end_s: float, period_s: float
 ) -> tuple[FloatArray, FloatArray]:
     """The drive's samples in [start, end), thinned to one per ping period."""
@@ -105,7 +105,7 @@ def evaluate_drive(
             continue
         cells = cells[on_grid]
         visible = inrix.until(now_s - latency_s)
-        x_seen, speed_seen = _pings(drive, now_s - params.ping_window_s, now_s, ping_period_s)
+        x_seen, speed_seen = probe_pings(drive, now_s - params.ping_window_s, now_s, ping_period_s)
         own_pings = LaneObservations.from_pings(
             grid, np.full(len(x_seen), lane), x_seen, speed_seen
         )
