@@ -177,6 +177,10 @@ def split_documents(
     scanner = _Scanner()
     pending = bytearray()  # the file's bytes from `pending_at` on, not yet handed out
     pending_at = 0
+    # Where content that is no object began since the last document (a number, a string, the
+    # wrong file given): its bytes are dropped as they are scanned, so memory stays bounded
+    # whatever the file holds, and it is counted once, when the next document or the file ends.
+    stray_at: int | None = None
     index = 0
     batch = DocumentBatch()
     batch_size = 0
@@ -189,9 +193,11 @@ def split_documents(
         consumed = pending_at
         for start, end in ends:
             gap = bytes(view[consumed - pending_at : start - pending_at]).strip(_BLANK)
-            if gap.strip(b"[]" + _BLANK):
-                batch.bad.append(BadDocument(index, consumed, "not a JSON object"))
+            if gap.strip(b"[]" + _BLANK) or stray_at is not None:
+                where = consumed if stray_at is None else stray_at
+                batch.bad.append(BadDocument(index, where, "not a JSON object"))
                 index += 1
+                stray_at = None
             batch.indices.append(index)
             batch.offsets.append(start)
             batch.texts.append(bytes(view[start - pending_at : end - pending_at]))
@@ -206,12 +212,17 @@ def split_documents(
         view.release()
         del pending[: consumed - pending_at]
         pending_at = consumed
+        if scanner.start is None:  # between documents: nothing here is handed out
+            if stray_at is None and pending.strip(b"[]" + _BLANK):
+                stray_at = pending_at
+            pending.clear()
+            pending_at = read_so_far
         if scanner.start is not None and read_so_far - scanner.start > MAX_DOCUMENT_BYTES:
             raise MotionFileError(
                 scanner.start, f"a document larger than {MAX_DOCUMENT_BYTES // 2**20} MB"
             )
-    if pending.strip(b"[]" + _BLANK) and scanner.start is None and not scanner.in_string:
-        batch.bad.append(BadDocument(index, pending_at, "not a JSON object"))
+    if stray_at is not None and scanner.start is None and not scanner.in_string:
+        batch.bad.append(BadDocument(index, stray_at, "not a JSON object"))
     batch.bytes_read = read_so_far
     if batch.texts or batch.bad:
         yield batch
@@ -228,6 +239,8 @@ def parse_batch(batch: DocumentBatch) -> tuple[pa.Table, list[int]]:
     exactly the documents it refuses are refused, each with the reason of `_type_problem` (or
     Arrow's message when the document is not JSON at all), and the others are kept.
     """
+    if not batch.texts:  # a batch of content that is no object only
+        return DOCUMENT_SCHEMA.empty_table(), []
     try:
         return _read(batch.texts), list(batch.indices)
     except pa.ArrowInvalid:

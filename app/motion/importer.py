@@ -58,6 +58,10 @@ from sim.motion.frame import METRES_PER_FOOT, MotionFrame
 
 IntArray = NDArray[np.int64]
 SECONDS_PER_DAY = 86_400
+# MOTION timestamps are unix seconds; one outside these years is a unit mistake (milliseconds
+# read as seconds lie some 50,000 years ahead) and no day of the store could hold it.
+EARLIEST_UNIX_S = 0.0  # 1970-01-01 UTC
+LATEST_UNIX_S = 4_102_444_800.0  # 2100-01-01 UTC
 # The manifest keeps this many bad documents' reasons (the counts are always complete).
 REASONS_KEPT = 1000
 HASH_CHUNK_BYTES = 8 * 1024 * 1024
@@ -240,20 +244,26 @@ def _accept(
     starts = np.concatenate([[0], np.cumsum(lengths)[:-1]]).astype(np.int64)
     # Point-level checks, reduced per document.
     finite = np.isfinite(time_s) & np.isfinite(x_ft) & np.isfinite(y_ft)
+    with np.errstate(invalid="ignore"):
+        in_era = (time_s >= EARLIEST_UNIX_S) & (time_s < LATEST_UNIX_S)
     step_ok = np.ones(len(time_s), dtype=bool)
     step_ok[1:] = np.diff(time_s) > 0
     step_ok[starts] = True
-    good_points = finite & step_ok
+    good_points = finite & in_era & step_ok
     doc_ok = np.logical_and.reduceat(good_points, starts) if len(starts) else np.zeros(0, bool)
     for position in np.flatnonzero(~doc_ok):
         first = starts[position]
         broken = int(np.argmax(~good_points[first : first + lengths[position]]))
-        refuse(
-            int(rows[position]),
-            f"non-finite or null value at point {broken}"
-            if not finite[first + broken]
-            else f"timestamps do not increase at point {broken}",
-        )
+        if not finite[first + broken]:
+            reason = f"non-finite or null value at point {broken}"
+        elif not in_era[first + broken]:
+            reason = (
+                f"timestamp {time_s[first + broken]:.15g} at point {broken} is no time in "
+                "seconds between 1970 and 2100 (milliseconds?)"
+            )
+        else:
+            reason = f"timestamps do not increase at point {broken}"
+        refuse(int(rows[position]), reason)
     keys = np.array([trajectory_key(document_ids[row]) for row in rows], dtype=np.int64)
     fresh = doc_ok.copy()
     for position in np.flatnonzero(doc_ok):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import json
+import tracemalloc
 
 import pytest
 from hypothesis import given, settings
@@ -70,6 +71,25 @@ def test_an_item_that_is_not_an_object_is_a_bad_document_and_the_rest_are_kept()
     texts = [text for batch in batches for text in batch.texts]
     assert texts == [b'{"a": 1}', b'{"b": 2}']
     assert [(entry.index, entry.reason) for entry in bad] == [(1, "not a JSON object")]
+
+
+def test_content_between_documents_is_not_held_in_memory() -> None:
+    """A large array of numbers (the wrong file given) was buffered whole until a document
+    ended: 988 MB for a 396 MB file (analytics audit). Now it is dropped as it is scanned and
+    counted once, where it began."""
+    numbers = b"[" + b",".join([b"123456.789"] * 800_000) + b', {"a": 1}, 5]'  # 8.8 MB
+    tracemalloc.start()
+    try:
+        batches = list(split_documents(io.BytesIO(numbers), chunk_bytes=2**20))
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 4 * 2**20, peak  # a few chunks, not the file
+    texts = [text for batch in batches for text in batch.texts]
+    bad = [(entry.index, entry.offset, entry.reason) for batch in batches for entry in batch.bad]
+    assert texts == [b'{"a": 1}']
+    end_of_document = numbers.index(b'{"a"') + len(b'{"a": 1}')
+    assert bad == [(0, 0, "not a JSON object"), (2, end_of_document, "not a JSON object")]
 
 
 def test_a_file_cut_inside_a_document_says_where_after_the_whole_ones() -> None:

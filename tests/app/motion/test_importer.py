@@ -100,6 +100,30 @@ def test_bad_documents_are_counted_with_their_reason_and_the_rest_imported(
     assert {entry["reason"] for entry in manifest["bad"]} == set(reasons.values())
 
 
+def test_timestamps_in_milliseconds_are_one_documents_error(tmp_path: Path) -> None:
+    """A document whose timestamps were in milliseconds ended the whole import in 'year 54862
+    is out of range', the good documents with it, staging files left behind (analytics audit)."""
+    good = document("good", [1.6e9, 1.6e9 + 1], [0.0, 20.0])
+    millis = document("millis", [1.6e12, 1.6e12 + 1000], [0.0, 20.0])
+    report = import_motion_file(
+        write(tmp_path / "m.json", [good, millis]), tmp_path / "s", METRIC_FRAME
+    )
+    assert report.documents == 1
+    assert [bad.reason for bad in report.bad] == [
+        "timestamp 1600000000000 at point 0 is no time in seconds between 1970 and 2100 (milliseconds?)"
+    ]
+    assert _count(tmp_path / "s", "motion_trajectories") == 1
+    assert not any((tmp_path / "s" / "staging").glob("*/*"))
+
+
+def test_a_file_of_numbers_is_bad_content_not_a_crash(tmp_path: Path) -> None:
+    """'[1, 2, 3]' ended in 'max() arg is an empty sequence' (analytics audit)."""
+    path = tmp_path / "numbers.json"
+    path.write_text("[1, 2, 3]")
+    report = import_motion_file(path, tmp_path / "s", METRIC_FRAME)
+    assert (report.documents, [bad.reason for bad in report.bad]) == (0, ["not a JSON object"])
+
+
 def test_a_file_with_nothing_to_import_is_counted_not_an_error(tmp_path: Path) -> None:
     """A file of the other direction only, or of bad documents only, imports nothing and says
     why (it used to end in an IndexError)."""
