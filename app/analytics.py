@@ -119,6 +119,14 @@ def bucket_window(
             upper = upper.replace(minute=0, second=0, microsecond=0) + timedelta(hours=1)
         elif column == "t_start":
             upper = box_end(upper, EDIE_H_T_S)
+    if isinstance(lower, datetime) and isinstance(upper, datetime) and upper == lower:
+        # equal bounds on a bucket's start (--since 2022-11-16 --until 2022-11-16) ask for that
+        # bucket, as equal bounds inside it do, not for nothing
+        upper = lower + {
+            "day": timedelta(days=1),
+            "hour": timedelta(hours=1),
+            "t_start": timedelta(seconds=EDIE_H_T_S),
+        }.get(column, timedelta(0))
     return lower, upper
 
 

@@ -666,6 +666,11 @@ def test_a_window_keeps_whole_days_and_hours(connection: Connection, store: Stor
         # a half-hour zone: 10:00+05:30 is 04:30 UTC, in the middle of the 04:00 hour
         ("hour", "2022-11-16T10:00+05:30", "2022-11-16T11:00+05:30", ("16T04:00", "16T06:00")),
         ("day", "2022-11-16T00:00", "2022-11-17T00:00", ("16T00:00", "17T00:00")),  # UTC
+        # equal bounds ask for the bucket they fall in, on its start as inside it (on its start
+        # they gave no row at all: analytics audit)
+        ("day", "2022-11-16T00:00", "2022-11-16T00:00", ("16T00:00", "17T00:00")),
+        ("day", "2022-11-16T12:00", "2022-11-16T12:00", ("16T00:00", "17T00:00")),
+        ("hour", "2022-11-16T13:00", "2022-11-16T13:00", ("16T13:00", "16T14:00")),
     ],
 )
 def test_a_window_in_another_zone_is_cut_at_the_views_utc_days_and_hours(
