@@ -326,6 +326,31 @@ def test_ping_rate_and_latency_per_vehicle_hour(
 # --- INRIX latency -----------------------------------------------------------------------------
 
 
+def test_a_break_in_driving_is_no_slow_pinging(connection: Connection, store: Store) -> None:
+    """SF-004 pinged at 1 Hz for 10 s, was switched off for 2 minutes, and pinged at 1 Hz for
+    10 s more in the same hour: (n - 1) / (last - first) read 18 / 149 s = 0.12 Hz, and the
+    docs' "cars that ping slowly" flagged it (analytics audit). SF-006 pings every 10 s: slow,
+    and still read so."""
+    hour = T0.replace(minute=10, second=0, microsecond=0)
+    first = [
+        ping("SF-004", hour + timedelta(seconds=i), 1010.0 + 20.0 * i, 20.0) for i in range(10)
+    ]
+    second = [
+        ping("SF-004", hour + timedelta(seconds=140 + i), 1010.0 + 20.0 * i, 20.0)
+        for i in range(10)
+    ]
+    slow = [
+        ping("SF-006", hour + timedelta(seconds=10 * i), 1010.0 + 200.0 * i, 20.0) for i in range(7)
+    ]
+    store(first + second + slow)
+
+    rates = analytics.read_view(connection, "ping_rate_hourly").set_index("vehicle_id")
+
+    assert rates.loc["SF-004", "pings"] == 20
+    assert rates.loc["SF-004", "ping_rate_hz"] == pytest.approx(1.0)
+    assert rates.loc["SF-006", "ping_rate_hz"] == pytest.approx(0.1)
+
+
 def test_inrix_latency_per_snapshot(
     connection: Connection, api: tuple[httpx.Client, str], seeded_engine: Engine
 ) -> None:

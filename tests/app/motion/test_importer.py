@@ -110,7 +110,8 @@ def test_timestamps_in_milliseconds_are_one_documents_error(tmp_path: Path) -> N
     )
     assert report.documents == 1
     assert [bad.reason for bad in report.bad] == [
-        "timestamp 1600000000000 at point 0 is no time in seconds between 1970 and 2100 (milliseconds?)"
+        "timestamp 1600000000000 at point 0 is no time in seconds between 1970 and 2100 "
+        "(milliseconds?)"
     ]
     assert _count(tmp_path / "s", "motion_trajectories") == 1
     assert not any((tmp_path / "s" / "staging").glob("*/*"))
