@@ -9,13 +9,14 @@ panel shows the bulk velocity u = q / rho, where the waves read most easily.
 from __future__ import annotations
 
 import io
-from datetime import UTC, date, datetime
+from datetime import date, datetime
 
 import matplotlib
 
 matplotlib.use("Agg")
 
 from pathlib import Path  # noqa: E402
+from zoneinfo import ZoneInfo  # noqa: E402
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
@@ -29,40 +30,50 @@ from app.motion.fleet import TRACE_GAP_S, FleetDay, fleet_pings  # noqa: E402
 ENGAGED_COLOUR = "red"
 NOT_ENGAGED_COLOUR = "white"
 G_PER_KM_PER_G_PER_M = 1000.0
-# Colour ranges: psi of a car at steady highway speed is ~60-80 g/km, in waves two or three
-# times that; u from standstill to 35 m/s (78 mph).
+# Colour ranges: the fuel model (sim.energy.RAV4_2019) gives psi = f(v, 0) / v of 28-50 g/km
+# for a car at a steady 15-35 m/s and 85-160 g/km for one crawling at 2-1 m/s, more while it
+# accelerates out of a wave; u from standstill to 35 m/s (78 mph).
 PSI_RANGE_G_PER_KM = (0.0, 200.0)
 # No car on the corridor covers ground faster than this (134 mph).
 MAX_TRACE_SPEED_MPS = 60.0
 SPEED_RANGE_MPS = (0.0, 35.0)
 
 
-def day_figure(store: Path, connection: Connection, day: date, corridor_id: str) -> bytes:
-    """The figure of one UTC day: all MOTION data of the day, all lanes, and the fleet's pings."""
+def day_figure(
+    store: Path, connection: Connection, day: date, corridor_id: str, zone: ZoneInfo
+) -> bytes:
+    """The figure of one UTC day: all MOTION data of the day, all lanes, and the fleet's pings;
+    clock times in `zone`."""
     window = day_window(store, day)
     field = edie_field(store, window)
     fleet = fleet_pings(connection, corridor_id, window.since, window.until)
-    return window_figure(window, field, fleet, corridor_id)
+    return window_figure(window, field, fleet, corridor_id, zone)
 
 
 def window_figure(
-    window: EdieWindow, field: pd.DataFrame, fleet: FleetDay, corridor_id: str
+    window: EdieWindow, field: pd.DataFrame, fleet: FleetDay, corridor_id: str, zone: ZoneInfo
 ) -> bytes:
     """The figure of a window's Edie field (from `edie_field`) and the fleet's pings in it."""
     title = (
-        f"{corridor_id}, {window.since:%Y-%m-%d}: Edie fields of every vehicle I-24 MOTION "
-        f"tracked ({window.h_t_s:g} s x {window.h_x_m:g} m boxes, all lanes)"
+        f"{corridor_id}, UTC day {window.since:%Y-%m-%d}: Edie fields of every vehicle I-24 "
+        f"MOTION tracked ({window.h_t_s:g} s x {window.h_x_m:g} m boxes, all lanes)"
     )
     return bulk_fuel_figure(
         to_grid(field, window, "fuel_per_distance_g_per_m"),
         to_grid(field, window, "speed_mps"),
         fleet,
         title,
+        zone,
     )
 
 
-def bulk_fuel_figure(psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str) -> bytes:
-    """The two panels as a PNG: psi (g/km) and u (m/s) over time and corridor position."""
+def bulk_fuel_figure(
+    psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str, zone: ZoneInfo
+) -> bytes:
+    """The two panels as a PNG: psi (g/km) and u (m/s) over time and corridor position.
+
+    The clock is `zone`'s, as in the paper's figure, whose times are Nashville's (the morning
+    rush, "around time 08:25:00"): in UTC the same waves sit six hours later."""
     figure, axes = plt.subplots(2, 1, figsize=(12, 8), sharex=True, constrained_layout=True)
     panels = (
         (
@@ -90,11 +101,10 @@ def bulk_fuel_figure(psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str
         axis.set_ylabel("corridor position x [km]")
         axis.set_ylim(grid.x_edges_m[0] / 1000.0, grid.x_edges_m[-1] / 1000.0)
         axis.add_collection(fleet_lines(fleet.pings), autolim=False)
-    ticks = _clock_ticks(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]))
-    clock = "%H:%M" if len(ticks) < 2 or ticks[1] - ticks[0] >= 60 else "%H:%M:%S"
-    axes[1].set_xticks(ticks, [datetime.fromtimestamp(t, UTC).strftime(clock) for t in ticks])
+    ticks, labels, axis_label = clock_axis(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]), zone)
+    axes[1].set_xticks(ticks, labels)
     axes[1].set_xlim(float(psi.t_edges_s[0]), float(psi.t_edges_s[-1]))
-    axes[1].set_xlabel("time [UTC]")
+    axes[1].set_xlabel(axis_label)
     share = (
         "no fleet pings on the corridor that day"
         if fleet.engagement_share is None
@@ -105,6 +115,16 @@ def bulk_fuel_figure(psi: EdieGrid, speed: EdieGrid, fleet: FleetDay, title: str
     figure.savefig(buffer, format="png", dpi=100)
     plt.close(figure)
     return buffer.getvalue()
+
+
+def clock_axis(first_s: float, last_s: float, zone: ZoneInfo) -> tuple[list[float], list[str], str]:
+    """The time axis between two unix times: round ticks, their clock times in `zone`, and the
+    axis's label naming the zone."""
+    ticks = _clock_ticks(first_s, last_s)
+    clock = "%H:%M" if len(ticks) < 2 or ticks[1] - ticks[0] >= 60 else "%H:%M:%S"
+    labels = [datetime.fromtimestamp(t, zone).strftime(clock) for t in ticks]
+    first = datetime.fromtimestamp(first_s, zone)
+    return ticks, labels, f"local time [{first.tzname()}, {zone.key}]"
 
 
 def _clock_ticks(first_s: float, last_s: float) -> list[float]:

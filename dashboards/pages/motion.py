@@ -24,7 +24,7 @@ from app.motion.figure import window_figure
 from app.motion.fleet import FleetDay, engagement_share, fleet_pings
 from app.motion.store import MotionStoreEmpty, imported_days, motion_store
 from dashboards.auth import PageError, UserDep
-from dashboards.rendering import render, settings_of
+from dashboards.rendering import display_zone, render, settings_of
 
 router = APIRouter(include_in_schema=False)
 
@@ -103,7 +103,8 @@ async def motion_figure(
         return fleet_pings(sync_session.connection(), CORRIDOR_ID, window.since, window.until)
 
     fleet = await session.run_sync(read_fleet)
-    png = await run_in_threadpool(window_figure, window, field, fleet, CORRIDOR_ID)
+    zone = display_zone(settings_of(request))
+    png = await run_in_threadpool(window_figure, window, field, fleet, CORRIDOR_ID, zone)
     cache[chosen] = (time.monotonic(), png)
     for stale in sorted(cache, key=lambda key: cache[key][0])[:-FIGURES_KEPT]:
         del cache[stale]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from datetime import UTC, date, datetime
 from pathlib import Path
+from zoneinfo import ZoneInfo
 
 import click
 from rich.progress import (
@@ -285,7 +286,13 @@ def motion_plot(day_text: str, output: Path, corridor_id: str, store: Path | Non
         engine = make_sync_engine(url)
         try:
             with engine.connect() as connection:
-                png = day_figure(store or motion_store(current), connection, day, corridor_id)
+                png = day_figure(
+                    store or motion_store(current),
+                    connection,
+                    day,
+                    corridor_id,
+                    ZoneInfo(current.dashboard_timezone),
+                )
         except MotionStoreEmpty as error:
             raise CliError(str(error)) from None
         finally:

@@ -80,7 +80,10 @@ def test_the_motion_page_draws_the_day_with_the_fleet_on_top(
         # the day is said to be UTC's, and the page's units the paper figure's, not the
         # footer every other page has (local time, mph, postmiles)
         expect(page.locator("#engagement")).to_contain_text("(the UTC day")
-        expect(page.locator("footer")).to_contain_text("days and times in UTC · speeds in m/s")
+        expect(page.locator("footer")).to_contain_text(
+            "Days are UTC days (the MOTION store’s); the figure’s clock is local, as in the "
+            "paper’s figure · speeds in m/s"
+        )
         figure = page.locator("#motion-figure")
         expect(figure).to_have_attribute("src", f"/analytics/motion.png?date={day}")
         page.wait_for_function(

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from datetime import UTC, datetime, timedelta
+from zoneinfo import ZoneInfo
 
 import numpy as np
 import pandas as pd
 
-from app.motion.figure import fleet_lines
+from app.motion.figure import clock_axis, fleet_lines
 
 T0 = datetime(2022, 11, 16, 13, 0, tzinfo=UTC)
 
@@ -56,3 +57,15 @@ def test_silences_and_jumps_break_the_line() -> None:
         )
     )
     assert len(lines.get_segments()) == 2
+
+
+def test_the_clock_is_nashvilles_as_in_the_papers_figure() -> None:
+    """The axis said 'time [UTC]': the paper's 08:25 wave sat at 14:25 (analytics audit)."""
+    start = datetime(2022, 11, 16, 14, 0, tzinfo=UTC).timestamp()
+    ticks, labels, axis_label = clock_axis(start, start + 3600.0, ZoneInfo("America/Chicago"))
+    assert (ticks[0], labels[0], labels[1]) == (start, "08:00", "08:10")
+    assert axis_label == "local time [CST, America/Chicago]"
+    _, summer, label = clock_axis(
+        start - 200 * 86400, start - 200 * 86400 + 600, ZoneInfo("America/Chicago")
+    )
+    assert (summer[0], label) == ("09:00", "local time [CDT, America/Chicago]")
