@@ -817,12 +817,23 @@ def test_the_fleet_and_vehicle_pages_show_the_policy_each_car_runs(
     site: str, seeded_engine: Engine
 ) -> None:
     first, second = "ab" * 32, "cd" * 32
+    shipped = "e530c072f540c1af93d1878abc9f46e61ad334692b0245782abeedbba62ba6df"  # SF-099's
     now = datetime.now(UTC).replace(microsecond=0)
     with httpx.Client(base_url=site, timeout=30) as api:
         admin = issue(seeded_engine, "admin")
-        for vehicle_id, policy in (("SF-001", first), ("SF-002", second)):
+        # SF-001 and SF-002 are assigned microaccel_acc (the seed) and last ran RL policies;
+        # SF-099 runs the rl_accel policy its assignment names
+        for vehicle_id, controller, policy in (
+            ("SF-001", "rl_acc", first),
+            ("SF-002", "rl_acc", second),
+            ("SF-099", "rl_accel", shipped),
+        ):
             pings = drive(vehicle_id, now - timedelta(seconds=5), 3000.0, 25.0, 5)
-            post_pings(api, admin, [{**ping, "policy_sha256": policy} for ping in pings])
+            post_pings(
+                api,
+                admin,
+                [{**ping, "controller": controller, "policy_sha256": policy} for ping in pings],
+            )
         post_status(
             api, admin, "SF-001", **healthy_status(now - timedelta(seconds=2)), policy_sha256=first
         )
@@ -830,7 +841,23 @@ def test_the_fleet_and_vehicle_pages_show_the_policy_each_car_runs(
         fleet = client.get("/fleet").text
         vehicle = client.get("/vehicles/SF-001").text
 
-    assert f'title="runs policy {first}">{first[:12]}</code>' in fleet
-    assert f'title="runs policy {second}">{second[:12]}</code>' in fleet
-    assert f'data-field="policy" title="{first}">{first[:12]}</code>' in vehicle
+    def ran(policy: str) -> str:
+        return (
+            '<span class="reported" data-field="reported">(last ping ran rl_acc <code '
+            f'class="policy" data-field="policy" title="last ping ran policy {policy}">'
+            f"{policy[:12]}</code>)</span>"
+        )
+
+    # the policy sits beside the controller that ran it, not the one assigned since
+    assert '<span data-field="controller">microaccel_acc</span> ' + ran(first) in fleet
+    assert '<span data-field="controller">microaccel_acc</span> ' + ran(second) in fleet
+    assert '<span data-field="controller">microaccel_acc</span> ' + ran(first) in vehicle
     assert f'<code class="policy" title="{first}">{first[:12]}</code>' in vehicle  # status history
+    # a car running what it is assigned says it once
+    row = fleet[fleet.index('data-vehicle="SF-099"') :]
+    row = row[: row.index("</tr>")]
+    assert (
+        '<span data-field="controller">rl_accel</span> <code class="policy" '
+        f'data-field="assigned-policy" title="assigned policy {shipped}">{shipped[:12]}</code></td>'
+    ) in row
+    assert 'data-field="reported"' not in row
