@@ -470,6 +470,7 @@ async def change_assignment(
         lane=lane,
         route=route,
         controller_name=controller_name,
+        controller_params=controller_params,
     )
     await session.flush()
     log.info(

@@ -129,6 +129,8 @@ class VehicleChange(Base):
     lane: Mapped[int | None] = mapped_column(SmallInteger)
     route: Mapped[str | None] = mapped_column(Text)
     controller_name: Mapped[str | None] = mapped_column(Text)
+    # the controller's parameters (an RL controller's policy_sha256 among them)
+    controller_params: Mapped[dict[str, Any] | None] = mapped_column(JSONB)
     # what a maintenance change set
     in_maintenance: Mapped[bool | None]
     note: Mapped[str | None] = mapped_column(Text)

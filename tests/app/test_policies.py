@@ -286,6 +286,28 @@ def test_an_assignment_names_a_stored_policy_and_the_car_reads_it_in_its_config(
     assert config["controller"] == {"name": "rl_acc", "params": {"policy_sha256": ACC_SHA256}}
 
 
+def test_the_change_log_says_which_policy_was_assigned(api: Api) -> None:
+    """Swapping a car between two policies left two identical change rows: who put which
+    policy on which car, and when, could not be told (policy audit)."""
+    assert api.upload(ACC_FILE.read_bytes(), manifest_of(ACC_FILE)).status_code == 201
+    for controller in (
+        {"name": "rl_acc", "params": {"policy_sha256": ACC_SHA256}},
+        {"name": "simple", "params": {}},
+    ):
+        assert api.assign("SF-001", controller).status_code == 200
+    with api.engine.connect() as connection:
+        rows = connection.execute(
+            text(
+                "SELECT controller_name, controller_params FROM fact_vehicle_change "
+                "WHERE vehicle_id = 'SF-001' ORDER BY config_version"
+            )
+        ).all()
+    assert [tuple(row) for row in rows] == [
+        ("rl_acc", {"policy_sha256": ACC_SHA256}),
+        ("simple", {}),
+    ]
+
+
 def test_an_assignment_naming_a_policy_the_server_lacks_is_refused(api: Api) -> None:
     before = api.get("/api/v1/vehicles/SF-001/config", role="vehicle").json()
 
