@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import json
 from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Form, HTTPException, Path, Response, UploadFile
@@ -20,6 +19,7 @@ from app.policies.service import (
     list_policies,
     policy_file,
     policy_manifest,
+    read_manifest,
     store_policy,
 )
 from contract.controllers import POLICY_SHA256_PATTERN, RL_CONTROLLERS
@@ -71,12 +71,7 @@ async def post_policy(
     `sha256` is not the file's, or the file is not a policy of the manifest's controller."""
     content = await policy.read()
     try:
-        document: Any = json.loads(await manifest.read())
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise _rejected("manifest", f"not JSON ({error})") from None
-    except RecursionError:
-        raise _rejected("manifest", "nested too deeply to read") from None
-    try:
+        document = read_manifest(await manifest.read())
         checked = check_policy(content, document, controller)
         stored, created = await store_policy(session, checked, f"token {principal.token_id}")
     except PolicyError as error:

@@ -53,6 +53,28 @@ class CheckedPolicy:
     content: bytes
 
 
+def read_manifest(document: bytes | str) -> object:
+    """A manifest's JSON, or PolicyError("manifest", why).
+
+    Python's JSON writer puts NaN and Infinity where a figure was not measured, and its reader
+    takes them back, but they are no JSON: PostgreSQL refuses them, and the upload ended in a
+    database error naming no field. They are refused here, with what to write instead."""
+
+    def no_number(constant: str) -> object:
+        raise PolicyError(
+            "manifest",
+            f"{constant} is no JSON number and cannot be stored (write null for a figure that "
+            "was not measured)",
+        )
+
+    try:
+        return json.loads(document, parse_constant=no_number)
+    except (UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise PolicyError("manifest", f"not JSON ({error})") from None
+    except RecursionError:
+        raise PolicyError("manifest", "nested too deeply to read") from None
+
+
 def check_policy(content: bytes, manifest: object, controller: str | None = None) -> CheckedPolicy:
     """The upload as a policy of `rl_<manifest actuation>`, or PolicyError naming what is wrong.
 

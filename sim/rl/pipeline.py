@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import platform
 import shutil
 import subprocess
@@ -218,8 +219,21 @@ def run_training(
             **({"final": final_selection} if final_selection else {}),
         }
     manifest_path = out_dir / f"{name}.json"
-    manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
+    manifest_path.write_text(json.dumps(without_nan(manifest), indent=2, allow_nan=False) + "\n")
     return TrainingRun(policy_path, manifest_path, digest, summary)
+
+
+def without_nan(value: Any) -> Any:
+    """`value` with every NaN or infinite float as None (JSON null). A KPI the baseline cannot
+    measure on a folder's drives is NaN; written as Python writes it, the manifest is no JSON
+    and the server refuses to store it (`app.policies.service.read_manifest`)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {key: without_nan(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [without_nan(item) for item in value]
+    return value
 
 
 def _fold_path(out_dir: Path, name: str, index: int) -> Path:

@@ -7,7 +7,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
@@ -18,17 +17,19 @@ from smoothfleet.cli.common import CliError, console, database, settings
 
 def read_upload(policy_file: Path, manifest_file: Path | None) -> tuple[bytes, object]:
     """The policy's bytes and its parsed manifest, or CliError naming the file at fault."""
+    from app.policies.service import PolicyError, read_manifest
+
     manifest_file = manifest_file or policy_file.with_suffix(".json")
     try:
         content = policy_file.read_bytes()
     except OSError as error:
         raise CliError(f"policy: {policy_file}: {error.strerror or error}") from None
     try:
-        manifest = json.loads(manifest_file.read_text(encoding="utf-8"))
+        manifest = read_manifest(manifest_file.read_bytes())
     except OSError as error:
         raise CliError(f"policy: manifest {manifest_file}: {error.strerror or error}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as error:
-        raise CliError(f"policy: manifest {manifest_file}: not JSON ({error})") from None
+    except PolicyError as error:
+        raise CliError(f"policy: manifest {manifest_file}: {error.reason}") from None
     return content, manifest
 
 

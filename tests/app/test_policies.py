@@ -188,6 +188,20 @@ def test_a_manifest_nested_too_deeply_to_read_is_refused_not_a_server_error(api:
     assert held_policies(api.engine) == SEEDED
 
 
+def test_a_manifest_with_nan_is_refused_naming_it(api: Api) -> None:
+    """Python writes an unmeasured KPI as NaN, which is no JSON: the upload ended in a database
+    error naming no field (policy audit)."""
+    manifest = json.dumps({**manifest_of(ACC_FILE), "kpi": float("nan")}).encode()
+
+    loc, msg = rejected(api.upload(ACC_FILE.read_bytes(), manifest))
+
+    assert loc == ["body", "manifest"]
+    assert msg == (
+        "NaN is no JSON number and cannot be stored (write null for a figure that was not measured)"
+    )
+    assert held_policies(api.engine) == SEEDED
+
+
 def test_a_corrupted_file_is_refused_by_its_hash(api: Api) -> None:
     content = bytearray(ACC_FILE.read_bytes())
     content[len(content) // 2] ^= 0xFF
@@ -349,6 +363,14 @@ def test_the_command_line_uploads_once_and_refuses_a_mismatch(
     assert refused.returncode == 1
     assert refused.stderr.startswith("smoothfleet: error: policy:")
     assert "the file's sha256 is" in refused.stderr
+    infinite = tmp_path / "infinite.json"
+    infinite.write_text(json.dumps({**manifest_of(ACC_FILE), "kpi": float("-inf")}))
+    refused = run_cli("policy", "upload", str(ACC_FILE), "--manifest", str(infinite), env=env)
+    assert refused.returncode == 1
+    assert refused.stderr == (
+        f"smoothfleet: error: policy: manifest {infinite}: -Infinity is no JSON number and cannot "
+        "be stored (write null for a figure that was not measured)\n"
+    )
     listed = run_cli("policy", "list", env=env)
     assert ACC_SHA256 in listed.stdout
     assert "2 policy(ies)" in listed.stdout  # the upload and the seed's rl_accel

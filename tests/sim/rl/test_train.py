@@ -15,7 +15,7 @@ import pytest
 from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.gaps import GapBounds
 from sim.rl.env import EnvConfig
-from sim.rl.pipeline import run_training
+from sim.rl.pipeline import run_training, without_nan
 from sim.rl.scores import ControllerUnderTest
 from sim.rl.train import PpoSettings, export_policy, train_policy
 from tests.sim.test_evaluate import write_drive
@@ -206,6 +206,16 @@ def test_held_out_scores_judge_the_envelope_the_policy_was_trained_to_keep(
     # judged to the reachable leader too, never less often within
     rows = manifest["cross_validation"]["drives"]
     assert all(row["gap_within_share"] <= row["gap_within_reachable_share"] <= 1.0 for row in rows)
+
+
+def test_a_kpi_not_measured_is_written_as_null_not_nan() -> None:
+    """NaN in a manifest is no JSON, and the server refused to store it (policy audit)."""
+    manifest = {"kpi": float("nan"), "folds": [{"fuel": float("inf"), "n": 3}], "note": "x"}
+    assert json.loads(json.dumps(without_nan(manifest), allow_nan=False)) == {
+        "kpi": None,
+        "folds": [{"fuel": None, "n": 3}],
+        "note": "x",
+    }
 
 
 def test_cli_train_names_a_missing_folder(tmp_path: Path) -> None:
