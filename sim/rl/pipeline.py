@@ -192,6 +192,8 @@ def run_training(
         ),
         "seed": seed,
         "timesteps": timesteps,
+        # what each training took (whole rollouts); manifests before 2026-12-04 have no such key
+        "timesteps_trained": settings.trained_timesteps(timesteps),
         # manifests of policies trained from one seed have no such key
         **({"restarts": final_restarts} if final_restarts else {}),
         "folds": folds,

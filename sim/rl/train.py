@@ -49,6 +49,12 @@ class PpoSettings:
     log_std_init: float = -1.0
     hidden: tuple[int, ...] = (64, 64)
 
+    def trained_timesteps(self, requested: int) -> int:
+        """The steps PPO takes when asked for `requested`: it collects whole rollouts of
+        n_steps x num_envs steps, so 300,000 asked of 16 x 256 are 303,104 trained."""
+        rollout = self.n_steps * self.num_envs
+        return -(-requested // rollout) * rollout
+
     def as_dict(self) -> dict[str, Any]:
         """Plain values for the manifest."""
         values = asdict(self)

@@ -188,6 +188,12 @@ def train_command(
     settings = PpoSettings(num_envs=num_envs)
     if gamma is not None:
         settings = replace(settings, gamma=gamma)
+    if (trained := settings.trained_timesteps(timesteps)) != timesteps:
+        console.print(
+            f"PPO collects whole rollouts of {settings.n_steps} steps x {settings.num_envs} "
+            f"platoons: each training takes {trained:,} steps for --timesteps {timesteps:,} "
+            "(the manifest records both)"
+        )
     output_folder(out_dir, "--out")
     with progress_bar() as progress:
         tasks: dict[str, TaskID] = {}
