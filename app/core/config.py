@@ -6,6 +6,7 @@ INRIX_URL, INRIX_KEY) are a contract with operators; everything else here is our
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import logging
 import os
@@ -192,6 +193,26 @@ class Settings(BaseSettings):
             raise ValueError(f"{value!r} is not an IANA time zone (e.g. America/Chicago)") from None
         return value
 
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _proxy_addresses(cls, value: str) -> str:
+        # The proxy-headers middleware takes an entry it cannot read as an address for a name
+        # that no peer matches: a typo silently trusted no proxy, and behind one every login
+        # counted against the proxy's address (one limit for the whole fleet's operators).
+        for entry in (part.strip() for part in value.split(",")):
+            if not entry or entry == "*":
+                continue
+            try:
+                ipaddress.ip_network(entry, strict=True)
+            except ValueError as error:
+                loose = _loose_network(entry)
+                hint = f": did you mean {loose}?" if loose and "/" in entry else ""
+                raise ValueError(
+                    f"{entry!r} is no IP address or network ({error}){hint} (comma-separated "
+                    "addresses or networks, or * for every peer)"
+                ) from None
+        return value
+
     @field_validator("public_url", "inrix_url")
     @classmethod
     def _http_url(cls, value: str | None) -> str | None:
@@ -330,3 +351,11 @@ def load_settings(**overrides: object) -> Settings:
 def get_settings() -> Settings:
     """The process's settings, read once."""
     return load_settings()
+
+
+def _loose_network(entry: str) -> str | None:
+    """The network `entry` lies in when its host bits are set (10.1.2.3/16 -> 10.1.0.0/16)."""
+    try:
+        return str(ipaddress.ip_network(entry, strict=False))
+    except ValueError:
+        return None

@@ -78,6 +78,31 @@ def test_a_wrong_json_setting_is_named(
         load_settings()
 
 
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        ("notanip", "'notanip' is no IP address or network"),
+        ("10.0.0.0/33, 10.9.8.7", "'10.0.0.0/33' is no IP address or network"),
+        ("10.1.2.3/16", "'10.1.2.3/16' is no IP .* has host bits set\\): did you mean 10.1.0.0/16"),
+    ],
+)
+def test_a_mistyped_trusted_proxy_is_named(
+    monkeypatch: pytest.MonkeyPatch, text: str, error: str
+) -> None:
+    """Accepted, it trusted no proxy: behind one, every operator's login counted against the
+    proxy's address (ops audit)."""
+    monkeypatch.setenv("SMOOTHFLEET_TRUSTED_PROXIES", text)
+    with pytest.raises(SettingsError, match=f"SMOOTHFLEET_TRUSTED_PROXIES: {error}"):
+        load_settings()
+
+
+def test_trusted_proxies_take_addresses_networks_and_every_peer(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setenv("SMOOTHFLEET_TRUSTED_PROXIES", "10.0.0.0/8, 192.168.1.1 ,::1,*")
+    assert load_settings().trusted_proxies == "10.0.0.0/8, 192.168.1.1 ,::1,*"
+
+
 @pytest.mark.parametrize("variable", ["INRIX_URL", "PUBLIC_URL"])
 def test_a_url_setting_needs_a_scheme_and_a_host(
     monkeypatch: pytest.MonkeyPatch, variable: str
