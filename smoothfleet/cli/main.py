@@ -139,6 +139,50 @@ def db_psql(psql_args: tuple[str, ...]) -> None:
         raise SystemExit(code)
 
 
+@db.command("dump")
+@click.argument("dump_file", metavar="FILE", type=click.Path(path_type=Path))
+def db_dump(dump_file: Path) -> None:
+    """Back up the database to FILE (pg_dump's custom format, for pg_restore).
+
+    The embedded server stops when the last command using it exits, so the URL `db url` prints
+    is dead by the time a pg_dump started after it connects: this runs pg_dump while the
+    server is held. FILE is replaced only by a whole dump."""
+    output_file(dump_file, "FILE")
+    current = settings()
+    executable = _newest_pg_dump()
+    partial = dump_file.with_name(f"{dump_file.name}.partial")
+    with database(current) as url:
+        code = subprocess.call([executable, "--format=custom", f"--file={partial}", libpq_url(url)])
+    if code:
+        partial.unlink(missing_ok=True)
+        raise CliError(f"pg_dump exited {code}: {dump_file} was left as it was")
+    partial.replace(dump_file)
+    console.print(
+        f"{dump_file}: {dump_file.stat().st_size:,} bytes; restore it into an empty database "
+        f"with pg_restore --dbname=URL {dump_file}"
+    )
+
+
+def _newest_pg_dump() -> str:
+    """The newest pg_dump at hand, the embedded server's or the system's: pg_dump refuses a
+    server newer than itself (Debian 12's 15 against the embedded 17), never an older one."""
+    from app.core.embedded import bin_dir
+
+    candidates = [str(bin_dir() / "pg_dump"), *filter(None, [shutil.which("pg_dump")])]
+
+    def major(executable: str) -> int:
+        try:
+            answer = subprocess.run(
+                [executable, "--version"], capture_output=True, text=True, check=True, timeout=10
+            ).stdout
+        except (OSError, subprocess.SubprocessError):
+            return -1
+        version = answer.rsplit(")", 1)[-1].split()
+        return int(version[0].split(".")[0]) if version and version[0][:1].isdigit() else -1
+
+    return max(candidates, key=major)
+
+
 @db.command("maintain")
 def db_maintain() -> None:
     """Create the coming days' ping partitions and drop those past retention."""

@@ -241,6 +241,33 @@ def test_a_damaged_handle_list_of_the_embedded_server_is_healed(tmp_path: Path) 
     assert "/smoothfleet" in again.stdout
 
 
+def test_a_backup_of_the_embedded_database_is_whole_and_restores(tmp_path: Path) -> None:
+    """operations.md had `pg_dump "$(smoothfleet db url)"`, whose server had stopped by the
+    time pg_dump connected: no backup at all (ops audit). `db dump` holds it while pg_dump runs."""
+    env = cli_env(SMOOTHFLEET_DATA_DIR=str(tmp_path / "data"))
+    assert run_cli("db", "upgrade", env=env).returncode == 0
+    backup = tmp_path / "backups" / "smoothfleet.dump"
+    backup.parent.mkdir()
+    backup.write_bytes(b"last night's")
+
+    dumped = run_cli("db", "dump", str(backup), env=env)
+
+    assert dumped.returncode == 0, dumped.stderr
+    assert f"{backup}: " in dumped.stdout.replace("\n", "")  # (rich wraps long lines)
+    assert backup.read_bytes()[:5] == b"PGDMP"
+    assert not list(backup.parent.glob("*.partial"))
+    from app.core.embedded import bin_dir
+
+    listing = subprocess.run(
+        [str(bin_dir() / "pg_restore"), "--list", str(backup)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    assert "TABLE public fact_vehicle_ping" in listing
+    assert "TABLE public alembic_version" in listing
+
+
 @pytest.mark.slow
 def test_the_embedded_server_still_stops_after_a_holder_was_killed(tmp_path: Path) -> None:
     """A SIGKILLed holder never leaves the handle list itself; the next command drops it."""
