@@ -9,6 +9,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.ext.asyncio import AsyncEngine
 
 from app.core.metrics import exposition
+from app.health.warehouse import warehouse_exposition
 from app.migrate import current_revision, head_revision
 
 router = APIRouter(tags=["operations"])
@@ -42,6 +43,9 @@ async def readyz(request: Request) -> JSONResponse:
 
 
 @router.get("/metrics", response_class=Response)
-async def metrics() -> Response:
-    """Prometheus text exposition of this process's counters and histograms."""
-    return Response(exposition(), media_type=CONTENT_TYPE_LATEST)
+async def metrics(request: Request) -> Response:
+    """Prometheus text exposition of this process's counters and histograms, and the
+    warehouse's newest plan, run and INRIX reading per corridor (`app.health.warehouse`)."""
+    engine: AsyncEngine = request.app.state.engine
+    body = exposition() + await warehouse_exposition(engine)
+    return Response(body, media_type=CONTENT_TYPE_LATEST)

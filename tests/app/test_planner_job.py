@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import time
@@ -10,6 +11,7 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import httpx
+import pytest
 from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
@@ -201,3 +203,41 @@ def test_a_plan_standing_on_old_readings_says_so() -> None:
     assert describe(CycleOutcome("I-24-WB", "published", 7, None, 12.0, whole)).endswith(
         "INRIX 8 s old)"
     )
+
+
+def _gauge(exposition: str, series: str) -> float:
+    """The value of one series in a Prometheus text exposition."""
+    found = re.search(rf"^{re.escape(series)} (\S+)$", exposition, re.MULTILINE)
+    assert found is not None, f"no {series} in /metrics"
+    return float(found.group(1))
+
+
+def test_metrics_show_plans_and_inrix_that_other_processes_made(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """In the compose layout the planner runs in its own process and the poller writes to the
+    database: the API's /metrics never saw a planner run or a polled reading (ops audit)."""
+    recent_inrix(seeded_engine)
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    assert run_cli("planner", "once", env=env).returncode == 0
+    with seeded_engine.connect() as connection:
+        published, started = connection.execute(
+            text("SELECT published_at, started_at FROM plan_run WHERE status = 'published'")
+        ).one()
+        measured = connection.execute(text("SELECT max(measured_at) FROM fact_inrix_estimate"))
+        newest_reading = measured.scalar_one()
+    with live_server(seeded_database_url, planner_enabled=False) as base:
+        exposition = httpx.get(f"{base}/metrics", timeout=10).text
+
+    assert _gauge(exposition, "smoothfleet_warehouse_up") == 1.0
+    corridor = '{corridor="I-24-WB"}'
+    assert _gauge(
+        exposition, f"smoothfleet_warehouse_plan_published_timestamp_seconds{corridor}"
+    ) == pytest.approx(published.timestamp())
+    assert _gauge(
+        exposition,
+        'smoothfleet_warehouse_plan_run_timestamp_seconds{corridor="I-24-WB",status="published"}',
+    ) == pytest.approx(started.timestamp())
+    assert _gauge(
+        exposition, f"smoothfleet_warehouse_inrix_measured_timestamp_seconds{corridor}"
+    ) == pytest.approx(newest_reading.timestamp())
