@@ -24,6 +24,10 @@ log = logging.getLogger(__name__)
 FIRST_RETRY_S = 1.0
 MAX_RETRY_S = 30.0
 REQUEST_TIMEOUT_S = 20.0
+# A segment-speed response for a corridor is kilobytes (48 segments of the 2021 recordings); a
+# region's a few megabytes. Larger is a provider or proxy gone wrong: read whole, a 200 MB body
+# took the poller to 3 GB, on a host it shares with PostgreSQL (ops audit).
+MAX_RESPONSE_BYTES = 32 * 1024 * 1024
 
 
 class PollFailed(Exception):
@@ -42,6 +46,7 @@ class InrixPoller:
         client: httpx.AsyncClient,
         first_retry_s: float = FIRST_RETRY_S,
         max_retry_s: float = MAX_RETRY_S,
+        max_response_bytes: int = MAX_RESPONSE_BYTES,
         sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -51,6 +56,7 @@ class InrixPoller:
         self._client = client
         self._first_retry_s = first_retry_s
         self._max_retry_s = max_retry_s
+        self._max_response_bytes = max_response_bytes
         self._sleep = sleep
         self._clock = clock
 
@@ -65,19 +71,40 @@ class InrixPoller:
             "Accept": "application/json",
         }
         try:
-            response = await self._client.get(self._url, headers=headers, timeout=REQUEST_TIMEOUT_S)
+            async with self._client.stream(
+                "GET", self._url, headers=headers, timeout=REQUEST_TIMEOUT_S
+            ) as response:
+                if response.status_code != 200:
+                    raise PollFailed(f"provider answered HTTP {response.status_code}")
+                content = await self._read_capped(response)
         except httpx.HTTPError as error:
             reason = str(error) or type(error).__name__
             raise PollFailed(self._scrub(f"provider unreachable: {reason}")) from None
-        if response.status_code != 200:
-            raise PollFailed(f"provider answered HTTP {response.status_code}")
         try:
-            document = orjson.loads(response.content)
+            document = orjson.loads(content)
         except orjson.JSONDecodeError:
             raise PollFailed("provider answered something that is not JSON") from None
         if not isinstance(document, dict):
             raise PollFailed("provider answered JSON that is not an object")
         return RecordedSnapshot(datetime.now(UTC), document)
+
+    async def _read_capped(self, response: httpx.Response) -> bytes:
+        """The body, or PollFailed as soon as it is known to exceed the cap (its announced
+        length, or the bytes read so far): never more than the cap is held."""
+        limit = self._max_response_bytes
+        too_large = PollFailed(
+            f"provider answered more than {limit:,} bytes: not read (a corridor's response is "
+            "kilobytes)"
+        )
+        announced = response.headers.get("Content-Length", "")
+        if announced.isdigit() and int(announced) > limit:
+            raise too_large
+        body = bytearray()
+        async for chunk in response.aiter_bytes():
+            body += chunk
+            if len(body) > limit:
+                raise too_large
+        return bytes(body)
 
     async def run(
         self, handle: Callable[[RecordedSnapshot], Awaitable[None]], *, count: int | None = None

@@ -6,7 +6,7 @@ import asyncio
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from datetime import UTC, datetime, timedelta
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
@@ -17,7 +17,7 @@ import pytest
 from pydantic import SecretStr
 from sqlalchemy import Engine, text
 
-from app.feeds.poller import InrixPoller
+from app.feeds.poller import InrixPoller, PollFailed
 from app.feeds.recording import (
     RecordedSnapshot,
     append_to_recording,
@@ -248,6 +248,44 @@ def test_backoff_doubles_and_gives_up_when_the_next_period_starts(
     # Second period begins at 60 s: fails once, succeeds after 1 s; the third period at 120 s.
     assert offsets[6:] == [60, 61, 120]
     assert len(handled) == 2
+
+
+def test_a_response_over_the_cap_is_refused_without_reading_it_whole() -> None:
+    """A 200 MB body was read whole, on every retry: 3 GB on a host shared with PostgreSQL
+    (ops audit)."""
+    served: list[int] = []
+
+    async def endless() -> AsyncIterator[bytes]:
+        for _ in range(1000):  # 64 MB if read to the end
+            served.append(1)
+            yield b" " * 65536
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        if request.url.path == "/announced":
+            return httpx.Response(200, headers={"Content-Length": str(10**9)}, content=endless())
+        return httpx.Response(200, content=endless())
+
+    async def fetch(path: str) -> str:
+        async with httpx.AsyncClient(transport=httpx.MockTransport(answer)) as client:
+            poller = InrixPoller(
+                f"http://provider.test{path}",
+                SecretStr(KEY),
+                period_s=60,
+                client=client,
+                max_response_bytes=2**20,
+            )
+            with pytest.raises(PollFailed) as refused:
+                await poller.fetch()
+            return str(refused.value)
+
+    message = asyncio.run(fetch("/streamed"))
+    assert message == (
+        "provider answered more than 1,048,576 bytes: not read (a corridor's response is kilobytes)"
+    )
+    assert len(served) <= 17  # 1 MB and one chunk, not 64 MB
+    served.clear()
+    assert asyncio.run(fetch("/announced")) == message
+    assert served == []  # refused on its Content-Length, before a byte
 
 
 def test_replay_keeps_the_recorded_spacing_divided_by_the_speed() -> None:
