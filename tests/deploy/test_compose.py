@@ -94,9 +94,15 @@ def test_services_share_the_database_and_run_in_production(compose: dict[str, An
         "http://api:8000",
     ]
     assert compose["services"]["fleet"]["profiles"] == ["fleet"]
+    # the poller carries both INRIX settings (compose passes on only the variables it lists)
+    inrix = service_environment(compose["services"]["inrix"])
+    assert compose["services"]["inrix"]["command"] == ["inrix", "poll"]
+    assert compose["services"]["inrix"]["profiles"] == ["inrix"]
+    assert {"SMOOTHFLEET_INRIX_URL", "SMOOTHFLEET_INRIX_KEY"} <= inrix.keys()
+    assert inrix["SMOOTHFLEET_DATABASE_URL"] == expected
 
 
-@pytest.mark.parametrize("service", ["api", "planner", "fleet"])
+@pytest.mark.parametrize("service", ["api", "planner", "inrix", "fleet"])
 def test_every_service_command_is_a_real_cli_command(compose: dict[str, Any], service: str) -> None:
     result = run_cli(*compose["services"][service]["command"], "--help", env=cli_env())
     assert result.returncode == 0, result.stderr
