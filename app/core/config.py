@@ -24,6 +24,7 @@ from contract.environment import AGENT_ENV_PREFIX, SERVER_ENV_PREFIX, TOOL_VARIA
 from contract.values import http_url
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
+MIN_SECRET_KEY_CHARS = 32
 
 logger = logging.getLogger(__name__)
 
@@ -294,11 +295,18 @@ class Settings(BaseSettings):
 
     @model_validator(mode="after")
     def _no_placeholder_secrets_in_production(self) -> Settings:
-        if (
-            self.environment == "production"
-            and self.secret_key.get_secret_value() in PLACEHOLDER_SECRETS
-        ):
+        if self.environment != "production":
+            return self
+        secret = self.secret_key.get_secret_value()
+        if secret in PLACEHOLDER_SECRETS:
             raise ValueError("SMOOTHFLEET_SECRET_KEY must be set to a real secret in production")
+        if len(secret) < MIN_SECRET_KEY_CHARS:
+            # it signs the dashboard's sessions: a short one ('abc', passed before: ops audit)
+            # can be guessed offline from one session cookie
+            raise ValueError(
+                f"SMOOTHFLEET_SECRET_KEY is {len(secret)} characters: production needs at least "
+                f"{MIN_SECRET_KEY_CHARS} (openssl rand -hex 32)"
+            )
         return self
 
 

@@ -118,6 +118,21 @@ def test_a_url_setting_needs_a_scheme_and_a_host(
             load_settings()
 
 
+def test_production_needs_a_secret_key_that_cannot_be_guessed(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """'abc' was accepted: only the listed placeholders were refused (ops audit)."""
+    monkeypatch.setenv("SMOOTHFLEET_ENVIRONMENT", "production")
+    monkeypatch.setenv("SMOOTHFLEET_DATABASE_URL", "postgresql://u:p@db:5432/smoothfleet")
+    monkeypatch.setenv("SMOOTHFLEET_SECRET_KEY", "abc")
+    with pytest.raises(
+        SettingsError, match="SMOOTHFLEET_SECRET_KEY is 3 characters: production needs at least 32"
+    ):
+        load_settings()
+    monkeypatch.setenv("SMOOTHFLEET_SECRET_KEY", "x" * 32)
+    assert load_settings().secret_key.get_secret_value() == "x" * 32
+
+
 def test_production_needs_a_database_url(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("SMOOTHFLEET_ENVIRONMENT", "production")
     monkeypatch.setenv("SMOOTHFLEET_SECRET_KEY", "a-real-secret-of-32-characters-xx")
