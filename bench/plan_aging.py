@@ -25,12 +25,11 @@ from pathlib import Path
 import numpy as np
 
 from app.seed import seed_corridor_document
-from contract.corridor import CorridorGeometry
-from planner import CorridorGrid, LaneObservations, NoInrixEstimate, PlannerInputs, plan_speeds
+from planner import LaneObservations, NoInrixEstimate, PlannerInputs, plan_speeds
 from planner.evaluation import probe_pings
 from planner.pipeline import parse_params
 from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
-from planner.recorded import load_recorded_drive
+from planner.recorded import CorridorFrame
 from vehicle_agent.controllers import TargetProfile
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
@@ -48,14 +47,8 @@ def main() -> None:
     args = parser.parse_args()
     params = parse_params(RECOMMENDED_PLANNER_PARAMS)
 
-    document = seed_corridor_document()
-    grid = CorridorGrid.from_rows(document["corridor"], document["i24_segments"])
-    geometry = CorridorGeometry.from_segments(
-        grid.corridor_id, grid.lanes, document["i24_segments"]
-    )
-    inrix_segments = document["inrix_segments"]
-    columns = [int(segment["xd_code"].rsplit("-", 1)[1]) for segment in inrix_segments]
-    centers = np.array([(s["start_x_m"] + s["end_x_m"]) / 2 for s in inrix_segments])
+    frame = CorridorFrame.of(seed_corridor_document())
+    grid = frame.grid
 
     # (profile, age, shifted) -> absolute errors over every drive's decisions
     errors: dict[tuple[str, float, bool], list[float]] = {
@@ -66,7 +59,7 @@ def main() -> None:
     }
     decisions = 0
     for folder in sorted((args.shared / "data/trajectories_with_inrix").iterdir()):
-        recorded = load_recorded_drive(folder, geometry, columns, centers)
+        recorded = frame.load(folder)
         drive = recorded.drive
         last = float(drive.time_s[-1]) - max(AGES_S) - TRUTH_WINDOW_S
         for now_s in np.arange(

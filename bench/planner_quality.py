@@ -16,11 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from app.seed import seed_corridor_document
-from contract.corridor import CorridorGeometry
 from planner.evaluation import VARIANTS, evaluate_drive
-from planner.inputs import CorridorGrid
 from planner.pipeline import parse_params
-from planner.recorded import load_recorded_drive
+from planner.recorded import CorridorFrame
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,23 +32,16 @@ def main() -> None:
     overrides = dict(item.split("=", 1) for item in args.param)
     params = parse_params(overrides)
 
-    document = seed_corridor_document()
-    grid = CorridorGrid.from_rows(document["corridor"], document["i24_segments"])
-    geometry = CorridorGeometry.from_segments(
-        grid.corridor_id, grid.lanes, document["i24_segments"]
-    )
-    inrix_segments = document["inrix_segments"]
-    columns = [int(segment["xd_code"].rsplit("-", 1)[1]) for segment in inrix_segments]
-    centers = np.array([(s["start_x_m"] + s["end_x_m"]) / 2 for s in inrix_segments])
+    frame = CorridorFrame.of(seed_corridor_document())
 
     folders = sorted((args.shared / "data/trajectories_with_inrix").iterdir())
     pooled: dict[str, list[float]] = {variant: [] for variant in VARIANTS}
     print(f"latency {args.latency:.0f} s, params {overrides or 'defaults'}")
     print(f"{'drive':58s} " + " ".join(f"{variant:>22s}" for variant in VARIANTS))
     for folder in folders:
-        recorded = load_recorded_drive(folder, geometry, columns, centers)
+        recorded = frame.load(folder)
         errors = evaluate_drive(
-            recorded.drive, recorded.inrix, grid, params, latency_s=args.latency
+            recorded.drive, recorded.inrix, frame.grid, params, latency_s=args.latency
         )
         for variant in VARIANTS:
             pooled[variant].extend(np.abs(errors.estimates_mps[variant] - errors.truth_mps))

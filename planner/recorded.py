@@ -6,16 +6,17 @@ returned relative to the drive's start, so the INRIX minutes and the drive share
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from contract.corridor import CorridorGeometry
 from contract.recorded import read_inrix_minutes, read_trajectory
 from planner.evaluation import ProbeDrive
-from planner.inputs import FloatArray, InrixHistory
+from planner.inputs import CorridorGrid, FloatArray, InrixHistory
 
 
 @dataclass(frozen=True)
@@ -50,3 +51,34 @@ def load_recorded_drive(
         segment_center_x_m=np.asarray(segment_center_x_m, dtype=np.float64),
     )
     return RecordedProbe(folder.name, drive, inrix)
+
+
+@dataclass(frozen=True)
+class CorridorFrame:
+    """The corridor the recorded drives are read onto: its planner grid, its geometry, and the
+    speed.csv column and centre of each of its INRIX segments (in the seed's order)."""
+
+    grid: CorridorGrid
+    geometry: CorridorGeometry
+    inrix_columns: list[int]
+    inrix_center_x_m: FloatArray
+
+    @classmethod
+    def of(cls, document: Mapping[str, Any]) -> CorridorFrame:
+        """From a seed corridor document (`app.seed.seed_corridor_document()`): an INRIX
+        segment's `xd_code` ends in its column of the recordings."""
+        grid = CorridorGrid.from_rows(document["corridor"], document["i24_segments"])
+        geometry = CorridorGeometry.from_segments(
+            grid.corridor_id, grid.lanes, document["i24_segments"]
+        )
+        inrix = document["inrix_segments"]
+        return cls(
+            grid,
+            geometry,
+            [int(segment["xd_code"].rsplit("-", 1)[1]) for segment in inrix],
+            np.array([(segment["start_x_m"] + segment["end_x_m"]) / 2 for segment in inrix]),
+        )
+
+    def load(self, folder: Path) -> RecordedProbe:
+        """A folder of trajectories_with_inrix on this corridor (`load_recorded_drive`)."""
+        return load_recorded_drive(folder, self.geometry, self.inrix_columns, self.inrix_center_x_m)

@@ -14,10 +14,8 @@ import numpy as np
 import pytest
 
 from app.seed import seed_corridor_document
-from contract.corridor import CorridorGeometry
 from planner.evaluation import DriveErrors, evaluate_drive
-from planner.inputs import CorridorGrid
-from planner.recorded import load_recorded_drive
+from planner.recorded import CorridorFrame
 
 # The two recordings the per-drive claims were first made on.
 FIRST_SHARED = (
@@ -28,20 +26,13 @@ FIRST_SHARED = (
 
 @pytest.fixture(scope="module")
 def errors_by_drive(shared_dir: Path) -> dict[str, DriveErrors]:
-    document = seed_corridor_document()
-    grid = CorridorGrid.from_rows(document["corridor"], document["i24_segments"])
-    geometry = CorridorGeometry.from_segments(
-        grid.corridor_id, grid.lanes, document["i24_segments"]
-    )
-    inrix = document["inrix_segments"]
-    columns = [int(segment["xd_code"].rsplit("-", 1)[1]) for segment in inrix]
-    centers = np.array([(segment["start_x_m"] + segment["end_x_m"]) / 2 for segment in inrix])
+    frame = CorridorFrame.of(seed_corridor_document())
     folders = sorted((shared_dir / "data/trajectories_with_inrix").iterdir())
     assert len(folders) == 9
     return {
-        folder.name: evaluate_drive(recorded.drive, recorded.inrix, grid)
+        folder.name: evaluate_drive(recorded.drive, recorded.inrix, frame.grid)
         for folder in folders
-        for recorded in [load_recorded_drive(folder, geometry, columns, centers)]
+        for recorded in [frame.load(folder)]
     }
 
 
