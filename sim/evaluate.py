@@ -151,6 +151,10 @@ class RunResult:
     # throughput and its baseline's are measured at the same points: `throughput_points_m`);
     # None: the baseline's own KPI is the one to compare with.
     baseline_throughput_vph: float | None = None
+    # Throughput change over the platoon's own vehicles (the cars that cut in not counted),
+    # against the baseline's own at the same points (`run_throughput_vph`); NaN where the runs
+    # share no stretch of road.
+    own_throughput_change_pct: float = 0.0
     # Times an AV was left to its stock ACC for want of a fresh plan (the feed had stopped, or
     # had not begun), summed over the AVs, and the AV-seconds it drove so.
     plan_hand_backs: int = 0
@@ -322,6 +326,7 @@ class Evaluation:
                 "recommended": r.recommended,
                 "fuel_saving_pct": self.fuel_saving_pct(r),
                 "throughput_change_pct": self.change_pct(r, "throughput_vph"),
+                "own_cars_throughput_change_pct": r.own_throughput_change_pct,
                 "network_speed_change_pct": self.change_pct(r, "network_speed_mps"),
                 "collisions": r.kpis.collisions,
                 "takeovers": r.takeovers,
@@ -454,6 +459,14 @@ def run_case(
             seconds_without_plan=sum(policy.steps_without_plan for policy in policies) * run.dt_s,
             baseline_throughput_vph=(
                 None if points is None else run_throughput_vph(baseline, points)
+            ),
+            own_throughput_change_pct=(
+                float("nan")
+                if points is None
+                else change_pct(
+                    run_throughput_vph(run, points, cut_ins_counted=False),
+                    run_throughput_vph(baseline, points, cut_ins_counted=False),
+                )
             ),
         )
     if save is not None:

@@ -273,16 +273,20 @@ def throughput_points_m(
     return shared_points_m(positions)
 
 
-def run_throughput_vph(run: PlatoonRun, points_m: FloatArray) -> float:
+def run_throughput_vph(
+    run: PlatoonRun, points_m: FloatArray, *, cut_ins_counted: bool = True
+) -> float:
     """The run's throughput averaged over `points_m`, every vehicle counted (the leader and
-    the cars that merged in included)."""
+    the cars that merged in included), or with `cut_ins_counted=False` the platoon's own.
+
+    The paper counts vehicles crossing positions of the road over all its lanes, where a car
+    that changes lanes is counted once whichever lane it crosses in. Here a car that cuts in
+    is counted in the platoon's lane and never taken off the lane it left, so a controller
+    that opens gaps (and draws cut-ins) gains throughput from them; the platoon's own count
+    is the reading such a gain cannot reach (simulator audit, docs/simulation.md)."""
+    merged = run.cut_in_position_m if cut_ins_counted else None
     return float(
-        np.mean(
-            [
-                throughput_at_vph(run.position_m, run.dt_s, point, run.cut_in_position_m)
-                for point in points_m
-            ]
-        )
+        np.mean([throughput_at_vph(run.position_m, run.dt_s, point, merged) for point in points_m])
     )
 
 

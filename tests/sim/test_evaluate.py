@@ -109,6 +109,11 @@ def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_
     assert evaluation.change_pct(run, "throughput_vph") == pytest.approx(
         100 * (run.kpis.throughput_vph / run.baseline_throughput_vph - 1)
     )
+    # the cars that cut into the AV's gap are counted in throughput where they cross; over the
+    # platoon's own cars alone (as every lane together would count them) the pair loses more
+    assert run.cut_ins > base.cut_ins == 0
+    assert base.own_throughput_change_pct == 0.0
+    assert run.own_throughput_change_pct < evaluation.change_pct(run, "throughput_vph") - 1.0
     summary = evaluation.summary()
     assert len(summary) == 2
     assert summary[0]["collisions"] == 0
@@ -125,6 +130,9 @@ def test_evaluation_compares_every_pair_with_the_baseline(shared_dir: Path, tmp_
         rows = list(csv.DictReader(handle))
     assert len(rows) == 3
     assert float(rows[0]["fuel_saving_pct"]) == 0.0
+    assert float(rows[1]["own_cars_throughput_change_pct"]) == pytest.approx(
+        run.own_throughput_change_pct
+    )
     write_heatmap(evaluation, tmp_path / "heatmap.png")
     assert (tmp_path / "heatmap.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "| shockwave | kernel_smooth | microaccel/accel | 1 |" in markdown_table(evaluation)
