@@ -406,7 +406,7 @@ def test_distance_lost_and_gap_figures_per_run() -> None:
     assert row["distance_lost_m"] == pytest.approx(140.0)
     assert row["optimum_fuel_saving_pct"] == 12.0
     # the columns a reviewer needs, in this order first
-    assert list(row)[:15] == [
+    assert list(row)[:16] == [
         "scenario",
         "drive",
         "planner",
@@ -415,6 +415,7 @@ def test_distance_lost_and_gap_figures_per_run() -> None:
         "recommended",
         "fuel_saving_pct",
         "throughput_change_pct",
+        "own_cars_throughput_change_pct",
         "network_speed_change_pct",
         "collisions",
         "takeovers",
