@@ -104,19 +104,24 @@ def db_upgrade(revision: str) -> None:
     console.print(f"database at {revision}")
 
 
-@db.command("downgrade")
+# "-1" (one revision down) is a revision, not an option: it was refused as "No such option".
+@db.command("downgrade", context_settings={"ignore_unknown_options": True})
 @click.argument("revision")
 def db_downgrade(revision: str) -> None:
-    """Migrate the schema down to REVISION ("base" removes every table)."""
-    from app.migrate import UnknownRevision, check_revision, downgrade
+    """Migrate the schema down to REVISION ("base" removes every table, "-1" one step)."""
+    from app.migrate import UnknownRevision, check_revision, current_revision, downgrade
 
     try:
         check_revision(revision)
     except UnknownRevision as error:
         raise click.BadParameter(str(error), param_hint="REVISION") from None
     with database(settings()) as url:
-        downgrade(make_sync_engine(url), revision)
-    console.print(f"database at {revision}")
+        engine = make_sync_engine(url)
+        downgrade(engine, revision)
+        with engine.connect() as connection:
+            reached = current_revision(connection)
+    # the revision reached, not the one asked for: "-1" says nothing of where it went
+    console.print(f"database at {reached or 'base (no table)'}")
 
 
 @db.command("url")

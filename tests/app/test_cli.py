@@ -308,6 +308,14 @@ def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
     """The operator's schema commands (docs/operations.md): down to base and back to head,
     then the ping partitions' housekeeping, which a second run finds done."""
     env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    # one step down: "-1" was refused as "No such option", and the line said "database at -1"
+    one_step = run_cli("db", "downgrade", "-1", env=env)
+    assert one_step.returncode == 0, one_step.stderr
+    with engine.connect() as connection:
+        below_head = current_revision(connection)
+    assert below_head is not None
+    assert below_head != head_revision()
+    assert f"database at {below_head}" in one_step.stdout
     down = run_cli("db", "downgrade", "base", env=env)
     assert down.returncode == 0, down.stderr
     assert "database at base" in down.stdout
