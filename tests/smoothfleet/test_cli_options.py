@@ -33,8 +33,8 @@ def test_finite_numbers_keep_the_ranges_bounds() -> None:
 @pytest.mark.parametrize(
     ("server", "says"),
     [
-        ("notaurl", "'notaurl' is no http(s) URL with a host"),
-        ("ftp://api:8000", "is no http(s) URL with a host"),
+        ("notaurl", "'notaurl': must be an http:// or https:// URL with a host"),
+        ("ftp://api:8000", "'ftp://api:8000': must be an http:// or https:// URL with a host"),
         ("http://127.0.0.1:9", "no smoothfleet API answers at http://127.0.0.1:9"),
     ],
 )

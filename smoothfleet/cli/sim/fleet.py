@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from urllib.parse import urlsplit
-
 import click
 import httpx
 
+from contract.values import http_url
 from smoothfleet.cli.common import fleet_options
 from smoothfleet.cli.sim.shared import console
 
@@ -52,12 +51,12 @@ def check_server(server_url: str) -> None:
     """A BadParameter naming what is wrong with `--server` before any car starts: it was
     taken as given, the workers retried for about 20 s, and the command said only that a
     worker exited."""
-    parts = urlsplit(server_url)
-    if parts.scheme not in ("http", "https") or not parts.hostname:
+    try:
+        http_url(server_url)  # the check every setting naming a server passes
+    except ValueError as error:
         raise click.BadParameter(
-            f"{server_url!r} is no http(s) URL with a host, e.g. http://api:8000",
-            param_hint="--server",
-        )
+            f"{server_url!r}: {error}, e.g. http://api:8000", param_hint="--server"
+        ) from None
     try:
         answer = httpx.get(f"{server_url}/healthz", timeout=5.0)
     except httpx.HTTPError as error:
