@@ -12,10 +12,15 @@ from pathlib import Path
 import httpx
 import psutil
 import pytest
+from psycopg import sql
 from sqlalchemy import Engine, text
 
+from app.core.db import libpq_url, make_sync_engine
+from app.core.embedded import bin_dir
+from app.core.embedded import database_url as embedded_url
 from app.migrate import current_revision, head_revision
 from app.vehicles.service import RosterError, parse_roster_csv
+from tests.support.databases import admin_execute
 from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
@@ -241,11 +246,15 @@ def test_a_damaged_handle_list_of_the_embedded_server_is_healed(tmp_path: Path) 
     assert "/smoothfleet" in again.stdout
 
 
-def test_a_backup_of_the_embedded_database_is_whole_and_restores(tmp_path: Path) -> None:
+def test_a_backup_of_the_embedded_database_is_whole_and_restores(
+    tmp_path: Path, pg_server: str
+) -> None:
     """operations.md had `pg_dump "$(smoothfleet db url)"`, whose server had stopped by the
-    time pg_dump connected: no backup at all (ops audit). `db dump` holds it while pg_dump runs."""
+    time pg_dump connected: no backup at all (ops audit). `db dump` holds it while pg_dump
+    runs, and the file restores into an empty database, as operations.md says to."""
     env = cli_env(SMOOTHFLEET_DATA_DIR=str(tmp_path / "data"))
     assert run_cli("db", "upgrade", env=env).returncode == 0
+    assert run_cli("tokens", "create", "--role", "viewer", env=env).returncode == 0
     backup = tmp_path / "backups" / "smoothfleet.dump"
     backup.parent.mkdir()
     backup.write_bytes(b"last night's")
@@ -256,16 +265,27 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(tmp_path: Path)
     assert f"{backup}: " in dumped.stdout.replace("\n", "")  # (rich wraps long lines)
     assert backup.read_bytes()[:5] == b"PGDMP"
     assert not list(backup.parent.glob("*.partial"))
-    from app.core.embedded import bin_dir
-
-    listing = subprocess.run(
-        [str(bin_dir() / "pg_restore"), "--list", str(backup)],
-        capture_output=True,
-        text=True,
-        check=True,
-    ).stdout
-    assert "TABLE public fact_vehicle_ping" in listing
-    assert "TABLE public alembic_version" in listing
+    name = f"restored_{int(time.time() * 1000)}"
+    admin_execute(pg_server, sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
+    restored = embedded_url(pg_server, name)
+    try:
+        subprocess.run(
+            [str(bin_dir() / "pg_restore"), f"--dbname={libpq_url(restored)}", str(backup)],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        engine = make_sync_engine(restored)
+        with engine.connect() as connection:
+            assert current_revision(connection) == head_revision()
+            tokens = connection.execute(text("SELECT role FROM api_token")).scalars().all()
+        engine.dispose()
+        assert tokens == ["viewer"]
+    finally:
+        admin_execute(
+            pg_server,
+            sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)),
+        )
 
 
 @pytest.mark.slow
