@@ -33,7 +33,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-from sim.emulator.car import CarEmulator
+from sim.emulator.car import CarEmulator, board_wired_to
 from sim.emulator.leaders import ConstantSpeedLeader
 from sim.emulator.rig import EmulatorGps, seed_geometry, uniform_plan, vehicle_config
 from vehicle_agent.agent import Agent
@@ -88,6 +88,7 @@ def build(
         gps=LatchedGps(EmulatorGps(emulator, clock)),  # type: ignore[arg-type]
         spool=PingSpool(spool_dir / f"{channel}.sqlite"),
         engage_policy=EngagePolicy(engage_after_s=0.2, override_holdoff_s=0.2),
+        button_port=board_wired_to(emulator),
     )
     agent.configure(vehicle_config(key, controller, stale_plan_after_s=3600.0), seed_geometry())
     agent.accept_plan(uniform_plan(25.0, published=clock.now()))

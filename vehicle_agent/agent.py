@@ -53,7 +53,7 @@ from vehicle_agent.controllers.policy import PolicyFileError
 from vehicle_agent.gps import GpsFix, GpsSource
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.policies import PolicyStore
-from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort
+from vehicle_agent.ports import ButtonBoardRequired, ButtonPort, CanAccelPort, CanButtonPort
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
 from vehicle_agent.server import (
@@ -234,6 +234,12 @@ class Agent:
         self.buttons: ButtonPort | None = None
         self.accel_port: CanAccelPort | None = None
         if car.actuation == "acc":
+            if button_port is None and not car.accepts_button_frames:
+                raise ButtonBoardRequired(
+                    f"the {car.model} {car.years[0]} ({car.key}) takes no button frames on "
+                    "CAN: its buttons are pressed through a GPIO button board, so set "
+                    "SMOOTHFLEET_AGENT_BUTTON_BOARD (e.g. plus=17,minus=27,gap=22)"
+                )
             self.buttons = (
                 button_port(self.safety)
                 if button_port is not None

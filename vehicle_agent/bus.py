@@ -1,5 +1,7 @@
 """Opening a CAN bus from a channel spec: `socketcan:can0` in a car, `virtual:<name>` in tests,
-the simulator and the demo (python-can's in-process virtual bus)."""
+the simulator and the demo (python-can's in-process virtual bus). A car whose frames are CAN-FD
+(the 2023 Rogue) needs the channel opened for CAN-FD: on socketcan a classic socket never
+receives an FD frame."""
 
 from __future__ import annotations
 
@@ -28,12 +30,15 @@ def parse_channel(spec: str) -> tuple[str, str]:
 FILTERING_INTERFACES = frozenset({"socketcan"})
 
 
-def open_bus(spec: str, filters: Sequence[dict[str, Any]] | None = None) -> can.BusABC:
-    """A python-can bus for `spec`, passing only `filters` where the interface filters."""
+def open_bus(
+    spec: str, filters: Sequence[dict[str, Any]] | None = None, *, fd: bool = False
+) -> can.BusABC:
+    """A python-can bus for `spec`, passing only `filters` where the interface filters, and
+    open for CAN-FD frames when `fd`."""
     interface, channel = parse_channel(spec)
     if interface not in FILTERING_INTERFACES:
         filters = None
     try:
-        return can.Bus(interface=interface, channel=channel, can_filters=filters)
+        return can.Bus(interface=interface, channel=channel, can_filters=filters, fd=fd)
     except (can.CanError, OSError, ValueError, ImportError) as error:
         raise BusSpecError(f"cannot open CAN bus {spec}: {error}") from None

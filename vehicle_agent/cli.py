@@ -31,7 +31,12 @@ from vehicle_agent.codec import codec_for
 from vehicle_agent.dbc import DbcError
 from vehicle_agent.gps import GpsdSource, GpsFix, GpsSource
 from vehicle_agent.policies import PolicyStore
-from vehicle_agent.ports import GpioButtonBoard, release_board_lines, sysfs_gpio_writer
+from vehicle_agent.ports import (
+    ButtonBoardRequired,
+    GpioButtonBoard,
+    release_board_lines,
+    sysfs_gpio_writer,
+)
 from vehicle_agent.runner import run_agent
 from vehicle_agent.safety import SafetyLayer
 from vehicle_agent.server import ServerClient, ServerError
@@ -65,7 +70,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--token", help="the vehicle's bearer token (SMOOTHFLEET_AGENT_TOKEN)")
     p.add_argument("--vehicle-id", help="roster id, e.g. SF-001 (SMOOTHFLEET_AGENT_VEHICLE_ID)")
     p.add_argument("--can", help="CAN channel, e.g. socketcan:can0 (SMOOTHFLEET_AGENT_CAN)")
-    p.add_argument("--make", help="car interface: nissan_rogue, cadillac_xt5 or toyota_rav4")
+    p.add_argument(
+        "--make",
+        help="car interface: nissan_rogue (2023), cadillac_xt5, toyota_rav4 or nissan_rogue_2018",
+    )
     p.add_argument("--gps", help="gpsd:<host>:<port> or none (SMOOTHFLEET_AGENT_GPS)")
     p.add_argument("--spool", dest="spool_path", type=Path, help="ping spool SQLite file")
     p.add_argument("--button-board", help="GPIO lines, e.g. plus=17,minus=27,gap=22")
@@ -158,7 +166,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             car = choose_car(settings, server, stop)
             codec = codec_for(car.dbc_name, car.checksums, settings.dbc_cache_dir)
             filters = CarStateReader(car, codec).can_filters()
-            bus = open_bus(settings.can, filters)
+            bus = open_bus(settings.can, filters, fd=car.can_fd)
         except (ServerError, UnknownCarError, DbcError, BusSpecError) as error:
             sys.stderr.write(f"smoothfleet-agent: {error}\n")
             return 1
@@ -180,19 +188,25 @@ def main(argv: Sequence[str] | None = None) -> int:
             def board(safety: SafetyLayer) -> GpioButtonBoard:
                 return GpioButtonBoard(lines, writer, safety)
 
-        agent = Agent(
-            vehicle_id=settings.vehicle_id,
-            car=car,
-            bus=bus,
-            clock=SystemClock(),
-            gps=gps_source(settings),
-            spool=spool,
-            server=server,
-            button_port=board,
-            dbc_cache=settings.dbc_cache_dir,
-            wave_speed_mps=settings.wave_speed_mps,
-            policies=PolicyStore(settings.policy_dir),
-        )
+        try:
+            agent = Agent(
+                vehicle_id=settings.vehicle_id,
+                car=car,
+                bus=bus,
+                clock=SystemClock(),
+                gps=gps_source(settings),
+                spool=spool,
+                server=server,
+                button_port=board,
+                dbc_cache=settings.dbc_cache_dir,
+                wave_speed_mps=settings.wave_speed_mps,
+                policies=PolicyStore(settings.policy_dir),
+            )
+        except ButtonBoardRequired as error:
+            spool.close()
+            bus.shutdown()
+            sys.stderr.write(f"smoothfleet-agent: {error}\n")
+            return 1
         log.info(
             "agent %s for %s (%s) on %s", AGENT_VERSION, settings.vehicle_id, car.key, settings.can
         )

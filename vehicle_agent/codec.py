@@ -137,5 +137,6 @@ class Codec:
 def codec_for(
     dbc_name: str, checksums: Mapping[str, Checksum], cache_dir: Path | None = None
 ) -> Codec:
-    """A codec over the generated opendbc DBC `dbc_name` (parsed once per process)."""
+    """A codec over the DBC `dbc_name`, shipped or generated from opendbc (parsed once per
+    process)."""
     return Codec(dbc_name, load_dbc(dbc_name, cache_dir), checksums)

@@ -1,4 +1,8 @@
-"""The makes' DBC files: generated from the opendbc package into a cache directory, then parsed.
+"""The makes' DBC files: shipped with the agent, or generated from the opendbc package into a
+cache directory; then parsed.
+
+A car opendbc does not cover (the 2023 Nissan Rogue, whose CAN-FD frames no opendbc DBC
+describes) has its DBC in `vehicle_agent/cars/dbc/`, installed with the package and read as is.
 
 opendbc ships most car DBCs as templates that `opendbc.dbc.generator.generator.generate_all()`
 assembles in memory (`<name>_generated`). We write the ones we use to a cache directory named
@@ -25,8 +29,8 @@ import platformdirs
 from cantools.database.can import Database as CanDatabase
 from cantools.database.errors import UnsupportedDatabaseFormatError
 
-# The DBCs of the fleet's makes (interfaces.md): Nissan Rogue, Cadillac XT5, Toyota RAV4.
-FLEET_DBCS = ("nissan_x_trail_2017", "gm_global_a_powertrain", "toyota_nodsu_pt")
+# DBCs shipped with the agent, by name (`<name>.dbc`); every other name comes from opendbc.
+BUNDLED_DBC_DIR = Path(__file__).with_name("cars") / "dbc"
 
 _MESSAGE = re.compile(r"^BO_ (\d+) ")
 _SIGNAL = re.compile(r"^\s+SG_ (\w+)")
@@ -102,6 +106,12 @@ def generated_dbc_path(name: str, cache_dir: Path | None = None) -> Path:
     return path
 
 
+def dbc_path(name: str, cache_dir: Path | None = None) -> Path:
+    """The file of DBC `name`: the shipped one if there is one, else opendbc's, generated."""
+    bundled = BUNDLED_DBC_DIR / f"{name}.dbc"
+    return bundled if bundled.is_file() else generated_dbc_path(name, cache_dir)
+
+
 def load_dbc(name: str, cache_dir: Path | None = None) -> CanDatabase:
     """The parsed DBC `name`, shared by every agent of the process."""
     key = (name, (cache_dir or default_cache_dir()).resolve())
@@ -109,7 +119,7 @@ def load_dbc(name: str, cache_dir: Path | None = None) -> CanDatabase:
         cached = _databases.get(key)
         if cached is not None:
             return cached
-        path = generated_dbc_path(name, cache_dir)
+        path = dbc_path(name, cache_dir)
         try:
             database = cantools.database.load_file(str(path), strict=False)
         except (OSError, ValueError, UnsupportedDatabaseFormatError) as error:

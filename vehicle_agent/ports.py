@@ -26,6 +26,11 @@ RELEASE_FRAMES = 3
 PERIOD_SLACK = 0.9
 
 
+class ButtonBoardRequired(ValueError):
+    """The car takes no button frames on CAN (`CarInterface.accepts_button_frames`) and no
+    button board was given: the message names the setting."""
+
+
 class ButtonPort(Protocol):
     """Something that holds at most one ACC button down."""
 

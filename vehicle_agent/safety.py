@@ -2,7 +2,9 @@
 
 It trusts nothing upstream (controller, limiter, sequencer, frame builder): the frame is decoded
 again with the make's DBC and must pass every check, or it is not sent, counted and logged:
-- allowed: the make's one command message (standard id, DBC length, valid checksum);
+- allowed: the make's one command message (standard id, DBC length, valid checksum), and none
+  to a car that acts on no frame of the agent's (the 2023 Rogue: a GPIO board presses its
+  buttons, through `admit_press`);
 - values: finite, acceleration within [-3, 1.5] m/s^2 and within the jerk limits of the last
   request (or of the car's measured acceleration when taking over), no cancel request, no
   request for more speed 2 mph over the fleet's top speed (73 mph, the limiter's); only the
@@ -146,6 +148,8 @@ class SafetyLayer:
     def check(self, frame: can.Message, context: SafetyContext) -> Refusal | None:
         """Why `frame` must not be sent now, or None when it may."""
         now = context.time_s
+        if not self.car.accepts_button_frames:
+            return Refusal("id", f"the {self.car.model} {self.car.years[0]} takes no frames")
         if frame.arbitration_id != self.command_id or frame.is_extended_id:
             return Refusal("id", f"id {frame.arbitration_id:#x} is not {self.car.command_message}")
         if len(frame.data) != self.command_length:

@@ -47,7 +47,8 @@ class AgentSettings(BaseSettings):
     vehicle_id: str = Field(pattern=r"^[A-Za-z0-9_-]{1,32}$")
     # python-can channel: socketcan:can0 in a car, virtual:<name> in simulation.
     can: str = "socketcan:can0"
-    # Car interface key (nissan_rogue, cadillac_xt5, toyota_rav4); unset: from the server config.
+    # Car interface key (nissan_rogue, cadillac_xt5, toyota_rav4, nissan_rogue_2018); unset: from
+    # the server config.
     make: str | None = None
     # gpsd:<host>:<port>, or none (no GPS: the agent reports but never takes over).
     gps: str = f"gpsd:{GPSD_HOST}:{GPSD_PORT}"

@@ -46,9 +46,10 @@ class CanSchedule:
     """The frames per second a make's car sends the agent, by the car's own message periods.
 
     Source: the periods of the messages the agent watches, in the make's table in
-    `vehicle_agent.cars` (nissan.py, gm.py, toyota.py: e.g. the Rogue's wheel speeds every 20 ms,
-    ProPilot state every 50 ms, its HUD every 100 ms; 150 frames/s in all). opendbc's DBCs carry
-    no GenMsgCycleTime (cantools reads `cycle_time` None for all 15 messages), and the recorded
+    `vehicle_agent.cars` (nissan_canfd.py, gm.py, toyota.py, nissan.py: e.g. the 2023 Rogue's
+    speed every 20 ms and its cruise state, buttons and HUD every 100 ms, 80 frames/s in all; the
+    2018-20 Rogue's 150). No DBC here carries GenMsgCycleTime (cantools reads `cycle_time`
+    None for all 15 opendbc messages, and the field team's Rogue DBC has none), and the recorded
     sample in ../shared/data/can has whole-second timestamps over a decimated stream (948 frames
     of SPEED in 63 s, where the RAV4 sends 50/s), so neither can replace the table.
     """
@@ -57,9 +58,12 @@ class CanSchedule:
     scheduled_per_s: float
 
     @classmethod
-    def of_make(cls, make: str, model: str) -> CanSchedule | None:
-        """The schedule of the fleet car of this make and model, or None for an unknown car."""
+    def of_make(cls, make: str, model: str, year: int | None = None) -> CanSchedule | None:
+        """The schedule of the car of this make, model and year (without a year: the fleet's
+        car of that make and model), or None for an unknown car."""
         for car in CARS.values():
+            if year is not None and year not in car.years:
+                continue
             if car.make.lower() == make.lower() and car.model.lower() == model.lower():
                 rate = sum(1.0 / rule.period_s for rule in car.messages.values())
                 return cls(car.model, rate)
@@ -161,6 +165,7 @@ class VehicleFacts:
     last_status: LastStatus | None
     make: str = ""
     model: str = ""
+    year: int | None = None
     # The reports before last_status in the hysteresis window, oldest first.
     earlier_statuses: tuple[LastStatus, ...] = ()
     # The roster's config version: the agent echoes the one it runs (None: not compared).
@@ -345,12 +350,12 @@ def check_can(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     if status.can_msgs_per_s is None:
         return Grade("green", "ok", "CAN ok (rate not reported)")
     rate = status.can_msgs_per_s
-    schedule = CanSchedule.of_make(facts.make, facts.model)
+    schedule = CanSchedule.of_make(facts.make, facts.model, facts.year)
     if schedule is None:
         return Grade(
             "amber",
             f"{rate:.0f}/s",
-            f"no CAN schedule for a {facts.make} {facts.model}",
+            f"no CAN schedule for a {facts.make} {facts.model} {facts.year or ''}".rstrip(),
             f"CAN rate unknown for {facts.make} {facts.model}",
         )
     amber, red = limits.can_rates(schedule)

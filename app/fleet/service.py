@@ -345,6 +345,7 @@ def _graded(
             last_status=last_status,
             make=vehicle.make,
             model=vehicle.model,
+            year=vehicle.year,
             config_version=vehicle.config_version,
             earlier_statuses=tuple(
                 status

@@ -7,7 +7,9 @@ in vehicle_agent.cars, scaled by `period_scale` to lighten a hundred emulated ca
 tolerates 10 missed periods, so a scale up to ~5 keeps every input fresh).
 
 The car's own button message reports every button held, the driver's and the agent's alike, as a
-button board pressing the real switches would; the agent tells its own presses apart.
+button board pressing the real switches would; the agent tells its own presses apart. A board is
+wired to the emulated switches through `board_line` (lines `BOARD_LINES`); a car that acts on no
+injected button frame (the 2023 Rogue) ignores the agent's, as the real one did.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from __future__ import annotations
 import bisect
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -28,6 +31,8 @@ from sim.emulator.leaders import ConstantSpeedLeader, Leader
 from vehicle_agent.cars import CarInterface, CruiseButton, car_for
 from vehicle_agent.codec import FrameError, codec_for
 from vehicle_agent.gps import GpsFix
+from vehicle_agent.ports import ButtonPort, GpioButtonBoard
+from vehicle_agent.safety import SafetyLayer
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +44,9 @@ MAX_SUBSTEP_S = 0.02
 # What the driver's feet do: brake pedal (m/s^2) and gas pedal (m/s^2).
 DRIVER_BRAKE_MPS2 = -2.5
 DRIVER_GAS_MPS2 = 1.0
+# The GPIO lines of the button board wired to an emulated car's switches (docs/agent.md's
+# example wiring).
+BOARD_LINES = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
 # Payloads kept per message for frames whose signals repeat (a counter's cycle, a constant HUD):
 # a hundred emulated cars re-encoding identical frames was a tenth of the demo fleet's step.
 PAYLOADS_PER_MESSAGE = 64
@@ -129,6 +137,7 @@ class CarEmulator:
             name: {} for name in self.frames
         }
         self._agent_buttons: frozenset[CruiseButton] = frozenset()
+        self._board_lines_high: set[int] = set()
         self._agent_command_s = -math.inf
         self._agent_accel = 0.0
 
@@ -154,6 +163,17 @@ class CarEmulator:
     def driver_buttons(self, *buttons: CruiseButton) -> None:
         """The steering-wheel buttons the driver holds from now on."""
         self.driver.buttons = frozenset(buttons)
+
+    def board_line(self, line: int, level: bool) -> None:
+        """A GPIO line of the button board wired to the switches (`BOARD_LINES`) goes high
+        (pressing its button) or low: the `write_line` of a `GpioButtonBoard`."""
+        if level:
+            self._board_lines_high.add(line)
+        else:
+            self._board_lines_high.discard(line)
+
+    def _board_buttons(self) -> frozenset[CruiseButton]:
+        return frozenset(b for b, line in BOARD_LINES.items() if line in self._board_lines_high)
 
     # The road ahead --------------------------------------------------------------------------
 
@@ -188,7 +208,7 @@ class CarEmulator:
     def step(self, now: float) -> None:
         """Read the agent's frames, advance the car to `now`, send the frames that are due."""
         self._receive(now)
-        held = self.driver.buttons | self._agent_buttons_at(now)
+        held = self.driver.buttons | self._agent_buttons_at(now) | self._board_buttons()
         self.acc.buttons(now, held, self.speed_mps, brake_pressed=self.driver.brake)
         while self.time_s < now - 1e-9:
             dt = min(MAX_SUBSTEP_S, now - self.time_s)
@@ -205,7 +225,7 @@ class CarEmulator:
             frame = self.bus.recv(timeout=0)
             if frame is None:
                 return
-            if frame.arbitration_id != self._command_id:
+            if frame.arbitration_id != self._command_id or not self.car.accepts_button_frames:
                 continue
             try:
                 _, signals = self.codec.decode(frame.arbitration_id, frame.data)
@@ -282,11 +302,13 @@ class CarEmulator:
             if rule.counter_signal is not None:
                 signals[rule.counter_signal] = self._counters[name]
                 self._counters[name] = (self._counters[name] + 1) % rule.counter_modulo
+            data = self._payload(name, signals)
             self.send_raw(
                 can.Message(
                     arbitration_id=self._frame_ids[name],
-                    data=self._payload(name, signals),
+                    data=data,
                     is_extended_id=False,
+                    is_fd=len(data) > 8,
                 )
             )
 
@@ -305,3 +327,16 @@ class CarEmulator:
         """Put any frame on the bus (tests use it for garbage)."""
         self.bus.send(frame)
         self.sent += 1
+
+
+def board_wired_to(emulator: CarEmulator) -> Callable[[SafetyLayer], ButtonPort] | None:
+    """The agent's button board wired to `emulator`'s switches, for a car that acts on no
+    button frame (the 2023 Rogue, as the field team fitted it); None for the others, whose
+    agent presses their buttons in CAN frames."""
+    if emulator.car.actuation != "acc" or emulator.car.accepts_button_frames:
+        return None
+
+    def board(safety: SafetyLayer) -> ButtonPort:
+        return GpioButtonBoard(BOARD_LINES, emulator.board_line, safety)
+
+    return board

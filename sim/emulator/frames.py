@@ -44,7 +44,7 @@ def _nissan_wheels(s: CarSnapshot) -> dict[str, float]:
     }
 
 
-NISSAN: dict[str, SignalBuilder] = {
+NISSAN_ROGUE_2018: dict[str, SignalBuilder] = {
     "WHEEL_SPEEDS_FRONT": _nissan_wheels,
     "WHEEL_SPEEDS_REAR": _nissan_wheels,
     "PRO_PILOT": lambda s: {
@@ -65,6 +65,48 @@ NISSAN: dict[str, SignalBuilder] = {
         "NO_BUTTON_PRESSED": int(not s.buttons),
         "USER_BRAKE_PRESSED": int(s.brake_pressed),
         "GAS_PEDAL": 200 if s.gas_pressed else 0,
+    },
+}
+
+
+def _rogue_2023_cruise_state(s: CarSnapshot) -> int:
+    """CRUISE_STATE on its 4 bits: 0 off, 6 on, 12 engaged, 14 engaged with the gas pressed
+    (the states the field team's libpanda names; the emulated ACC holds no standstill, 4)."""
+    if not s.acc_main_on:
+        return 0
+    if not s.acc_engaged:
+        return 6
+    return 14 if s.gas_pressed else 12
+
+
+def _rogue_2023_button(s: CarSnapshot) -> int:
+    """ACC_BTNS: one code for the buttons held. The message has room for one; which of two held
+    at once the car reports is not known, and the emulated car reports cancel and the main
+    switch first (a driver's, as the agent's board presses neither)."""
+    for button, code in (
+        (CruiseButton.CANCEL, 4),
+        (CruiseButton.MAIN, 5),
+        (CruiseButton.PLUS, 1),
+        (CruiseButton.MINUS, 2),
+        (CruiseButton.GAP, 3),
+    ):
+        if button in s.buttons:
+            return code
+    return 0
+
+
+NISSAN_ROGUE_2023: dict[str, SignalBuilder] = {
+    "SPEED": lambda s: {"SPEED": s.speed_mps * KPH_PER_MPS},
+    "CRUISE": lambda s: {
+        "CRUISE_STATE": _rogue_2023_cruise_state(s),
+        "CRUISE_ENGAGED": int(s.acc_engaged),
+    },
+    "WHEEL_BUTTONS": lambda s: {"ACC_BTNS": _rogue_2023_button(s)},
+    "ACC_HUD": lambda s: {
+        "SYSTEM_ON": int(s.acc_main_on),
+        "MINICAR": int(s.lead_present),
+        "SET_SPEED": s.set_speed_mph if s.acc_engaged and s.set_speed_mph else 0,
+        "SET_DISTANCE": s.gap_setting,
     },
 }
 
@@ -134,7 +176,8 @@ TOYOTA: dict[str, SignalBuilder] = {
 }
 
 FRAMES: dict[str, dict[str, SignalBuilder]] = {
-    "nissan_rogue": NISSAN,
+    "nissan_rogue": NISSAN_ROGUE_2023,
+    "nissan_rogue_2018": NISSAN_ROGUE_2018,
     "cadillac_xt5": GM,
     "toyota_rav4": TOYOTA,
 }

@@ -18,7 +18,7 @@ import can
 
 from contract.corridor import CorridorGeometry
 from contract.vehicles import ControllerConfig, VehicleConfig
-from sim.emulator.car import CarEmulator
+from sim.emulator.car import CarEmulator, board_wired_to
 from sim.emulator.leaders import Leader
 from vehicle_agent.agent import Agent
 from vehicle_agent.cars import car_for
@@ -182,7 +182,9 @@ def rig(
     button_port: Callable[[SafetyLayer], ButtonPort] | None = None,
 ) -> Iterator[Rig]:
     """An engaged-ready agent and emulated car (the driver has not set ACC yet); `button_port`
-    replaces the make's CAN button frames (a GPIO board: the emulated car then sees no press)."""
+    replaces the make's CAN button frames (a GPIO board not wired to the car: the emulated car
+    then sees no press). A car that takes no button frames (the 2023 Rogue) gets, by default,
+    a board wired to its switches (`board_wired_to`)."""
     channel = f"agent-rig-{next(_channels)}"
     car_bus = can.Bus(interface="virtual", channel=channel)
     agent_bus = can.Bus(interface="virtual", channel=channel)
@@ -208,7 +210,7 @@ def rig(
         server=server,
         dbc_cache=dbc_cache,
         policies=policies,
-        button_port=button_port,
+        button_port=button_port or board_wired_to(emulator),
     )
     if server is None:
         agent.configure(

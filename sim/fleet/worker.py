@@ -35,7 +35,7 @@ from pydantic import BaseModel
 
 from contract.corridor import CorridorGeometry
 from sim.drives import load_drive
-from sim.emulator.car import CarEmulator
+from sim.emulator.car import CarEmulator, board_wired_to
 from sim.emulator.rig import uniform_plan, vehicle_config
 from sim.energy import RAV4_2019
 from sim.fleet.traffic import CorridorTraffic, TrafficLeaders, synthetic_waves
@@ -221,6 +221,7 @@ class Fleet:
             dbc_cache=dbc_cache,
             # each car keeps the policies it downloads, as a car in the field does
             policies=PolicyStore(spool_dir / "policies" / vehicle.vehicle_id),
+            button_port=board_wired_to(emulator),
         )
         return FleetCar(vehicle, clock, emulator, agent, (car_bus, agent_bus))
 

@@ -363,7 +363,7 @@ def report_can_rates(api: Api, vehicle_id: str, rates: list[float], now: datetim
 
 def test_a_dip_in_one_report_does_not_flip_a_car_but_a_lasting_fault_does(api: Api) -> None:
     now = datetime.now(UTC).replace(microsecond=0)
-    # Rogues send 150 frames/s (red at 15/s). SF-001 dips once; SF-002 stays low for 60 s.
+    # 2023 Rogues send 80 frames/s (red at 8/s). SF-001 dips once; SF-002 stays low for 60 s.
     report_can_rates(api, "SF-001", [150.0] * 6 + [5.0], now)
     report_can_rates(api, "SF-002", [150.0] + [5.0] * 7, now)
 
@@ -375,7 +375,7 @@ def test_a_dip_in_one_report_does_not_flip_a_car_but_a_lasting_fault_does(api: A
     assert can["pending"].startswith("red for 0 s")
     faulty = vehicle(fleet, "SF-002")
     assert faulty["verdict"] == "not cleared"
-    assert faulty["problems"] == ["CAN 5/s ≤ 15/s for Rogue"]
+    assert faulty["problems"] == ["CAN 5/s ≤ 8/s for Rogue"]
     verdicts = [v["verdict"] for v in fleet["vehicles"]]
     assert verdicts == sorted(verdicts, key=lambda v: v != "not cleared")
 

@@ -191,8 +191,9 @@ def test_pings_a_full_spool_dropped_are_shown_not_graded() -> None:
         ({"gps_satellites": 5}, "gps", "amber"),
         ({"gps_satellites": 4}, "gps", "red"),
         ({"is_can_ok": False}, "can", "red"),
-        ({"can_msgs_per_s": 75.0}, "can", "amber"),
-        ({"can_msgs_per_s": 15.0}, "can", "red"),
+        # the fleet's 2023 Rogue sends 80/s: amber at half, red at a tenth
+        ({"can_msgs_per_s": 40.0}, "can", "amber"),
+        ({"can_msgs_per_s": 8.0}, "can", "red"),
         ({"is_acc_available": False}, "acc", "red"),
         ({"is_controller_running": False}, "controller", "amber"),
         ({"controller": "simple"}, "controller", "amber"),
@@ -284,11 +285,24 @@ def test_ages_read_well(seconds: float, text: str) -> None:
 
 
 def test_a_rogue_is_graded_against_its_own_can_schedule() -> None:
-    # Rogue: 2 wheel-speed messages every 20 ms, ProPilot and throttle every 50 ms, HUD every
-    # 100 ms = 50 + 50 + 20 + 20 + 10 = 150 frames/s; amber at half (75), red at a tenth (15).
-    assert CanSchedule.of_make("Nissan", "Rogue") == CanSchedule("Rogue", 150.0)
-    readiness = assess(healthy_facts(last_status=healthy_status(can_msgs_per_s=12.0)), NOW, LIMITS)
-    assert readiness.problems == ("CAN 12/s ≤ 15/s for Rogue",)
+    # 2023 Rogue: SPEED every 20 ms, CRUISE, WHEEL_BUTTONS and ACC_HUD every 100 ms = 50 + 10 +
+    # 10 + 10 = 80 frames/s; amber at half (40), red at a tenth (8).
+    assert CanSchedule.of_make("Nissan", "Rogue", 2023) == CanSchedule("Rogue", 80.0)
+    assert CanSchedule.of_make("Nissan", "Rogue") == CanSchedule("Rogue", 80.0)  # the fleet's
+    readiness = assess(healthy_facts(last_status=healthy_status(can_msgs_per_s=7.0)), NOW, LIMITS)
+    assert readiness.problems == ("CAN 7/s ≤ 8/s for Rogue",)
+    slow = assess(healthy_facts(last_status=healthy_status(can_msgs_per_s=12.0)), NOW, LIMITS)
+    assert slow.level_of("can") == "amber"
+    assert slow.reasons == ("CAN 12/s ≤ 40/s for Rogue",)
+
+
+def test_a_2018_20_rogue_is_graded_against_its_own_frames() -> None:
+    # 2 wheel-speed messages every 20 ms, ProPilot and throttle every 50 ms, HUD every 100 ms =
+    # 50 + 50 + 20 + 20 + 10 = 150 frames/s; amber at half (75), red at a tenth (15).
+    assert CanSchedule.of_make("Nissan", "Rogue", 2019) == CanSchedule("Rogue", 150.0)
+    facts = healthy_facts(year=2019, last_status=healthy_status(can_msgs_per_s=12.0))
+    assert assess(facts, NOW, LIMITS).problems == ("CAN 12/s ≤ 15/s for Rogue",)
+    assert CanSchedule.of_make("Nissan", "Rogue", 2016) is None
 
 
 def test_each_make_has_its_own_can_thresholds() -> None:
@@ -323,14 +337,15 @@ def test_reasons_read_as_words() -> None:
 
 
 def reports(*rates: float, every_s: float = 10.0) -> VehicleFacts:
-    """A Rogue whose status reports, every_s apart and ending now, gave these CAN rates."""
+    """A 2018-20 Rogue (150 frames/s: amber at 75, red at 15) whose status reports, every_s
+    apart and ending now, gave these CAN rates."""
     statuses = [
         healthy_status(
             ts=NOW - timedelta(seconds=every_s * (len(rates) - 1 - i)), can_msgs_per_s=rate
         )
         for i, rate in enumerate(rates)
     ]
-    return healthy_facts(last_status=statuses[-1], earlier_statuses=tuple(statuses[:-1]))
+    return healthy_facts(year=2019, last_status=statuses[-1], earlier_statuses=tuple(statuses[:-1]))
 
 
 HOLD = replace(LIMITS, hold_s=60.0)

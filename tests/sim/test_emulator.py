@@ -46,7 +46,9 @@ def drain(bus: can.BusABC, reader: CarStateReader, now: float) -> None:
         reader.ingest(frame, now)
 
 
-@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5", "toyota_rav4"])
+@pytest.mark.parametrize(
+    "key", ["nissan_rogue", "cadillac_xt5", "toyota_rav4", "nissan_rogue_2018"]
+)
 def test_agent_reads_the_emulated_car_of_each_make(
     key: str, car_bus: can.BusABC, agent_bus: can.BusABC, dbc_cache: Path
 ) -> None:
@@ -85,7 +87,7 @@ def test_agent_reads_the_emulated_car_of_each_make(
     assert reader.stats.errors == {}
 
 
-@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+@pytest.mark.parametrize("key", ["nissan_rogue_2018", "cadillac_xt5"])
 def test_button_frames_move_the_set_speed_and_the_gap(
     key: str, car_bus: can.BusABC, agent_bus: can.BusABC, dbc_cache: Path
 ) -> None:

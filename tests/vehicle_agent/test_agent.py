@@ -243,7 +243,7 @@ def test_a_pass_that_stalls_after_reading_the_car_sends_nothing_and_hands_back(
 
 
 @pytest.mark.parametrize(
-    ("key", "controller"), [("toyota_rav4", "microaccel"), ("nissan_rogue", "simple")]
+    ("key", "controller"), [("toyota_rav4", "microaccel"), ("nissan_rogue_2018", "simple")]
 )
 def test_commands_the_bus_will_not_send_hand_back_and_say_so(
     key: str, controller: str, tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
@@ -399,7 +399,7 @@ def test_stopping_the_agent_mid_press_sends_the_release_through_the_safety_layer
     reading the buttons went on seeing the press (here, the emulated car echoes it in its own
     button frames until its command timeout). However soon after the last frame it stops (the
     fleet worker's clock has not moved; a late control tick), the release gets through."""
-    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+    with rig("nissan_rogue_2018", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses +
         r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
         assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
@@ -427,7 +427,7 @@ def test_a_nissan_press_copies_no_car_frame_older_than_two_periods(
     frames no longer reaching the agent, it went on pressing + and telling the car the gas was
     released while the driver held it. A press copies a frame read at most 2 periods before,
     and the refusal hands back."""
-    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+    with rig("nissan_rogue_2018", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent holds + 0.9 s
         r.run(2.0, until=lambda: r.agent.sequencer.button is not None)
         assert r.agent.sequencer.button is CruiseButton.PLUS, "no button held"
@@ -462,7 +462,7 @@ def test_a_nissan_press_copies_no_car_frame_older_than_two_periods(
 def test_presses_the_car_does_not_take_hand_back_and_say_so(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    with rig("nissan_rogue", tmp_path, dbc_cache, controller="simple") as r:
+    with rig("nissan_rogue_2018", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r, set_speed_mph=50)  # under a 60 mph plan: the agent presses
 
         def lost(frame: can.Message, timeout: float | None = None) -> None:

@@ -86,7 +86,7 @@ def test_a_line_the_control_loop_stops_releasing_is_written_low_by_the_deadman(
     """A stalled loop never calls `hold` again to end a press: the board's own timer does, at
     the safety layer's longest hold, and the same hold is not raised again when the loop
     comes back; a new press after a release is."""
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     limits = SafetyLimits(max_hold_s=0.2)
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache), limits)
     levels: dict[int, bool] = {}
@@ -116,7 +116,7 @@ def test_a_line_whose_raise_failed_after_it_went_high_is_still_written_low(
     """A write can fail after the level changed (sysfs reports an error the pin has already
     taken). The board cannot tell, so it treats the line as held: the loop's release lowers it,
     and so does the deadman when the loop never comes back."""
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
     levels: dict[int, bool] = {}
 
@@ -145,7 +145,7 @@ def test_a_line_whose_raise_failed_after_it_went_high_is_still_written_low(
 
 
 def test_a_closed_board_writes_every_line_low_and_presses_nothing_more(dbc_cache: Path) -> None:
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
     writes: list[tuple[int, bool]] = []
     board = GpioButtonBoard(
@@ -248,7 +248,7 @@ class CarCopy:
     max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
 )
 @given(
-    key=st.sampled_from(["nissan_rogue", "cadillac_xt5"]),
+    key=st.sampled_from(["nissan_rogue_2018", "cadillac_xt5"]),
     steps=st.lists(
         st.tuples(buttons, st.booleans(), st.booleans(), copy_ages), min_size=1, max_size=120
     ),
@@ -345,7 +345,7 @@ def test_a_rogue_press_in_a_frame_showing_the_drivers_pedal_is_refused(
     """A Rogue button frame copies the car's pedal and brake. A press beside the driver's
     pedal went out whenever the agent's override check had not yet seen the pedal; the release
     carrying it still goes out, as every release does."""
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
     context = SafetyContext(1.0, car_state(1.0))
@@ -366,7 +366,7 @@ def test_only_the_release_ending_a_press_may_come_sooner_than_the_rate(dbc_cache
     """A release refused for its rate left a stopping agent's press standing in the car's last
     frame. The one release after a press passes however soon; another right behind it, and a
     press, keep the rate."""
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     safety = SafetyLayer(car, codec)
     frame_id = codec.frame_id(car.command_message)
@@ -452,7 +452,7 @@ def test_a_press_needs_a_real_release_before_it(
     frame and another 1.1 s hold all passed, which a car that misses the blip reads as one
     2.25 s hold, past the 1.2 s of a second 5 mph step."""
     agent_bus, car_bus = buses
-    car, codec, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
+    car, codec, safety, copy, port = button_port("nissan_rogue_2018", agent_bus, dbc_cache)
     now = 0.0
     while now < 1.1 - 1e-9:  # the longest hold allowed
         copy.read_s = now
@@ -473,7 +473,7 @@ def test_a_press_needs_a_real_release_before_it(
     assert sum(1 for buttons in pressed if buttons) == 22 + 1
 
 
-@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+@pytest.mark.parametrize("key", ["nissan_rogue_2018", "cadillac_xt5"])
 def test_no_press_of_plus_sets_a_button_car_over_the_fleets_top_speed(
     key: str, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
 ) -> None:
@@ -502,7 +502,7 @@ def test_no_press_of_plus_sets_a_button_car_over_the_fleets_top_speed(
     assert safety.refused == {"setting": 2}
 
 
-@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+@pytest.mark.parametrize("key", ["nissan_rogue_2018", "cadillac_xt5"])
 def test_button_frames_count_on_from_the_cars_own_counter(
     key: str, buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
 ) -> None:
@@ -539,7 +539,7 @@ def test_from_a_stale_copy_only_the_release_ending_a_press_goes_out(
     telling the car the driver's inputs of a moment ago. The release ending the press still
     goes out: no press may stand in the last frame the car read."""
     agent_bus, car_bus = buses
-    car, codec, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
+    car, codec, safety, copy, port = button_port("nissan_rogue_2018", agent_bus, dbc_cache)
     copy.read_s = 0.0  # the car's last CRUISE_THROTTLE the agent reads
     sent: list[tuple[float, frozenset[CruiseButton]]] = []
     for step in range(9 if not stops else 5):
@@ -566,7 +566,7 @@ def test_an_agent_stopping_just_after_a_release_sends_no_repeat_the_rate_refuses
     not: the car had just read the release. Now the repeat waits for its period, and a port
     stopping before it is due sends nothing and says nothing."""
     agent_bus, car_bus = buses
-    _, _, safety, copy, port = button_port("nissan_rogue", agent_bus, dbc_cache)
+    _, _, safety, copy, port = button_port("nissan_rogue_2018", agent_bus, dbc_cache)
     copy.read_s = 0.0
     port.hold(CruiseButton.PLUS, SafetyContext(0.0, car_state(0.0)))
     copy.read_s = 0.05
@@ -624,7 +624,7 @@ def test_refusals_are_counted_with_their_reason(dbc_cache: Path) -> None:
 def test_the_car_state_is_aged_when_the_command_leaves_not_when_the_pass_began(
     dbc_cache: Path,
 ) -> None:
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     sent_at = [0.1]
     safety = SafetyLayer(car, codec, clock=lambda: sent_at[0])
@@ -637,7 +637,7 @@ def test_the_car_state_is_aged_when_the_command_leaves_not_when_the_pass_began(
 
 
 def test_a_press_copies_only_a_car_frame_read_within_two_periods(dbc_cache: Path) -> None:
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
     checked_at = [0.1]
     safety = SafetyLayer(car, codec, clock=lambda: checked_at[0])
@@ -653,7 +653,7 @@ def test_a_press_copies_only_a_car_frame_read_within_two_periods(dbc_cache: Path
 
 
 def test_gpio_board_presses_only_what_the_safety_layer_allows(dbc_cache: Path) -> None:
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
     writes: list[tuple[int, bool]] = []
     board = GpioButtonBoard(
@@ -682,7 +682,7 @@ def test_a_held_button_is_let_go_before_the_car_takes_a_second_long_step(
 ) -> None:
     """The fleet's cars step a held + or - by 5 mph every 0.6 s: held to 1.2 s, one hold would
     move the setting 10 mph. The safety layer lets a hold last only up to 1.1 s."""
-    car = car_for("nissan_rogue")
+    car = car_for("nissan_rogue_2018")
     safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
     levels: dict[int, bool] = {}
     board = GpioButtonBoard({CruiseButton.PLUS: 17}, levels.__setitem__, safety)

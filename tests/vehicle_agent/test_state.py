@@ -106,7 +106,7 @@ TOYOTA_FRAMES = {
     ("key", "frames", "expected"),
     [
         (
-            "nissan_rogue",
+            "nissan_rogue_2018",
             NISSAN_FRAMES,
             CarReading(
                 speed_mps=90.0 / 3.6,
@@ -194,7 +194,7 @@ def test_a_message_missing_for_ten_periods_invalidates_the_state(dbc_cache: Path
 
 
 def test_nothing_received_is_invalid(dbc_cache: Path) -> None:
-    _, _, reader = reader_for("nissan_rogue", dbc_cache)
+    _, _, reader = reader_for("nissan_rogue_2018", dbc_cache)
     state = reader.snapshot(0.0)
     assert not state.valid
     assert state.problem == "WHEEL_SPEEDS_FRONT not received yet"
@@ -269,7 +269,7 @@ def test_unknown_ids_are_counted_and_ignored(dbc_cache: Path) -> None:
 
 
 def test_a_stuck_counter_invalidates_the_state(dbc_cache: Path) -> None:
-    _, codec, reader = reader_for("nissan_rogue", dbc_cache)
+    _, codec, reader = reader_for("nissan_rogue_2018", dbc_cache)
     for name, signals in NISSAN_FRAMES.items():
         reader.ingest(frame(codec, name, signals), 10.0)
     pilot = NISSAN_FRAMES["PRO_PILOT"]

@@ -11,11 +11,13 @@ from vehicle_agent.cars.base import (
     MessageRule,
 )
 from vehicle_agent.cars.gm import CadillacXT5
-from vehicle_agent.cars.nissan import NissanRogue
+from vehicle_agent.cars.nissan import NissanRogue2018
+from vehicle_agent.cars.nissan_canfd import NissanRogue
 from vehicle_agent.cars.toyota import ToyotaRav4
 
+# The fleet's cars first: a make and model without a year means the paper's car.
 CARS: dict[str, type[CarInterface]] = {
-    car.key: car for car in (NissanRogue, CadillacXT5, ToyotaRav4)
+    car.key: car for car in (NissanRogue, CadillacXT5, ToyotaRav4, NissanRogue2018)
 }
 
 

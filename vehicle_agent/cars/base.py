@@ -101,6 +101,14 @@ class CarInterface(ABC):
     # its buttons (the Nissan's pedals and brake): a press then needs that frame fresh, or it
     # would tell the car the driver's inputs of a moment ago (`SafetyLayer.check_copy`).
     copies_command_frame: ClassVar[bool] = False
+    # Whether the car acts on button frames the agent puts on its bus. The 2023 Nissan Rogue
+    # does not (paper, vehicle interface: its protocols "prevented the injection of commands"),
+    # so its buttons are pressed electrically, by a GPIO button board (`GpioButtonBoard`), and
+    # the agent refuses to drive it without one (`ButtonBoardRequired`).
+    accepts_button_frames: ClassVar[bool] = True
+    # Whether the car's messages are CAN-FD frames (over 8 bytes), so the bus must be opened
+    # for CAN-FD (`vehicle_agent.bus.open_bus`).
+    can_fd: ClassVar[bool] = False
     # The message whose latest frame tells whether the stock ACC holds a standstill
     # (`holds_standstill`), for makes whose command frame may release one: a release goes out
     # only while a fresh frame of it shows none held (`SafetyLayer.check_standstill_release`).

@@ -1,4 +1,7 @@
-"""2023 Nissan Rogue on opendbc's `nissan_x_trail_2017` DBC (actuation `acc`: button presses).
+"""2018-20 Nissan Rogue on opendbc's `nissan_x_trail_2017` DBC (actuation `acc`: button presses).
+
+The paper's 2023 Rogue sends other frames (`nissan_canfd.py`); opendbc lists this DBC for the
+2018-20 Rogue and X-Trail.
 
 Read: wheel speeds (km/h, the mean of four), PRO_PILOT (cruise main on, ACC activated, 4-bit
 counter), PROPILOT_HUD (set speed in mph on US cars, follow distance 1-3 bars, lead car icon =
@@ -36,13 +39,13 @@ BUTTON_SIGNALS = {
 }
 
 
-class NissanRogue(CarInterface):
-    """The paper's majority car."""
+class NissanRogue2018(CarInterface):
+    """The Rogue before the paper's: button frames on classic CAN."""
 
-    key = "nissan_rogue"
+    key = "nissan_rogue_2018"
     make = "Nissan"
     model = "Rogue"
-    years = (2023,)
+    years = (2018, 2019, 2020)
     dbc_name = "nissan_x_trail_2017"
     actuation: ClassVar[Actuation] = "acc"
     messages: ClassVar[dict[str, MessageRule]] = {
