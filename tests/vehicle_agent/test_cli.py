@@ -55,9 +55,9 @@ def test_missing_and_wrong_settings_name_the_variable() -> None:
 
 
 def run_agent_without_server(
-    can: str, spool: Path, env: dict[str, str] | None = None
+    can: str, spool: Path, env: dict[str, str] | None = None, make: str = "toyota_rav4"
 ) -> subprocess.CompletedProcess[str]:
-    """A RAV4 agent on `can` and `spool`, with no GPS and no server to reach."""
+    """An agent for `make` (a RAV4) on `can` and `spool`, with no GPS and no server to reach."""
     return run_agent_cli(
         "--server",
         "http://127.0.0.1:9",
@@ -66,7 +66,7 @@ def run_agent_without_server(
         "--vehicle-id",
         "SF-001",
         "--make",
-        "toyota_rav4",
+        make,
         "--can",
         can,
         "--gps",
@@ -100,6 +100,19 @@ def test_a_dbc_cache_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:
     )
     assert "SMOOTHFLEET_AGENT_DBC_CACHE_DIR" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_2023_rogue_without_a_button_board_is_one_line(tmp_path: Path) -> None:
+    """The car takes no button frames: with no board the agent would follow no plan."""
+    result = run_agent_without_server(
+        "virtual:rogue-test", tmp_path / "s.sqlite", make="nissan_rogue"
+    )
+    assert result.returncode == 1
+    assert result.stderr == (
+        "smoothfleet-agent: the Rogue 2023 (nissan_rogue) takes no button frames on CAN: its "
+        "buttons are pressed through a GPIO button board, so set SMOOTHFLEET_AGENT_BUTTON_BOARD "
+        "(e.g. plus=17,minus=27,gap=22)\n"
+    )
 
 
 def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
