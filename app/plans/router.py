@@ -185,11 +185,17 @@ async def get_plan_history(
     """Planner runs with their algorithm, parameters and inputs, newest first (for replay).
 
     An unknown corridor is a 404, as on `plans/latest`: an empty history would read as a
-    corridor the planner never ran for, and hide a misspelt id."""
+    corridor the planner never ran for, and hide a misspelt id. So is `until` before `since` a
+    422, not an empty list: the window is [since, until)."""
     corridor_id = await _readable_corridor(principal, session, corridor)
     for name, moment in (("since", since), ("until", until)):
         if moment is not None and moment.tzinfo is None:
             raise HTTPException(422, f"{name} needs a time zone (RFC 3339)")
+    if since is not None and until is not None and until < since:
+        # an empty answer would read as no planner run in a window the caller did not mean
+        raise HTTPException(
+            422, f"until ({until.isoformat()}) is before since ({since.isoformat()})"
+        )
     if corridor_id is not None and await corridor_lanes(session, corridor_id) is None:
         raise HTTPException(404, f"unknown corridor {corridor_id}")
     runs = await plan_history(session, corridor_id, since, until, status, limit)

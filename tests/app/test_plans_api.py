@@ -198,6 +198,19 @@ def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None
     assert naive.status_code == 422
 
 
+def test_a_history_window_that_ends_before_it_starts_is_refused(served: Served) -> None:
+    """It answered an empty list, which read as no planner run in the window meant."""
+    reversed_window = served.get(
+        "/api/v1/plans", since="2026-01-02T00:00:00Z", until="2026-01-01T00:00:00+00:00"
+    )
+    assert reversed_window.status_code == 422
+    assert reversed_window.json() == {
+        "detail": "until (2026-01-01T00:00:00+00:00) is before since (2026-01-02T00:00:00+00:00)"
+    }
+    empty = served.get("/api/v1/plans", since="2026-01-01T00:00:00Z", until="2026-01-01T00:00:00Z")
+    assert empty.json() == {"plans": []}  # [t, t) holds no run, and asks nothing wrong
+
+
 def test_the_history_of_an_unknown_corridor_is_a_404_naming_it(served: Served) -> None:
     """It was 200 with no runs: a misspelt corridor read as one the planner never ran for."""
     unknown = served.get("/api/v1/plans", corridor="I-40-EB")

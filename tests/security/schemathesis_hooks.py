@@ -14,6 +14,10 @@ as the descriptions say; JSON Schema has no way to bound a date-time relative to
   in tests/app/test_vehicle_reports.py. Pings need no such help: a ping outside the window is
   refused item by item inside a 200, as a batch's bad items are.
 
+The plan history's window [since, until) is refused (422) with `until` before `since`, a
+relation between two parameters that no schema states: a positive case that drew them so gets
+them in order, all else as drawn (the refusal is tested in tests/app/test_plans_api.py).
+
 And a policy upload is kept only when the file hashes to its manifest's `sha256` and loads as a
 trained network of the manifest's actuation (app/policies/service.py): conditions on a file's
 bytes that no schema can state, so every drawn file would be refused (422) and the 201/200 path
@@ -49,6 +53,7 @@ from contract.values import Timestamp
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 STATUS = ("POST", "/api/v1/vehicles/{vehicle_id}/status")
+PLAN_HISTORY = ("GET", "/api/v1/plans")
 POLICY_UPLOAD = ("POST", "/api/v1/policies")
 # What a positive upload that names no controller sends (see above).
 UNNAMED_CONTROLLER = "rl_acc"
@@ -101,15 +106,31 @@ def _a_shipped_policy(body: object) -> object:
     }
 
 
+def _window_in_order(query: object) -> object:
+    """A plan-history query whose `until` reads before its `since` with the two swapped."""
+    if not isinstance(query, dict):
+        return query
+    since, until = query.get("since"), query.get("until")
+    if not (isinstance(since, str) and isinstance(until, str)):
+        return query
+    try:
+        reversed_window = TIMESTAMP.validate_python(until) < TIMESTAMP.validate_python(since)
+    except ValidationError:
+        return query
+    return {**query, "since": until, "until": since} if reversed_window else query
+
+
 @schemathesis.hook
 def map_case(context: Any, case: Any) -> Any:
-    """A positive status report or policy upload gets the help described above; every other
-    case is sent as drawn."""
+    """A positive status report, plan-history query or policy upload gets the help described
+    above; every other case is sent as drawn."""
     if case.meta is None or not case.meta.generation.mode.is_positive:
         return case
     operation = (case.method.upper(), case.operation.path)
     if operation == STATUS:
         case.body = _ts_in_the_window(case.body)
+    elif operation == PLAN_HISTORY:
+        case.query = _window_in_order(case.query)
     elif operation == POLICY_UPLOAD:
         case.body = _a_shipped_policy(case.body)
         meta = case.meta  # re-judged here: negative, for the bytes it cannot validate (see above)
