@@ -44,6 +44,16 @@ MAX_SUBSTEP_S = 0.02
 # What the driver's feet do: brake pedal (m/s^2) and gas pedal (m/s^2).
 DRIVER_BRAKE_MPS2 = -2.5
 DRIVER_GAS_MPS2 = 1.0
+# The RAV4's PCM once the car is stopped with ACC engaged (opendbc's toyota_nodsu_pt, PCM_CRUISE
+# CRUISE_STATE: "if standstill is requested will switch to state 11 (3 sec timer), after timer is
+# elapsed will switch into state 7 (standstill)"): it then holds the car until the driver
+# resumes (RES or the gas), whatever acceleration is requested. Whether the real PCM also takes
+# ACC_CONTROL's RELEASE_STANDSTILL then is not known here (openpilot drives off with it); the
+# agent never sets it once it has read the hold, and the emulated PCM leaves the hold to the
+# driver alone, so a frame in flight as the hold begins cannot end it.
+PCM_HOLD_AFTER_S = 3.0
+# Below this speed the car is stopped (m/s).
+STOPPED_MPS = 0.01
 # The GPIO lines of the button board wired to an emulated car's switches (docs/agent.md's
 # example wiring).
 BOARD_LINES = {CruiseButton.PLUS: 17, CruiseButton.MINUS: 27, CruiseButton.GAP: 22}
@@ -86,11 +96,13 @@ def track_of(corridor: CorridorGeometry) -> Track:
 
 @dataclass
 class Driver:
-    """The driver's inputs."""
+    """The driver's inputs; `resume_after_s`, how long after a standstill hold begins the driver
+    resumes (RES) by themselves (None: only when `driver_resume()` is called)."""
 
     brake: bool = False
     gas: bool = False
     buttons: frozenset[CruiseButton] = frozenset()
+    resume_after_s: float | None = None
 
 
 class CarEmulator:
@@ -140,6 +152,9 @@ class CarEmulator:
         self._board_lines_high: set[int] = set()
         self._agent_command_s = -math.inf
         self._agent_accel = 0.0
+        # the PCM's standstill (accel makes): when the car stopped engaged, when the hold began
+        self._stopped_since_s: float | None = None
+        self._held_since_s: float | None = None
 
     # The driver -----------------------------------------------------------------------------
 
@@ -159,6 +174,17 @@ class CarEmulator:
     def driver_gas(self, pressed: bool) -> None:
         """Gas pedal: overrides the ACC while pressed."""
         self.driver.gas = pressed
+
+    def driver_resume(self) -> None:
+        """The driver presses RES at a standstill the PCM holds: the hold ends (the set speed
+        stays as it was)."""
+        self._held_since_s = None
+        self._stopped_since_s = None
+
+    @property
+    def standstill_held(self) -> bool:
+        """Whether the PCM holds the car stopped for the driver to resume (accel makes)."""
+        return self._held_since_s is not None
 
     def driver_buttons(self, *buttons: CruiseButton) -> None:
         """The steering-wheel buttons the driver holds from now on."""
@@ -214,11 +240,32 @@ class CarEmulator:
             dt = min(MAX_SUBSTEP_S, now - self.time_s)
             self._advance(dt)
         self.time_s = now
+        self._update_standstill(now)
         self._send_due(now, held)
 
+    def _update_standstill(self, now: float) -> None:
+        """The RAV4 PCM's standstill: 3 s stopped with ACC engaged, then held until the driver
+        resumes (`driver_resume`, the gas, or `Driver.resume_after_s`)."""
+        if self.car.actuation != "accel" or not self.acc.engaged:
+            self._stopped_since_s = self._held_since_s = None
+            return
+        if self._held_since_s is not None:
+            resume = self.driver.resume_after_s
+            if self.driver.gas or (resume is not None and now - self._held_since_s >= resume):
+                self.driver_resume()
+            return
+        if self.speed_mps > STOPPED_MPS:
+            self._stopped_since_s = None
+        elif self._stopped_since_s is None:
+            self._stopped_since_s = now
+        elif now - self._stopped_since_s >= PCM_HOLD_AFTER_S:
+            self._held_since_s = now
+
+    def _agent_command_fresh(self, now: float) -> bool:
+        return now - self._agent_command_s <= COMMAND_TIMEOUT_PERIODS * self.car.command_period_s
+
     def _agent_buttons_at(self, now: float) -> frozenset[CruiseButton]:
-        timeout = COMMAND_TIMEOUT_PERIODS * self.car.command_period_s
-        return self._agent_buttons if now - self._agent_command_s <= timeout else frozenset()
+        return self._agent_buttons if self._agent_command_fresh(now) else frozenset()
 
     def _receive(self, now: float) -> None:
         while True:
@@ -247,14 +294,18 @@ class CarEmulator:
         params = self.acc.params
         if not self.acc.engaged:
             return DRIVER_GAS_MPS2 if self.driver.gas else 0.0
-        timeout = COMMAND_TIMEOUT_PERIODS * self.car.command_period_s
-        if self.car.actuation == "accel" and self.time_s - self._agent_command_s <= timeout:
+        if self.car.actuation == "accel" and self._agent_command_fresh(self.time_s):
             command = min(max(self._agent_accel, params.min_accel_mps2), params.max_accel_mps2)
         else:
             command = self.acc.accel(self.speed_mps, gap, lead_speed)
         return max(command, DRIVER_GAS_MPS2) if self.driver.gas else command
 
     def _advance(self, dt: float) -> None:
+        if self.standstill_held and not self.driver.gas:
+            # the PCM holds the car on its brakes: stopped, whatever crawl was left
+            self.speed_mps = self.accel_mps2 = 0.0
+            self.time_s += dt
+            return
         command = self.commanded_accel()
         self.accel_mps2 += (command - self.accel_mps2) * min(dt / ACTUATOR_LAG_S, 1.0)
         self.speed_mps = max(self.speed_mps + self.accel_mps2 * dt, 0.0)
@@ -285,6 +336,8 @@ class CarEmulator:
             brake_pressed=self.driver.brake,
             gas_pressed=self.driver.gas,
             buttons=held,
+            standstill_timer=self._stopped_since_s is not None and not self.standstill_held,
+            standstill_held=self.standstill_held,
         )
 
     def _send_due(self, now: float, held: frozenset[CruiseButton]) -> None:

@@ -29,6 +29,9 @@ class CarSnapshot:
     brake_pressed: bool
     gas_pressed: bool
     buttons: frozenset[CruiseButton]
+    # the RAV4 PCM's standstill: counting its 3 s, then holding the car for the driver
+    standstill_timer: bool = False
+    standstill_held: bool = False
 
 
 SignalBuilder = Callable[[CarSnapshot], dict[str, float]]
@@ -150,11 +153,22 @@ GM: dict[str, SignalBuilder] = {
 }
 
 
+def _toyota_cruise_state(s: CarSnapshot) -> int:
+    """PCM_CRUISE CRUISE_STATE (opendbc's value table): 8 adaptive engaged, 11 the 3 s timer
+    once stopped, 7 standstill (held for the driver), 0 off."""
+    if not s.acc_engaged:
+        return 0
+    if s.standstill_held:
+        return 7
+    return 11 if s.standstill_timer else 8
+
+
 TOYOTA: dict[str, SignalBuilder] = {
     "SPEED": lambda s: {"SPEED": s.speed_mps * KPH_PER_MPS},
     "PCM_CRUISE": lambda s: {
         "CRUISE_ACTIVE": int(s.acc_engaged),
         "GAS_RELEASED": int(not s.gas_pressed),
+        "CRUISE_STATE": _toyota_cruise_state(s),
     },
     "PCM_CRUISE_2": lambda s: {
         "MAIN_ON": int(s.acc_main_on),

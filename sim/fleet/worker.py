@@ -55,6 +55,10 @@ NETWORK_THREADS = 4
 NETWORK_PAUSE_S = 0.2
 # The driver sets ACC near the posted limit; the agent moves the setting from there.
 DRIVER_SET_SPEED_MPH = 70
+# How long a driver takes to press RES once the RAV4's PCM holds the car at a standstill (the
+# emulator's PCM holds until then). No recording gives it; without a driver who resumes, a
+# RAV4 stopped in a wave would stay there for the rest of the run.
+DRIVER_RESUME_AFTER_S = 2.0
 # Where a car re-enters the corridor after reaching its end (m from either end).
 WRAP_MARGIN_M = 60.0
 # The leader starts this far ahead: about the stock ACC's widest time gap at the traffic speed.
@@ -208,6 +212,7 @@ class Fleet:
             dbc_cache=dbc_cache,
         )
         emulator.driver_engage(DRIVER_SET_SPEED_MPH)
+        emulator.driver.resume_after_s = DRIVER_RESUME_AFTER_S
         agent = Agent(
             vehicle_id=vehicle.vehicle_id,
             car=car,

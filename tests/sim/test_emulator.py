@@ -155,6 +155,61 @@ def test_acceleration_requests_drive_the_rav4_until_they_stop(
     assert emulator.accel_mps2 > 0.3
 
 
+def test_the_rav4s_pcm_counts_3_s_stopped_then_holds_until_the_driver_resumes(
+    car_bus: can.BusABC, agent_bus: can.BusABC, dbc_cache: Path
+) -> None:
+    """opendbc's PCM_CRUISE CRUISE_STATE: 8 engaged, 11 the 3 s timer once stopped, 7 the
+    standstill held for the driver; held, no request moves the car."""
+    emulator = CarEmulator("toyota_rav4", car_bus, speed_mps=0.0, dbc_cache=dbc_cache)
+    emulator.driver_engage(set_speed_mph=30)
+    car = car_for("toyota_rav4")
+    reader = CarStateReader(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    codec = reader.codec
+    now = 0.0
+
+    def request(accel_mps2: float, seconds: float) -> list[float]:
+        """Requests every 40 ms for `seconds`; the CRUISE_STATE read after each."""
+        nonlocal now
+        data = codec.encode("ACC_CONTROL", car.accel_signals(accel_mps2, release_standstill=True))
+        states = []
+        for _ in range(round(seconds / 0.04)):
+            frame = can.Message(
+                arbitration_id=codec.frame_id("ACC_CONTROL"), data=data, is_extended_id=False
+            )
+            agent_bus.send(frame)
+            now = round(now + 0.04, 3)
+            emulator.step(now)
+            drain(agent_bus, reader, now)
+            states.append(reader.latest["PCM_CRUISE"]["CRUISE_STATE"])
+        return states
+
+    waiting = request(-0.5, 2.0)  # stopped 2 s: the timer runs, no hold yet
+    assert set(waiting) == {11}
+    moving = request(1.0, 1.0)  # moving within the timer: no hold, and the timer is reset
+    assert emulator.speed_mps > 0.3
+    assert moving[-1] == 8
+    request(-3.0, 1.0)  # stopped again
+    assert emulator.speed_mps == 0.0
+    stopped = request(-0.5, 3.2)
+    assert stopped[0] == 11  # the 3 s timer from the stop...
+    assert stopped[-1] == 7  # ...then the standstill
+    assert emulator.standstill_held
+    held = request(1.0, 2.0)  # 2 s of requests to go, RELEASE_STANDSTILL set: no move
+    assert emulator.speed_mps == 0.0
+    assert set(held) == {7}
+    emulator.driver_resume()  # RES
+    resumed = request(1.0, 1.0)
+    assert emulator.speed_mps > 0.3
+    assert resumed[-1] == 8
+    # a driver who presses RES by themselves 1 s into a hold (the demo fleet's drivers)
+    emulator.driver.resume_after_s = 1.0
+    request(-3.0, 1.0)
+    waited = request(-0.5, 4.5)
+    assert 7 in waited
+    assert waited[-1] == 11  # resumed after 1 s, and stopped still: the timer again
+    assert not emulator.standstill_held
+
+
 def test_stock_acc_settles_at_the_gap_settings_time_gap(
     car_bus: can.BusABC, dbc_cache: Path
 ) -> None:

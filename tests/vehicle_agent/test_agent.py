@@ -16,7 +16,7 @@ import pytest
 
 from contract.corridor import CorridorGeometry
 from contract.units import MPS_PER_MPH
-from sim.emulator.leaders import ConstantSpeedLeader
+from sim.emulator.leaders import ConstantSpeedLeader, SpeedProfileLeader
 from sim.emulator.rig import Rig, rig, seed_corridor_document, uniform_plan
 from vehicle_agent.agent import FAULT_HOLDS_S, GPS_MAX_AGE_S
 from vehicle_agent.cars import CarReading, CruiseButton
@@ -617,6 +617,54 @@ def test_the_agent_never_releases_a_standstill_the_rav4s_pcm_holds(
         for frame, request in enumerate(resumed, start=1):
             assert request["ACCEL_CMD"] <= 2.5 * period * frame + 0.01
         assert resumed[-1]["ACCEL_CMD"] > 0
+
+
+def test_the_emulated_pcm_holds_a_stop_the_agent_never_releases_until_the_driver_resumes(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """End to end, with the emulator's own PCM: behind a leader that stops for 20 s, the car
+    stops, the PCM holds it after its 3 s timer, and the agent stays engaged and sends no
+    release while its controller would go; the leader drives off and the car stays until the
+    driver's RES, then the agent pulls away."""
+    # 40 m ahead at 10 m/s, stopped from 110 to 130 s (the rig's clock starts at 100 s)
+    leader = SpeedProfileLeader(
+        [100.0, 105.0, 110.0, 130.0, 135.0], [10.0, 10.0, 0.0, 0.0, 10.0], position_m=1040.0
+    )
+    with (
+        rig(
+            "toyota_rav4",
+            tmp_path,
+            dbc_cache,
+            controller="microaccel",
+            speed_mps=10.0,
+            leader=leader,
+            target_speed_mps=10.0,
+        ) as r,
+        can.Bus(interface="virtual", channel=r.agent_bus.channel_id) as listener,
+    ):
+        codec = r.agent.codec
+        r.emulator.driver_engage(set_speed_mph=25)
+        r.run(30.0, until=lambda: r.emulator.standstill_held)
+        assert r.emulator.standstill_held
+        held_at = r.clock.monotonic()
+        assert held_at < 125.0
+        r.run(134.0 - held_at)  # the leader left at 130 s
+        assert r.emulator.speed_mps == 0.0
+        assert r.emulator.lead()[0] > 20.0  # type: ignore[operator]
+        assert engaged(r), r.agent.state.reason
+        assert r.agent._requested_accel > 0  # the controller would go
+        requests = [
+            codec.decode(frame.arbitration_id, frame.data)[1]
+            for frame in iter(lambda: listener.recv(timeout=0), None)
+            if frame.arbitration_id == codec.frame_id("ACC_CONTROL")
+        ]
+        # from a PCM_CRUISE of the hold on, within a PCM period and an agent period of it
+        after_hold = requests[-int((r.clock.monotonic() - held_at - 0.07) * 30) :]
+        assert {request["RELEASE_STANDSTILL"] for request in after_hold} == {0}
+        r.emulator.driver_resume()
+        r.run(3.0)
+        assert r.emulator.speed_mps > 2.0
+        assert engaged(r), r.agent.state.reason
 
 
 def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
