@@ -31,19 +31,22 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from contract.units import MPS_PER_MPH, mps_to_mph
-from vehicle_agent.actuators import (
-    LONG_PRESS_S,
-    LONG_STEP_MPH,
-    SHORT_STEP_MPH,
-    ButtonSequencer,
-    next_gap_setting,
-)
+from vehicle_agent.actuators import ButtonSequencer
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.controllers import AccSetPoint
 from vehicle_agent.stopping import STOCK_ACC_MAX_BRAKING_MPS2
 
 MIN_SET_SPEED_MPH = 20
 MAX_SET_SPEED_MPH = 90
+# The emulated car's buttons (paper, the ACC buttons' figure: +/- 1 mph a press, 5 mph held;
+# the 0.6 s a hold takes per 5 mph step is our assumption). Stated here apart from what the
+# agent believes of them (vehicle_agent.actuators), so that an agent wrong about the car is
+# caught by its tests against this one, not matched by it.
+PRESS_STEP_MPH = 1
+HOLD_STEP_MPH = 5
+HOLD_STEP_EVERY_S = 0.6
+# The gap button's cycle of bars (interfaces.md: three settings of ~1.2, 1.5, 2.0 s).
+NEXT_GAP_BARS = {3: 2, 2: 1, 1: 3}
 
 
 @dataclass(frozen=True)
@@ -161,11 +164,11 @@ class StockAcc:
             self._long_steps[button] = 0
         for button in (CruiseButton.PLUS, CruiseButton.MINUS):
             if button in pressed and self.engaged and self.set_speed_mph is not None:
-                steps = int((now - self._pressed[button]) // LONG_PRESS_S)
+                steps = int((now - self._pressed[button]) // HOLD_STEP_EVERY_S)
                 while self._long_steps[button] < steps:
                     self._long_steps[button] += 1
                     sign = 1 if button is CruiseButton.PLUS else -1
-                    self.set_speed_mph = _bounded(self.set_speed_mph + sign * LONG_STEP_MPH)
+                    self.set_speed_mph = _bounded(self.set_speed_mph + sign * HOLD_STEP_MPH)
         for button in set(self._pressed) - pressed:
             del self._pressed[button]
             if not self._long_steps.pop(button, 0):
@@ -178,7 +181,7 @@ class StockAcc:
         elif button is CruiseButton.CANCEL:
             self.cancel()
         elif button is CruiseButton.GAP:
-            self.gap_setting = next_gap_setting(self.gap_setting)
+            self.gap_setting = NEXT_GAP_BARS[self.gap_setting]
         elif not self.engaged:
             if brake_pressed:
                 return
@@ -188,7 +191,7 @@ class StockAcc:
                 self.engaged = True
         elif self.set_speed_mph is not None:
             sign = 1 if button is CruiseButton.PLUS else -1
-            self.set_speed_mph = _bounded(self.set_speed_mph + sign * SHORT_STEP_MPH)
+            self.set_speed_mph = _bounded(self.set_speed_mph + sign * PRESS_STEP_MPH)
 
     def accel(
         self, speed_mps: float, lead_distance_m: float | None, lead_speed_mps: float | None

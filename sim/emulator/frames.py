@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 from contract.units import KPH_PER_MPH, KPH_PER_MPS, MPH_PER_MPS
 from vehicle_agent.cars import CruiseButton
-from vehicle_agent.cars.toyota import NO_LEAD_DISTANCE_M
 
 
 @dataclass(frozen=True)
@@ -35,6 +34,10 @@ class CarSnapshot:
 
 
 SignalBuilder = Callable[[CarSnapshot], dict[str, float]]
+
+# What the emulated RAV4's LEAD_INFO says with no leader: the field team's "252 = none" (data
+# README), stated here apart from the agent's reading of it.
+RAV4_NO_LEAD_DISTANCE_M = 252.0
 
 
 def _nissan_wheels(s: CarSnapshot) -> dict[str, float]:
@@ -184,7 +187,7 @@ TOYOTA: dict[str, SignalBuilder] = {
     "LEAD_INFO": lambda s: {
         "LEAD_LONG_DIST": s.lead_distance_m
         if s.lead_present and s.lead_distance_m
-        else NO_LEAD_DISTANCE_M,
+        else RAV4_NO_LEAD_DISTANCE_M,
         "LEAD_REL_SPEED": (s.lead_rel_speed_mps or 0.0) if s.lead_present else 0.0,
     },
 }
