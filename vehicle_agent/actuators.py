@@ -114,6 +114,15 @@ class ButtonSequencer:
         self.button = None
         self._expectation = None
 
+    def pause(self) -> None:
+        """Release at once and press nothing until `step` is called again, keeping the request
+        and the count of unconfirmed presses: the car takes no press now (its ACC holds a
+        standstill for the driver, who alone may resume it). A press cut short is neither
+        confirmed nor counted."""
+        self.phase = Phase.IDLE
+        self.button = None
+        self._expectation = None
+
     def step(self, now: float, speed_mph: float | None, gap: int | None) -> CruiseButton | None:
         """Advance to `now` given the car's reported set speed and gap; the button to hold."""
         if self.phase is Phase.PRESSED:

@@ -236,7 +236,7 @@ class Agent:
         if car.actuation == "acc":
             if button_port is None and not car.accepts_button_frames:
                 raise ButtonBoardRequired(
-                    f"the {car.model} {car.years[0]} ({car.key}) takes no button frames on "
+                    f"the {car.make} {car.model} ({car.key}) takes no button frames on "
                     "CAN: its buttons are pressed through a GPIO button board, so set "
                     "SMOOTHFLEET_AGENT_BUTTON_BOARD (e.g. plus=17,minus=27,gap=22)"
                 )
@@ -548,7 +548,11 @@ class Agent:
         if self.buttons is not None:
             held = None
             reading = car_state.reading
-            if self.state.commanding and reading is not None:
+            if self.state.commanding and reading is not None and reading.standstill_held:
+                # The stock ACC holds the car stopped for the driver: + would resume it (drive
+                # off with nobody resuming) and - may too, so nothing is pressed while it lasts.
+                self.sequencer.pause()
+            elif self.state.commanding and reading is not None:
                 held = self.sequencer.step(
                     now, reading.acc_speed_setting_mph, reading.acc_gap_setting
                 )

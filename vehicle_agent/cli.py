@@ -150,7 +150,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if failures or args.release_buttons:
             return 1 if failures else 0
     elif args.release_buttons:
-        return 0  # no board: the car's buttons are CAN frames, which stop with the agent
+        return 0  # no board set: nothing to lower (CAN button frames stop with the agent)
     stop = threading.Event()
 
     def request_stop(signum: int, frame: FrameType | None) -> None:

@@ -13,8 +13,10 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
   1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
-- the car: ACC engaged by the driver, the car state valid and fresh, and no release of a
-  standstill the stock ACC may hold for the driver to resume (the RAV4's RELEASE_STANDSTILL)
+- the car: ACC engaged by the driver, the car state valid and fresh, no press while the stock
+  ACC holds a standstill for the driver (the 2023 Rogue's CRUISE_STATE 4: + resumes it), and no
+  release of a standstill the stock ACC may hold for the driver to resume (the RAV4's
+  RELEASE_STANDSTILL)
   but from a reading of it at most 2 of its periods old that shows none held
   (`check_standstill_release`; the port builds no other release, so this refuses only a frame
   built wrong, not every late PCM_CRUISE);
@@ -149,7 +151,9 @@ class SafetyLayer:
         """Why `frame` must not be sent now, or None when it may."""
         now = context.time_s
         if not self.car.accepts_button_frames:
-            return Refusal("id", f"the {self.car.model} {self.car.years[0]} takes no frames")
+            return Refusal(
+                "id", f"the {self.car.make} {self.car.model} ({self.car.key}) takes no frames"
+            )
         if frame.arbitration_id != self.command_id or frame.is_extended_id:
             return Refusal("id", f"id {frame.arbitration_id:#x} is not {self.car.command_message}")
         if len(frame.data) != self.command_length:
@@ -298,6 +302,11 @@ class SafetyLayer:
         problem = self._check_car(context)
         if problem is not None:
             return problem
+        reading = context.car_state.reading
+        if reading is not None and reading.standstill_held:
+            return Refusal(
+                "standstill", "the stock ACC holds a standstill for the driver: no press"
+            )
         if not pressed <= self.limits.allowed_buttons:
             names = ", ".join(sorted(b.value for b in pressed - self.limits.allowed_buttons))
             return Refusal("button", f"button {names} is not the agent's to press")

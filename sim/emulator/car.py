@@ -52,6 +52,12 @@ DRIVER_GAS_MPS2 = 1.0
 # agent never sets it once it has read the hold, and the emulated PCM leaves the hold to the
 # driver alone, so a frame in flight as the hold begins cannot end it.
 PCM_HOLD_AFTER_S = 3.0
+# The makes whose stock ACC holds a standstill for the driver and reports it: the RAV4's PCM,
+# and the 2023 Rogue (CRUISE_STATE 4, "standstill" in the field team's libpanda), whose delay
+# before the hold is not known: the RAV4's 3 s is assumed. A press of + (RES) by anyone, the
+# driver or a button board on the switches, resumes the hold, as RES does on the car; a + held
+# since before the hold began is no new press.
+HOLDS_STANDSTILL = frozenset({"toyota_rav4", "nissan_rogue"})
 # Below this speed the car is stopped (m/s).
 STOPPED_MPS = 0.01
 # The GPIO lines of the button board wired to an emulated car's switches (docs/agent.md's
@@ -152,9 +158,11 @@ class CarEmulator:
         self._board_lines_high: set[int] = set()
         self._agent_command_s = -math.inf
         self._agent_accel = 0.0
-        # the PCM's standstill (accel makes): when the car stopped engaged, when the hold began
+        # the stock ACC's standstill (HOLDS_STANDSTILL): when the car stopped engaged, when the
+        # hold began
         self._stopped_since_s: float | None = None
         self._held_since_s: float | None = None
+        self._buttons_before: frozenset[CruiseButton] = frozenset()
 
     # The driver -----------------------------------------------------------------------------
 
@@ -176,14 +184,14 @@ class CarEmulator:
         self.driver.gas = pressed
 
     def driver_resume(self) -> None:
-        """The driver presses RES at a standstill the PCM holds: the hold ends (the set speed
+        """The driver resumes a standstill the stock ACC holds (the RAV4's RES, whose set speed
         stays as it was)."""
         self._held_since_s = None
         self._stopped_since_s = None
 
     @property
     def standstill_held(self) -> bool:
-        """Whether the PCM holds the car stopped for the driver to resume (accel makes)."""
+        """Whether the stock ACC holds the car stopped for the driver to resume."""
         return self._held_since_s is not None
 
     def driver_buttons(self, *buttons: CruiseButton) -> None:
@@ -240,18 +248,24 @@ class CarEmulator:
             dt = min(MAX_SUBSTEP_S, now - self.time_s)
             self._advance(dt)
         self.time_s = now
-        self._update_standstill(now)
+        self._update_standstill(now, held)
+        self._buttons_before = held
         self._send_due(now, held)
 
-    def _update_standstill(self, now: float) -> None:
-        """The RAV4 PCM's standstill: 3 s stopped with ACC engaged, then held until the driver
-        resumes (`driver_resume`, the gas, or `Driver.resume_after_s`)."""
-        if self.car.actuation != "accel" or not self.acc.engaged:
+    def _update_standstill(self, now: float, held: frozenset[CruiseButton]) -> None:
+        """The stock ACC's standstill (`HOLDS_STANDSTILL`): 3 s stopped with ACC engaged, then
+        held until resumed (a press of +, `driver_resume`, the gas, or
+        `Driver.resume_after_s`)."""
+        if self.car.key not in HOLDS_STANDSTILL or not self.acc.engaged:
             self._stopped_since_s = self._held_since_s = None
             return
         if self._held_since_s is not None:
             resume = self.driver.resume_after_s
-            if self.driver.gas or (resume is not None and now - self._held_since_s >= resume):
+            if (
+                self.driver.gas
+                or CruiseButton.PLUS in held - self._buttons_before
+                or (resume is not None and now - self._held_since_s >= resume)
+            ):
                 self.driver_resume()
             return
         if self.speed_mps > STOPPED_MPS:
@@ -272,14 +286,16 @@ class CarEmulator:
             frame = self.bus.recv(timeout=0)
             if frame is None:
                 return
-            if frame.arbitration_id != self._command_id or not self.car.accepts_button_frames:
+            if frame.arbitration_id != self._command_id:
                 continue
             try:
                 _, signals = self.codec.decode(frame.arbitration_id, frame.data)
             except FrameError:
                 self.agent_bad_frames += 1
                 continue
-            self.agent_frames += 1
+            self.agent_frames += 1  # counted, whether or not the car acts on it
+            if not self.car.accepts_button_frames:
+                continue
             self._agent_command_s = now
             if self.car.actuation == "accel":
                 self._agent_accel = self.car.commanded_accel(signals)

@@ -28,7 +28,7 @@ class CarSnapshot:
     brake_pressed: bool
     gas_pressed: bool
     buttons: frozenset[CruiseButton]
-    # the RAV4 PCM's standstill: counting its 3 s, then holding the car for the driver
+    # the stock ACC's standstill: counting its 3 s, then holding the car for the driver
     standstill_timer: bool = False
     standstill_held: bool = False
 
@@ -76,12 +76,14 @@ NISSAN_ROGUE_2018: dict[str, SignalBuilder] = {
 
 
 def _rogue_2023_cruise_state(s: CarSnapshot) -> int:
-    """CRUISE_STATE on its 4 bits: 0 off, 6 on, 12 engaged, 14 engaged with the gas pressed
-    (the states the field team's libpanda names; the emulated ACC holds no standstill, 4)."""
+    """CRUISE_STATE on its 4 bits: 0 off, 6 on, 12 engaged, 14 engaged with the gas pressed, 4
+    the standstill held for the driver (the states the field team's libpanda names)."""
     if not s.acc_main_on:
         return 0
     if not s.acc_engaged:
         return 6
+    if s.standstill_held:
+        return 4
     return 14 if s.gas_pressed else 12
 
 

@@ -55,9 +55,10 @@ NETWORK_THREADS = 4
 NETWORK_PAUSE_S = 0.2
 # The driver sets ACC near the posted limit; the agent moves the setting from there.
 DRIVER_SET_SPEED_MPH = 70
-# How long a driver takes to press RES once the RAV4's PCM holds the car at a standstill (the
-# emulator's PCM holds until then). No recording gives it; without a driver who resumes, a
-# RAV4 stopped in a wave would stay there for the rest of the run.
+# How long a driver takes to resume once the stock ACC holds the car at a standstill (the
+# emulated RAV4 and 2023 Rogue hold until then, `sim.emulator.car.HOLDS_STANDSTILL`). No
+# recording gives it; without a driver who resumes, a car stopped in a wave would stay there
+# for the rest of the run.
 DRIVER_RESUME_AFTER_S = 2.0
 # Where a car re-enters the corridor after reaching its end (m from either end).
 WRAP_MARGIN_M = 60.0

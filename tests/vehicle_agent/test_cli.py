@@ -109,7 +109,7 @@ def test_a_2023_rogue_without_a_button_board_is_one_line(tmp_path: Path) -> None
     )
     assert result.returncode == 1
     assert result.stderr == (
-        "smoothfleet-agent: the Rogue 2023 (nissan_rogue) takes no button frames on CAN: its "
+        "smoothfleet-agent: the Nissan Rogue (nissan_rogue) takes no button frames on CAN: its "
         "buttons are pressed through a GPIO button board, so set SMOOTHFLEET_AGENT_BUTTON_BOARD "
         "(e.g. plus=17,minus=27,gap=22)\n"
     )

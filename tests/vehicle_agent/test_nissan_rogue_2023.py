@@ -8,7 +8,8 @@ from pathlib import Path
 import can
 import pytest
 
-from sim.emulator.car import BOARD_LINES
+from sim.emulator.car import BOARD_LINES, CarEmulator
+from sim.emulator.leaders import SpeedProfileLeader
 from sim.emulator.rig import Rig, rig
 from vehicle_agent.agent import Agent
 from vehicle_agent.bus import open_bus
@@ -92,6 +93,7 @@ def test_hand_built_frames_read_as_the_field_teams_dbc_lays_them_out(dbc_cache: 
 def test_the_2018_frames_are_not_the_2023_cars() -> None:
     """A make, model and year from the roster picks the interface of that year's frames."""
     assert car_for("Nissan", "Rogue", 2023).key == "nissan_rogue"
+    assert car_for("Nissan", "Rogue", 2021).key == "nissan_rogue"
     assert car_for("Nissan", "Rogue", 2019).key == "nissan_rogue_2018"
     assert car_for("Nissan", "Rogue").key == "nissan_rogue"  # the fleet's
     assert car_for("nissan_rogue").can_fd
@@ -132,6 +134,33 @@ def test_the_safety_layer_lets_no_frame_onto_the_cars_bus(dbc_cache: Path) -> No
         press, SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, None))
     )
     assert safety.refused == {"id": 1}
+
+
+def test_the_emulated_car_counts_injected_button_frames_and_acts_on_none(
+    dbc_cache: Path,
+) -> None:
+    """As the real one refused them (paper): so a test's count of the agent's frames means
+    something for this car too."""
+    car_bus = can.Bus(interface="virtual", channel="rogue-2023-inject")
+    agent_bus = can.Bus(interface="virtual", channel="rogue-2023-inject")
+    try:
+        emulator = CarEmulator("nissan_rogue", car_bus, speed_mps=25.0, dbc_cache=dbc_cache)
+        emulator.driver_engage(set_speed_mph=60)
+        codec = codec_for("nissan_rogue_2023", {}, dbc_cache)
+        now = 0.0
+        for _ in range(10):  # + held 0.5 s in frames every 50 ms, then released
+            agent_bus.send(fd_frame(1119, codec.encode("WHEEL_BUTTONS", {"ACC_BTNS": 1})))
+            now = round(now + 0.05, 3)
+            emulator.step(now)
+        for _ in range(10):
+            agent_bus.send(fd_frame(1119, codec.encode("WHEEL_BUTTONS", {"ACC_BTNS": 0})))
+            now = round(now + 0.05, 3)
+            emulator.step(now)
+        assert emulator.agent_frames == 20
+        assert emulator.acc.set_speed_mph == 60
+    finally:
+        car_bus.shutdown()
+        agent_bus.shutdown()
 
 
 def test_a_can_fd_bus_carries_the_cars_64_byte_frames() -> None:
@@ -179,8 +208,8 @@ def test_the_board_wired_to_the_switches_walks_the_set_speed_and_gap_to_the_requ
         assert engaged(r)
         assert not r.agent.sequencer.stalled
         assert r.agent.safety.refused == {}
-        assert r.agent.safety.sent == 0  # no frame on the car's bus
-        assert r.emulator.agent_frames == 0
+        assert r.agent.safety.sent == 0  # no frame on the car's bus...
+        assert r.emulator.agent_frames == 0  # ...as the car counts them, acted on or not
         assert r.agent.reader.stats.errors == {}
 
 
@@ -206,3 +235,68 @@ def test_the_driver_takes_the_car_back_within_a_cruise_frame(
         assert r.clock.monotonic() - touched_at <= SLOWEST_PERIOD_S + CONTROL_PERIOD_S
         if action == "gas":
             assert r.agent.state.mode is Mode.OVERRIDDEN
+
+
+def test_nothing_is_pressed_while_the_stock_acc_holds_a_standstill_for_the_driver(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """At a standstill the stock ACC holds (CRUISE_STATE 4), + resumes the car. The paper's
+    clip leaves out 0 mph samples, so a stopped car's setting is the controller's own, and the
+    board went on pressing + towards the plan's 60 mph through the hold: it drove off a stop
+    that is the driver's to leave. Now the agent stays engaged and presses nothing until the
+    driver resumes."""
+    # 40 m ahead at 10 m/s, stopped from 110 to 130 s (the rig's clock starts at 100 s)
+    leader = SpeedProfileLeader(
+        [100.0, 108.0, 110.0, 130.0, 135.0], [10.0, 10.0, 0.0, 0.0, 10.0], position_m=1040.0
+    )
+    with rig(
+        "nissan_rogue",
+        tmp_path,
+        dbc_cache,
+        controller="simple",
+        speed_mps=10.0,
+        leader=leader,
+        target_speed_mps=26.8224,  # 60 mph
+    ) as r:
+        r.run(7.0)
+        # set late, at 45 mph: the agent walks it down to 20 as the car stops, then up again
+        r.emulator.driver_engage(set_speed_mph=45)
+        r.run(30.0, until=lambda: r.emulator.standstill_held)
+        assert r.emulator.standstill_held
+        held_at = r.clock.monotonic()
+        assert held_at < 125.0
+        presses = r.agent.sequencer.presses
+        setting = r.emulator.acc.set_speed_mph
+        assert setting is not None
+        assert setting < 55  # the walk up to 60 mph was not done when the hold began
+        r.run(136.0 - held_at)  # the leader left at 130 s
+        assert r.emulator.speed_mps == 0.0
+        assert r.emulator.standstill_held
+        assert r.agent.sequencer.presses == presses
+        assert r.emulator.acc.set_speed_mph == setting
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.safety.refused == {}
+        r.emulator.driver_resume()
+        r.run(5.0)
+        assert r.emulator.speed_mps > 2.0
+        assert engaged(r), r.agent.state.reason
+
+
+def test_the_safety_layer_refuses_a_press_while_the_stock_acc_holds_a_standstill(
+    dbc_cache: Path,
+) -> None:
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    held = CarReading(
+        speed_mps=0.0,
+        acc_available=True,
+        acc_engaged=True,
+        acc_speed_setting_mph=30.0,
+        acc_gap_setting=3,
+        lead_present=True,
+        standstill_held=True,
+    )
+    context = SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, held))
+    assert not safety.admit_press(frozenset({CruiseButton.PLUS}), context)
+    assert safety.refused == {"standstill": 1}
+    assert safety.admit_press(frozenset(), context)  # letting go always is

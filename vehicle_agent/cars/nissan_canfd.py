@@ -1,4 +1,4 @@
-"""2023 Nissan Rogue on its CAN-FD frames (actuation `acc`: button presses, by a GPIO board).
+"""2021-23 Nissan Rogue on its CAN-FD frames (actuation `acc`: button presses, by a GPIO board).
 
 The paper's majority car (97 of the 100). opendbc's Nissan DBCs describe the 2018-20 frames
 (`nissan.py`); the 2023 car puts what the agent reads on other ids, in CAN-FD frames of 12 to 64
@@ -57,7 +57,9 @@ class NissanRogue(CarInterface):
     key = "nissan_rogue"
     make = "Nissan"
     model = "Rogue"
-    years = (2023,)
+    # the paper's cars are 2023s; the field team's DBC was made on a 2021 (its name), the first
+    # year of this Rogue
+    years = (2021, 2022, 2023)
     dbc_name = "nissan_rogue_2023"
     actuation: ClassVar[Actuation] = "acc"
     can_fd = True
