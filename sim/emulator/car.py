@@ -53,11 +53,12 @@ DRIVER_GAS_MPS2 = 1.0
 # driver alone, so a frame in flight as the hold begins cannot end it.
 PCM_HOLD_AFTER_S = 3.0
 # The makes whose stock ACC holds a standstill for the driver and reports it: the RAV4's PCM,
-# and the 2023 Rogue (CRUISE_STATE 4, "standstill" in the field team's libpanda), whose delay
-# before the hold is not known: the RAV4's 3 s is assumed. A press of + (RES) by anyone, the
+# the 2023 Rogue (CRUISE_STATE 4, "standstill" in the field team's libpanda) and the XT5
+# (AcceleratorPedal2 CruiseState 4, opendbc's "Standstill"), whose delays before the hold are
+# not known: the RAV4's 3 s is assumed. A press of + (RES) by anyone, the
 # driver or a button board on the switches, resumes the hold, as RES does on the car; a + held
 # since before the hold began is no new press.
-HOLDS_STANDSTILL = frozenset({"toyota_rav4", "nissan_rogue"})
+HOLDS_STANDSTILL = frozenset({"toyota_rav4", "nissan_rogue", "cadillac_xt5"})
 # Below this speed the car is stopped (m/s).
 STOPPED_MPS = 0.01
 # The GPIO lines of the button board wired to an emulated car's switches (docs/agent.md's

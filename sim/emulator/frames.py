@@ -154,7 +154,11 @@ GM: dict[str, SignalBuilder] = {
         "ACCAlwaysOne": 1,
     },
     "ASCMSteeringButton": _gm_buttons,
-    "AcceleratorPedal2": lambda s: {"AcceleratorPedal2": 120 if s.gas_pressed else 0},
+    "AcceleratorPedal2": lambda s: {
+        "AcceleratorPedal2": 120 if s.gas_pressed else 0,
+        # opendbc's value table: 0 off, 1 active, 4 standstill (held for the driver)
+        "CruiseState": (4 if s.standstill_held else 1) if s.acc_engaged else 0,
+    },
 }
 
 

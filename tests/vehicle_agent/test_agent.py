@@ -669,6 +669,53 @@ def test_the_emulated_pcm_holds_a_stop_the_agent_never_releases_until_the_driver
         assert engaged(r), r.agent.state.reason
 
 
+@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+def test_nothing_is_pressed_while_the_stock_acc_holds_a_standstill_for_the_driver(
+    key: str, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """At a standstill the stock ACC holds (the 2023 Rogue's CRUISE_STATE 4, the XT5's
+    AcceleratorPedal2 CruiseState 4), + resumes the car. The paper's
+    clip leaves out 0 mph samples, so a stopped car's setting is the controller's own, and the
+    board went on pressing + towards the plan's 60 mph through the hold: it drove off a stop
+    that is the driver's to leave. Now the agent stays engaged and presses nothing until the
+    driver resumes."""
+    # 40 m ahead at 10 m/s, stopped from 110 to 130 s (the rig's clock starts at 100 s)
+    leader = SpeedProfileLeader(
+        [100.0, 108.0, 110.0, 130.0, 135.0], [10.0, 10.0, 0.0, 0.0, 10.0], position_m=1040.0
+    )
+    with rig(
+        key,
+        tmp_path,
+        dbc_cache,
+        controller="simple",
+        speed_mps=10.0,
+        leader=leader,
+        target_speed_mps=26.8224,  # 60 mph
+    ) as r:
+        r.run(7.0)
+        # set late, at 45 mph: the agent walks it down to 20 as the car stops, then up again
+        r.emulator.driver_engage(set_speed_mph=45)
+        r.run(30.0, until=lambda: r.emulator.standstill_held)
+        assert r.emulator.standstill_held
+        held_at = r.clock.monotonic()
+        assert held_at < 125.0
+        presses = r.agent.sequencer.presses
+        setting = r.emulator.acc.set_speed_mph
+        assert setting is not None
+        assert setting < 55  # the walk up to 60 mph was not done when the hold began
+        r.run(136.0 - held_at)  # the leader left at 130 s
+        assert r.emulator.speed_mps == 0.0
+        assert r.emulator.standstill_held
+        assert r.agent.sequencer.presses == presses
+        assert r.emulator.acc.set_speed_mph == setting
+        assert engaged(r), r.agent.state.reason
+        assert r.agent.safety.refused == {}
+        r.emulator.driver_resume()
+        r.run(5.0)
+        assert r.emulator.speed_mps > 2.0
+        assert engaged(r), r.agent.state.reason
+
+
 def test_the_rav4_releases_no_standstill_from_a_pcm_cruise_over_two_periods_old(
     tmp_path: Path, dbc_cache: Path
 ) -> None:

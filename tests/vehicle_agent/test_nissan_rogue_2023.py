@@ -9,7 +9,6 @@ import can
 import pytest
 
 from sim.emulator.car import BOARD_LINES, CarEmulator
-from sim.emulator.leaders import SpeedProfileLeader
 from sim.emulator.rig import Rig, rig
 from vehicle_agent.agent import Agent
 from vehicle_agent.bus import open_bus
@@ -235,51 +234,6 @@ def test_the_driver_takes_the_car_back_within_a_cruise_frame(
         assert r.clock.monotonic() - touched_at <= SLOWEST_PERIOD_S + CONTROL_PERIOD_S
         if action == "gas":
             assert r.agent.state.mode is Mode.OVERRIDDEN
-
-
-def test_nothing_is_pressed_while_the_stock_acc_holds_a_standstill_for_the_driver(
-    tmp_path: Path, dbc_cache: Path
-) -> None:
-    """At a standstill the stock ACC holds (CRUISE_STATE 4), + resumes the car. The paper's
-    clip leaves out 0 mph samples, so a stopped car's setting is the controller's own, and the
-    board went on pressing + towards the plan's 60 mph through the hold: it drove off a stop
-    that is the driver's to leave. Now the agent stays engaged and presses nothing until the
-    driver resumes."""
-    # 40 m ahead at 10 m/s, stopped from 110 to 130 s (the rig's clock starts at 100 s)
-    leader = SpeedProfileLeader(
-        [100.0, 108.0, 110.0, 130.0, 135.0], [10.0, 10.0, 0.0, 0.0, 10.0], position_m=1040.0
-    )
-    with rig(
-        "nissan_rogue",
-        tmp_path,
-        dbc_cache,
-        controller="simple",
-        speed_mps=10.0,
-        leader=leader,
-        target_speed_mps=26.8224,  # 60 mph
-    ) as r:
-        r.run(7.0)
-        # set late, at 45 mph: the agent walks it down to 20 as the car stops, then up again
-        r.emulator.driver_engage(set_speed_mph=45)
-        r.run(30.0, until=lambda: r.emulator.standstill_held)
-        assert r.emulator.standstill_held
-        held_at = r.clock.monotonic()
-        assert held_at < 125.0
-        presses = r.agent.sequencer.presses
-        setting = r.emulator.acc.set_speed_mph
-        assert setting is not None
-        assert setting < 55  # the walk up to 60 mph was not done when the hold began
-        r.run(136.0 - held_at)  # the leader left at 130 s
-        assert r.emulator.speed_mps == 0.0
-        assert r.emulator.standstill_held
-        assert r.agent.sequencer.presses == presses
-        assert r.emulator.acc.set_speed_mph == setting
-        assert engaged(r), r.agent.state.reason
-        assert r.agent.safety.refused == {}
-        r.emulator.driver_resume()
-        r.run(5.0)
-        assert r.emulator.speed_mps > 2.0
-        assert engaged(r), r.agent.state.reason
 
 
 def test_the_safety_layer_refuses_a_press_while_the_stock_acc_holds_a_standstill(

@@ -3,7 +3,8 @@
 Read: ECMVehicleSpeed (mph), ECMEngineStatus (cruise main on and active, brake pressed),
 ASCMActiveCruiseControlStatus (set speed in km/h, gap level 1-3, lead car present),
 ASCMSteeringButton (the driver's ACC buttons; rolling counter and checksum), AcceleratorPedal2
-(gas). No lead distance or relative speed (paper Table 2). Sent: ASCMSteeringButton with Resume
+(gas, and CruiseState: 4 is the standstill the ACC holds for the driver's resume, opendbc's value
+table). No lead distance or relative speed (paper Table 2). Sent: ASCMSteeringButton with Resume
 (+), Set (-) or the distance button.
 """
 
@@ -25,6 +26,8 @@ from vehicle_agent.codec import Checksum, GmSteeringButtonChecksum
 
 # Accelerator pedal counts above which the driver is pressing the gas.
 GAS_PRESSED_COUNTS = 3
+# AcceleratorPedal2 CruiseState while the ACC holds the car stopped for the driver to resume.
+CRUISE_STATE_STANDSTILL = 4
 
 # ACCButtons codes (DBC value table): 1 none, 2 resume, 3 set, 5 main, 6 cancel.
 BUTTON_CODES = {
@@ -70,6 +73,7 @@ class CadillacXT5(CarInterface):
         buttons = {b for b, value in BUTTON_CODES.items() if value == code}
         if buttons_frame["DistanceButton"]:
             buttons.add(CruiseButton.GAP)
+        pedal = signals["AcceleratorPedal2"]
         return CarReading(
             speed_mps=float(signals["ECMVehicleSpeed"]["VehicleSpeed"]) * MPS_PER_MPH,
             acc_available=bool(engine["CruiseMainOn"]),
@@ -80,8 +84,9 @@ class CadillacXT5(CarInterface):
             acc_gap_setting=gap if 1 <= gap <= 3 else None,
             lead_present=bool(acc["ACCLeadCar"]),
             brake_pressed=bool(engine["BrakePressed"]),
-            gas_pressed=signals["AcceleratorPedal2"]["AcceleratorPedal2"] > GAS_PRESSED_COUNTS,
+            gas_pressed=pedal["AcceleratorPedal2"] > GAS_PRESSED_COUNTS,
             buttons=frozenset(buttons),
+            standstill_held=int(pedal["CruiseState"]) == CRUISE_STATE_STANDSTILL,
         )
 
     def button_signals(
