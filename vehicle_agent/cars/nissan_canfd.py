@@ -34,11 +34,10 @@ from vehicle_agent.cars.base import (
     Signals,
 )
 
-# CRUISE_STATE on its 4 bits (cars/dbc/nissan_rogue_2023.dbc).
+# CRUISE_STATE on its 4 bits (cars/dbc/nissan_rogue_2023.dbc's value table: also 6 on and 12
+# engaged, which the agent reads from CRUISE_ENGAGED).
 CRUISE_OFF = 0
 CRUISE_STANDSTILL_HOLD = 4
-CRUISE_ON = 6
-CRUISE_ENGAGED = 12
 CRUISE_ENGAGED_GAS_PRESSED = 14
 
 # ACC_BTNS codes (the DBC's value table); 0 is no button.
