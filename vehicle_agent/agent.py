@@ -53,7 +53,7 @@ from vehicle_agent.controllers.policy import PolicyFileError
 from vehicle_agent.gps import GpsFix, GpsSource
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS, LanePlan, Plan, PlanError
 from vehicle_agent.policies import PolicyStore
-from vehicle_agent.ports import ButtonBoardRequired, ButtonPort, CanAccelPort, CanButtonPort
+from vehicle_agent.ports import ButtonPort, CanAccelPort, CanButtonPort, require_button_board
 from vehicle_agent.probes import cpu_temp_c, disk_free_mb
 from vehicle_agent.safety import SafeSender, SafetyContext, SafetyLayer
 from vehicle_agent.server import (
@@ -233,13 +233,8 @@ class Agent:
         self.limiter = AccelLimiter()
         self.buttons: ButtonPort | None = None
         self.accel_port: CanAccelPort | None = None
+        require_button_board(car, has_board=button_port is not None)
         if car.actuation == "acc":
-            if button_port is None and not car.accepts_button_frames:
-                raise ButtonBoardRequired(
-                    f"the {car.make} {car.model} ({car.key}) takes no button frames on "
-                    "CAN: its buttons are pressed through a GPIO button board, so set "
-                    "SMOOTHFLEET_AGENT_BUTTON_BOARD (e.g. plus=17,minus=27,gap=22)"
-                )
             self.buttons = (
                 button_port(self.safety)
                 if button_port is not None

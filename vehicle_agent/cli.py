@@ -35,6 +35,7 @@ from vehicle_agent.ports import (
     ButtonBoardRequired,
     GpioButtonBoard,
     release_board_lines,
+    require_button_board,
     sysfs_gpio_writer,
 )
 from vehicle_agent.runner import run_agent
@@ -164,10 +165,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         try:
             car = choose_car(settings, server, stop)
+            # before the bus, the spool and gpsd: a car the agent cannot press is refused first
+            require_button_board(car, has_board=bool(settings.button_board))
             codec = codec_for(car.dbc_name, car.checksums, settings.dbc_cache_dir)
             filters = CarStateReader(car, codec).can_filters()
             bus = open_bus(settings.can, filters, fd=car.can_fd)
-        except (ServerError, UnknownCarError, DbcError, BusSpecError) as error:
+        except (ServerError, UnknownCarError, DbcError, BusSpecError, ButtonBoardRequired) as error:
             sys.stderr.write(f"smoothfleet-agent: {error}\n")
             return 1
         except KeyboardInterrupt:
@@ -188,25 +191,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             def board(safety: SafetyLayer) -> GpioButtonBoard:
                 return GpioButtonBoard(lines, writer, safety)
 
-        try:
-            agent = Agent(
-                vehicle_id=settings.vehicle_id,
-                car=car,
-                bus=bus,
-                clock=SystemClock(),
-                gps=gps_source(settings),
-                spool=spool,
-                server=server,
-                button_port=board,
-                dbc_cache=settings.dbc_cache_dir,
-                wave_speed_mps=settings.wave_speed_mps,
-                policies=PolicyStore(settings.policy_dir),
-            )
-        except ButtonBoardRequired as error:
-            spool.close()
-            bus.shutdown()
-            sys.stderr.write(f"smoothfleet-agent: {error}\n")
-            return 1
+        agent = Agent(
+            vehicle_id=settings.vehicle_id,
+            car=car,
+            bus=bus,
+            clock=SystemClock(),
+            gps=gps_source(settings),
+            spool=spool,
+            server=server,
+            button_port=board,
+            dbc_cache=settings.dbc_cache_dir,
+            wave_speed_mps=settings.wave_speed_mps,
+            policies=PolicyStore(settings.policy_dir),
+        )
         log.info(
             "agent %s for %s (%s) on %s", AGENT_VERSION, settings.vehicle_id, car.key, settings.can
         )

@@ -31,6 +31,18 @@ class ButtonBoardRequired(ValueError):
     button board was given: the message names the setting."""
 
 
+def require_button_board(car: CarInterface, *, has_board: bool) -> None:
+    """Refuse a car the agent could press no button on: an ACC car that ignores injected
+    button frames (the 2023 Rogue) with no board wired to its switches would follow no plan.
+    The CLI asks before it opens the bus; the agent asks again for every other caller."""
+    if car.actuation == "acc" and not has_board and not car.accepts_button_frames:
+        raise ButtonBoardRequired(
+            f"the {car.make} {car.model} ({car.key}) takes no button frames on "
+            "CAN: its buttons are pressed through a GPIO button board, so set "
+            "SMOOTHFLEET_AGENT_BUTTON_BOARD (e.g. plus=17,minus=27,gap=22)"
+        )
+
+
 class ButtonPort(Protocol):
     """Something that holds at most one ACC button down."""
 

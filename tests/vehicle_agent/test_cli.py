@@ -115,6 +115,19 @@ def test_a_2023_rogue_without_a_button_board_is_one_line(tmp_path: Path) -> None
     )
 
 
+def test_a_2023_rogue_without_a_button_board_is_refused_before_the_bus_opens(
+    tmp_path: Path,
+) -> None:
+    """Nothing is opened for a car the agent could not press: not the bus (here one that
+    cannot open, whose error came first), not the ping spool."""
+    spool = tmp_path / "s.sqlite"
+    result = run_agent_without_server("nosuch:can0", spool, make="nissan_rogue")
+    assert result.returncode == 1
+    assert "GPIO button board" in result.stderr
+    assert "cannot open CAN bus" not in result.stderr
+    assert not spool.exists()
+
+
 def test_an_unusable_bus_is_one_line(tmp_path: Path) -> None:
     result = run_agent_without_server("nosuch:can0", tmp_path / "s.sqlite")
     assert result.returncode == 1
