@@ -14,11 +14,14 @@ import csv
 import hashlib
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from sim.platoon import PlatoonRun
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 RUNS_INDEX = "runs.csv"
 INDEX_COLUMNS = ("file", "scenario", "drive", "planner", "controller", "avs")
@@ -33,6 +36,8 @@ def run_file_name(scenario: str, drive: str, planner: str, controller: str, avs:
 
 def trajectory_table(run: PlatoonRun) -> pd.DataFrame:
     """The run in the long format of the module docstring (rows where a vehicle exists)."""
+    import pandas as pd  # only `--save-runs` writes tables: every other command starts without
+
     position = run.position_m
     speed = run.speed_mps
     roles = np.where(run.is_av, "av", "human").astype(object)

@@ -31,19 +31,23 @@ from pathlib import Path
 from typing import Any
 from zoneinfo import ZoneInfo
 
+import click
 import httpx
 from sqlalchemy import Engine, select, text
 
 from app.core.config import Settings
-from app.core.db import make_sync_engine, session_scope
+from app.core.db import make_sync_engine, redact, session_scope
 from app.core.security import issue_token, revoke_tokens
 from app.models.dimensions import InrixSegment, Vehicle
+from app.users.service import new_password, save_user
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
 from sim.drives import Drive, load_drive
 from sim.energy import GALLONS_PER_GRAM_GASOLINE
 from sim.fleet.traffic import CorridorTraffic, Segment, synthetic_waves
 from sim.fleet.worker import VehicleSpec, WorkerSpec
+from smoothfleet.cli.common import CliError, console, database, fleet_options
 from smoothfleet.cli.demo_status import StatusMonitor
+from smoothfleet.cli.serve import ensure_port_free, with_overrides
 
 CORRIDOR = "I-24-WB"
 # The strongest stop-and-go drive of the shared data, 300 s in: waves from the first minute.
@@ -563,3 +567,111 @@ def smoothfleet_command() -> list[str]:
     """How to run this installation's `smoothfleet`."""
     script = Path(sys.executable).parent / "smoothfleet"
     return [str(script)] if script.exists() else [sys.executable, "-m", "smoothfleet.cli"]
+
+
+DEMO_ADMIN = "admin"
+
+
+DEMO_DATABASE = "smoothfleet_demo"
+
+
+@click.command("demo")
+@click.option("--host", help="Listen address (SMOOTHFLEET_HOST).")
+@click.option("--port", type=int, help="Listen port (SMOOTHFLEET_PORT).")
+@click.option(
+    "--keep",
+    is_flag=True,
+    help="Keep the previous run's demo database (maintenance flags, users, plans, pings).",
+)
+@click.option(
+    "--rl",
+    is_flag=True,
+    help="Run the fleet on the committed RL policies: upload them and assign rl_acc / rl_accel "
+    "by sha256 to every car (each car downloads its policy).",
+)
+@fleet_options
+def demo(
+    host: str | None,
+    port: int | None,
+    keep: bool,
+    rl: bool,
+    duration: float | None,
+    vehicles: int,
+) -> None:
+    """Everything on one machine: embedded database, migrations, seed, API, dashboard, planner,
+    a simulated INRIX feed and a simulated fleet whose cars run the real vehicle agent.
+
+    The embedded server gets a database of the demo's own, made afresh each run unless --keep;
+    with SMOOTHFLEET_DATABASE_URL set, the demo uses that database as it is."""
+    current = with_overrides(host=host, port=port)
+    ensure_port_free(current.host, current.port)
+    if current.database_url is not None:
+        console.print("SMOOTHFLEET_DATABASE_URL is set: the demo uses that database as it is")
+        with database(current) as url:
+            _demo_on(url, current, duration, vehicles, rl=rl)
+        return
+    from app.core.embedded import (
+        database_url,
+        drop_database,
+        embedded_server,
+        ensure_database,
+        pgdata_dir,
+    )
+
+    with embedded_server(pgdata_dir(current.data_dir)) as server_url:
+        if not keep:
+            drop_database(server_url, DEMO_DATABASE)
+        ensure_database(server_url, DEMO_DATABASE)
+        _demo_on(database_url(server_url, DEMO_DATABASE), current, duration, vehicles, rl=rl)
+
+
+def _say_whole(line: str) -> None:
+    """One line of the demo's output, never wrapped at the terminal's width (a status line is
+    read, and grepped from a log, as one line)."""
+    console.print(line, soft_wrap=True)
+
+
+def _demo_on(
+    url: str, current: Settings, duration: float | None, vehicles: int, *, rl: bool
+) -> None:
+    # the migrations, the seed and the policy store: imported by a demo that runs, not by --help
+    from app.migrate import upgrade
+    from app.policies.service import ManifestConflict, assign_shipped_policies
+    from app.seed import seed
+
+    engine = make_sync_engine(url)
+    upgrade(engine)
+    admin_password = new_password()
+    try:
+        with session_scope(engine) as session:
+            counts = seed(session)
+            save_user(session, DEMO_ADMIN, "admin", admin_password)
+            policies = assign_shipped_policies(session) if rl else {}
+    except ManifestConflict as error:
+        raise CliError(
+            f"demo --rl: {error}; the kept database holds it as an earlier run stored it, and a "
+            "stored policy's manifest never changes: run the demo without --keep"
+        ) from None
+    finally:
+        engine.dispose()
+    public = (current.public_url or f"http://{current.host}:{current.port}").rstrip("/")
+    console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
+    console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+    for controller, sha256 in counts.policies.items():
+        _say_whole(f"{controller}: policy {sha256[:12]} held for the seeded cars that run it")
+    for controller, sha256 in policies.items():
+        _say_whole(f"{controller}: policy {sha256[:12]} assigned to every car it can drive")
+        if controller not in counts.policies:
+            # The roster follows the simulator's verdict; --rl overrides it, and says so.
+            _say_whole(
+                f"{controller}: the seed roster does not run it (the simulator's verdict is not "
+                "to assign it: docs/simulation.md); --rl runs it as the paper's fleet did"
+            )
+    console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
+    console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
+    try:
+        summary = run_demo(url, current, duration_s=duration, vehicles=vehicles, say=_say_whole)
+    except DemoError as error:
+        raise CliError(f"demo: {error}") from None
+    for line in summary.lines():
+        console.print(line)

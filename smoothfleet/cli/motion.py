@@ -21,10 +21,8 @@ from rich.progress import (
     TransferSpeedColumn,
 )
 
-from app.core.db import make_sync_engine
 from app.motion.documents import MotionFileError
 from app.motion.edie import H_T_S, H_X_M, EdieWindow, EdieWindowError, edie_field
-from app.motion.figure import day_figure
 from app.motion.importer import ImportReport, import_motion_file
 from app.motion.store import MotionStoreEmpty, motion_store
 from sim.drives import DriveError, load_drive, shared_data_dir
@@ -276,6 +274,10 @@ def motion_edie(
 @click.option("--store", type=click.Path(path_type=Path))
 def motion_plot(day_text: str, output: Path, corridor_id: str, store: Path | None) -> None:
     """The paper's psi(t, x) heatmap (and u) with the fleet's trajectories, as a PNG."""
+    # matplotlib and SQLAlchemy: imported by this command alone
+    from app.core.db import make_sync_engine
+    from app.motion.figure import day_figure
+
     try:
         day = date.fromisoformat(day_text)
     except ValueError:

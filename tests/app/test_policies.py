@@ -20,7 +20,7 @@ from app.core.db import session_scope
 from app.policies.service import ManifestConflict, assign_shipped_policies
 from app.seed import seed
 from smoothfleet.cli.common import CliError
-from smoothfleet.cli.main import _demo_on
+from smoothfleet.cli.demo import _demo_on
 from tests.support.fleet import drive, post_pings
 from tests.support.policies import acc_policy_bytes, accel_policy_bytes
 from tests.support.servers import cli_env, live_server, run_cli

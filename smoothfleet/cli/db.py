@@ -1,0 +1,151 @@
+"""`smoothfleet db` (migrations, URL, psql, backups, housekeeping) and `smoothfleet seed`."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import click
+
+from app.core.db import libpq_url, make_sync_engine, redact, session_scope
+from smoothfleet.cli.common import CliError, console, database, output_file, settings
+
+
+@click.group()
+def db() -> None:
+    """The warehouse database: migrations, URL, psql, housekeeping."""
+
+
+@db.command("upgrade")
+@click.argument("revision", default="head")
+def db_upgrade(revision: str) -> None:
+    """Migrate the schema up to REVISION (default: head)."""
+    from app.migrate import UnknownRevision, check_revision, upgrade
+
+    try:
+        check_revision(revision)
+    except UnknownRevision as error:
+        raise click.BadParameter(str(error), param_hint="REVISION") from None
+    with database(settings()) as url:
+        upgrade(make_sync_engine(url), revision)
+    console.print(f"database at {revision}")
+
+
+# "-1" (one revision down) is a revision, not an option: it was refused as "No such option".
+@db.command("downgrade", context_settings={"ignore_unknown_options": True})
+@click.argument("revision")
+def db_downgrade(revision: str) -> None:
+    """Migrate the schema down to REVISION ("base" removes every table, "-1" one step)."""
+    from app.migrate import UnknownRevision, check_revision, current_revision, downgrade
+
+    try:
+        check_revision(revision)
+    except UnknownRevision as error:
+        raise click.BadParameter(str(error), param_hint="REVISION") from None
+    with database(settings()) as url:
+        engine = make_sync_engine(url)
+        downgrade(engine, revision)
+        with engine.connect() as connection:
+            reached = current_revision(connection)
+    # the revision reached, not the one asked for: "-1" says nothing of where it went
+    console.print(f"database at {reached or 'base (no table)'}")
+
+
+@db.command("url")
+def db_url() -> None:
+    """Print the database URL (password hidden) the other commands use."""
+    with database(settings()) as url:
+        click.echo(redact(url))
+
+
+@db.command("psql", context_settings={"ignore_unknown_options": True})
+@click.argument("psql_args", nargs=-1, type=click.UNPROCESSED)
+def db_psql(psql_args: tuple[str, ...]) -> None:
+    """Open psql on the database (the embedded server's own psql if none is installed)."""
+    from app.core.embedded import bin_dir
+
+    executable = shutil.which("psql") or str(bin_dir() / "psql")
+    with database(settings()) as url:
+        code = subprocess.call([executable, libpq_url(url), *psql_args])
+    if code:
+        raise SystemExit(code)
+
+
+@db.command("dump")
+@click.argument("dump_file", metavar="FILE", type=click.Path(path_type=Path))
+def db_dump(dump_file: Path) -> None:
+    """Back up the database to FILE (pg_dump's custom format, for pg_restore).
+
+    The embedded server stops when the last command using it exits, so the URL `db url` prints
+    is dead by the time a pg_dump started after it connects: this runs pg_dump while the
+    server is held. FILE is replaced only by a whole dump."""
+    output_file(dump_file, "FILE")
+    current = settings()
+    executable = _newest_pg_dump()
+    partial = dump_file.with_name(f"{dump_file.name}.partial")
+    with database(current) as url:
+        code = subprocess.call([executable, "--format=custom", f"--file={partial}", libpq_url(url)])
+    if code:
+        partial.unlink(missing_ok=True)
+        raise CliError(f"pg_dump exited {code}: {dump_file} was left as it was")
+    partial.replace(dump_file)
+    console.print(
+        f"{dump_file}: {dump_file.stat().st_size:,} bytes; restore it into an empty database "
+        f"with pg_restore --dbname=URL {dump_file}"
+    )
+
+
+def _newest_pg_dump() -> str:
+    """The newest pg_dump at hand, the embedded server's or the system's: pg_dump refuses a
+    server newer than itself (Debian 12's 15 against the embedded 17), never an older one."""
+    from app.core.embedded import bin_dir
+
+    candidates = [str(bin_dir() / "pg_dump"), *filter(None, [shutil.which("pg_dump")])]
+
+    def major(executable: str) -> int:
+        try:
+            answer = subprocess.run(
+                [executable, "--version"], capture_output=True, text=True, check=True, timeout=10
+            ).stdout
+        except (OSError, subprocess.SubprocessError):
+            return -1
+        version = answer.rsplit(")", 1)[-1].split()
+        return int(version[0].split(".")[0]) if version and version[0][:1].isdigit() else -1
+
+    return max(candidates, key=major)
+
+
+@db.command("maintain")
+def db_maintain() -> None:
+    """Create the coming days' ping partitions and drop those past retention."""
+    from app.maintenance import maintain
+
+    current = settings()
+    with database(current) as url, make_sync_engine(url).begin() as connection:
+        result = maintain(
+            connection,
+            ahead_days=current.ping_partitions_ahead_days,
+            retention_days=current.ping_retention_days,
+        )
+    console.print(
+        f"ping partitions: {result.partitions_created} created, "
+        f"{result.partitions_dropped} dropped (retention {current.ping_retention_days} days), "
+        f"{result.default_rows_deleted} older pings deleted from the default partition, "
+        f"{result.status_reports_deleted} status reports past retention deleted"
+    )
+
+
+@click.command("seed")
+def seed_command() -> None:
+    """Load the I-24-WB corridor, its segments and the 100-car roster (idempotent)."""
+    from app.seed import seed
+
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        counts = seed(session)
+    console.print(
+        f"seeded: {counts.corridors} corridor(s), {counts.inrix_segments} INRIX segments, "
+        f"{counts.i24_segments} sub-segments, {counts.vehicles} vehicles"
+    )
+    for controller, sha256 in counts.policies.items():
+        console.print(f"{controller}: policy {sha256[:12]} held for the roster's cars that run it")

@@ -1,0 +1,49 @@
+"""`smoothfleet users`: the dashboard's logins (add or reset, list)."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+from rich.table import Table
+
+from app.core.db import make_sync_engine, session_scope
+from app.users.service import OPS_ROLES, UserError, check_new_user, list_users, save_user
+from smoothfleet.cli.common import CliError, console, database, settings
+
+
+@click.group()
+def users() -> None:
+    """Dashboard users (roles viewer, operator, admin)."""
+
+
+@users.command("add")
+@click.argument("username")
+@click.option("--role", required=True, type=click.Choice(OPS_ROLES))
+@click.option(
+    "--password-stdin", is_flag=True, help="Read the password from standard input (one line)."
+)
+def users_add(username: str, role: str, password_stdin: bool) -> None:
+    """Create a dashboard user, or reset an existing user's role and password."""
+    if password_stdin:
+        password = sys.stdin.readline().rstrip("\r\n")
+    else:
+        password = click.prompt("password", hide_input=True, confirmation_prompt=True)
+    try:
+        check_new_user(username, role, password)
+    except UserError as error:
+        raise CliError(f"users add: {error}") from None
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        created = save_user(session, username, role, password)
+    console.print(f"user {username} {'created' if created else 'updated'} with role {role}")
+
+
+@users.command("list")
+def users_list() -> None:
+    """Show the dashboard users."""
+    with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
+        table = Table("user", "role", "last login", "failed logins")
+        for user in list_users(session):
+            last = user.last_login_at.isoformat(timespec="seconds") if user.last_login_at else ""
+            table.add_row(user.username, user.role, last, str(user.failed_logins))
+    console.print(table)
