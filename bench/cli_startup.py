@@ -19,6 +19,7 @@ import sys
 import time
 
 COMMANDS = (
+    (),  # the listing of every command
     ("sim", "evaluate"),
     ("sim", "train"),
     ("motion", "generate"),
@@ -55,14 +56,13 @@ def main() -> None:
     floor = median_wall_s([python, "-c", "pass"], args.repeat)
     print(f"{'baseline: bare interpreter':<24} {floor:6.2f} s")
     for words in COMMANDS:
-        line = " ".join(words)
         lazy = median_wall_s([python, "-m", "smoothfleet.cli", *words, "--help"], args.repeat)
         eager_code = (
             f"{EVERY_COMMAND_MODULE}; import sys; from smoothfleet.cli.main import main; "
             f"sys.argv = ['smoothfleet', *{list(words)!r}, '--help']; main()"
         )
         eager = median_wall_s([python, "-c", eager_code], args.repeat)
-        label = f"{line} --help"
+        label = " ".join([*words, "--help"])
         print(f"{label:<24} {lazy:6.2f} s   baseline (every command module) {eager:6.2f} s")
 
 

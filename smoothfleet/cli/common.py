@@ -8,6 +8,7 @@ import math
 import os
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -134,16 +135,27 @@ def settings() -> Settings:
     return get_settings()
 
 
+@dataclass(frozen=True)
+class LazyCommand:
+    """Where a command lives (`module:attribute`), and the first line of its help, so the
+    group's listing can name it without importing it (a test checks the two agree)."""
+
+    where: str
+    summary: str
+
+
 class CommandGroup(click.Group):
     """A command group whose commands are imported when a command line names them.
 
     `smoothfleet db upgrade` should not first import pandas, matplotlib and the simulator for
     `motion` and `sim`, nor `smoothfleet sim evaluate` SQLAlchemy and the warehouse's models:
-    together they were 4-6 s before every command. `lazy` maps a command's name to
-    `module:attribute`; `--help` still lists them all (importing them).
+    together they were 4-6 s before every command, and `--help`, which lists them all, paid
+    for every one. `lazy` maps a command's name to its `LazyCommand`.
     """
 
-    def __init__(self, *args: object, lazy: Mapping[str, str] | None = None, **kwargs: object):
+    def __init__(
+        self, *args: object, lazy: Mapping[str, LazyCommand] | None = None, **kwargs: object
+    ):
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self._lazy = dict(lazy or {})
 
@@ -151,13 +163,32 @@ class CommandGroup(click.Group):
         return sorted({*super().list_commands(ctx), *self._lazy})
 
     def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        where = self._lazy.get(cmd_name)
-        if where is not None and cmd_name not in self.commands:
-            module, attribute = where.split(":")
+        lazy = self._lazy.get(cmd_name)
+        if lazy is not None and cmd_name not in self.commands:
+            module, attribute = lazy.where.split(":")
             command = getattr(importlib.import_module(module), attribute)
-            assert isinstance(command, click.Command), where
+            assert isinstance(command, click.Command), lazy.where
             self.add_command(command, cmd_name)
         return super().get_command(ctx, cmd_name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The listing click writes, from the summaries of the commands not yet imported."""
+        names = self.list_commands(ctx)
+        if not names:
+            return
+        limit = formatter.width - 6 - max(len(name) for name in names)
+        rows = []
+        for name in names:
+            loaded = self.commands.get(name)
+            if loaded is not None:
+                if not loaded.hidden:
+                    rows.append((name, loaded.get_short_help_str(limit)))
+            else:
+                # shortened as click shortens a command's own help
+                stand_in = click.Command(name, help=self._lazy[name].summary)
+                rows.append((name, stand_in.get_short_help_str(limit)))
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
 
 
 def fleet_options(command: Callable[..., None]) -> Callable[..., None]:

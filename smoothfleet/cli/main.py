@@ -16,23 +16,58 @@ from typing import NoReturn
 
 import click
 
-from smoothfleet.cli.common import CliError, CommandGroup
+from smoothfleet.cli.common import CliError, CommandGroup, LazyCommand
 
 # Every command is imported only when a command line names it: their imports (SQLAlchemy and
-# the models, pandas, matplotlib, the simulator) were most of the start-up time of each.
+# the models, pandas, matplotlib, the simulator) were most of the start-up time of each. The
+# summaries are the first lines of the commands' own help (tests/smoothfleet/test_startup.py).
 COMMANDS = {
-    "db": "smoothfleet.cli.db:db",
-    "seed": "smoothfleet.cli.db:seed_command",
-    "vehicles": "smoothfleet.cli.vehicles:vehicles",
-    "tokens": "smoothfleet.cli.tokens:tokens",
-    "users": "smoothfleet.cli.users:users",
-    "analytics": "smoothfleet.cli.analytics:analytics_group",
-    "serve": "smoothfleet.cli.serve:serve",
-    "demo": "smoothfleet.cli.demo:demo",
-    **{
-        name: f"smoothfleet.cli.{name}:{name}"
-        for name in ("inrix", "sim", "planner", "motion", "policy")
-    },
+    "analytics": LazyCommand(
+        "smoothfleet.cli.analytics:analytics_group",
+        "The analytics views (schema `analytics`, docs/analytics.md).",
+    ),
+    "db": LazyCommand(
+        "smoothfleet.cli.db:db", "The warehouse database: migrations, URL, psql, housekeeping."
+    ),
+    "demo": LazyCommand(
+        "smoothfleet.cli.demo:demo",
+        "Everything on one machine: embedded database, migrations, seed, API, dashboard, "
+        "planner, a simulated INRIX feed and a simulated fleet whose cars run the real vehicle "
+        "agent.",
+    ),
+    "inrix": LazyCommand(
+        "smoothfleet.cli.inrix:inrix",
+        "The INRIX segment-speed feed: poll the provider, replay or convert recordings.",
+    ),
+    "motion": LazyCommand(
+        "smoothfleet.cli.motion:motion",
+        "I-24 MOTION trajectories: import, Edie fields, the bulk-fuel figure.",
+    ),
+    "planner": LazyCommand(
+        "smoothfleet.cli.planner:planner",
+        "The Speed Planner: its schedule, a single cycle, and replay of a stored plan.",
+    ),
+    "policy": LazyCommand(
+        "smoothfleet.cli.policy:policy",
+        "Trained controller policies stored on the server by sha256.",
+    ),
+    "seed": LazyCommand(
+        "smoothfleet.cli.db:seed_command",
+        "Load the I-24-WB corridor, its segments and the 100-car roster (idempotent).",
+    ),
+    "serve": LazyCommand(
+        "smoothfleet.cli.serve:serve",
+        "Run the API and dashboard (and the planner schedule unless --no-planner).",
+    ),
+    "sim": LazyCommand(
+        "smoothfleet.cli.sim:sim",
+        "Simulate platoons on real I-24 drives: evaluate planners x controllers.",
+    ),
+    "tokens": LazyCommand("smoothfleet.cli.tokens:tokens", "API bearer tokens."),
+    "users": LazyCommand(
+        "smoothfleet.cli.users:users", "Dashboard users (roles viewer, operator, admin)."
+    ),
+    "vehicles": LazyCommand("smoothfleet.cli.vehicles:vehicles", "The fleet roster."),
 }
 
 

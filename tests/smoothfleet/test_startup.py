@@ -4,11 +4,15 @@ bench/cli_startup.py). Checked on the modules loaded, not on a clock."""
 
 from __future__ import annotations
 
+import importlib
 import json
 import subprocess
 import sys
 
+import click
 import pytest
+
+from smoothfleet.cli.main import COMMANDS
 
 HEAVY = ("sqlalchemy", "pandas", "matplotlib", "torch", "duckdb")
 
@@ -66,3 +70,27 @@ def test_the_listing_names_every_command() -> None:
         "vehicles",
     ):
         assert f"  {command} " in listing, command
+
+
+def test_the_listing_imports_no_command_and_says_what_each_says_itself() -> None:
+    """`smoothfleet --help` names every command from the summaries beside the lazy table; each
+    must read as the command's own help does when click shortens it, at any width."""
+    code = (
+        "import json, sys\n"
+        "from click.testing import CliRunner\n"
+        "from smoothfleet.cli.main import cli\n"
+        "listing = CliRunner().invoke(cli, ['--help'], terminal_width=100).output\n"
+        "loaded = [m for m in sys.modules if m.startswith('smoothfleet.cli.') and m not in (\n"
+        "    'smoothfleet.cli.main', 'smoothfleet.cli.common')]\n"
+        "print(json.dumps(loaded))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    assert json.loads(done.stdout.strip().splitlines()[-1]) == []
+    for name, lazy in COMMANDS.items():
+        module, attribute = lazy.where.split(":")
+        command = getattr(importlib.import_module(module), attribute)
+        for limit in (20, 45, 80, 400):
+            summary = click.Command(name, help=lazy.summary).get_short_help_str(limit)
+            assert summary == command.get_short_help_str(limit), (name, limit)
