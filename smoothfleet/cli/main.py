@@ -127,9 +127,10 @@ def main() -> None:
 def expected_failure(error: Exception) -> str | None:
     """The one line an expected failure of the server side ends with (None: a bug).
 
-    Its types are imported here, not at start-up: an error can only come from a module the
-    failing command imported, so they cost that command nothing, and a command that never
-    touches the database (`sim`, `motion generate`) starts without SQLAlchemy."""
+    Its types are imported here, once a command has failed, not at start-up: a command that
+    never touches the database (`sim`, `motion generate`) starts without SQLAlchemy, and one
+    that does has them loaded already (an error is raised only by a module that was
+    imported)."""
     from psycopg.errors import UndefinedTable
     from sqlalchemy.exc import ProgrammingError
 

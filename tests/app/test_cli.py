@@ -20,7 +20,7 @@ from app.core.embedded import bin_dir
 from app.core.embedded import database_url as embedded_url
 from app.migrate import current_revision, head_revision
 from app.vehicles.service import RosterError, parse_roster_csv
-from tests.support.databases import admin_execute
+from tests.support.databases import admin_execute, database_from_template
 from tests.support.servers import cli_env, free_port, run_cli, smoothfleet_command, wait_until_ready
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
@@ -177,6 +177,18 @@ def test_a_wrong_setting_is_one_line_naming_it(env: dict[str, str], expected: st
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
     assert expected in lines[0]
+
+
+def test_a_database_without_the_schema_is_one_line_naming_the_fix(pg_server: str) -> None:
+    """The error types are imported only once a command fails (smoothfleet/cli/main.py): the
+    missing schema is still recognised, not shown as an unexpected error."""
+    with database_from_template(pg_server, "template0") as url:
+        result = run_cli("vehicles", "list", env=cli_env(SMOOTHFLEET_DATABASE_URL=url))
+    assert result.returncode == 1
+    assert result.stderr == (
+        "smoothfleet: error: the database has no smoothfleet schema yet: run `smoothfleet db "
+        "upgrade`\n"
+    )
 
 
 def test_a_taken_port_is_one_line(database_url: str) -> None:
