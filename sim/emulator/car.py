@@ -52,13 +52,14 @@ DRIVER_GAS_MPS2 = 1.0
 # agent never sets it once it has read the hold, and the emulated PCM leaves the hold to the
 # driver alone, so a frame in flight as the hold begins cannot end it.
 PCM_HOLD_AFTER_S = 3.0
-# The makes whose stock ACC holds a standstill for the driver and reports it: the RAV4's PCM,
-# the 2023 Rogue (CRUISE_STATE 4, "standstill" in the field team's libpanda) and the XT5
-# (AcceleratorPedal2 CruiseState 4, opendbc's "Standstill"), whose delays before the hold are
-# not known: the RAV4's 3 s is assumed. A press of + (RES) by anyone, the
+# The makes whose stock ACC holds a standstill for the driver: the RAV4's PCM, the 2023 Rogue
+# (CRUISE_STATE 4, "standstill" in the field team's libpanda) and the XT5 (AcceleratorPedal2
+# CruiseState 4, opendbc's "Standstill"), which report it, and the 2018-20 Rogue, whose frames
+# do not (the emulated car sends nothing of it either); their delays before the hold are not
+# known: the RAV4's 3 s is assumed. A press of + (RES) by anyone, the
 # driver or a button board on the switches, resumes the hold, as RES does on the car; a + held
 # since before the hold began is no new press.
-HOLDS_STANDSTILL = frozenset({"toyota_rav4", "nissan_rogue", "cadillac_xt5"})
+HOLDS_STANDSTILL = frozenset({"toyota_rav4", "nissan_rogue", "nissan_rogue_2018", "cadillac_xt5"})
 # Below this speed the car is stopped (m/s).
 STOPPED_MPS = 0.01
 # The GPIO lines of the button board wired to an emulated car's switches (docs/agent.md's

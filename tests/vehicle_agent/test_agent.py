@@ -669,12 +669,13 @@ def test_the_emulated_pcm_holds_a_stop_the_agent_never_releases_until_the_driver
         assert engaged(r), r.agent.state.reason
 
 
-@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5"])
+@pytest.mark.parametrize("key", ["nissan_rogue", "cadillac_xt5", "nissan_rogue_2018"])
 def test_nothing_is_pressed_while_the_stock_acc_holds_a_standstill_for_the_driver(
     key: str, tmp_path: Path, dbc_cache: Path
 ) -> None:
     """At a standstill the stock ACC holds (the 2023 Rogue's CRUISE_STATE 4, the XT5's
-    AcceleratorPedal2 CruiseState 4), + resumes the car. The paper's
+    AcceleratorPedal2 CruiseState 4; the 2018-20 Rogue shows none, so every engaged stop reads
+    as held there), + resumes the car. The paper's
     clip leaves out 0 mph samples, so a stopped car's setting is the controller's own, and the
     board went on pressing + towards the plan's 60 mph through the hold: it drove off a stop
     that is the driver's to leave. Now the agent stays engaged and presses nothing until the

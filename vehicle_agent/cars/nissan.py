@@ -10,6 +10,12 @@ lead distance or relative speed (paper Table 2). Sent: CRUISE_THROTTLE with RES 
 the follow-distance button, the other signals copied from the car's latest frame. That frame
 carries the driver's gas pedal and brake too, so a press is built only from one read at most 2
 periods ago (`copies_command_frame`): the car state stays valid on one 10 periods old.
+
+A stop held by the ACC for the driver's resume is told apart from a brief one by no frame this
+DBC holds (opendbc reads only the wheels' standstill either), and RES (+) resumes a hold. So
+every stop with the ACC engaged reads as held (`standstill_held`): the agent presses nothing
+while the car stands, which costs nothing (a setting matters once the car moves) and never
+drives off a stop that is the driver's to leave.
 """
 
 from __future__ import annotations
@@ -85,6 +91,7 @@ class NissanRogue2018(CarInterface):
             acc_speed_setting_mph=set_speed if engaged and set_speed > 0 else None,
             acc_gap_setting=gap if 1 <= gap <= 3 else None,
             lead_present=bool(hud["LEAD_CAR"]),
+            standstill_held=engaged and speed_kph == 0.0,  # any stop (module docstring)
             brake_pressed=_brake_pressed(throttle),
             gas_pressed=_gas_pressed(throttle),
             buttons=frozenset(b for b, name in BUTTON_SIGNALS.items() if throttle[name]),
