@@ -12,9 +12,10 @@ carries the driver's gas pedal and brake too, so a press is built only from one 
 periods ago (`copies_command_frame`): the car state stays valid on one 10 periods old.
 
 No frame of this DBC tells a stop the ACC holds for the driver's resume from a brief one
-(opendbc, too, reads only the wheels' standstill), and RES (+) resumes a hold. So every stop with the ACC engaged reads as held (`standstill_held`): the agent presses nothing
-while the car stands, which costs nothing (a setting matters once the car moves) and never
-drives off a stop that is the driver's to leave.
+(opendbc, too, reads only the wheels' standstill), and RES (+) resumes a hold. So every stop
+with the ACC engaged reads as held (`standstill_held`): the agent presses nothing while the car
+stands, which costs nothing (a setting matters once the car moves) and never drives off a stop
+that is the driver's to leave.
 """
 
 from __future__ import annotations
