@@ -195,6 +195,23 @@ def test_edie_does_not_bridge_long_gaps(connection: Connection, store: Store) ->
     assert box["time_s"] == pytest.approx(2.0)
 
 
+def test_edie_ends_a_pings_time_at_the_next_ping_off_the_corridor(
+    connection: Connection, store: Store
+) -> None:
+    # 1 Hz at 10 m/s for 9 s; the 4th to 6th pings are 5 km off the corridor (no x_m). Each of
+    # the six pings on it stands for 1 s until the car's next ping, on the corridor or not:
+    # 6 s and 60 m in the box, not the 9 s and 90 m of crediting the last ping before the
+    # excursion with all of it (migration 0017).
+    pings = drive("SF-006", T0, 1010.0, 10.0, 9)
+    for excursion in pings[3:6]:
+        excursion["lat"] += 0.045
+    store(pings)
+
+    box = analytics.read_view(connection, "edie_boxes").iloc[0]
+
+    assert (box["pings"], box["time_s"], box["distance_m"]) == (6, 6.0, 60.0)
+
+
 def test_edie_field_function_takes_other_box_sizes_and_a_window(
     connection: Connection, store: Store
 ) -> None:
