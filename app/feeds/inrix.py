@@ -21,7 +21,15 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError, field_validator
 
 from contract.units import MPS_PER_MPH
-from contract.values import JsonFloat, StorableText, json_number, plausible_time, real, time_text
+from contract.values import (
+    JsonFloat,
+    StorableText,
+    json_number,
+    plausible_time,
+    real,
+    storable_text,
+    time_text,
+)
 
 S_PER_MINUTE = 60.0
 
@@ -182,6 +190,17 @@ def _segment(item: Any) -> InrixSegment:
         raise ValueError(_first_error(error)) from None
 
 
+def _echoable(code: str) -> bool:
+    """Whether a refused segment's code can be named in the answer: a lone surrogate has no
+    UTF-8, so the answer could not be written (a 500 that lost the whole snapshot); such a
+    segment is refused with `code` null, its reason saying what was wrong."""
+    try:
+        storable_text(code)
+    except ValueError:
+        return False
+    return True
+
+
 def readings_of(response: InrixResponse) -> SnapshotReadings:
     """The response's readings, converted from mph and minutes to SI units, and its segments
     refused (not a reading, or a code already read at that timestamp)."""
@@ -199,7 +218,7 @@ def readings_of(response: InrixResponse) -> SnapshotReadings:
             )
         for index, item in enumerate(segment_set.segments):
             code = item.get("code") if isinstance(item, dict) else None
-            named = code if isinstance(code, str) else None
+            named = code if isinstance(code, str) and _echoable(code) else None
             try:
                 segment = _segment(item)
             except ValueError as error:

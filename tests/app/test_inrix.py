@@ -213,6 +213,33 @@ def test_a_bad_segment_is_refused_on_its_own_and_the_snapshot_kept(
     assert stored[("SF-I24WB-07", measured)]["speed_mps"] == pytest.approx(50 * MPH)
 
 
+def test_a_code_with_a_lone_surrogate_is_refused_unnamed_and_the_snapshot_kept(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    """A code that has no UTF-8 (an escaped lone surrogate) is refused on its own, with its
+    code left out of the answer (it could not be written: the answer was a 500 and the
+    snapshot lost); the other reading is stored."""
+    response = provider_response(
+        {"code": "SF-I24WB-05\ud800", "speed": 45},
+        {"code": "SF-I24WB-08", "speed": 55},
+        timestamp="2026-11-23T08:00:00Z",
+    )
+    answer = api.post(
+        "/api/v1/feeds/inrix",
+        content=json.dumps(response).encode("ascii"),  # the surrogate as \ud800, as sent
+        headers={**feed, "content-type": "application/json"},
+    )
+
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert body["accepted"] == 1
+    (refusal,) = body["refused"]
+    assert (refusal["segment"], refusal["code"]) == (0, None)
+    assert refusal["error"].startswith("code: ")
+    measured = datetime(2026, 11, 23, 8, 0, tzinfo=UTC)
+    assert set(estimates(seeded_engine)) == {("SF-I24WB-08", measured)}
+
+
 def test_a_code_read_again_at_one_instant_in_another_segment_set_is_refused(
     api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
 ) -> None:
