@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -23,6 +25,7 @@ from sqlalchemy.orm import Session
 
 from app.models import Policy, Vehicle
 from contract.controllers import POLICY_SHA256_PATTERN, RL_CONTROLLERS
+from contract.values import storable_text
 from vehicle_agent.controllers.policy import PolicyFileError, read_policy
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
@@ -58,7 +61,10 @@ def read_manifest(document: bytes | str) -> object:
 
     Python's JSON writer puts NaN and Infinity where a figure was not measured, and its reader
     takes them back, but they are no JSON: PostgreSQL refuses them, and the upload ended in a
-    database error naming no field. They are refused here, with what to write instead."""
+    database error naming no field. They are refused here, with what to write instead, as are
+    numbers no float holds (1e400, an integer of 400 digits: a re-upload compares the
+    manifests as floats) and text PostgreSQL cannot store (NUL, a lone surrogate), each named
+    by where it is."""
 
     def no_number(constant: str) -> object:
         raise PolicyError(
@@ -67,12 +73,62 @@ def read_manifest(document: bytes | str) -> object:
             "was not measured)",
         )
 
+    def finite_float(text: str) -> float:
+        value = float(text)
+        if not math.isfinite(value):
+            raise _beyond_a_float(text)
+        return value
+
+    def float_sized_integer(text: str) -> int:
+        # A longer integer is beyond a float's range whatever its digits; int() would refuse
+        # one over 4,300 digits with a ValueError of its own.
+        if len(text.lstrip("-")) > _FLOAT_DIGITS or abs(int(text)) > sys.float_info.max:
+            raise _beyond_a_float(text)
+        return int(text)
+
     try:
-        return json.loads(document, parse_constant=no_number)
+        manifest = json.loads(
+            document,
+            parse_constant=no_number,
+            parse_float=finite_float,
+            parse_int=float_sized_integer,
+        )
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise PolicyError("manifest", f"not JSON ({error})") from None
     except RecursionError:
         raise PolicyError("manifest", "nested too deeply to read") from None
+    _check_text(manifest, "manifest")
+    return manifest
+
+
+# Digits of the largest float (1.8e308): an integer with more is beyond it.
+_FLOAT_DIGITS = 309
+
+
+def _beyond_a_float(number: str) -> PolicyError:
+    """The error for a number no float holds, quoting it (a 5,000-digit one by its start and
+    length)."""
+    quoted = number if len(number) <= 24 else f"{number[:12]}... ({len(number)} characters)"
+    return PolicyError("manifest", f"the number {quoted} is beyond a float's range")
+
+
+def _check_text(value: object, where: str) -> None:
+    """PolicyError naming the first key or string of `value` PostgreSQL cannot store."""
+    if isinstance(value, str):
+        try:
+            storable_text(value)
+        except ValueError as error:
+            raise PolicyError(where, str(error)) from None
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            try:
+                storable_text(key)
+            except ValueError as error:
+                raise PolicyError(where, f"a key: {error}") from None
+            _check_text(item, f"{where}.{key}")
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            _check_text(item, f"{where}.{index}")
 
 
 def check_policy(content: bytes, manifest: object, controller: str | None = None) -> CheckedPolicy:

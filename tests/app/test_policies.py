@@ -202,6 +202,39 @@ def test_a_manifest_with_nan_is_refused_naming_it(api: Api) -> None:
     assert held_policies(api.engine) == SEEDED
 
 
+@pytest.mark.parametrize(
+    ("value", "loc", "reason"),
+    [
+        ("1e400", ["body", "manifest"], "the number 1e400 is beyond a float's range"),
+        (
+            "1" * 5000,
+            ["body", "manifest"],
+            "the number 111111111111... (5000 characters) is beyond a float's range",
+        ),
+        (
+            str(10**400),
+            ["body", "manifest"],
+            "the number 100000000000... (401 characters) is beyond a float's range",
+        ),
+        ('"a\\u0000b"', ["body", "manifest", "kpi"], "text must not contain the NUL character"),
+        ('["ok", "a\\ud800"]', ["body", "manifest", "kpi", "1"], "a lone UTF-16 surrogate"),
+    ],
+    ids=["1e400", "5000-digits", "401-digits", "nul", "surrogate"],
+)
+def test_a_manifest_value_postgresql_or_a_float_cannot_hold_is_refused_naming_it(
+    api: Api, value: str, loc: list[str], reason: str
+) -> None:
+    """Each was a 500 (audit): Python's integer-length limit in the reader, a float overflow
+    when a re-upload compared the manifests, PostgreSQL's JSON refusing the text."""
+    document = json.dumps(manifest_of(ACC_FILE))[:-1] + f', "kpi": {value}}}'
+
+    found_loc, msg = rejected(api.upload(ACC_FILE.read_bytes(), document.encode()))
+
+    assert found_loc == loc
+    assert reason in msg
+    assert held_policies(api.engine) == SEEDED
+
+
 def test_a_corrupted_file_is_refused_by_its_hash(api: Api) -> None:
     content = bytearray(ACC_FILE.read_bytes())
     content[len(content) // 2] ^= 0xFF
