@@ -14,7 +14,7 @@ from datetime import datetime, timedelta
 from typing import NamedTuple
 
 import orjson
-from pydantic import ValidationError
+from pydantic import ConfigDict, ValidationError
 
 from app.auth import Principal
 from app.ingest.directory import CorridorInfo, FleetDirectory
@@ -101,6 +101,13 @@ def parse_body(body: bytes) -> tuple[list[object], bool]:
         raise BodyError('body must be a ping object or {"pings": [...]}')
     # a lone ping may carry fields it does not know, "pings" among them (Ping ignores them)
     lone_ping = any(name in document for name in REQUIRED_FIELDS)
+    if lone_ping and isinstance(document.get("pings"), list):
+        # read as the batch, the ping's own fields were dropped with a 200 that stored nothing
+        present = ", ".join(name for name in REQUIRED_FIELDS if name in document)
+        raise BodyError(
+            f'body is both a ping (it has {present}) and a batch ("pings": [...]): send the '
+            "ping alone or inside the batch"
+        )
     if "pings" in document and (isinstance(document["pings"], list) or not lone_ping):
         items = document["pings"]
         if not isinstance(items, list):
@@ -157,6 +164,14 @@ def _describe(error: ValidationError) -> str:
     return f"{where}: {message}" if where else message
 
 
+class _BareBatch(PingBatch):
+    """A batch with no other field beside "pings", the shape the agent sends: the one-pass
+    path's. Anything else (a ping's own fields beside a list of pings) goes item by item,
+    where `parse_body` decides it."""
+
+    model_config = ConfigDict(extra="forbid")
+
+
 def _all_valid(body: bytes) -> list[Ping] | None:
     """Every ping of a body in which all pings are valid, parsed in one pass; None otherwise.
 
@@ -166,7 +181,7 @@ def _all_valid(body: bytes) -> list[Ping] | None:
     """
     try:
         if b'"pings"' in body:
-            return PingBatch.model_validate_json(body).pings
+            return _BareBatch.model_validate_json(body).pings
         return [Ping.model_validate_json(body)]
     except ValidationError:
         return None

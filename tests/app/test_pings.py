@@ -302,6 +302,20 @@ def test_a_body_that_is_not_a_ping_or_a_batch_is_422(
     assert answer.json()["detail"].startswith(expected)
 
 
+def test_a_body_that_is_both_a_ping_and_a_batch_is_422_naming_both(
+    api: httpx.Client, car: dict[str, str], seeded_engine: Engine
+) -> None:
+    """A ping with a list of pings beside its fields was read as the batch: 200, the ping's own
+    fields dropped and nothing stored (audit)."""
+    answer = api.post("/api/v1/pings", json=ping(pings=[]), headers=car)
+    assert (answer.status_code, answer.json()["detail"]) == (
+        422,
+        'body is both a ping (it has vehicle_id, ts, lat, lon, speed_mps) and a batch ("pings": '
+        "[...]): send the ping alone or inside the batch",
+    )
+    assert stored(seeded_engine) == []
+
+
 def test_a_lone_ping_with_an_unknown_field_called_pings_is_stored(
     api: httpx.Client, car: dict[str, str], seeded_engine: Engine
 ) -> None:
