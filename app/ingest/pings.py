@@ -7,6 +7,7 @@ ingest is testable on its own and the hot path allocates no ORM objects.
 from __future__ import annotations
 
 import json
+import math
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -127,14 +128,28 @@ def parse_body(body: bytes) -> tuple[list[object], bool]:
 def _lenient_json(body: bytes, strict_error: orjson.JSONDecodeError) -> object:
     """The body as Python's json module reads it, for what orjson refuses but is not garbage.
 
-    `json.dumps` writes NaN, Infinity and -Infinity by default, and a number like 1e999 or an
-    escaped lone surrogate is valid JSON syntax; read this way, such a value is refused by
-    validation with its item's index, and the other pings of the batch are kept.
+    `json.dumps` writes NaN, Infinity and -Infinity by default, and a number like 1e999, an
+    integer of 5,000 digits or an escaped lone surrogate is valid JSON syntax; read this way,
+    such a value is refused by validation with its item's index, and the other pings of the
+    batch are kept.
     """
     try:
-        return json.loads(body)
+        return json.loads(body, parse_int=_integer_or_overflow)
     except (ValueError, RecursionError):
         raise BodyError(f"body is not JSON: {strict_error}") from None
+
+
+# Python's int() refuses longer integer text (a ValueError that refused the whole body, every
+# good ping of the batch with it); no field holds one anyway.
+_INT_MAX_DIGITS = 4300
+
+
+def _integer_or_overflow(text: str) -> int | float:
+    """An integer's value, or an infinity of its sign when it is too long to read: validation
+    then refuses its item alone, as it refuses 1e999."""
+    if len(text.lstrip("-")) > _INT_MAX_DIGITS:
+        return -math.inf if text.startswith("-") else math.inf
+    return int(text)
 
 
 VEHICLE_ID_RE = re.compile(VEHICLE_ID_PATTERN)

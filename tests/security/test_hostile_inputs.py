@@ -29,7 +29,12 @@ from tests.support.tokens import bearer, issue
 NOW = datetime.now(UTC).replace(microsecond=0)
 INRIX_CODE = "SF-I24WB-11"
 # Placeholders replaced in the JSON text by literals json.dumps cannot write.
-_LITERALS = {"__1E999__": "1e999", "__-1E999__": "-1e999", "__TINY__": "1e-320"}
+_LITERALS = {
+    "__1E999__": "1e999",
+    "__-1E999__": "-1e999",
+    "__TINY__": "1e-320",
+    "__5000_DIGITS__": "9" * 5000,  # past Python's integer text limit (4,300 digits)
+}
 _ts = itertools.count(1)
 
 
@@ -157,6 +162,7 @@ def test_in_a_batch_a_nan_literal_or_unstorable_text_rejects_only_its_ping(
         a_ping(controller="a\x00b"),
         a_ping(controller="x\udc00"),
         a_ping(lead_distance_m="__1E999__"),
+        a_ping(plan_id="__5000_DIGITS__"),
         a_ping(),
     ]
     answer = post(api, "/api/v1/pings", raw_json({"pings": batch}), admin)
@@ -168,6 +174,7 @@ def test_in_a_batch_a_nan_literal_or_unstorable_text_rejects_only_its_ping(
         (2, "controller"),
         (3, "controller"),
         (4, "lead_distance_m"),
+        (5, "plan_id"),
     ]
     with seeded_engine.connect() as connection:
         stored = connection.execute(text("SELECT count(*) FROM fact_vehicle_ping")).scalar_one()
