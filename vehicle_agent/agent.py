@@ -350,7 +350,9 @@ class Agent:
                 plan_fresh=plan_fresh,
                 plan_reaches_car=lane_plan is not None
                 and x_m is not None
-                and lane_plan.reaches(x_m),
+                and lane_plan.reaches(
+                    x_m, lane_plan.lookup_shift_m(wall, self.wave_speed_mps, now)
+                ),
                 controller_ok=self._fault_clear("controller_ok", now),
                 actuator_ok=self._fault_clear("actuator_ok", now),
                 commands_sent=self._fault_clear("commands_sent", now),

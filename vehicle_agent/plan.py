@@ -154,29 +154,44 @@ class LanePlan:
             age = max(age, now_s - self.received_s)
         return age
 
-    def reaches(self, x_m: float) -> bool:
-        """Whether the lane's targets cover the car's position `x_m` (within
-        `PLAN_REACH_TOLERANCE_M` of their ends). A plan for a stretch the car is not on is no
-        plan for the car, however fresh."""
+    def reaches(self, x_m: float, shift_m: float = 0.0) -> bool:
+        """Whether the lane's targets cover where the car's target is read: its position `x_m`
+        moved downstream by the lookup's `shift_m` (`lookup_shift_m`), within
+        `PLAN_REACH_TOLERANCE_M` of their ends. A plan for a stretch the car is not on is no
+        plan for the car, however fresh; nor is an aged one whose lookup runs past its end,
+        which would read the end's target held flat."""
+        lookup_m = x_m + shift_m
         return (
             float(self.x_m[0]) - PLAN_REACH_TOLERANCE_M
-            <= x_m
+            <= lookup_m
             <= float(self.x_m[-1]) + PLAN_REACH_TOLERANCE_M
         )
 
     def is_fresh(self, wall: datetime, stale_after_s: float, now_s: float | None = None) -> bool:
-        """Before its own valid_until and published within `stale_after_s` (`age_s`).
+        """Before its own valid_until and published within `stale_after_s`, both judged by its
+        age (`age_s`): a wall clock behind the server's keeps a plan no longer after it arrived
+        than its publisher said it holds (valid_until less published_at).
 
         Whether the server could be reached since does not matter: a plan stays right for as
         long as its publisher said, so a server restart or a network gap does not end it.
         """
-        if self.plan.valid_until is not None and wall > self.plan.valid_until:
+        age = self.age_s(wall, now_s)
+        valid_until = self.plan.valid_until
+        if valid_until is not None and age > (valid_until - self.plan.published_at).total_seconds():
             return False
-        return self.age_s(wall, now_s) <= stale_after_s
+        return age <= stale_after_s
+
+    def lookup_shift_m(
+        self, wall: datetime, wave_speed_mps: float, now_s: float | None = None
+    ) -> float:
+        """How far downstream the targets are read now: -wave speed x plan age (the waves the
+        plan describes have travelled upstream since it was published)."""
+        return -wave_speed_mps * max(self.age_s(wall, now_s), 0.0)
 
     def profile(
         self, wall: datetime, wave_speed_mps: float, now_s: float | None = None
     ) -> TargetProfile:
-        """Targets as seen now: the lookup moves downstream by -wave speed x plan age."""
-        shift = -wave_speed_mps * max(self.age_s(wall, now_s), 0.0)
-        return TargetProfile(self.x_m, self.speeds, shift_m=shift)
+        """Targets as seen now: the lookup moves downstream by `lookup_shift_m`."""
+        return TargetProfile(
+            self.x_m, self.speeds, shift_m=self.lookup_shift_m(wall, wave_speed_mps, now_s)
+        )

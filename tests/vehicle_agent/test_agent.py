@@ -995,6 +995,42 @@ def test_a_plan_that_does_not_reach_the_car_hands_back(tmp_path: Path, dbc_cache
         assert r.emulator.speed_mps > 20.0
 
 
+def test_an_aged_plan_read_past_its_end_hands_back(tmp_path: Path, dbc_cache: Path) -> None:
+    """A lane to 1,500 m (5 m/s on its last 100 m) published 150 s ago: its targets are read
+    625 m downstream of the car. At about 1,000 m the car is on the lane, but its lookup is
+    past the end, where it held the 5 m/s flat: an engaged RAV4 slowed from 25 m/s to 11.5
+    on a target the plan never set for its place (audit)."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=25.0) as r:
+        engage_and_settle(r)
+        now = r.clock.now()
+        aged = Plan.model_validate(
+            {
+                "plan_id": 2,
+                "corridor": uniform_plan(25.0, published=now).corridor,
+                "published_at": now - timedelta(seconds=150),
+                "valid_until": now + timedelta(minutes=10),
+                "lanes": [
+                    {
+                        "lane": lane,
+                        "x_m": [0.0, 1400.0],
+                        "end_x_m": [1400.0, 1500.0],
+                        "target_speed_mps": [25.0, 5.0],
+                    }
+                    for lane in (1, 2, 3, 4)
+                ],
+            }
+        )
+        assert r.agent.accept_plan(aged)
+        r.run(1.0)
+
+        assert r.agent.snapshot.x_m is not None
+        assert r.agent.snapshot.x_m < 1500.0  # on the lane
+        assert not engaged(r)
+        assert r.agent.state.reason == "the plan does not reach the car's position"
+        r.run(5.0)
+        assert r.emulator.speed_mps > 20.0
+
+
 def test_a_car_moved_to_another_corridor_follows_no_plan_of_the_old_one(
     tmp_path: Path, dbc_cache: Path
 ) -> None:

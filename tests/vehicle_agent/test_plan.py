@@ -98,3 +98,29 @@ def test_a_car_clock_behind_the_servers_cannot_make_an_old_plan_young() -> None:
     assert not lane.is_fresh(behind, 120.0, now_s=1000.0 + 540.0)
     # and the lookup shifts by that age, not by none
     assert lane.profile(behind, -4.0, now_s=1000.0 + 10.0).shift_m == 40.0
+
+
+def test_a_car_clock_behind_the_servers_cannot_keep_a_plan_past_its_validity() -> None:
+    """The plan holds for 180 s (valid_until less published_at). With the car's wall clock an
+    hour behind, valid_until never came by that clock: the plan was followed for as long as
+    stale_plan_after_s allowed (audit). Its age, at least the time since it arrived, ends it."""
+    lane = LanePlan(parse_plan(body()), 2, None, received_s=1000.0)
+    behind = PUBLISHED - timedelta(hours=1)
+    assert lane.is_fresh(behind, 600.0, now_s=1000.0 + 180.0)
+    assert not lane.is_fresh(behind, 600.0, now_s=1000.0 + 181.0)
+
+
+def test_the_plan_reaches_the_car_where_its_target_is_read_not_where_it_is() -> None:
+    """The lane's targets run to 300 m (its last sub-segment ends there), read 50 m downstream
+    of the car (a 12.5 s old plan at -4 m/s): a car at 290 m reads its target at 340 m, within
+    the 50 m tolerance of the end; one at 310 m reads it at 360 m, past it, where the lookup
+    would hold the end's target flat; a car 60 m upstream of the first point reads it at
+    -10 m, inside."""
+    lane = LanePlan(parse_plan(body()), 2, None)
+    shift = lane.lookup_shift_m(PUBLISHED + timedelta(seconds=12.5), -4.0)
+    assert shift == 50.0
+    assert lane.reaches(290.0, shift)
+    assert not lane.reaches(310.0, shift)
+    assert lane.reaches(310.0)  # where the car itself is, the lane covers it
+    assert lane.reaches(-60.0, shift)
+    assert not lane.reaches(-60.0)
