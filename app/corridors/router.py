@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import hashlib
+from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Request, Response
+from fastapi import APIRouter, HTTPException, Path, Request, Response
 
 from app.auth import AuthDep
 from app.core.errors import error_responses
 from app.core.sessions import SessionDep
 from app.corridors.schemas import CorridorOut
 from app.corridors.service import corridor_geometry
+from contract.values import StorableText
 
 router = APIRouter(prefix="/api/v1", tags=["corridors"])
 
@@ -24,7 +26,10 @@ router = APIRouter(prefix="/api/v1", tags=["corridors"])
     },
 )
 async def get_corridor(
-    corridor_id: str, request: Request, principal: AuthDep, session: SessionDep
+    corridor_id: Annotated[StorableText, Path()],
+    request: Request,
+    principal: AuthDep,
+    session: SessionDep,
 ) -> Response:
     """Segments with postmiles, x_m, lat/lon and lanes, plus the legal target-speed range."""
     corridor = await corridor_geometry(session, corridor_id)

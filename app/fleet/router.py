@@ -35,6 +35,7 @@ from app.fleet.service import (
     select_entries,
     set_maintenance,
 )
+from contract.values import StorableText
 from contract.vehicles import VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["operations"])
@@ -66,8 +67,8 @@ async def get_fleet(
     request: Request,
     principal: ViewerDep,
     session: SessionDep,
-    route: Annotated[str | None, Query(description="Only vehicles on this route.")] = None,
-    make: Annotated[str | None, Query(description="Only vehicles of this make.")] = None,
+    route: Annotated[StorableText | None, Query(description="Only vehicles on this route.")] = None,
+    make: Annotated[StorableText | None, Query(description="Only vehicles of this make.")] = None,
     problem: Annotated[
         str | None,
         Query(

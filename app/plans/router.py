@@ -29,7 +29,7 @@ from app.plans.service import (
 )
 from contract.errors import NO_VALID_PLAN
 from contract.plans import PlanOut
-from contract.values import time_text
+from contract.values import StorableText, time_text
 from contract.vehicles import VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["plans"])
@@ -125,7 +125,7 @@ async def get_latest_plan(
     request: Request,
     principal: AuthDep,
     session: SessionDep,
-    corridor: Annotated[str, Query(description="corridor id, e.g. I-24-WB")],
+    corridor: Annotated[StorableText, Query(description="corridor id, e.g. I-24-WB")],
     lane: Annotated[int | None, Query(description="one lane only (1 = leftmost)")] = None,
 ) -> Response:
     """The newest published plan still valid, all lanes or one; 503 + Retry-After if none."""
@@ -172,7 +172,9 @@ async def get_vehicle_plan(
 async def get_plan_history(
     principal: AuthDep,
     session: SessionDep,
-    corridor: Annotated[str | None, Query(description="corridor id (all when omitted)")] = None,
+    corridor: Annotated[
+        StorableText | None, Query(description="corridor id (all when omitted)")
+    ] = None,
     since: Annotated[
         datetime | None, BeforeValidator(time_text), Query(description="runs started at or after")
     ] = None,

@@ -153,6 +153,27 @@ def test_text_postgresql_cannot_store_is_422_naming_the_field(
     assert answer.json()["detail"][0]["loc"] == ["body", field]
 
 
+@pytest.mark.parametrize(
+    ("url", "loc"),
+    [
+        ("/api/v1/plans/latest?corridor=I-24%00WB", ["query", "corridor"]),
+        ("/api/v1/plans?corridor=I-24%00WB", ["query", "corridor"]),
+        ("/api/v1/fleet?route=A%00", ["query", "route"]),
+        ("/api/v1/fleet?make=Toyota%00", ["query", "make"]),
+        ("/api/v1/corridors/I-24%00WB", ["path", "corridor_id"]),
+    ],
+    ids=["plan", "plan-runs", "fleet-route", "fleet-make", "corridor"],
+)
+def test_a_read_naming_text_postgresql_cannot_hold_is_422_naming_the_parameter(
+    api: httpx.Client, admin: dict[str, str], url: str, loc: list[str]
+) -> None:
+    """Such a read reached the database and came back as "a value cannot be stored", naming
+    neither the parameter nor a read (audit)."""
+    answer = api.get(url, headers=admin)
+    assert answer.status_code == 422, answer.text
+    assert answer.json()["detail"][0]["loc"] == loc
+
+
 def test_in_a_batch_a_nan_literal_or_unstorable_text_rejects_only_its_ping(
     api: httpx.Client, admin: dict[str, str], seeded_engine: Engine
 ) -> None:
