@@ -962,6 +962,30 @@ def test_a_plan_without_our_lane_leaves_the_car_to_its_acc(tmp_path: Path, dbc_c
         assert r.emulator.agent_frames == 0
 
 
+def every_lane_plan(
+    now: datetime,
+    published: datetime,
+    *,
+    x_m: list[float],
+    end_x_m: list[float],
+    speeds: list[float],
+) -> Plan:
+    """Plan 2 of the rig's corridor with the same targets on its four lanes, valid for 10 min
+    from `now`."""
+    return Plan.model_validate(
+        {
+            "plan_id": 2,
+            "corridor": uniform_plan(25.0, published=now).corridor,
+            "published_at": published,
+            "valid_until": now + timedelta(minutes=10),
+            "lanes": [
+                {"lane": lane, "x_m": x_m, "end_x_m": end_x_m, "target_speed_mps": speeds}
+                for lane in (1, 2, 3, 4)
+            ],
+        }
+    )
+
+
 def test_a_plan_that_does_not_reach_the_car_hands_back(tmp_path: Path, dbc_cache: Path) -> None:
     """A lane covering 0-200 m of the corridor, the car at 1,000 m: the lookup held the lane's
     last target flat past its end, and an engaged RAV4 slowed from 25 to 5 m/s on a target
@@ -969,22 +993,8 @@ def test_a_plan_that_does_not_reach_the_car_hands_back(tmp_path: Path, dbc_cache
     with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=25.0) as r:
         engage_and_settle(r)
         now = r.clock.now()
-        short = Plan.model_validate(
-            {
-                "plan_id": 2,
-                "corridor": uniform_plan(25.0, published=now).corridor,
-                "published_at": now,
-                "valid_until": now + timedelta(minutes=10),
-                "lanes": [
-                    {
-                        "lane": lane,
-                        "x_m": [0.0, 100.0],
-                        "end_x_m": [100.0, 200.0],
-                        "target_speed_mps": [5.0, 5.0],
-                    }
-                    for lane in (1, 2, 3, 4)
-                ],
-            }
+        short = every_lane_plan(
+            now, now, x_m=[0.0, 100.0], end_x_m=[100.0, 200.0], speeds=[5.0, 5.0]
         )
         assert r.agent.accept_plan(short)
         r.run(1.0)
@@ -1003,22 +1013,12 @@ def test_an_aged_plan_read_past_its_end_hands_back(tmp_path: Path, dbc_cache: Pa
     with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", speed_mps=25.0) as r:
         engage_and_settle(r)
         now = r.clock.now()
-        aged = Plan.model_validate(
-            {
-                "plan_id": 2,
-                "corridor": uniform_plan(25.0, published=now).corridor,
-                "published_at": now - timedelta(seconds=150),
-                "valid_until": now + timedelta(minutes=10),
-                "lanes": [
-                    {
-                        "lane": lane,
-                        "x_m": [0.0, 1400.0],
-                        "end_x_m": [1400.0, 1500.0],
-                        "target_speed_mps": [25.0, 5.0],
-                    }
-                    for lane in (1, 2, 3, 4)
-                ],
-            }
+        aged = every_lane_plan(
+            now,
+            now - timedelta(seconds=150),
+            x_m=[0.0, 1400.0],
+            end_x_m=[1400.0, 1500.0],
+            speeds=[25.0, 5.0],
         )
         assert r.agent.accept_plan(aged)
         r.run(1.0)
