@@ -275,8 +275,9 @@ def _sent_at(ts: datetime, received_at: datetime) -> datetime:
     return min(ts, received_at)
 
 
-def _age_s(ts: datetime, received_at: datetime, now: datetime) -> float:
-    """How long ago a message was sent (`_sent_at`), never negative."""
+def message_age_s(ts: datetime, received_at: datetime, now: datetime) -> float:
+    """How long ago a message was sent (`_sent_at`), never negative: what the age checks
+    grade and what the fleet's answer shows."""
     return max((now - _sent_at(ts, received_at)).total_seconds(), 0.0)
 
 
@@ -284,7 +285,7 @@ def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest ping (the car's GPS time)."""
     if facts.last_ping is None:
         return Grade("red", "never", "no ping received", "never pinged")
-    age = _age_s(facts.last_ping.ts, facts.last_ping.received_at, now)
+    age = message_age_s(facts.last_ping.ts, facts.last_ping.received_at, now)
     level = grade_rising(age, limits.ping_age_s)
     amber, red = limits.ping_age_s
     return Grade(
@@ -299,7 +300,7 @@ def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grad
     """Age of the newest status report (sent every ~10 s by a healthy agent)."""
     if facts.last_status is None:
         return Grade("red", "never", "no status report received", "never reported its status")
-    age = _age_s(facts.last_status.ts, facts.last_status.received_at, now)
+    age = message_age_s(facts.last_status.ts, facts.last_status.received_at, now)
     level = grade_rising(age, limits.status_age_s)
     amber, red = limits.status_age_s
     return Grade(
@@ -454,7 +455,7 @@ def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     if status.plan_age_s is None:
         return Grade("amber", "none", "no plan held: the car drives on stock ACC", "no plan held")
     amber, red = limits.plan_age_s
-    age_s = status.plan_age_s + _age_s(status.ts, status.received_at, now)
+    age_s = status.plan_age_s + message_age_s(status.ts, status.received_at, now)
     level = grade_rising(age_s, limits.plan_age_s)
     age = describe_age(age_s)
     return Grade(level, age, f"amber from {amber:g} s, red from {red:g} s", f"plan {age} old")

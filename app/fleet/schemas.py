@@ -20,6 +20,7 @@ from pydantic import (
     field_validator,
 )
 
+from app.fleet.readiness import message_age_s
 from app.fleet.service import MAX_NOTE_LENGTH, MAX_ROUTE_LENGTH, FleetCounts, FleetEntry
 from contract.controllers import controller_choice_schema
 from contract.values import NO_NUL_PATTERN, StorableText, json_number, storable_text
@@ -138,12 +139,18 @@ class MaintenanceOut(MaintenanceIn):
     vehicle_id: str
 
 
+MESSAGE_AGE = (
+    "seconds since the car sent it, by the server's clock: from its ts, or from when the server "
+    "received it if that was earlier (a car clock ahead shows no negative age)"
+)
+
+
 class PingOut(BaseModel):
     """A vehicle's newest ping."""
 
     ts: datetime
     received_at: datetime
-    age_s: float
+    age_s: float = Field(description=MESSAGE_AGE)
     speed_mps: float
     x_m: float | None
     postmile: float | None
@@ -160,7 +167,7 @@ class StatusOut(BaseModel):
 
     ts: datetime
     received_at: datetime
-    age_s: float
+    age_s: float = Field(description=MESSAGE_AGE)
     agent_version: str | None
     uptime_s: float | None
     can_ok: bool | None
@@ -271,7 +278,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
         else PingOut(
             ts=ping.ts,
             received_at=ping.received_at,
-            age_s=(now - ping.ts).total_seconds(),
+            age_s=message_age_s(ping.ts, ping.received_at, now),
             speed_mps=ping.speed_mps,
             x_m=ping.x_m,
             postmile=entry.postmile,
@@ -287,7 +294,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
         else StatusOut(
             ts=status.ts,
             received_at=status.received_at,
-            age_s=(now - status.ts).total_seconds(),
+            age_s=message_age_s(status.ts, status.received_at, now),
             agent_version=status.agent_version,
             uptime_s=status.uptime_s,
             can_ok=status.is_can_ok,

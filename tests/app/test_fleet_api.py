@@ -107,6 +107,21 @@ def test_a_reporting_car_is_cleared_and_turns_red_when_its_status_goes_stale(api
     assert stale["verdict"] == "not cleared"
 
 
+def test_a_car_whose_clock_runs_ahead_shows_no_negative_age(api: Api) -> None:
+    """Its ping and status are stamped 100 s ahead (the server takes up to 300 s): the answer
+    showed ages of about -100 s while its checks read them as about 0 s (audit). Both read
+    the time since the server received them now."""
+    ahead = datetime.now(UTC).replace(microsecond=0) + timedelta(seconds=100)
+    post_pings(api.client, api.tokens["admin"], drive("SF-001", ahead, 2000.0, 25.0, 1))
+    post_status(api.client, api.tokens["admin"], "SF-001", **healthy_status(ahead))
+
+    entry = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
+
+    assert 0.0 <= entry["last_ping"]["age_s"] < 30.0
+    assert 0.0 <= entry["last_status"]["age_s"] < 30.0
+    assert checks(entry)["ping"] == "green"
+
+
 def test_fleet_filters_by_route_make_and_problem(api: Api) -> None:
     report_healthy(api, "SF-001")
     everyone = api.get("/api/v1/fleet").json()["vehicles"]
