@@ -93,11 +93,11 @@ def read_manifest(document: bytes | str) -> object:
             parse_float=finite_float,
             parse_int=float_sized_integer,
         )
+        _check_text(manifest, "manifest")  # as deep as the reader went, within the same catch
     except (UnicodeDecodeError, json.JSONDecodeError) as error:
         raise PolicyError("manifest", f"not JSON ({error})") from None
     except RecursionError:
         raise PolicyError("manifest", "nested too deeply to read") from None
-    _check_text(manifest, "manifest")
     return manifest
 
 
