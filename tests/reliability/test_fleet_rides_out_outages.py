@@ -66,25 +66,34 @@ STEP_S = 0.1  # the agent's control period
 HAND_BACK_WITHIN_S = 1.0
 
 
+# Each car's emulated clock (its wall and steady clock in one) runs this far ahead of the wall
+# clock at most. Started at the wall's last whole second and caught up in bursts from behind,
+# it was behind the wall by up to 0.7 s when a plan arrived, and then ran faster than the wall
+# while it caught up: the plan's age since arrival by that clock (which bounds its validity, as
+# a real steady clock does) reached valid_until before the wall did, and the car handed back
+# early by either clock. Ahead of the wall, a plan arrives after its publication by the car's
+# clock too, as on a car.
+CLOCK_LEAD_S = 2.0
+
+
 @dataclass
 class Fleet:
-    """The cars, and every (wall time, vehicle, engaged) they went through."""
+    """The cars, and every (car time, vehicle, engaged) they went through: the car judges
+    valid_until by its own clock."""
 
     cars: dict[str, Rig]
     history: list[tuple[datetime, str, bool]] = field(default_factory=list)
 
     def drive(self, seconds: float, until: Callable[[], bool] | None = None) -> None:
-        """Advance every car with the wall clock (the server judges plans by it)."""
+        """Advance every car with the wall clock (the server judges plans by it), each car's
+        clock kept up to `CLOCK_LEAD_S` ahead of it."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
-            now = datetime.now(UTC)
+            ahead = datetime.now(UTC) + timedelta(seconds=CLOCK_LEAD_S)
             for vehicle_id, car in self.cars.items():
-                while car.clock.now() < now:
+                while car.clock.now() < ahead:
                     car.run(STEP_S, network=True)
-                    # stamped by the wall clock, whose time valid_until is in: a car's own clock
-                    # runs behind it while it catches up (0.7 s seen), and a car that handed
-                    # back on time by the server's clock read as early by its own
-                    self.history.append((datetime.now(UTC), vehicle_id, self.engaged(vehicle_id)))
+                    self.history.append((car.clock.now(), vehicle_id, self.engaged(vehicle_id)))
             if until is not None and until():
                 return
             time.sleep(0.02)
@@ -99,11 +108,23 @@ class Fleet:
     def all_engaged(self) -> bool:
         return all(self.engaged(vehicle_id) for vehicle_id in self.cars)
 
-    def engaged_between(self, start: datetime, end: datetime) -> dict[str, set[bool]]:
-        """Per vehicle, the engaged states seen in [start, end]."""
+    def mark(self) -> int:
+        """Where the history stands now, for `engaged_in`."""
+        return len(self.history)
+
+    def engaged_in(
+        self,
+        start: int,
+        stop: int | None = None,
+        *,
+        since: datetime | None = None,
+        until: datetime | None = None,
+    ) -> dict[str, set[bool]]:
+        """Per vehicle, the engaged states recorded between two `mark`s, at car times within
+        [since, until] where given. (Marks, not wall times: a car's clock runs ahead.)"""
         seen: dict[str, set[bool]] = {vehicle_id: set() for vehicle_id in self.cars}
-        for moment, vehicle_id, engaged in self.history:
-            if start <= moment <= end:
+        for moment, vehicle_id, engaged in self.history[start:stop]:
+            if (since is None or since <= moment) and (until is None or moment <= until):
                 seen[vehicle_id].add(engaged)
         return seen
 
@@ -151,6 +172,8 @@ def fleet_on(base: str, engine: Engine, tmp_path: Path, dbc_cache: Path) -> Iter
                     vehicle_id=vehicle_id,
                     server=ServerClient(http, vehicle_id, token),
                     speed_mps=24.0,
+                    # ahead of the wall from its first step: its first poll fetches the plan
+                    start=datetime.now(UTC) + timedelta(seconds=CLOCK_LEAD_S),
                 )
             )
         fleet = Fleet(cars)
@@ -186,12 +209,12 @@ def test_a_server_kill_leaves_every_car_on_its_plan_until_valid_until(
             # the server is gone (SIGKILL: no goodbye), the plan still has a while to run
             server.send_signal(signal.SIGKILL)
             server.wait(timeout=10)
-            killed_at = datetime.now(UTC)
+            killed_at, killed = datetime.now(UTC), fleet.mark()
             assert valid_until - killed_at > timedelta(seconds=10), "engaging took too long"
             fleet.drive((valid_until - datetime.now(UTC)).total_seconds() + 3.0)
-            before_expiry = fleet.engaged_between(killed_at, valid_until - timedelta(seconds=0.2))
-            after_expiry = fleet.engaged_between(
-                valid_until + timedelta(seconds=HAND_BACK_WITHIN_S), datetime.now(UTC)
+            before_expiry = fleet.engaged_in(killed, until=valid_until - timedelta(seconds=0.2))
+            after_expiry = fleet.engaged_in(
+                killed, since=valid_until + timedelta(seconds=HAND_BACK_WITHIN_S)
             )
             assert before_expiry == {vehicle_id: {True} for vehicle_id in FLEET}
             assert after_expiry == {vehicle_id: {False} for vehicle_id in FLEET}
@@ -235,13 +258,13 @@ def test_a_database_outage_disengages_no_car(
         try:
             with fleet_on(base, engine, tmp_path, dbc_cache) as fleet:
                 engine.dispose()
-                stopped_at = datetime.now(UTC)
+                stopped = fleet.mark()
                 cluster.stop()
                 fleet.drive(DATABASE_AWAY_S)
                 cluster.start()
-                back_at = datetime.now(UTC)
+                back_at, back = datetime.now(UTC), fleet.mark()
                 assert back_at < valid_until
-                during = fleet.engaged_between(stopped_at, back_at)
+                during = fleet.engaged_in(stopped, back)
                 assert during == {vehicle_id: {True} for vehicle_id in FLEET}
                 for car in fleet.cars.values():
                     # pings were refused 503 database_unavailable (they stay spooled) ...
