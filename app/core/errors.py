@@ -150,10 +150,13 @@ def install_error_handlers(app: FastAPI) -> None:
             raise error.__cause__
         if error.status_code == 400 and error.detail == UNREADABLE_BODY:
             why = _unread_body(request.headers)
+            # FastAPI answers a JSON syntax error itself (422); what reaches here failed after
+            # the syntax: text that is not UTF-8, or an integer Python will not read
             detail = (
                 f"request body cannot be read: {why}"
                 if why
-                else "request body is not valid JSON text"
+                else "request body cannot be read as JSON: it is not UTF-8 text, or holds an "
+                "integer too long to read (over 4,300 digits)"
             )
             return JSONResponse({"detail": detail}, 422)
         if error.status_code == 400:

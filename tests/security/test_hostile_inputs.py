@@ -153,6 +153,21 @@ def test_text_postgresql_cannot_store_is_422_naming_the_field(
     assert answer.json()["detail"][0]["loc"] == ["body", field]
 
 
+def test_a_status_with_an_integer_too_long_to_read_is_422_saying_so(
+    api: httpx.Client, admin: dict[str, str]
+) -> None:
+    """The text is JSON; Python refuses to read an integer of over 4,300 digits. The answer
+    said "request body is not valid JSON text" (audit)."""
+    answer = post(
+        api,
+        "/api/v1/vehicles/SF-001/status",
+        raw_json(a_status(gps_satellites="__5000_DIGITS__")),
+        admin,
+    )
+    assert answer.status_code == 422
+    assert "integer too long to read" in answer.json()["detail"]
+
+
 @pytest.mark.parametrize(
     ("url", "loc"),
     [
