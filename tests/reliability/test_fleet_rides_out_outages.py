@@ -61,8 +61,8 @@ PLAN_VALID_FOR_S = 40.0
 SERVER_AWAY_S = 50.0
 DATABASE_AWAY_S = 20.0
 STEP_S = 0.1  # the agent's control period
-# A car hands back at the first control step after valid_until (its clock runs in 0.1 s steps
-# behind the wall clock by at most the loop's lag).
+# A car hands back at the first control step after valid_until by its own clock (0.1 s steps);
+# the windows are read by that clock, so this is the step with room to spare.
 HAND_BACK_WITHIN_S = 1.0
 
 
