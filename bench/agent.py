@@ -68,7 +68,7 @@ def build(
     key: str, controller: str, clock: ManualClock | SystemClock, spool_dir: Path
 ) -> tuple[Agent, CarEmulator, can.BusABC, can.BusABC]:
     channel = f"bench-agent-{next(_channels)}"
-    car_bus = can.Bus(interface="virtual", channel=channel)
+    car_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     agent_bus = can.Bus(interface="virtual", channel=channel)
     start = clock.monotonic()
     emulator = CarEmulator(
@@ -79,6 +79,7 @@ def build(
         corridor=seed_geometry(),
         start_s=start,
         leader=ConstantSpeedLeader(1045.0, 25.0, start),
+        frame_epoch_s=lambda: clock.now().timestamp(),
     )
     agent = Agent(
         vehicle_id="SF-BENCH",

@@ -315,7 +315,7 @@ class Agent:
         wall = self.clock.now()
         self.stats.ticks += 1
         while (frame := self.bus.recv(timeout=0)) is not None:
-            self.reader.ingest(frame, now)
+            self.reader.ingest(frame, now - self.clock.frame_age_s(frame.timestamp))
         car_state = self.reader.snapshot(now)
         reading = car_state.reading
         measured_accel = self._estimate_accel(reading, now)

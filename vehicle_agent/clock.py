@@ -1,5 +1,13 @@
 """Time for the agent, injected: a monotonic clock for control and a wall clock (the car's
-GPS-disciplined system clock) for the timestamps it reports."""
+GPS-disciplined system clock) for the timestamps it reports.
+
+A CAN frame carries the time it was received, in the wall clock's seconds since the epoch
+(SocketCAN stamps each frame in the kernel, `SO_TIMESTAMPNS`). The agent dates a frame by it, not
+by the pass that reads it: after a stalled pass the frames queued before the stall are as old as
+they are, and a car gone silent meanwhile is seen to be. A wall clock stepped forward between
+receipt and reading (NTP) makes the frames read across the step look old once: the agent then
+hands back on stale inputs, the safe side.
+"""
 
 from __future__ import annotations
 
@@ -18,6 +26,18 @@ class Clock(Protocol):
     def now(self) -> datetime:
         """The wall-clock time (UTC)."""
 
+    def frame_age_s(self, received_epoch_s: float) -> float:
+        """Seconds since a CAN frame stamped `received_epoch_s` was received (`frame_age`)."""
+
+
+def frame_age(now_epoch_s: float, received_epoch_s: float) -> float:
+    """Seconds from a frame's receipt to `now_epoch_s`, both wall-clock epoch seconds; 0 for a
+    frame no interface stamped (python-can's default 0.0) and for one stamped ahead of now (the
+    wall clock stepped back since): such a frame is as new as the pass reading it."""
+    if received_epoch_s <= 0.0:
+        return 0.0
+    return max(0.0, now_epoch_s - received_epoch_s)
+
 
 class SystemClock:
     """The machine's clocks."""
@@ -29,6 +49,11 @@ class SystemClock:
     def now(self) -> datetime:
         """datetime.now(UTC)."""
         return datetime.now(UTC)
+
+    def frame_age_s(self, received_epoch_s: float) -> float:
+        """The age of a frame stamped by this machine's wall clock (SocketCAN's, or python-can's
+        virtual bus's)."""
+        return frame_age(time.time(), received_epoch_s)
 
 
 class ManualClock:
@@ -47,6 +72,11 @@ class ManualClock:
     def now(self) -> datetime:
         """The simulated wall time."""
         return self._start_wall + timedelta(seconds=self._mono - self._start_mono)
+
+    def frame_age_s(self, received_epoch_s: float) -> float:
+        """The age of a frame stamped with this clock's wall time (the car emulator's
+        `frame_epoch_s`): a frame the host stamped is not on this clock's time line."""
+        return frame_age(self.now().timestamp(), received_epoch_s)
 
     def advance(self, seconds: float) -> None:
         """Move both clocks forward."""

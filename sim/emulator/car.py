@@ -114,7 +114,14 @@ class Driver:
 
 
 class CarEmulator:
-    """One emulated car of a given make on `bus`."""
+    """One emulated car of a given make on `bus`.
+
+    `frame_epoch_s`, where given, stamps each frame sent with the wall time an agent on a
+    simulated clock reads (`ManualClock.now`), as SocketCAN stamps a frame on receipt, so the
+    agent dates the frames on its own time line; the bus must then keep the stamps (python-can's
+    virtual bus with `preserve_timestamps=True`). Without it the bus stamps the host's time, which
+    an agent on the machine's clock (`SystemClock`) reads.
+    """
 
     def __init__(
         self,
@@ -130,8 +137,10 @@ class CarEmulator:
         start_s: float = 0.0,
         period_scale: float = 1.0,
         dbc_cache: Path | None = None,
+        frame_epoch_s: Callable[[], float] | None = None,
     ) -> None:
         self.car = car if isinstance(car, CarInterface) else car_for(car)
+        self.frame_epoch_s = frame_epoch_s
         self.bus = bus
         self.codec = codec_for(self.car.dbc_name, self.car.checksums, dbc_cache)
         self.frames = FRAMES[self.car.key]
@@ -380,6 +389,7 @@ class CarEmulator:
                     data=data,
                     is_extended_id=False,
                     is_fd=len(data) > 8,
+                    timestamp=0.0 if self.frame_epoch_s is None else self.frame_epoch_s(),
                 )
             )
 

@@ -186,7 +186,7 @@ def rig(
     then sees no press). A car that takes no button frames (the 2023 Rogue) gets, by default,
     a board wired to its switches (`board_wired_to`)."""
     channel = f"agent-rig-{next(_channels)}"
-    car_bus = can.Bus(interface="virtual", channel=channel)
+    car_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
     agent_bus = can.Bus(interface="virtual", channel=channel)
     clock = ManualClock(start or datetime.now(UTC).replace(microsecond=0), monotonic_s=100.0)
     emulator = CarEmulator(
@@ -198,6 +198,7 @@ def rig(
         corridor=seed_geometry(),
         start_s=clock.monotonic(),
         dbc_cache=dbc_cache,
+        frame_epoch_s=lambda: clock.now().timestamp(),
     )
     gps = EmulatorGps(emulator, clock)
     agent = Agent(

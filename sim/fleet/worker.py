@@ -197,7 +197,7 @@ class Fleet:
     ) -> FleetCar:
         car = car_for(vehicle.make, vehicle.model, vehicle.year)
         channel = f"fleet-{vehicle.vehicle_id}"
-        car_bus = can.Bus(interface="virtual", channel=channel)
+        car_bus = can.Bus(interface="virtual", channel=channel, preserve_timestamps=True)
         agent_bus = can.Bus(interface="virtual", channel=channel)
         clock = ManualClock(datetime.now(UTC), monotonic_s=time.monotonic())
         now = clock.monotonic()
@@ -211,6 +211,7 @@ class Fleet:
             lane=vehicle.lane,
             start_s=now,
             dbc_cache=dbc_cache,
+            frame_epoch_s=lambda: clock.now().timestamp(),
         )
         emulator.driver_engage(DRIVER_SET_SPEED_MPH)
         emulator.driver.resume_after_s = DRIVER_RESUME_AFTER_S

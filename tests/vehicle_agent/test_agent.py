@@ -128,6 +128,31 @@ def test_can_loss_hands_back_within_one_period(tmp_path: Path, dbc_cache: Path) 
         assert r.emulator.agent_frames == sent  # no more requests: the stock ACC drives
 
 
+def test_frames_queued_across_a_stalled_pass_are_dated_by_their_receipt(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A pass 0.3 s late (the Pi busy elsewhere) found the car's frames queued: they were dated
+    by the pass reading them, so a car gone silent at the start of the stall read as healthy
+    for 10 periods more. Dated by their receipt, the late pass sees them as they are: the newest
+    fresh while the car talks, 0.3 s old (15 of SPEED's 20 ms periods) once it has stopped."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+
+        def stalled_pass(seconds: float) -> None:
+            r.clock.advance(seconds)
+            r.emulator.step(r.clock.monotonic())
+            r.agent.tick()
+
+        stalled_pass(0.3)  # the car went on sending through the stall
+        assert engaged(r), r.agent.state.reason
+        r.clock.advance(CONTROL_PERIOD_S)
+        r.emulator.step(r.clock.monotonic())  # the car's last frames, queued: the pass stalls
+        r.emulator.muted = set(r.emulator.frames)
+        stalled_pass(0.3)
+        assert not engaged(r)
+        assert r.agent.state.reason == "CAN inputs not healthy"
+
+
 def test_a_control_pass_follows_the_plan_it_checked_not_one_replaced_meanwhile(
     tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
