@@ -145,7 +145,9 @@ def distance_lost_m(
 
 
 def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> FloatArray:
-    """When each vehicle passes `point_m` (linear between steps; positions never decrease).
+    """When each vehicle first reaches `point_m` (linear between steps; positions never
+    decrease), as a detector at the point counts it: a car that stops there counts when it
+    arrives, not when it leaves.
 
     A column that is NaN where the vehicle was not in the lane (a car that merged in) crosses
     only if it was in the lane when it passed the point; otherwise its time is NaN.
@@ -155,11 +157,26 @@ def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> Flo
     for column in range(position_m.shape[1]):
         track = position_m[:, column]
         present = np.isfinite(track)
-        if present.all():
-            times[column] = np.interp(point_m, track, time_s)
-        elif present.any() and track[present][0] <= point_m <= track[present][-1]:
-            times[column] = np.interp(point_m, track[present], time_s[present])
+        if not present.all():
+            if not (present.any() and track[present][0] <= point_m <= track[present][-1]):
+                continue
+            times[column] = _first_arrival_s(track[present], time_s[present], point_m)
+        else:
+            times[column] = _first_arrival_s(track, time_s, point_m)
     return times
+
+
+def _first_arrival_s(track: FloatArray, time_s: FloatArray, point_m: float) -> float:
+    """The first time a non-decreasing `track` reaches `point_m` (its ends outside: clamped,
+    as `np.interp` does)."""
+    reached = int(np.searchsorted(track, point_m, side="left"))
+    if reached == 0:
+        return float(time_s[0])
+    if reached == track.size:
+        return float(time_s[-1])
+    before, after = track[reached - 1], track[reached]
+    share = (point_m - before) / (after - before)
+    return float(time_s[reached - 1] + share * (time_s[reached] - time_s[reached - 1]))
 
 
 def throughput_at_vph(

@@ -57,6 +57,16 @@ def test_throughput_of_two_cars_1_5_s_apart() -> None:
     assert throughput_vph(POSITIONS, 1.0) == pytest.approx(2400.0)
 
 
+def test_a_car_stopped_at_the_point_counts_when_it_arrives_not_when_it_leaves() -> None:
+    # the first car reaches 10 m at t = 1 s, waits there until t = 3 s, goes on; the second
+    # reaches it at t = 4 s: a detector at 10 m counts them 3 s apart, 1200 veh/h (read from
+    # its departure, 1 s apart: 3600)
+    positions = np.array(
+        [[0.0, -20.0], [10.0, -15.0], [10.0, -10.0], [10.0, -5.0], [20.0, 10.0], [30.0, 20.0]]
+    )
+    assert throughput_at_vph(positions, 1.0, 10.0) == pytest.approx(1200.0)
+
+
 def test_throughput_refuses_a_point_not_every_car_reaches() -> None:
     with pytest.raises(ValueError, match="not every vehicle passes 12 m"):
         throughput_at_vph(POSITIONS, 1.0, 12.0)
