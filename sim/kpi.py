@@ -152,7 +152,7 @@ def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> Flo
     A column that is NaN where the vehicle was not in the lane (a car that merged in) crosses
     only if it was in the lane when it passed the point; otherwise its time is NaN.
     """
-    time_s = np.arange(position_m.shape[0]) * dt_s
+    time_s = np.arange(position_m.shape[0], dtype=np.float64) * dt_s
     times = np.full(position_m.shape[1], np.nan)
     for column in range(position_m.shape[1]):
         track = position_m[:, column]
