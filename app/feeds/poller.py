@@ -3,6 +3,15 @@
 The key travels in the Authorization header only: it is never part of a URL, a log line or an
 error message (any message that would contain it is scrubbed). A failed poll is retried after
 1 s, 2 s, 4 s... (at most 30 s) until the next period begins, which starts afresh.
+
+The provider serves the current minute only, so a response once fetched is never thrown away
+for the warehouse's sake: it is recorded at once (`record`), and while the database does not
+take it (`StoreFailed`) it waits in a backlog, retried with the same backoff without asking the
+provider again, and stored oldest first once the database answers. Every wait is bounded: a
+provider that trickles its answer is given up after `fetch_deadline_s`, a store the database
+never answers after `store_deadline_s` (a frozen server never enforces its own statement
+timeout); such a store is cancelled and left to end on its own, and no other store starts while
+it has not, so a hung database holds one connection, not one a retry.
 """
 
 from __future__ import annotations
@@ -10,6 +19,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections import deque
 from collections.abc import Awaitable, Callable
 from datetime import UTC, datetime
 
@@ -24,6 +34,13 @@ log = logging.getLogger(__name__)
 FIRST_RETRY_S = 1.0
 MAX_RETRY_S = 30.0
 REQUEST_TIMEOUT_S = 20.0
+# The whole request, however slowly its bytes come (REQUEST_TIMEOUT_S bounds each read).
+FETCH_DEADLINE_S = 30.0
+# One snapshot's store: over PostgreSQL's 30 s statement timeout, under the 60 s period.
+STORE_DEADLINE_S = 40.0
+# Snapshots fetched and not yet stored, at most: a day of minutes (kilobytes each for a
+# corridor). Beyond it the oldest goes, with a line saying so; the recording still has it.
+BACKLOG_LIMIT = 24 * 60
 # A segment-speed response for a corridor is kilobytes (48 segments of the 2021 recordings); a
 # region's a few megabytes. Larger is a provider or proxy gone wrong: read whole, a 200 MB body
 # took the poller to 3 GB, on a host it shares with PostgreSQL (ops audit).
@@ -32,6 +49,11 @@ MAX_RESPONSE_BYTES = 32 * 1024 * 1024
 
 class PollFailed(Exception):
     """One poll did not yield a usable response; the message is safe to log."""
+
+
+class StoreFailed(Exception):
+    """The warehouse did not take a snapshot (the database down or not answering): the
+    snapshot is kept and stored again later. The message is safe to log."""
 
 
 class InrixPoller:
@@ -47,6 +69,9 @@ class InrixPoller:
         first_retry_s: float = FIRST_RETRY_S,
         max_retry_s: float = MAX_RETRY_S,
         max_response_bytes: int = MAX_RESPONSE_BYTES,
+        fetch_deadline_s: float = FETCH_DEADLINE_S,
+        store_deadline_s: float = STORE_DEADLINE_S,
+        backlog_limit: int = BACKLOG_LIMIT,
         sleep: Callable[[float], Awaitable[None]] = asyncio.sleep,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -57,8 +82,14 @@ class InrixPoller:
         self._first_retry_s = first_retry_s
         self._max_retry_s = max_retry_s
         self._max_response_bytes = max_response_bytes
+        self._fetch_deadline_s = fetch_deadline_s
+        self._store_deadline_s = store_deadline_s
         self._sleep = sleep
         self._clock = clock
+        self.backlog: deque[RecordedSnapshot] = deque()
+        self._backlog_limit = backlog_limit
+        # a store given up on that has not ended yet (see the module docstring)
+        self._abandoned_store: asyncio.Task[None] | None = None
 
     def _scrub(self, message: str) -> str:
         secret = self._key.get_secret_value()
@@ -107,30 +138,100 @@ class InrixPoller:
         return bytes(body)
 
     async def run(
-        self, handle: Callable[[RecordedSnapshot], Awaitable[None]], *, count: int | None = None
+        self,
+        store: Callable[[RecordedSnapshot], Awaitable[None]],
+        *,
+        record: Callable[[RecordedSnapshot], None] | None = None,
+        count: int | None = None,
     ) -> int:
-        """Poll until `count` snapshots were handled (forever if None); returns how many."""
-        handled = 0
+        """Poll until `count` snapshots were stored (forever if None); returns how many.
+
+        Each period fetches one response (retried on PollFailed, from the fetch or from `store`
+        finding it unusable), hands it to `record` at once, and stores the backlog oldest first.
+        """
+        stored = 0
         next_poll = self._clock()
-        while count is None or handled < count:
+        while count is None or stored < count:
             period_ends = next_poll + self._period_s
             delay = self._first_retry_s
+            fetched = False
             while True:
                 try:
-                    snapshot = await self.fetch()
-                    await handle(snapshot)
+                    if not fetched:
+                        self._keep(await self._fetch_within_deadline(), record)
+                        fetched = True
+                    while self.backlog and (count is None or stored < count):
+                        try:
+                            await self._store_within_deadline(store, self.backlog[0])
+                        except PollFailed:  # not a usable response: dropped
+                            self.backlog.popleft()
+                            # the backlog's newest is this period's: gone, ask again
+                            fetched = bool(self.backlog)
+                            raise
+                        self.backlog.popleft()
+                        stored += 1
                 except PollFailed as error:
-                    if self._clock() + delay >= period_ends:
-                        log.warning("INRIX poll failed: %s; next poll at the next period", error)
-                        break
-                    log.warning("INRIX poll failed: %s; retrying in %.0f s", error, delay)
-                    await self._sleep(delay)
-                    delay = min(delay * 2, self._max_retry_s)
-                    continue
-                handled += 1
-                break
-            if count is not None and handled >= count:
+                    failure = f"INRIX poll failed: {error}"
+                except StoreFailed as error:
+                    failure = (
+                        f"INRIX snapshot not stored: {error} ({len(self.backlog)} kept to store)"
+                    )
+                else:
+                    break
+                if self._clock() + delay >= period_ends:
+                    log.warning("%s; next poll at the next period", failure)
+                    break
+                log.warning("%s; retrying in %.0f s", failure, delay)
+                await self._sleep(delay)
+                delay = min(delay * 2, self._max_retry_s)
+            if count is not None and stored >= count:
                 break
             next_poll = period_ends
             await self._sleep(max(0.0, next_poll - self._clock()))
-        return handled
+        return stored
+
+    def _keep(
+        self, snapshot: RecordedSnapshot, record: Callable[[RecordedSnapshot], None] | None
+    ) -> None:
+        """Record a fetched response and put it in the backlog (its oldest dropped when full)."""
+        if record is not None:
+            record(snapshot)
+        if len(self.backlog) >= self._backlog_limit:
+            dropped = self.backlog.popleft()
+            log.error(
+                "INRIX backlog full (%d snapshots not stored): dropped the one fetched at %s",
+                self._backlog_limit,
+                dropped.recorded_at.isoformat(),
+            )
+        self.backlog.append(snapshot)
+
+    async def _fetch_within_deadline(self) -> RecordedSnapshot:
+        try:
+            return await asyncio.wait_for(self.fetch(), self._fetch_deadline_s)
+        except TimeoutError:
+            raise PollFailed(
+                f"provider did not answer within {self._fetch_deadline_s:g} s"
+            ) from None
+
+    async def _store_within_deadline(
+        self, store: Callable[[RecordedSnapshot], Awaitable[None]], snapshot: RecordedSnapshot
+    ) -> None:
+        """`store(snapshot)`, StoreFailed when it has not ended within the deadline (it is
+        cancelled, not awaited: its clean-up may wait on the same hung server)."""
+        if self._abandoned_store is not None and not self._abandoned_store.done():
+            raise StoreFailed("the database has not ended the store given up on before")
+        task = asyncio.ensure_future(store(snapshot))
+        done, _ = await asyncio.wait({task}, timeout=self._store_deadline_s)
+        if not done:
+            task.cancel()
+            task.add_done_callback(_consume_outcome)
+            self._abandoned_store = task
+            raise StoreFailed(f"the database did not answer within {self._store_deadline_s:g} s")
+        task.result()
+
+
+def _consume_outcome(task: asyncio.Task[None]) -> None:
+    """Read an abandoned store's outcome, so asyncio does not report it as never retrieved
+    (a late success is stored: the backlog's next store of it counts a duplicate)."""
+    if not task.cancelled():
+        task.exception()

@@ -15,12 +15,13 @@ from pathlib import Path
 import click
 import httpx
 from sqlalchemy.exc import DBAPIError
+from sqlalchemy.exc import TimeoutError as PoolTimeout
 from sqlalchemy.ext.asyncio import AsyncSession, async_sessionmaker
 
 from app.core.config import Settings, SettingsError
 from app.core.db import make_async_engine
 from app.feeds.inrix import InrixFormatError, readings
-from app.feeds.poller import InrixPoller, PollFailed
+from app.feeds.poller import InrixPoller, PollFailed, StoreFailed
 from app.feeds.recording import (
     RecordedSnapshot,
     append_to_recording,
@@ -66,7 +67,8 @@ def _storer(
 ) -> Callable[[RecordedSnapshot], Awaitable[None]]:
     """Store one snapshot in its own transaction and print what became of it; PollFailed
     (naming the recording's line, for a replay) for a snapshot that is no response or is
-    stamped ahead of now by more than `max_future_s`, as the API refuses it."""
+    stamped ahead of now by more than `max_future_s`, as the API refuses it; StoreFailed when
+    the database does not take it (the poller keeps it and stores it later)."""
 
     async def store(snapshot: RecordedSnapshot) -> None:
         where = "" if snapshot.line is None else f"line {snapshot.line}: "
@@ -79,9 +81,9 @@ def _storer(
         try:
             async with sessions() as session, session.begin():
                 result = await store_readings(session, found, now)
-        except (DBAPIError, OSError) as error:
+        except (DBAPIError, OSError, PoolTimeout) as error:
             reason = str(error).strip().splitlines()[0] if str(error).strip() else "unreachable"
-            raise PollFailed(f"database: {reason}") from None
+            raise StoreFailed(f"database: {reason}") from None
         click.echo(_describe(result))
 
     return store
@@ -137,9 +139,10 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
         store = _storer(sessions, lambda snapshot: timedelta(0), current.ping_max_future_s)
         recording = record
 
-        async def handle(snapshot: RecordedSnapshot) -> None:
+        def keep(snapshot: RecordedSnapshot) -> None:
+            """Append the response as soon as it is fetched, stored or not: the recording is
+            how minutes the database missed are backfilled (`inrix replay`)."""
             nonlocal recording
-            await store(snapshot)
             if recording is None:
                 return
             try:
@@ -159,7 +162,7 @@ def poll(period: float | None, count: int | None, record: Path | None) -> None:
             poller = InrixPoller(
                 url, key, period_s=period or current.inrix_poll_period_s, client=client
             )
-            return await poller.run(handle, count=count)
+            return await poller.run(store, record=keep, count=count)
 
     with database(current) as database_url:
         asyncio.run(_with_database(database_url, work))
@@ -198,7 +201,7 @@ def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
     with database(current) as database_url:
         try:
             count = asyncio.run(_with_database(database_url, work))
-        except PollFailed as error:
+        except (PollFailed, StoreFailed) as error:
             raise CliError(f"{recording.name}: {error}") from None
     click.echo(f"replayed {count} snapshot(s) from {recording}")
 

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import subprocess
 import sys
 import threading
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from datetime import UTC, datetime, timedelta
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+from typing import Any
 
 import httpx
 import orjson
@@ -17,7 +19,7 @@ import pytest
 from pydantic import SecretStr
 from sqlalchemy import Engine, text
 
-from app.feeds.poller import InrixPoller, PollFailed
+from app.feeds.poller import InrixPoller, PollFailed, StoreFailed
 from app.feeds.recording import (
     RecordedSnapshot,
     append_to_recording,
@@ -43,6 +45,7 @@ class FakeClock:
     async def sleep(self, seconds: float) -> None:
         self.sleeps.append(seconds)
         self.now += seconds
+        await asyncio.sleep(0)  # other tasks run, as they would during a real sleep
 
 
 class Provider:
@@ -323,3 +326,153 @@ def test_a_replay_shifted_to_now_never_stamps_a_snapshot_after_it_is_stored(spee
     assert min(lags) == timedelta(0)
     stamped_now = {1.0: 0, 0.5: 0, 10.0: 12, 0.0: 12}[speed]
     assert lags[stamped_now] == timedelta(0)
+
+
+def polling(
+    snapshot: RecordedSnapshot,
+    clock: FakeClock,
+    answer: Callable[[httpx.Request], Any],
+    store: Callable[[RecordedSnapshot], Awaitable[None]],
+    *,
+    count: int,
+    record: Callable[[RecordedSnapshot], None] | None = None,
+    **limits: float,
+) -> int:
+    """Run a poller on `answer` (a provider) and `store` with the fake clock's backoff."""
+
+    async def run() -> int:
+        async with httpx.AsyncClient(transport=httpx.MockTransport(answer)) as client:
+            poller = InrixPoller(
+                "http://provider.test/speed",
+                SecretStr(KEY),
+                period_s=60,
+                client=client,
+                sleep=clock.sleep,
+                clock=clock,
+                **limits,  # type: ignore[arg-type]
+            )
+            return await poller.run(store, record=record, count=count)
+
+    return asyncio.run(run())
+
+
+def test_what_is_fetched_while_the_database_is_down_is_recorded_and_stored_once_it_is_back(
+    snapshot: RecordedSnapshot, caplog: pytest.LogCaptureFixture
+) -> None:
+    """INRIX serves the current minute only: a poll that fetched a response and could not
+    store it threw it away and asked the provider again (6 calls a minute), and recorded it
+    only after storing, so an outage left a hole in the warehouse and in the recording that
+    should backfill it. Down for 100 s, the database misses no minute now."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    fetched_at: list[float] = []
+    recorded: list[RecordedSnapshot] = []
+    stored: list[RecordedSnapshot] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        fetched_at.append(clock.now)
+        return httpx.Response(200, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        if clock.now < 1100:
+            raise StoreFailed("database: connection refused")
+        stored.append(recorded_snapshot)
+
+    caplog.set_level(logging.WARNING, logger="app.feeds.poller")
+    assert polling(snapshot, clock, answer, store, count=3, record=recorded.append) == 3
+    # one request a period (0, 60, 120 s), recorded at once; stored in order at 120 s
+    assert [round(moment - 1000) for moment in fetched_at] == [0, 60, 120]
+    assert [id(item) for item in stored] == [id(item) for item in recorded]
+    assert len(stored) == 3
+    assert "INRIX snapshot not stored: database: connection refused (2 kept to store)" in (
+        caplog.text
+    )
+
+
+def test_a_provider_that_never_finishes_answering_is_given_up_at_the_deadline(
+    snapshot: RecordedSnapshot, caplog: pytest.LogCaptureFixture
+) -> None:
+    """httpx's timeout bounds each read, not the request: a provider sending a byte now and
+    then held the poller for as long as it liked, and no minute was polled meanwhile."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    calls: list[float] = []
+
+    async def answer(request: httpx.Request) -> httpx.Response:
+        calls.append(clock.now)
+        if len(calls) == 1:
+            await asyncio.sleep(3600)
+        return httpx.Response(200, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        pass
+
+    caplog.set_level(logging.WARNING, logger="app.feeds.poller")
+    assert polling(snapshot, clock, answer, store, count=1, fetch_deadline_s=0.2) == 1
+    assert [round(moment - 1000) for moment in calls] == [0, 1]
+    assert "provider did not answer within 0.2 s; retrying in 1 s" in caplog.text
+
+
+def test_a_store_the_database_never_answers_is_given_up_and_no_other_starts_until_it_ends(
+    snapshot: RecordedSnapshot, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A frozen database never enforces its statement timeout: the store hung, and the feed
+    with it. Now it is given up after the deadline and cancelled; while its clean-up still
+    waits on the server, no second store piles up on it; once it ends, the snapshot it held is
+    stored (fetched once)."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    calls: list[float] = []
+    stores: list[float] = []
+    cleaned_up = asyncio.Event()
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        calls.append(clock.now)
+        return httpx.Response(200, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        stores.append(clock.now)
+        if len(stores) == 1:
+            try:
+                await asyncio.sleep(3600)
+            except asyncio.CancelledError:
+                await cleaned_up.wait()  # a clean-up waiting on the same server
+
+    async def sleep(seconds: float) -> None:
+        await FakeClock.sleep(clock, seconds)
+        if clock.now >= 1030:
+            cleaned_up.set()
+            await asyncio.sleep(0)
+
+    clock.sleep = sleep  # type: ignore[method-assign]
+    caplog.set_level(logging.WARNING, logger="app.feeds.poller")
+    assert polling(snapshot, clock, answer, store, count=1, store_deadline_s=0.2) == 1
+    assert [round(moment - 1000) for moment in calls] == [0]
+    # given up at once, then refused at 1, 3, 7 and 15 s while it cleans up; stored at 31 s
+    assert [round(moment - 1000) for moment in stores] == [0, 31]
+    assert "the database did not answer within 0.2 s (1 kept to store)" in caplog.text
+    assert caplog.text.count("has not ended the store given up on before") == 4
+
+
+def test_a_database_error_in_a_store_is_a_store_failure_not_a_poll_failure(
+    snapshot: RecordedSnapshot,
+) -> None:
+    """The CLI's store tells a database that does not take a snapshot (kept, stored later)
+    from a response that is no usable snapshot (dropped, asked again)."""
+    from sqlalchemy.ext.asyncio import async_sessionmaker
+
+    from app.core.db import make_async_engine
+    from smoothfleet.cli.inrix import _storer
+
+    async def run() -> None:
+        engine = make_async_engine("postgresql+psycopg://nobody@127.0.0.1:9/none", pool_size=1)
+        try:
+            store = _storer(async_sessionmaker(engine), lambda item: timedelta(0), 300.0)
+            with pytest.raises(StoreFailed, match="^database: "):
+                await store(snapshot)
+            with pytest.raises(PollFailed):
+                await store(RecordedSnapshot(snapshot.recorded_at, {"result": []}))
+        finally:
+            await engine.dispose()
+
+    asyncio.run(run())
