@@ -148,6 +148,12 @@ class ServerClient:
             raise ServerTimeout(f"{method} {path}: no answer ({type(error).__name__})") from None
         except httpx.TransportError as error:
             raise ServerUnreachable(f"{method} {path}: {type(error).__name__}: {error}") from None
+        except httpx.HTTPError as error:
+            # an answer httpx could not read (a body that is not the Content-Encoding it names,
+            # a proxy's redirect loop): not what the contract says, so the callers' handling of
+            # a bad answer applies (a policy download's failure hands the car back) instead of
+            # an error none of them expects leaving the car on the policy assigned before
+            raise UnexpectedAnswer(f"{method} {path}: {type(error).__name__}: {error}") from None
         self.last_rtt_ms = (time.perf_counter() - started) * 1000.0
         return response
 

@@ -52,6 +52,29 @@ def test_a_corridor_without_sub_segments_is_an_unexpected_answer() -> None:
         client_answering({"lanes": 4, "segments": []}).corridor("I-24-WB")
 
 
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda client: client.config(),
+        lambda client: client.policy("a" * 64),
+        lambda client: client.plan(2, None),
+        lambda client: client.post_pings(PINGS),
+    ],
+    ids=["config", "policy", "plan", "pings"],
+)
+def test_an_answer_that_cannot_be_decoded_is_an_unexpected_answer(call: Any) -> None:
+    """A body that is not the Content-Encoding it names (a misbehaving proxy) raised httpx's
+    DecodingError, which no caller expects: a policy download that met it left the car
+    engaged on the policy assigned before, asking again on every network pass."""
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, headers={"Content-Encoding": "gzip"}, content=b"not gzip")
+
+    http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(answer))
+    with pytest.raises(UnexpectedAnswer, match="DecodingError"):
+        call(ServerClient(http, "SF-001", "token"))
+
+
 def gpsd(*reports: object) -> GpsdSource:
     source = GpsdSource(clock=lambda: 5.0)
     for report in reports:
