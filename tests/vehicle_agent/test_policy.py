@@ -354,6 +354,7 @@ def test_archives_no_policy_could_be_are_refused_as_policy_files(tmp_path: Path)
     read_policy(good, "acc", "good")  # itself a policy
     deflate64 = zip_with_header_field(good, 8, 9)  # compression method 9: Deflate64
     encrypted = zip_with_header_field(good, 6, 1)  # general-purpose flag bit 0: encrypted
+    newer_zip = zip_with_header_field(good, 4, 84)  # version needed to extract: 8.4
     bomb = tmp_path / "bomb.npz"
     np.savez_compressed(bomb, actuation=np.array("acc"), layer_0_weight=np.zeros((4096, 1024)))
     structured = tmp_path / "structured.npz"
@@ -368,6 +369,7 @@ def test_archives_no_policy_could_be_are_refused_as_policy_files(tmp_path: Path)
     cases = {
         "deflate64": (deflate64, "not a policy file"),
         "encrypted": (encrypted, "not a policy file"),
+        "newer zip": (newer_zip, "not a policy file .zip file version 8.4"),
         "bomb": (bomb.read_bytes(), "unpacks to 33554[0-9]+ bytes, more than a policy's"),
         "structured": (structured.read_bytes(), "not a policy file"),
     }

@@ -323,7 +323,9 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     try:
         with zipfile.ZipFile(io.BytesIO(content)) as listing:
             unpacked = sum(member.file_size for member in listing.infolist())
-    except (OSError, ValueError, zipfile.BadZipFile) as error:
+    # NotImplementedError: a member needing a newer zip version than zipfile reads (its
+    # "version needed to extract"), raised while the directory is read
+    except (OSError, ValueError, zipfile.BadZipFile, NotImplementedError) as error:
         raise PolicyFileError(f"{label}: not a policy file ({error})") from None
     if unpacked > MAX_POLICY_UNPACKED_BYTES:
         raise PolicyFileError(
