@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
 
 import click
+from sqlalchemy.engine import URL, make_url
 
-from app.core.db import libpq_url, make_sync_engine, redact, session_scope
-from smoothfleet.cli.common import CliError, console, database, output_file, settings
+from app.core.db import libpq_url, make_sync_engine, redact, session_scope, sqlalchemy_url
+from smoothfleet.cli.common import (
+    CliError,
+    console,
+    database,
+    output_file,
+    replaced_on_success,
+    settings,
+)
 
 
 @click.group()
@@ -59,6 +68,28 @@ def db_url() -> None:
         click.echo(redact(url))
 
 
+def _for_child(url: str) -> tuple[str, dict[str, str]]:
+    """The libpq URL without its password, and an environment for a child process (psql,
+    pg_dump) that gives the password (PGPASSWORD) and opens the session in UTC (PGTZ), as the
+    service's own sessions are: a command line is shown to every user of the host (`ps`), an
+    environment only to its owner; and the warehouse's days and hours are UTC's, which a bound
+    written without a zone is read in only when the session is (docs/analytics.md)."""
+    parsed = make_url(sqlalchemy_url(url))
+    environment = dict(os.environ, PGTZ="UTC")
+    if parsed.password is not None:
+        environment["PGPASSWORD"] = str(parsed.password)
+        parsed = URL.create(
+            parsed.drivername,
+            parsed.username,
+            None,
+            parsed.host,
+            parsed.port,
+            parsed.database,
+            parsed.query,
+        )
+    return libpq_url(parsed.render_as_string(hide_password=False)), environment
+
+
 @db.command("psql", context_settings={"ignore_unknown_options": True})
 @click.argument("psql_args", nargs=-1, type=click.UNPROCESSED)
 def db_psql(psql_args: tuple[str, ...]) -> None:
@@ -67,7 +98,8 @@ def db_psql(psql_args: tuple[str, ...]) -> None:
 
     executable = shutil.which("psql") or str(bin_dir() / "psql")
     with database(settings()) as url:
-        code = subprocess.call([executable, libpq_url(url), *psql_args])
+        child_url, environment = _for_child(url)
+        code = subprocess.call([executable, child_url, *psql_args], env=environment)
     if code:
         raise SystemExit(code)
 
@@ -79,17 +111,22 @@ def db_dump(dump_file: Path) -> None:
 
     The embedded server stops when the last command using it exits, so the URL `db url` prints
     is dead by the time a pg_dump started after it connects: this runs pg_dump while the
-    server is held. FILE is replaced only by a whole dump."""
+    server is held. FILE is replaced only by a whole dump, written to disk before it is: the
+    temporary file beside it is this process's own, so two dumps to one FILE never write into
+    one file (before 2026-12-05 they shared `FILE.partial`, and the first renamed a file the
+    second had truncated and half rewritten)."""
     output_file(dump_file, "FILE")
     current = settings()
     executable = _newest_pg_dump()
-    partial = dump_file.with_name(f"{dump_file.name}.partial")
-    with database(current) as url:
-        code = subprocess.call([executable, "--format=custom", f"--file={partial}", libpq_url(url)])
-    if code:
-        partial.unlink(missing_ok=True)
-        raise CliError(f"pg_dump exited {code}: {dump_file} was left as it was")
-    partial.replace(dump_file)
+    with database(current) as url, replaced_on_success(dump_file) as partial:
+        child_url, environment = _for_child(url)
+        code = subprocess.call(
+            [executable, "--format=custom", f"--file={partial}", child_url], env=environment
+        )
+        if code:
+            raise CliError(f"pg_dump exited {code}: {dump_file} was left as it was")
+        with partial.open("rb") as written:
+            os.fsync(written.fileno())
     console.print(
         f"{dump_file}: {dump_file.stat().st_size:,} bytes; restore it into an empty database "
         f"with pg_restore --dbname=URL {dump_file}"

@@ -276,7 +276,7 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(
     assert dumped.returncode == 0, dumped.stderr
     assert f"{backup}: " in dumped.stdout.replace("\n", "")  # (rich wraps long lines)
     assert backup.read_bytes()[:5] == b"PGDMP"
-    assert not list(backup.parent.glob("*.partial"))
+    assert not list(backup.parent.glob("*partial*"))
     name = f"restored_{int(time.time() * 1000)}"
     admin_execute(pg_server, sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
     restored = embedded_url(pg_server, name)
@@ -298,6 +298,77 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(
             pg_server,
             sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)),
         )
+
+
+PASSWORD = "S3cretPw"
+
+
+def tool_on_path(bin_path: Path, name: str, body: str) -> None:
+    """A stand-in for a PostgreSQL client on PATH: answers `--version` as release 99 (newer
+    than any, so `db dump` picks it), otherwise runs `body` (sh)."""
+    tool = bin_path / name
+    tool.write_text(
+        "#!/bin/sh\n"
+        f'if [ "$1" = --version ]; then echo "{name} (PostgreSQL) 99.0"; exit 0; fi\n' + body
+    )
+    tool.chmod(0o755)
+
+
+def with_password(url: str) -> str:
+    from sqlalchemy.engine import make_url
+
+    return make_url(url).set(password=PASSWORD).render_as_string(hide_password=False)
+
+
+@pytest.mark.parametrize("command", ["psql", "dump"])
+def test_psql_and_dump_get_the_password_from_their_environment_not_their_command_line(
+    command: str, database_url: str, tmp_path: Path
+) -> None:
+    """Both put the whole URL on the child's command line, where `ps` shows every user of
+    the host the production database's password (a nightly backup's, say)."""
+    seen = tmp_path / "seen"
+    tool_on_path(
+        tmp_path,
+        "pg_dump" if command == "dump" else "psql",
+        f'echo "argv: $*" > {seen}; echo "password: $PGPASSWORD; zone: $PGTZ" >> {seen}\n'
+        'for arg in "$@"; do case "$arg" in --file=*) echo dump > "${arg#--file=}";; esac; done\n',
+    )
+    env = cli_env(
+        SMOOTHFLEET_DATABASE_URL=with_password(database_url),
+        PATH=f"{tmp_path}:{cli_env()['PATH']}",
+    )
+    args = ["db", "psql"] if command == "psql" else ["db", "dump", str(tmp_path / "x.dump")]
+
+    result = run_cli(*args, env=env)
+
+    assert result.returncode == 0, result.stderr
+    argv, environment = seen.read_text().splitlines()
+    assert PASSWORD not in argv
+    assert environment == f"password: {PASSWORD}; zone: UTC"
+
+
+def test_two_dumps_to_one_file_never_write_into_one_file(database_url: str, tmp_path: Path) -> None:
+    """Both wrote FILE.partial: the second truncated it while the first wrote, the first
+    renamed it into place as a good backup (the second's start, its own end), and the second
+    failed. Each writes its own file now, and FILE is one whole dump."""
+    tool_on_path(
+        tmp_path,
+        "pg_dump",
+        'for arg in "$@"; do case "$arg" in --file=*) out="${arg#--file=}";; esac; done\n'
+        'echo "begins $$" > "$out"; sleep 3; echo "ends $$" >> "$out"\n',
+    )
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url, PATH=f"{tmp_path}:{cli_env()['PATH']}")
+    backup = tmp_path / "nightly.dump"
+    command = [*smoothfleet_command(), "db", "dump", str(backup)]
+    first = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    time.sleep(1.5)
+    second = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    outcomes = [process.communicate(timeout=120) for process in (first, second)]
+
+    assert [first.returncode, second.returncode] == [0, 0], outcomes
+    began, ended = backup.read_text().split()[1::2]
+    assert began == ended
+    assert not list(tmp_path.glob("*partial*"))
 
 
 @pytest.mark.slow
