@@ -9,7 +9,9 @@ real-time, 20 mixed, 10 historical), `c-Value` (0-100), `segmentClosed` and `sub
 Each segment is read on its own, as a batch's pings are: one the model refuses (a value out of
 range, no code) or a code read twice at one timestamp is refused with its place and reason, and
 the snapshot's other readings are kept. A provider that sends one bad segment must not cost the
-planner that minute of the whole corridor.
+planner that minute of the whole corridor. So is each segment set: one with no time to read
+(its timestamp unreadable, or missing with the response's `createdDate` missing or unreadable)
+or whose `segments` is no list is refused whole (`segment` None), and the other sets are kept.
 """
 
 from __future__ import annotations
@@ -85,42 +87,38 @@ class InrixResult(BaseModel):
 
     model_config = ConfigDict(extra="ignore")
 
-    segmentspeeds: list[InrixSegmentSet]
+    # Each set is read on its own (InrixSegmentSet), as each segment is.
+    segmentspeeds: list[Any] = Field(
+        description="segment sets (schema InrixSegmentSet), each read on its own: one with no "
+        "readable time (its timestamp, else the response's createdDate) or no list of segments "
+        "is refused whole in the answer's `refused` (`segment` null), the others stored"
+    )
+
+
+class _CreatedDate(BaseModel):
+    """The response's `createdDate`, read apart: unreadable, it costs only the sets that
+    need it (those without a timestamp of their own)."""
+
+    model_config = ConfigDict(extra="ignore", populate_by_name=True)
+
+    created_date: datetime | None = Field(None, alias="createdDate")
+
+    _text = field_validator("created_date", mode="before")(time_text)
+    _utc = field_validator("created_date")(_as_utc)
 
 
 class InrixResponse(BaseModel):
     """A segment-speed response as returned by the provider."""
 
-    model_config = ConfigDict(
-        extra="ignore",
-        populate_by_name=True,
-        # Every set needs a time: its own timestamp, or the response's createdDate.
-        json_schema_extra={
-            "anyOf": [
-                {"required": ["createdDate"], "properties": {"createdDate": {"type": "string"}}},
-                {
-                    "properties": {
-                        "result": {
-                            "properties": {
-                                "segmentspeeds": {
-                                    "items": {
-                                        "required": ["timestamp"],
-                                        "properties": {"timestamp": {"type": "string"}},
-                                    }
-                                }
-                            }
-                        }
-                    }
-                },
-            ]
-        },
-    )
+    model_config = ConfigDict(extra="ignore", populate_by_name=True)
 
     result: InrixResult
-    created_date: datetime | None = Field(None, alias="createdDate")
-
-    _text = field_validator("created_date", mode="before")(time_text)
-    _utc = field_validator("created_date")(_as_utc)
+    created_date: Any = Field(
+        None,
+        alias="createdDate",
+        description="when the provider made the response (ISO 8601; no zone: UTC): the time of "
+        "every set without a timestamp of its own",
+    )
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,7 +141,7 @@ class RefusedReading:
     """A segment of the response that is not a reading to store, and why."""
 
     segment_set: int
-    segment: int
+    segment: int | None  # None: the whole set
     code: str | None
     error: str
 
@@ -201,21 +199,45 @@ def _echoable(code: str) -> bool:
     return True
 
 
+def _created_date(value: Any) -> tuple[datetime | None, str]:
+    """The response's createdDate, or None and why there is none to use."""
+    if value is None:
+        return None, "no timestamp (and no createdDate)"
+    try:
+        return _CreatedDate.model_validate({"createdDate": value}).created_date, ""
+    except ValidationError as error:
+        return None, f"no timestamp, and the response's {_first_error(error)}"
+
+
+def _segment_set(item: Any) -> InrixSegmentSet:
+    """One item of `segmentspeeds[]`; ValueError saying what is wrong if it is none."""
+    try:
+        return InrixSegmentSet.model_validate(item)
+    except ValidationError as error:
+        raise ValueError(_first_error(error)) from None
+
+
 def readings_of(response: InrixResponse) -> SnapshotReadings:
     """The response's readings, converted from mph and minutes to SI units, and its segments
-    refused (not a reading, or a code already read at that timestamp)."""
+    and segment sets refused (not a reading, a code already read at that timestamp; a set with
+    no time or no list of segments)."""
     found: list[SegmentReading] = []
     refused: list[RefusedReading] = []
+    created_date, no_created_date = _created_date(response.created_date)
     # (instant, code) -> where it was first read, across the whole response: two segment sets
     # may name one instant in two zones, and a second reading of a code there is refused as
     # within one set, not stored as a "duplicate" of the first
     first_of_code: dict[tuple[datetime, str], tuple[int, int]] = {}
-    for number, segment_set in enumerate(response.result.segmentspeeds):
-        measured_at = segment_set.timestamp or response.created_date
+    for number, item_set in enumerate(response.result.segmentspeeds):
+        try:
+            segment_set = _segment_set(item_set)
+        except ValueError as error:
+            refused.append(RefusedReading(number, None, None, str(error)))
+            continue
+        measured_at = segment_set.timestamp or created_date
         if measured_at is None:
-            raise InrixFormatError(
-                f"result.segmentspeeds.{number}: no timestamp (and no createdDate)"
-            )
+            refused.append(RefusedReading(number, None, None, no_created_date))
+            continue
         for index, item in enumerate(segment_set.segments):
             code = item.get("code") if isinstance(item, dict) else None
             named = code if isinstance(code, str) and _echoable(code) else None

@@ -10,7 +10,7 @@ from app.auth import FeedWriterDep
 from app.core.config import Settings
 from app.core.errors import error_responses
 from app.core.sessions import SessionDep
-from app.feeds.inrix import InrixFormatError, InrixResponse, readings_of
+from app.feeds.inrix import InrixResponse, readings_of
 from app.feeds.schemas import InrixAnswer, RefusedSegment
 from app.feeds.service import SnapshotTimeRefused, refuse_future, store_readings
 
@@ -24,15 +24,13 @@ async def post_inrix(
     """Store the snapshot's readings in SI units (feed or admin token).
 
     Codes not on any corridor are counted in `unknown_codes`, not stored; a resent snapshot
-    stores nothing twice; a segment that is no valid reading is refused on its own (`refused`)
-    and the others stored. Answered after the commit. A snapshot timestamped more than
-    SMOOTHFLEET_PING_MAX_FUTURE_S ahead or SMOOTHFLEET_INRIX_MAX_AGE_DAYS back is refused (422).
+    stores nothing twice; a segment that is no valid reading, or a segment set with no time or
+    no list of segments, is refused on its own (`refused`) and the others stored. Answered
+    after the commit. A snapshot timestamped more than SMOOTHFLEET_PING_MAX_FUTURE_S ahead or
+    SMOOTHFLEET_INRIX_MAX_AGE_DAYS back is refused (422).
     """
     received_at = datetime.now(UTC)
-    try:
-        found = readings_of(response)
-    except InrixFormatError as error:
-        raise HTTPException(422, str(error)) from None
+    found = readings_of(response)
     settings: Settings = request.app.state.settings
     try:
         refuse_future(found, received_at, settings.ping_max_future_s)

@@ -11,7 +11,10 @@ class RefusedSegment(BaseModel):
     """A segment of the snapshot that was not stored, with its place and why."""
 
     segment_set: int = Field(description="its index in result.segmentspeeds")
-    segment: int = Field(description="its index in that set's segments")
+    segment: int | None = Field(
+        description="its index in that set's segments; null when the whole set was refused "
+        "(no time to read, or no list of segments)"
+    )
     code: str | None = Field(description="its code, when it had one")
     error: str
 
@@ -27,5 +30,6 @@ class InrixAnswer(BaseModel):
     refused: list[RefusedSegment] = Field(
         default_factory=list,
         description="segments that are no valid reading, or a code already read at that "
-        "timestamp: not stored; the snapshot's other readings are",
+        "timestamp, and segment sets with no time or no list of segments: not stored; the "
+        "snapshot's other readings are",
     )

@@ -53,7 +53,8 @@ def _describe(result: StoreResult) -> str:
         line += f" ({', '.join(result.unknown)})"
     if result.refused:
         line += f", {len(result.refused)} refused: " + "; ".join(
-            f"segmentspeeds.{refusal.segment_set}.segments.{refusal.segment}"
+            f"segmentspeeds.{refusal.segment_set}"
+            f"{'' if refusal.segment is None else f'.segments.{refusal.segment}'}"
             f"{f' ({refusal.code})' if refusal.code else ''}: {refusal.error}"
             for refusal in result.refused
         )

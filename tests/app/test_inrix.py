@@ -158,9 +158,9 @@ def test_a_set_without_timestamp_takes_the_response_created_date(
     ("document", "expected"),
     [
         ({"segmentspeeds": []}, "result"),
-        (provider_response({"code": "SF-I24WB-07", "speed": 60}), "no timestamp"),
+        ({"result": {"segmentspeeds": {"timestamp": "2026-11-23T08:00:00Z"}}}, "segmentspeeds"),
     ],
-    ids=["no-result", "no-timestamp"],
+    ids=["no-result", "no-list-of-sets"],
 )
 def test_a_body_that_is_not_a_segment_speed_response_is_422(
     api: httpx.Client,
@@ -173,6 +173,51 @@ def test_a_body_that_is_not_a_segment_speed_response_is_422(
     assert answer.status_code == 422
     assert expected in str(answer.json()["detail"])
     assert estimates(seeded_engine) == {}
+
+
+def test_a_set_with_no_time_or_no_segments_is_refused_on_its_own_and_the_others_kept(
+    api: httpx.Client, feed: dict[str, str], seeded_engine: Engine
+) -> None:
+    """One broken segment set made the whole body a 422, and the good sets of that minute
+    were lost with it (through `inrix poll`, fetched again and again until the period ended).
+    An unreadable createdDate cost even sets with timestamps of their own."""
+    good = {"timestamp": "2026-11-23T08:00:00Z", "segments": [{"code": "SF-I24WB-07", "speed": 60}]}
+    response = {
+        "createdDate": "yesterday-ish",
+        "result": {
+            "segmentspeeds": [
+                good,
+                {"timestamp": "garbage", "segments": [{"code": "SF-I24WB-08", "speed": 50}]},
+                {"timestamp": "2026-11-23T08:00:00Z", "segments": {"code": "SF-I24WB-08"}},
+                "not a set",
+                {"segments": [{"code": "SF-I24WB-08", "speed": 50}]},
+            ]
+        },
+    }
+    answer = api.post("/api/v1/feeds/inrix", json=response, headers=feed)
+
+    assert answer.status_code == 200, answer.text
+    body = answer.json()
+    assert body["accepted"] == 1
+    refused = {r["segment_set"]: r for r in body["refused"]}
+    assert sorted(refused) == [1, 2, 3, 4]
+    assert all(r["segment"] is None and r["code"] is None for r in refused.values())
+    assert refused[1]["error"].startswith("timestamp: ")
+    assert refused[2]["error"].startswith("segments: ")
+    assert refused[4]["error"].startswith("no timestamp, and the response's createdDate: ")
+    assert set(estimates(seeded_engine)) == {
+        ("SF-I24WB-07", datetime(2026, 11, 23, 8, 0, tzinfo=UTC))
+    }
+    alone = provider_response({"code": "SF-I24WB-07", "speed": 60})
+    answer = api.post("/api/v1/feeds/inrix", json=alone, headers=feed)
+    assert answer.status_code == 200
+    [only] = answer.json()["refused"]
+    assert only == {
+        "segment_set": 0,
+        "segment": None,
+        "code": None,
+        "error": "no timestamp (and no createdDate)",
+    }
 
 
 def test_a_bad_segment_is_refused_on_its_own_and_the_snapshot_kept(

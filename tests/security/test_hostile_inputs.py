@@ -225,8 +225,17 @@ def test_in_a_batch_a_nan_literal_or_unstorable_text_rejects_only_its_ping(
 def test_an_inrix_snapshot_from_an_impossible_time_is_refused_and_not_stored(
     api: httpx.Client, admin: dict[str, str], seeded_engine: Engine, measured_at: str
 ) -> None:
+    """A time outside the window refuses the snapshot (422); one that is no time at all (year
+    0 once in UTC) is its set's timestamp unreadable, and the set is refused on its own (since
+    2026-12-05: a broken set no longer costs the others)."""
     answer = post(api, "/api/v1/feeds/inrix", raw_json(an_inrix(measured_at)), admin)
-    assert answer.status_code == 422
+    if measured_at.startswith("0001"):
+        assert answer.status_code == 200
+        [refused] = answer.json()["refused"]
+        assert (refused["segment_set"], refused["segment"]) == (0, None)
+        assert refused["error"].startswith("timestamp: ")
+    else:
+        assert answer.status_code == 422
     with seeded_engine.connect() as connection:
         assert connection.execute(text("SELECT count(*) FROM fact_inrix_estimate")).scalar() == 0
 
