@@ -11,6 +11,7 @@ from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from alembic.script.revision import ResolutionError
+from alembic.util import CommandError
 from sqlalchemy import Connection, Engine, text
 
 # The migration scripts are this package's data: Alembic runs them (their env.py imports
@@ -75,6 +76,20 @@ def upgrade(engine: Engine, revision: str = "head") -> None:
         config = alembic_config()
         config.attributes["connection"] = connection
         command.upgrade(config, revision)
+
+
+def revisions_undone(connection: Connection, revision: str) -> list[tuple[str, str]]:
+    """(revision, what it did) of each migration a downgrade to `revision` undoes, newest
+    first; UnknownRevision for a target that is not below the database's revision."""
+    current = current_revision(connection)
+    if current is None:
+        return []
+    script = ScriptDirectory.from_config(alembic_config())
+    try:
+        undone = list(script.iterate_revisions(current, revision))
+    except (ResolutionError, CommandError) as error:
+        raise UnknownRevision(f"cannot downgrade from {current} to {revision!r}: {error}") from None
+    return [(one.revision, (one.doc or "").splitlines()[0]) for one in undone]
 
 
 def downgrade(engine: Engine, revision: str) -> None:

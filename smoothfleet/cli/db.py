@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import click
@@ -44,9 +45,24 @@ def db_upgrade(revision: str) -> None:
 # "-1" (one revision down) is a revision, not an option: it was refused as "No such option".
 @db.command("downgrade", context_settings={"ignore_unknown_options": True})
 @click.argument("revision")
-def db_downgrade(revision: str) -> None:
-    """Migrate the schema down to REVISION ("base" removes every table, "-1" one step)."""
-    from app.migrate import UnknownRevision, check_revision, current_revision, downgrade
+@click.option(
+    "--yes",
+    is_flag=True,
+    help="Do not ask first (scripts): what the undone migrations created goes, with its data.",
+)
+def db_downgrade(revision: str, yes: bool) -> None:
+    """Migrate the schema down to REVISION ("base" removes every table, "-1" one step).
+
+    Says which migrations it undoes and asks first: undoing one drops what it created, the
+    assignment history or the change log with their rows, and "base" every table (before
+    2026-12-05 it asked nothing). Without a terminal to ask on, only --yes goes ahead."""
+    from app.migrate import (
+        UnknownRevision,
+        check_revision,
+        current_revision,
+        downgrade,
+        revisions_undone,
+    )
 
     try:
         check_revision(revision)
@@ -54,11 +70,31 @@ def db_downgrade(revision: str) -> None:
         raise click.BadParameter(str(error), param_hint="REVISION") from None
     with database(settings()) as url:
         engine = make_sync_engine(url)
+        with engine.connect() as connection:
+            try:
+                undone = revisions_undone(connection, revision)
+            except UnknownRevision as error:
+                raise click.BadParameter(str(error), param_hint="REVISION") from None
+        if undone and not yes:
+            _confirm_downgrade(revision, undone)
         downgrade(engine, revision)
         with engine.connect() as connection:
             reached = current_revision(connection)
     # the revision reached, not the one asked for: "-1" says nothing of where it went
     console.print(f"database at {reached or 'base (no table)'}")
+
+
+def _confirm_downgrade(revision: str, undone: list[tuple[str, str]]) -> None:
+    """Say what a downgrade undoes and ask; CliError when there is no terminal to ask on."""
+    listing = "\n".join(f"  {name}  {what}" for name, what in undone)
+    warning = (
+        f"db downgrade {revision} undoes {len(undone)} migration(s); what they created goes, "
+        f"with the data in it (back up first: smoothfleet db dump FILE):\n{listing}"
+    )
+    if not sys.stdin.isatty():
+        raise CliError(f"{warning}\nnothing was changed: pass --yes to go on (no terminal to ask)")
+    click.echo(warning, err=True)
+    click.confirm("Downgrade?", abort=True, err=True)
 
 
 @db.command("url")

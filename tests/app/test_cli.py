@@ -411,15 +411,23 @@ def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
     """The operator's schema commands (docs/operations.md): down to base and back to head,
     then the ping partitions' housekeeping, which a second run finds done."""
     env = cli_env(SMOOTHFLEET_DATABASE_URL=database_url)
+    # with no terminal to ask on, a downgrade says what it would undo and changes nothing
+    asked = run_cli("db", "downgrade", "base", env=env, stdin="")
+    assert asked.returncode == 1
+    assert f"db downgrade base undoes {int(head_revision())} migration(s)" in asked.stderr
+    assert "0012  A vehicle's assignments over time" in asked.stderr
+    assert "nothing was changed: pass --yes to go on" in asked.stderr
+    with engine.connect() as connection:
+        assert current_revision(connection) == head_revision()
     # one step down: "-1" was refused as "No such option", and the line said "database at -1"
-    one_step = run_cli("db", "downgrade", "-1", env=env)
+    one_step = run_cli("db", "downgrade", "-1", "--yes", env=env)
     assert one_step.returncode == 0, one_step.stderr
     with engine.connect() as connection:
         below_head = current_revision(connection)
     assert below_head is not None
     assert below_head != head_revision()
     assert f"database at {below_head}" in one_step.stdout
-    down = run_cli("db", "downgrade", "base", env=env)
+    down = run_cli("db", "downgrade", "base", "--yes", env=env)
     assert down.returncode == 0, down.stderr
     assert "database at base" in down.stdout
     with engine.connect() as connection:
