@@ -37,6 +37,26 @@ class FiniteFloatRange(click.FloatRange):
         return number
 
 
+def storable_text_option(
+    ctx: click.Context, param: click.Parameter, value: str | None
+) -> str | None:
+    """An option's text if PostgreSQL can store it (`contract.values.storable_text`): bytes that
+    are no UTF-8 on the command line (Python hands them over as lone surrogates) or a NUL are
+    refused naming the option, not met as an "unexpected UnicodeEncodeError" at the database."""
+    from contract.values import storable_text
+
+    if value is None:
+        return None
+    try:
+        return storable_text(value)
+    except ValueError as error:
+        raise click.BadParameter(f"{value!r}: {error}", ctx, param) from None
+
+
+# A token's or row's id: PostgreSQL's bigint, which a larger number would overflow.
+BIGINT_ID = click.IntRange(1, 2**63 - 1)
+
+
 def output_folder(path: Path, option: str) -> Path:
     """`path` made a folder this user can write into, or a BadParameter naming `option`.
 

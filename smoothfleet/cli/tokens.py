@@ -10,7 +10,14 @@ from sqlalchemy.exc import IntegrityError
 
 from app.core.db import make_sync_engine, session_scope
 from app.core.security import TOKEN_ROLES, issue_token
-from smoothfleet.cli.common import CliError, console, database, settings
+from smoothfleet.cli.common import (
+    BIGINT_ID,
+    CliError,
+    console,
+    database,
+    settings,
+    storable_text_option,
+)
 
 
 @click.group()
@@ -20,8 +27,15 @@ def tokens() -> None:
 
 @tokens.command("create")
 @click.option("--role", required=True, type=click.Choice(TOKEN_ROLES))
-@click.option("--vehicle", "vehicle_id", help="The vehicle a vehicle token is bound to.")
-@click.option("--name", default="", help="A note on who holds the token.")
+@click.option(
+    "--vehicle",
+    "vehicle_id",
+    callback=storable_text_option,
+    help="The vehicle a vehicle token is bound to.",
+)
+@click.option(
+    "--name", default="", callback=storable_text_option, help="A note on who holds the token."
+)
 def tokens_create(role: str, vehicle_id: str | None, name: str) -> None:
     """Issue a token and print it once (only its hash is stored)."""
     if (role == "vehicle") != (vehicle_id is not None):
@@ -36,8 +50,13 @@ def tokens_create(role: str, vehicle_id: str | None, name: str) -> None:
 
 
 @tokens.command("revoke")
-@click.option("--id", "token_id", type=int, help="The token's id (see `tokens list`).")
-@click.option("--vehicle", "vehicle_id", help="Revoke every live token of this vehicle.")
+@click.option("--id", "token_id", type=BIGINT_ID, help="The token's id (see `tokens list`).")
+@click.option(
+    "--vehicle",
+    "vehicle_id",
+    callback=storable_text_option,
+    help="Revoke every live token of this vehicle.",
+)
 @click.option(
     "--token-stdin", is_flag=True, help="Read the token itself from standard input (one line)."
 )

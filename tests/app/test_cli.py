@@ -300,6 +300,28 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(
         )
 
 
+@pytest.mark.parametrize(
+    ("args", "option"),
+    [
+        (("tokens", "revoke", "--id", "99999999999999999999"), "--id"),
+        (("tokens", "create", "--role", "admin", "--name", "bad\udcffname"), "--name"),
+        (("tokens", "create", "--role", "vehicle", "--vehicle", "SF-\udcff"), "--vehicle"),
+        (("tokens", "revoke", "--vehicle", "SF-\x01\udcff"), "--vehicle"),
+    ],
+    ids=["id-beyond-bigint", "name-not-utf8", "vehicle-not-utf8", "revoke-vehicle-not-utf8"],
+)
+def test_token_options_the_database_cannot_hold_are_refused_naming_the_option(
+    args: tuple[str, ...], option: str, database_url: str
+) -> None:
+    """A bigint overflow and bytes that are no UTF-8 (a lone surrogate to Python) reached the
+    database: "unexpected DataError ... [SQL: UPDATE api_token ...]", "unexpected
+    UnicodeEncodeError"."""
+    result = run_cli(*args, env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url))
+    assert result.returncode == 2, result.stderr
+    assert f"Invalid value for '{option}'" in result.stderr
+    assert "unexpected" not in result.stderr
+
+
 PASSWORD = "S3cretPw"
 
 
