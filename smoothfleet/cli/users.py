@@ -27,6 +27,12 @@ def users_add(username: str, role: str, password_stdin: bool) -> None:
     """Create a dashboard user, or reset an existing user's role and password."""
     if password_stdin:
         password = sys.stdin.readline().rstrip("\r\n")
+    elif not sys.stdin.isatty():
+        # click's prompt read end-of-input and left with exit 130 and no word (compose's
+        # `run -T`, a script)
+        raise CliError(
+            "users add: no terminal to ask the password on: pipe it in with --password-stdin"
+        )
     else:
         password = click.prompt("password", hide_input=True, confirmation_prompt=True)
     try:

@@ -35,6 +35,21 @@ def stored_user(engine: Engine, username: str) -> tuple[str, str]:
     return str(row[0]), str(row[1])
 
 
+def test_users_add_with_no_terminal_and_no_password_stdin_says_so(database_url: str) -> None:
+    """It printed "password:", read end-of-input and exited 130 without a word."""
+    result = run_cli(
+        "users",
+        "add",
+        "ops",
+        "--role",
+        "operator",
+        env=cli_env(SMOOTHFLEET_DATABASE_URL=database_url),
+        stdin="",
+    )
+    assert result.returncode == 1
+    assert "no terminal to ask the password on: pipe it in with --password-stdin" in (result.stderr)
+
+
 def test_users_add_stores_a_salted_scrypt_hash_and_can_reset_it(
     database_url: str, engine: Engine
 ) -> None:
