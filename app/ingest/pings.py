@@ -256,6 +256,15 @@ def check_in_context(
     rows: list[PingRow] = []
     rejected: list[Rejected] = []
     for index, ping in pings:
+        # before the roster: a ping older than retention is refused for good, whoever sent it
+        # (an unknown vehicle's is retryable, and the car kept resending it in vain)
+        if ping.ts < window.earliest:
+            rejected.append(
+                Rejected(
+                    index, f"ts is older than the {window.retention_days}-day retention window"
+                )
+            )
+            continue
         corridor = directory.corridor_of(ping.vehicle_id, ping.ts)
         if corridor is None:
             rejected.append(Rejected(index, f"unknown vehicle {ping.vehicle_id}", retryable=True))
@@ -275,13 +284,6 @@ def check_in_context(
                     index,
                     f"ts is more than {window.max_future_s:g} s in the future",
                     retryable=True,
-                )
-            )
-            continue
-        if ping.ts < window.earliest:
-            rejected.append(
-                Rejected(
-                    index, f"ts is older than the {window.retention_days}-day retention window"
                 )
             )
             continue

@@ -468,6 +468,19 @@ def test_pings_of_a_vehicle_just_removed_from_the_roster_are_rejected_per_item(
     assert len(stored(seeded_engine, "SF-051")) == 1
 
 
+def test_a_ping_older_than_retention_is_refused_for_good_even_from_an_unknown_vehicle(
+    api: httpx.Client, seeded_engine: Engine
+) -> None:
+    """The roster was checked first, so it was "unknown vehicle", retryable: a ping the server
+    can never take, resent with every batch while the car kept it."""
+    operator = bearer(issue(seeded_engine, "operator"))
+    old = (datetime.now(UTC) - timedelta(days=91)).isoformat()
+    answer = api.post("/api/v1/pings", json={"pings": [ping("SF-999", ts=old)]}, headers=operator)
+    assert answer.json()["rejected"] == [
+        {"index": 0, "error": "ts is older than the 90-day retention window", "retryable": False}
+    ]
+
+
 def test_the_endpoint_is_documented_with_its_body_and_security(api: httpx.Client) -> None:
     operation = api.get("/openapi.json").json()["paths"]["/api/v1/pings"]["post"]
     body = operation["requestBody"]["content"]["application/json"]["schema"]
