@@ -26,6 +26,7 @@ from jinja2.runtime import Context
 
 from app.core.config import Settings
 from app.fleet.readiness import describe_age
+from app.policies.service import bundled_policy_sha256
 from contract.units import MPH_PER_MPS
 from dashboards.auth import PageUser
 
@@ -62,6 +63,7 @@ def _localtime(context: Context, value: datetime | None) -> str:
 templates.env.filters["mph"] = _mph
 templates.env.filters["localtime"] = _localtime
 templates.env.filters["age"] = describe_age
+templates.env.globals["bundled_policy"] = bundled_policy_sha256
 
 
 def settings_of(request: Request) -> Settings:

@@ -16,6 +16,7 @@ import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 from sqlalchemy import Insert, Select, select, update
@@ -255,6 +256,15 @@ async def policy_manifest(session: AsyncSession, sha256: str) -> dict[str, Any] 
 async def policy_controller(session: AsyncSession, sha256: str) -> str | None:
     """The controller a stored policy is for (`rl_acc` / `rl_accel`), or None if not stored."""
     return await session.scalar(select(Policy.controller).where(Policy.policy_sha256 == sha256))
+
+
+@cache
+def bundled_policy_sha256(controller: str) -> str | None:
+    """The sha256 of the policy the agent package ships for an RL controller, which a car
+    assigned `controller` without a policy named runs (None for any other controller)."""
+    if controller not in RL_CONTROLLERS:
+        return None
+    return hashlib.sha256((BUNDLED_POLICIES / f"{controller}.npz").read_bytes()).hexdigest()
 
 
 def store_shipped_policy(session: Session, controller: str, uploaded_by: str) -> Policy:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import html
 import re
 import secrets
@@ -22,7 +23,8 @@ from planner.recommended import RECOMMENDED_PLANNER
 from tests.dashboards.support import PASSWORDS, add_users, csrf_of, log_in, logged_in, post_form
 from tests.support.fleet import drive, healthy_status, post_inrix, post_pings, post_status
 from tests.support.servers import live_server
-from tests.support.tokens import issue
+from tests.support.tokens import bearer, issue
+from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
 
 @pytest.fixture
@@ -859,5 +861,38 @@ def test_the_fleet_and_vehicle_pages_show_the_policy_each_car_runs(
     assert (
         '<span data-field="controller">rl_accel</span> <code class="policy" '
         f'data-field="assigned-policy" title="assigned policy {shipped}">{shipped[:12]}</code></td>'
+    ) in row
+    assert 'data-field="reported"' not in row
+
+
+def test_a_car_on_the_bundled_policy_is_not_shown_as_running_something_else(
+    site: str, seeded_engine: Engine
+) -> None:
+    """An RL assignment naming no policy runs the agent's bundled one: its pings report that
+    hash, which the row compared with no policy at all, "(last ping ran rl_acc ...)"."""
+    bundled = hashlib.sha256((BUNDLED_POLICIES / "rl_acc.npz").read_bytes()).hexdigest()
+    now = datetime.now(UTC).replace(microsecond=0)
+    with httpx.Client(base_url=site, timeout=30) as api:
+        admin = issue(seeded_engine, "admin")
+        assigned = api.put(
+            "/api/v1/vehicles/SF-081/assignment",
+            json={"lane": 1, "route": "A", "controller": {"name": "rl_acc", "params": {}}},
+            headers=bearer(admin),
+        )
+        assert assigned.status_code == 200, assigned.text
+        pings = drive("SF-081", now - timedelta(seconds=5), 3000.0, 25.0, 5)
+        post_pings(
+            api,
+            admin,
+            [{**ping, "controller": "rl_acc", "policy_sha256": bundled} for ping in pings],
+        )
+    with logged_in(site, "viewer") as client:
+        fleet = client.get("/fleet").text
+    row = fleet[fleet.index('data-vehicle="SF-081"') :]
+    row = row[: row.index("</tr>")]
+    assert (
+        '<span data-field="controller">rl_acc</span> <code class="policy" '
+        f'data-field="assigned-policy" title="the agent\'s bundled policy {bundled}">'
+        f"{bundled[:12]}</code></td>"
     ) in row
     assert 'data-field="reported"' not in row
