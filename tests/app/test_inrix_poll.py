@@ -231,19 +231,7 @@ def test_backoff_doubles_and_gives_up_when_the_next_period_starts(
     async def handle(recorded: RecordedSnapshot) -> None:
         handled.append(recorded)
 
-    async def run() -> int:
-        async with httpx.AsyncClient(transport=httpx.MockTransport(answer)) as client:
-            poller = InrixPoller(
-                "http://provider.test/speed",
-                SecretStr(KEY),
-                period_s=60,
-                client=client,
-                sleep=clock.sleep,
-                clock=clock,
-            )
-            return await poller.run(handle, count=2)
-
-    assert asyncio.run(run()) == 2
+    assert polling(snapshot, clock, answer, handle, count=2) == 2
     # First period: tries at 0, 1, 3, 7, 15, 31 s (retry waits 1, 2, 4, 8, 16); the next wait
     # (30 s, capped) would cross into the second period, so it waits for that period instead.
     offsets = [round(moment - 1000) for moment in calls]
