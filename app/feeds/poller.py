@@ -7,7 +7,8 @@ error message (any message that would contain it is scrubbed). A failed poll is 
 The provider serves the current minute only, so a response once fetched is never thrown away
 for the warehouse's sake: it is recorded at once (`record`), and while the database does not
 take it (`StoreFailed`) it waits in a backlog, retried with the same backoff without asking the
-provider again, and stored oldest first once the database answers. Every wait is bounded: a
+provider again, and stored oldest first once the database answers, whether or not the
+provider answers then. Every wait is bounded: a
 provider that trickles its answer is given up after `fetch_deadline_s`, a store the database
 never answers after `store_deadline_s` (a frozen server never enforces its own statement
 timeout); such a store is cancelled and left to end on its own, and no other store starts while
@@ -156,28 +157,35 @@ class InrixPoller:
             delay = self._first_retry_s
             fetched = False
             while True:
-                try:
-                    if not fetched:
+                failures: list[str] = []
+                if not fetched:
+                    try:
                         self._keep(await self._fetch_within_deadline(), record)
                         fetched = True
+                    except PollFailed as error:
+                        failures.append(f"INRIX poll failed: {error}")
+                # the backlog is stored whether or not this period's fetch succeeded: minutes
+                # kept while the database was down need the database, not the provider
+                try:
                     while self.backlog and (count is None or stored < count):
                         try:
                             await self._store_within_deadline(store, self.backlog[0])
                         except PollFailed:  # not a usable response: dropped
                             self.backlog.popleft()
                             # the backlog's newest is this period's: gone, ask again
-                            fetched = bool(self.backlog)
+                            fetched = fetched and bool(self.backlog)
                             raise
                         self.backlog.popleft()
                         stored += 1
                 except PollFailed as error:
-                    failure = f"INRIX poll failed: {error}"
+                    failures.append(f"INRIX poll failed: {error}")
                 except StoreFailed as error:
-                    failure = (
+                    failures.append(
                         f"INRIX snapshot not stored: {error} ({len(self.backlog)} kept to store)"
                     )
-                else:
+                if not failures or (count is not None and stored >= count):
                     break
+                failure = "; ".join(failures)
                 if self._clock() + delay >= period_ends:
                     log.warning("%s; next poll at the next period", failure)
                     break

@@ -377,6 +377,29 @@ def test_what_is_fetched_while_the_database_is_down_is_recorded_and_stored_once_
     )
 
 
+def test_minutes_kept_while_the_database_was_down_are_stored_while_the_provider_is_down(
+    snapshot: RecordedSnapshot, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The database comes back as the provider goes away: the minute kept waits for the
+    database only, not for the provider to answer again."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    stored_at: list[float] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200 if clock.now < 1060 else 502, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        if clock.now < 1060:
+            raise StoreFailed("database: connection refused")
+        stored_at.append(clock.now)
+
+    caplog.set_level(logging.WARNING, logger="app.feeds.poller")
+    assert polling(snapshot, clock, answer, store, count=1) == 1
+    # stored at 60 s, on the period's first try, though the provider answered 502 to it
+    assert [round(moment - 1000) for moment in stored_at] == [60]
+
+
 def test_a_provider_that_never_finishes_answering_is_given_up_at_the_deadline(
     snapshot: RecordedSnapshot, caplog: pytest.LogCaptureFixture
 ) -> None:
