@@ -8,11 +8,11 @@ The provider serves the current minute only, so a response once fetched is never
 for the warehouse's sake: it is recorded at once (`record`), and while the database does not
 take it (`StoreFailed`) it waits in a backlog, retried with the same backoff without asking the
 provider again, and stored oldest first once the database answers, whether or not the
-provider answers then. Every wait is bounded: a
-provider that trickles its answer is given up after `fetch_deadline_s`, a store the database
-never answers after `store_deadline_s` (a frozen server never enforces its own statement
-timeout); such a store is cancelled and left to end on its own, and no other store starts while
-it has not, so a hung database holds one connection, not one a retry.
+provider answers then. Every wait is bounded: a provider that trickles its answer is given up
+after `fetch_deadline_s`, a store the database never answers after `store_deadline_s` (a frozen
+server never enforces its own statement timeout); such a store is cancelled and left to end on
+its own, and no other store starts while it has not, so a hung database holds one connection,
+not one a retry.
 """
 
 from __future__ import annotations
