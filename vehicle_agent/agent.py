@@ -38,7 +38,7 @@ from contract.vehicles import Ping, VehicleConfig, VehicleStatusReport
 from vehicle_agent import engage
 from vehicle_agent.actuators import AccelLimiter, ButtonSequencer
 from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton
-from vehicle_agent.clock import Clock
+from vehicle_agent.clock import Clock, frame_age
 from vehicle_agent.codec import codec_for
 from vehicle_agent.controllers import (
     AccelCommand,
@@ -314,8 +314,10 @@ class Agent:
         now = self.clock.monotonic()
         wall = self.clock.now()
         self.stats.ticks += 1
+        wall_epoch_s = wall.timestamp()
         while (frame := self.bus.recv(timeout=0)) is not None:
-            self.reader.ingest(frame, now - self.clock.frame_age_s(frame.timestamp))
+            # dated by its receipt (vehicle_agent.clock), not by this pass
+            self.reader.ingest(frame, now - frame_age(wall_epoch_s, frame.timestamp))
         car_state = self.reader.snapshot(now)
         reading = car_state.reading
         measured_accel = self._estimate_accel(reading, now)

@@ -26,14 +26,13 @@ class Clock(Protocol):
     def now(self) -> datetime:
         """The wall-clock time (UTC)."""
 
-    def frame_age_s(self, received_epoch_s: float) -> float:
-        """Seconds since a CAN frame stamped `received_epoch_s` was received (`frame_age`)."""
-
 
 def frame_age(now_epoch_s: float, received_epoch_s: float) -> float:
-    """Seconds from a frame's receipt to `now_epoch_s`, both wall-clock epoch seconds; 0 for a
-    frame no interface stamped (python-can's default 0.0) and for one stamped ahead of now (the
-    wall clock stepped back since): such a frame is as new as the pass reading it."""
+    """Seconds from a frame's receipt to `now_epoch_s` (the pass's wall-clock reading), both
+    epoch seconds; 0 for a frame no interface stamped (python-can's default 0.0) and for one
+    stamped after it (received during the pass, or the wall clock stepped back since): such a
+    frame is as new as the pass reading it. An emulated car on a simulated clock stamps its
+    frames with that clock's wall time (`sim.emulator.car.CarEmulator`'s `frame_epoch_s`)."""
     if received_epoch_s <= 0.0:
         return 0.0
     return max(0.0, now_epoch_s - received_epoch_s)
@@ -49,11 +48,6 @@ class SystemClock:
     def now(self) -> datetime:
         """datetime.now(UTC)."""
         return datetime.now(UTC)
-
-    def frame_age_s(self, received_epoch_s: float) -> float:
-        """The age of a frame stamped by this machine's wall clock (SocketCAN's, or python-can's
-        virtual bus's)."""
-        return frame_age(time.time(), received_epoch_s)
 
 
 class ManualClock:
@@ -72,11 +66,6 @@ class ManualClock:
     def now(self) -> datetime:
         """The simulated wall time."""
         return self._start_wall + timedelta(seconds=self._mono - self._start_mono)
-
-    def frame_age_s(self, received_epoch_s: float) -> float:
-        """The age of a frame stamped with this clock's wall time (the car emulator's
-        `frame_epoch_s`): a frame the host stamped is not on this clock's time line."""
-        return frame_age(self.now().timestamp(), received_epoch_s)
 
     def advance(self, seconds: float) -> None:
         """Move both clocks forward."""
