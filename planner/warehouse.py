@@ -220,11 +220,15 @@ def load_inrix(
 
 # Per vehicle, lane and sub-segment of the window (cell = -1: off the corridor, x_m NULL or
 # beyond its ends); the cycle pools these per lane and cell, the observation table keeps them.
+# A ping counts in the corridor and lane its vehicle was assigned at the ping's `ts`
+# (`dim_vehicle_assignment`), as ingest map-matched it and the analytics views read it: the
+# vehicle's assignment now put the last minute's pings of a car just moved in its new lane, or
+# on its new corridor at positions measured along the old one.
 # `traffic`: whether the pings tell the traffic's speed under the cycle's `engaged_pings` rule
 # (`planner.inputs.traffic_pings`; a flag the car did not send reads as false).
 PER_VEHICLE = """
     SELECT p.vehicle_id,
-           coalesce(p.lane, v.assigned_lane) AS lane,
+           coalesce(p.lane, a.assigned_lane) AS lane,
            CASE WHEN p.x_m IS NULL OR p.x_m < :first_start OR p.x_m >= :last_end THEN -1
                 ELSE width_bucket(p.x_m::float8, CAST(:starts AS float8[])) END AS cell,
            (:engaged_pings = 'all' OR p.is_controller_engaged IS NOT TRUE
@@ -232,8 +236,9 @@ PER_VEHICLE = """
            sum(p.speed_mps::float8) AS speed_sum,
            count(*) AS pings
     FROM fact_vehicle_ping p
-    JOIN dim_vehicle v ON v.vehicle_id = p.vehicle_id
-    WHERE v.corridor_id = :corridor AND p.ts > :window_start AND p.ts <= :window_end
+    JOIN dim_vehicle_assignment a
+      ON a.vehicle_id = p.vehicle_id AND p.ts >= a.valid_from AND p.ts < a.valid_to
+    WHERE a.corridor_id = :corridor AND p.ts > :window_start AND p.ts <= :window_end
     GROUP BY 1, 2, 3, 4
 """
 

@@ -20,7 +20,13 @@ from planner.warehouse import (
     run_cycle,
     store_window_observations,
 )
-from tests.planner.facts import CORRIDOR, inrix_snapshot, pings, standing_slowdown
+from tests.planner.facts import (
+    CORRIDOR,
+    inrix_snapshot,
+    move_to_eastbound,
+    pings,
+    standing_slowdown,
+)
 
 NOW = datetime(2026, 11, 24, 13, 0, tzinfo=UTC)
 PARAMS = PlannerParams()
@@ -94,6 +100,42 @@ def test_a_cycle_publishes_every_lane_with_its_provenance(seeded_engine: Engine)
     assert inputs["inrix_oldest_reading_age_s"] == 180.0  # the snapshot read every segment
     assert inputs["inrix_snapshots"] == 5
     assert inputs["ping_window_end"] == NOW.isoformat()
+
+
+def test_pings_count_in_the_lane_and_corridor_assigned_at_their_time(
+    seeded_engine: Engine,
+) -> None:
+    """The cycle read each car's assignment now: a car moved to lane 3 after its pings (sent
+    with no lane, as GPS fixes mostly are) had them fused into lane 3, and a car moved to
+    another corridor took its last minute of pings there, at positions along this one."""
+    minutes_of_slowdown(seeded_engine, NOW, 5)
+    pings(seeded_engine, "SF-002", NOW, np.linspace(8400, 8700, 60), 5.0)
+    pings(seeded_engine, "SF-001", NOW - timedelta(seconds=5), np.linspace(8000, 8200, 30), 20.0)
+    with seeded_engine.begin() as connection:  # after the pings, as the clock goes
+        connection.execute(
+            text("UPDATE dim_vehicle SET assigned_lane = 3 WHERE vehicle_id = 'SF-002'")
+        )
+    move_to_eastbound(seeded_engine, "SF-001")
+
+    outcome = cycle(seeded_engine, NOW)
+
+    with seeded_engine.connect() as connection:
+        observations = connection.execute(
+            text(
+                "SELECT vehicle_id, lane, sum(ping_count) FROM fact_vehicle_observation "
+                "GROUP BY vehicle_id, lane ORDER BY vehicle_id"
+            )
+        ).all()
+        lane_3 = connection.execute(
+            text(
+                "SELECT sum(fleet_ping_count) FROM fact_speed_planner "
+                "WHERE plan_id = :id AND lane = 3"
+            ),
+            {"id": outcome.plan_id},
+        ).scalar()
+    assert [tuple(row) for row in observations] == [("SF-001", 1, 30), ("SF-002", 2, 60)]
+    assert lane_3 is None
+    assert outcome.inputs["vehicles"] == 2
 
 
 def test_the_behind_leader_rule_sets_aside_an_engaged_cars_echo_of_the_plan(
