@@ -25,7 +25,9 @@ class InvalidParams(ValueError):
 class PlannerParams(BaseModel):
     """Parameters of all six steps; stage variants are chosen by registry name."""
 
-    model_config = ConfigDict(frozen=True, extra="forbid")
+    # allow_inf_nan: 1e999 (infinity in JSON) passed every `gt=0`, and the cycles then planned
+    # NaN everywhere and failed to write it
+    model_config = ConfigDict(frozen=True, extra="forbid", allow_inf_nan=False)
 
     # Step 1 - INRIX prediction.
     predictor: str = "wave_trend"

@@ -130,6 +130,10 @@ def identify_bottlenecks(
     return current, standing_bottlenecks(current, previous, inputs.grid, params)
 
 
+class NonFiniteTargets(ValueError):
+    """A plan whose targets are not all numbers: never published (the cycle fails, recorded)."""
+
+
 def clip_to_legal_range(
     target_mps: FloatArray, grid: CorridorGrid, params: PlannerParams
 ) -> FloatArray:
@@ -137,4 +141,9 @@ def clip_to_legal_range(
     configured allowance over the posted limit (the paper's fleet: 73 mph on a 70 mph road)."""
     ceiling = grid.speed_limit_mps + params.speed_limit_allowance_mps
     clipped: FloatArray = np.clip(target_mps, grid.min_target_speed_mps, ceiling)
+    not_numbers = int(np.count_nonzero(~np.isfinite(clipped)))  # np.clip lets NaN through
+    if not_numbers:
+        raise NonFiniteTargets(
+            f"{not_numbers} of the plan's {clipped.size} targets are no number: not published"
+        )
     return clipped

@@ -17,7 +17,7 @@ from planner import (
     parse_params,
     plan_speeds,
 )
-from planner.pipeline import STAGE_REGISTRIES
+from planner.pipeline import STAGE_REGISTRIES, NonFiniteTargets, clip_to_legal_range
 from tests.planner.grids import uniform_grid
 
 GRID = uniform_grid(150, lanes=2)  # 15 km, 2 lanes
@@ -112,6 +112,11 @@ def test_unknown_algorithm_and_bad_parameters_say_what_was_wrong() -> None:
         plan_speeds(inputs, "kernel_smooth", PlannerParams(kernel="box"))
     with pytest.raises(InvalidParams, match="planner parameter window_m"):
         PlannerParams.parse({"window_m": -5})
+    # infinity passed every "greater than 0", and every cycle then planned NaN
+    with pytest.raises(InvalidParams, match="planner parameter trend_damping_s"):
+        PlannerParams.parse({"trend_damping_s": float("inf")})
+    with pytest.raises(NonFiniteTargets, match="1 of the plan's 3 targets are no number"):
+        clip_to_legal_range(np.array([10.0, np.nan, 20.0]), GRID, PlannerParams())
     for stage in STAGE_REGISTRIES:
         with pytest.raises(InvalidParams, match=f"planner parameter {stage}: unknown .* 'x'"):
             parse_params({stage: "x"})
