@@ -424,12 +424,16 @@ def _try_lock(session: Session, corridor_id: str) -> bool:
     )
 
 
-def _published_since(session: Session, corridor_id: str, since: datetime) -> bool:
+def _window_taken_since(session: Session, corridor_id: str, since: datetime) -> bool:
+    """Whether a cycle since `since` published a plan or was skipped: both store their ping
+    window's observations, so a second replica's cycle moments later would store the same pings
+    again (a skipped run was not counted before 2026-12-05, and with INRIX down two replicas
+    each stored every window)."""
     return bool(
         session.scalar(
             text(
                 "SELECT EXISTS (SELECT 1 FROM plan_run WHERE corridor_id = :corridor "
-                "AND status = 'published' AND started_at > :since)"
+                "AND status IN ('published', 'skipped') AND started_at > :since)"
             ),
             {"corridor": corridor_id, "since": since},
         )
@@ -588,9 +592,9 @@ def run_cycle(
     """One planner cycle for one corridor in the caller's transaction (steps 1-6).
 
     Returns `busy` without writing when another planner holds the corridor or published less
-    than `min_interval_s` ago; `skipped` (with a plan_run row saying why) when there is no
-    estimate; `published` otherwise. Any other error propagates: the caller rolls back and
-    records the failure (`record_failure`).
+    than `min_interval_s` ago (or was skipped then: either stored its ping window); `skipped`
+    (with a plan_run row saying why) when there is no estimate; `published` otherwise. Any
+    other error propagates: the caller rolls back and records the failure (`record_failure`).
     """
     clock = time.perf_counter()
     now = now or datetime.now(UTC)
@@ -598,10 +602,10 @@ def run_cycle(
         raise ValueError("run_cycle: `now` must carry a time zone")
     if not _try_lock(session, corridor_id):
         return CycleOutcome(corridor_id, "busy", reason="another planner holds this corridor")
-    if min_interval_s > 0 and _published_since(
+    if min_interval_s > 0 and _window_taken_since(
         session, corridor_id, now - timedelta(seconds=min_interval_s)
     ):
-        return CycleOutcome(corridor_id, "busy", reason="a plan was published moments ago")
+        return CycleOutcome(corridor_id, "busy", reason="a cycle ran moments ago")
     grid = load_grid(session, corridor_id)
     inrix = load_inrix(session, corridor_id, now, params, received_by=now)
     window_start = now - timedelta(seconds=params.ping_window_s)

@@ -305,6 +305,21 @@ def test_only_one_planner_publishes_per_corridor(seeded_engine: Engine) -> None:
         assert connection.scalar(text("SELECT count(*) FROM plan_run")) == 1
 
 
+def test_with_inrix_down_a_second_replica_does_not_store_the_window_again(
+    seeded_engine: Engine,
+) -> None:
+    """A skipped cycle stores its ping window too, but only a published one held the other
+    replica off: with no INRIX, two replicas 20 s apart each stored their window, 100
+    observations of 60 pings."""
+    pings(seeded_engine, "SF-002", NOW, np.linspace(8400, 8700, 60), 5.0)
+    first = cycle(seeded_engine, NOW, min_interval_s=30.0)
+    second = cycle(seeded_engine, NOW + timedelta(seconds=20), min_interval_s=30.0)
+    assert (first.status, second.status) == ("skipped", "busy")
+    with seeded_engine.connect() as connection:
+        observed = connection.scalar(text("SELECT sum(ping_count) FROM fact_vehicle_observation"))
+    assert observed == 60
+
+
 def test_replay_recomputes_a_plan_from_the_warehouse(seeded_engine: Engine) -> None:
     minutes_of_slowdown(seeded_engine, NOW + timedelta(minutes=4), 9)
     for minute in range(4):
