@@ -149,6 +149,11 @@ class Snapshot:
     config_version: int | None = None
 
 
+# Doublings past any period's reach of MAX_BACKOFF_S (a period of 1 ms doubled 24 times is
+# 4.7 h).
+MAX_BACKOFF_DOUBLINGS = 25
+
+
 @dataclass
 class Schedule:
     """When a periodic job next runs, with exponential back-off after failures."""
@@ -167,7 +172,9 @@ class Schedule:
 
     def failed(self, now: float, period_s: float) -> None:
         """It failed: retry after a growing delay, never longer than MAX_BACKOFF_S."""
-        self.failures += 1
+        # counted no further than the cap needs: 2 ** 1024 overflows a float, and after 1,025
+        # failures in a row (8.5 h at the cap) the job was retried on every network pass
+        self.failures = min(self.failures + 1, MAX_BACKOFF_DOUBLINGS)
         self.next_s = now + min(period_s * 2 ** (self.failures - 1), MAX_BACKOFF_S)
 
 

@@ -72,13 +72,14 @@ class GpsdSource:
         reader thread: a reader gone quiet leaves the car without a current fix."""
         try:
             report = json.loads(line)
-        except json.JSONDecodeError:
+        except (ValueError, RecursionError):  # not JSON, a 5,000-digit number, deep nesting
             return
         if not isinstance(report, dict):
             return
         try:
             self._fold(report)
-        except (TypeError, ValueError, AttributeError) as error:
+        except (TypeError, ValueError, AttributeError, OverflowError) as error:
+            # OverflowError: "mode": 1e999, a latitude of 400 digits
             log.debug("gpsd: skipped a %s report (%s)", report.get("class"), error)
 
     def _fold(self, report: dict[str, Any]) -> None:
@@ -90,10 +91,15 @@ class GpsdSource:
             elif isinstance(report.get("uSat"), int):
                 self._satellites = int(report["uSat"])
         elif report.get("class") == "TPV" and "lat" in report and "lon" in report:
+            lat, lon = float(report["lat"]), float(report["lon"])
+            # json reads NaN: a position that is no number, or off the globe, is no fix (it
+            # read as one, and the car showed a fix it could build no ping from)
+            if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0):
+                raise ValueError(f"position ({lat}, {lon}) is not on the globe")
             self._latest = GpsFix(
                 time_s=self.clock(),
-                lat=float(report["lat"]),
-                lon=float(report["lon"]),
+                lat=lat,
+                lon=lon,
                 has_fix=int(report.get("mode") or 0) >= 2,
                 speed_mps=_number(report.get("speed")),
                 heading_deg=_number(report.get("track")),
@@ -115,9 +121,18 @@ class GpsdSource:
                         *lines, buffer = buffer.split(b"\n")
                         for line in lines:
                             self.handle(line.decode("utf-8", "replace"))
+                        if len(buffer) > MAX_REPORT_BYTES:  # no newline in sight: not gpsd
+                            raise OSError(f"a line over {MAX_REPORT_BYTES} bytes")
             except OSError as error:
                 log.warning("gpsd at %s:%s: %s", *self.address, error)
+            except Exception:  # noqa: BLE001 - the reader must outlive any one bad report
+                # a thread that ended here left the car without a fix until a restart
+                log.exception("gpsd reader: unexpected error; reconnecting")
             self._stop.wait(2.0)
+
+
+# gpsd's longest reports (SKY with every satellite) are a few kilobytes.
+MAX_REPORT_BYTES = 1 << 20
 
 
 def _utc(value: object) -> datetime | None:

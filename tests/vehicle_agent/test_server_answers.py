@@ -10,6 +10,7 @@ from typing import Any
 import httpx
 import pytest
 
+from vehicle_agent.agent import MAX_BACKOFF_S, Schedule
 from vehicle_agent.gps import GpsdSource
 from vehicle_agent.server import ServerClient, UnexpectedAnswer
 
@@ -119,3 +120,47 @@ def test_an_odd_gpsd_report_is_skipped_not_fatal(report: object) -> None:
     fix = source.latest()
     assert fix is not None
     assert fix.lat == 36.0
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        '{"class": "TPV", "mode": 1e999, "lat": 36.1, "lon": -86.6}',
+        '{"class": "TPV", "mode": 3, "lat": ' + "9" * 400 + ', "lon": -86.6}',
+        '{"class": "TPV", "mode": 3, "lat": ' + "9" * 5000 + ', "lon": -86.6}',
+        "[" * 100_000,
+        '{"class": "TPV", "mode": 3, "lat": NaN, "lon": -86.6}',
+        '{"class": "TPV", "mode": 3, "lat": 91.0, "lon": -86.6}',
+    ],
+    ids=[
+        "infinite mode",
+        "400-digit lat",
+        "5000-digit lat",
+        "deep nesting",
+        "NaN lat",
+        "off the globe",
+    ],
+)
+def test_a_gpsd_line_that_breaks_a_parser_is_skipped_and_no_fix(line: str) -> None:
+    """Each ended the reader thread (an OverflowError, a ValueError from json, a
+    RecursionError), leaving the car without a fix until a restart; a NaN latitude read as a
+    fix no ping could be built from."""
+    source = GpsdSource(clock=lambda: 5.0)
+    source.handle(line)
+    assert source.latest() is None
+    source.handle('{"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6}')
+    fix = source.latest()
+    assert fix is not None
+    assert fix.lat == 36.0
+
+
+def test_the_network_back_off_stops_counting_at_its_cap() -> None:
+    """2 ** 1024 overflows a float: after 1,025 failures in a row (8.5 h at the 30 s cap) the
+    back-off raised, and the failing job ran on every network pass."""
+    schedule = Schedule()
+    for _ in range(2000):
+        schedule.failed(0.0, 1.0)
+    assert schedule.next_s == MAX_BACKOFF_S
+    schedule.done(0.0, 1.0)
+    schedule.failed(0.0, 1.0)
+    assert schedule.next_s == 1.0
