@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sqlite3
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -960,7 +961,16 @@ class Agent:
         if self.server is None:
             return 0
         now = self.clock.monotonic() if now is None else now
-        outcome = self.uplink.upload(self.server)
+        try:
+            outcome = self.uplink.upload(self.server)
+        except (sqlite3.Error, OSError) as spool_error:
+            # the spool's disk (full, read-only): what the server took stays spooled and is
+            # resent as duplicates later, but not on every network pass (it was: the same
+            # batch of up to 1,000 pings five times a second)
+            self.stats.server_errors["spool"] += 1
+            log.warning("ping spool: %s; uploads back off", spool_error)
+            self._upload_schedule.failed(now, 1.0)
+            return 0
         for error in outcome.errors:
             self._server_failed("pings", error)
         self.stats.pings_uploaded += outcome.uploaded

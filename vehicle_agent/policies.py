@@ -15,6 +15,7 @@ again, and replaced only by verified bytes.
 from __future__ import annotations
 
 import hashlib
+import logging
 import os
 import tempfile
 import time
@@ -22,6 +23,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from vehicle_agent.controllers.policy import PolicyActuation, PolicyFileError, read_policy
+
+log = logging.getLogger(__name__)
 
 # A `.part` file older than this (s) is no write in progress but one a crash cut short: a write
 # takes milliseconds, and another agent sharing the folder may be in the middle of one.
@@ -42,12 +45,19 @@ class PolicyStore:
     def _remove_stale_parts(self) -> None:
         """Remove what crashed writes left (STALE_PART_S)."""
         now = time.time()
-        for part in self.directory.glob("*.part"):
-            try:
-                if now - part.stat().st_mtime > STALE_PART_S:
-                    part.unlink()
-            except FileNotFoundError:
-                continue  # another agent removed it first
+        try:
+            for part in self.directory.glob("*.part"):
+                try:
+                    if now - part.stat().st_mtime > STALE_PART_S:
+                        part.unlink()
+                except FileNotFoundError:
+                    continue  # another agent removed it first
+        except OSError as error:
+            # tidying is best effort: a card remounted read-only (ext4 after errors) crashed
+            # the agent at start-up here; the policies kept on it still load
+            log.warning(
+                "policy store %s: leftover downloads not removed (%s)", self.directory, error
+            )
 
     def path(self, sha256: str) -> Path:
         """Where the policy with this sha256 is kept."""

@@ -4,6 +4,8 @@
 from __future__ import annotations
 
 import json
+import os
+import time
 from pathlib import Path
 
 import httpx
@@ -11,6 +13,7 @@ import pytest
 
 from tests.support.cars import car_served_by
 from vehicle_agent.batching import PingBatchSize
+from vehicle_agent.policies import PolicyStore
 
 
 def test_a_refused_batch_halves_and_the_size_grows_back_to_its_ceiling() -> None:
@@ -118,3 +121,39 @@ def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
         r.agent.upload()
         assert r.agent.spool.backlog() == 0
         assert requests - sent <= 3
+
+
+def test_a_spool_that_cannot_be_written_backs_uploads_off(tmp_path: Path, dbc_cache: Path) -> None:
+    """A spool error (a full or read-only card) left the upload before its schedule was
+    updated: the next network pass, 0.2 s later, posted the same batch again, and so on."""
+    posts = 0
+
+    def server(request: httpx.Request) -> httpx.Response:
+        nonlocal posts
+        posts += 1
+        pings = json.loads(request.content)["pings"]
+        return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
+
+    transport = httpx.MockTransport(server)
+    with (
+        httpx.Client(base_url="http://server.test", transport=transport) as http,
+        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
+    ):
+        r.run(5.0)
+        r.agent.spool.close()  # every spool call now raises sqlite3.ProgrammingError
+        now = r.clock.monotonic()
+        assert r.agent.upload(now) == 0
+        assert r.agent.stats.server_errors["spool"] == 1
+        assert not r.agent._upload_schedule.due(now + 0.2)
+
+
+def test_leftover_downloads_that_cannot_be_removed_do_not_stop_the_agent(tmp_path: Path) -> None:
+    """Tidying the policy store raised out of the agent's start-up on a card remounted
+    read-only (here a stale leftover that is a folder, which no one may unlink)."""
+    store_dir = tmp_path / "policies"
+    stale = store_dir / "tmpabc.part"
+    stale.mkdir(parents=True)
+    os.utime(stale, (time.time() - 2 * 86400, time.time() - 2 * 86400))
+    store = PolicyStore(store_dir)
+    assert stale.exists()
+    assert not store.holds("a" * 64)
