@@ -16,6 +16,13 @@ VEHICLE_ID_PATTERN = r"^[A-Za-z0-9_-]{1,32}$"
 # A car holds its plan this long after publication by default, then hands the car back; the
 # server's planner publishes every 60 s, so two skipped cycles still keep a car on its plan.
 STALE_PLAN_AFTER_S = 180.0
+# The longest agent periods a config may set (s). A period is when the agent next does the job,
+# set once from the config: a config's 1e300 (or Infinity) stopped pings, status reports or
+# plan polls for the rest of the run, the corrected config never reaching the schedule.
+MAX_PING_PERIOD_S = 60.0
+MAX_STATUS_PERIOD_S = 600.0
+MAX_PLAN_POLL_S = 600.0
+MAX_STALE_PLAN_AFTER_S = 86_400.0
 # A batch is the agent's store-and-forward upload: at most this many pings per request.
 MAX_PINGS_PER_BATCH = 1000
 # Plan ids stay below 2^53: every JSON reader (IEEE doubles) holds them exactly.
@@ -174,7 +181,7 @@ class VehicleConfig(BaseModel):
     Unknown fields are ignored, so a car keeps reading the configs of a newer server.
     """
 
-    model_config = ConfigDict(extra="ignore")
+    model_config = ConfigDict(extra="ignore", allow_inf_nan=False)
 
     vehicle_id: str
     make: str
@@ -187,10 +194,10 @@ class VehicleConfig(BaseModel):
     controller: ControllerConfig
     active: bool = Field(True, description="false: the agent leaves the car to its stock ACC")
     in_maintenance: bool = False
-    ping_period_s: float = Field(1.0, gt=0)
-    status_period_s: float = Field(10.0, gt=0)
-    plan_poll_s: float = Field(5.0, gt=0)
-    stale_plan_after_s: float = Field(STALE_PLAN_AFTER_S, gt=0)
+    ping_period_s: float = Field(1.0, gt=0, le=MAX_PING_PERIOD_S)
+    status_period_s: float = Field(10.0, gt=0, le=MAX_STATUS_PERIOD_S)
+    plan_poll_s: float = Field(5.0, gt=0, le=MAX_PLAN_POLL_S)
+    stale_plan_after_s: float = Field(STALE_PLAN_AFTER_S, gt=0, le=MAX_STALE_PLAN_AFTER_S)
     config_version: int | None = Field(
         None, ge=1, description="bumped by every change; echoed in the car's status reports"
     )

@@ -180,8 +180,10 @@ class ServerClient:
         try:
             return VehicleConfig.model_validate_json(response.content)
         except ValidationError as error:
+            first = error.errors(include_url=False)[0]
+            where = ".".join(str(part) for part in first["loc"])
             raise UnexpectedAnswer(
-                f"config: not a vehicle config ({error.errors()[0]['msg']})"
+                f"config: not a vehicle config ({where}: {first['msg']})"
             ) from None
 
     def corridor(self, corridor_id: str) -> CorridorGeometry:

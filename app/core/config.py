@@ -22,6 +22,12 @@ from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from contract.environment import AGENT_ENV_PREFIX, SERVER_ENV_PREFIX, TOOL_VARIABLES
 from contract.values import http_url
+from contract.vehicles import (
+    MAX_PING_PERIOD_S,
+    MAX_PLAN_POLL_S,
+    MAX_STALE_PLAN_AFTER_S,
+    MAX_STATUS_PERIOD_S,
+)
 
 PLACEHOLDER_SECRETS = frozenset({"", "change-me", "changeme", "secret", "development"})
 MIN_SECRET_KEY_CHARS = 32
@@ -112,10 +118,11 @@ class Settings(BaseSettings):
     inrix_max_age_days: int = Field(7, ge=1, le=36500)
 
     # Vehicle agent periods and limits handed out in /vehicles/{id}/config.
-    agent_ping_period_s: float = Field(1.0, gt=0)
-    agent_status_period_s: float = Field(10.0, gt=0)
-    agent_plan_poll_s: float = Field(5.0, gt=0)
-    agent_stale_plan_after_s: float = Field(180.0, gt=0)
+    # (bounded as the config the cars read bounds them: contract.vehicles)
+    agent_ping_period_s: float = Field(1.0, gt=0, le=MAX_PING_PERIOD_S)
+    agent_status_period_s: float = Field(10.0, gt=0, le=MAX_STATUS_PERIOD_S)
+    agent_plan_poll_s: float = Field(5.0, gt=0, le=MAX_PLAN_POLL_S)
+    agent_stale_plan_after_s: float = Field(180.0, gt=0, le=MAX_STALE_PLAN_AFTER_S)
 
     # Fleet readiness (piStatus checks): (amber, red) per check. Ages, backlog and temperature
     # turn amber/red above their thresholds; disk, CAN rate and satellites below theirs.

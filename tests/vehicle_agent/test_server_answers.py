@@ -10,6 +10,7 @@ from typing import Any
 import httpx
 import pytest
 
+from sim.emulator.rig import vehicle_config
 from vehicle_agent.agent import MAX_BACKOFF_S, Schedule
 from vehicle_agent.gps import GpsdSource
 from vehicle_agent.server import ServerClient, UnexpectedAnswer
@@ -164,3 +165,22 @@ def test_the_network_back_off_stops_counting_at_its_cap() -> None:
     schedule.done(0.0, 1.0)
     schedule.failed(0.0, 1.0)
     assert schedule.next_s == 1.0
+
+
+@pytest.mark.parametrize("field", ["ping_period_s", "status_period_s", "plan_poll_s"])
+@pytest.mark.parametrize("value", [1e300, "Infinity"])
+def test_a_config_whose_period_would_stop_a_job_for_the_run_is_refused(
+    field: str, value: object
+) -> None:
+    """A period is when the agent next does the job, set once: 1e300 stopped pings, status
+    reports or plan polls until a restart, the corrected config notwithstanding. Such a config
+    is an unexpected answer (the car keeps the one it has and asks again)."""
+    body = vehicle_config("toyota_rav4", "microaccel").model_dump(mode="json")
+    raw = json.dumps(body | {field: 0.0}).replace(f'"{field}": 0.0', f'"{field}": {value}')
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, content=raw, headers={"content-type": "application/json"})
+
+    http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(answer))
+    with pytest.raises(UnexpectedAnswer, match=field):
+        ServerClient(http, "SF-001", "token").config()
