@@ -125,6 +125,9 @@ class _Scanner:
     escaped_at: int = -1  # the byte after a backslash inside a string
     top_depth: int | None = None  # 1 inside a top-level array, 0 for JSON lines
     start: int | None = None  # where the current document began
+    # Where the structure broke: `scan` stops there and returns the documents that closed
+    # before it, which the caller hands out before raising this.
+    broken: MotionFileError | None = None
 
     def scan(self, chunk: bytes, chunk_at: int) -> list[tuple[int, int]]:
         """(start, end) of every top-level object that closes in this chunk."""
@@ -153,7 +156,8 @@ class _Scanner:
             elif code in _CLOSING:
                 self.depth -= 1
                 if self.depth < 0:
-                    raise MotionFileError(position, f"'{chr(code)}' closes nothing")
+                    self.broken = MotionFileError(position, f"'{chr(code)}' closes nothing")
+                    return ends
                 if code == _CLOSE_BRACE and self.depth == self.top_depth and self.start is not None:
                     ends.append((self.start, position + 1))
                     self.start = None
@@ -172,7 +176,8 @@ def split_documents(
     """Yield batches of whole top-level documents read from `stream`, in file order.
 
     Raises MotionFileError where the structure breaks (a closing bracket without its opening,
-    or the file ending inside a document); the batches yielded before are complete.
+    a document over MAX_DOCUMENT_BYTES, the file ending inside a document or inside its
+    top-level array), after yielding every whole document before the break.
     """
     scanner = _Scanner()
     pending = bytearray()  # the file's bytes from `pending_at` on, not yet handed out
@@ -210,6 +215,8 @@ def split_documents(
                 batch = DocumentBatch()
                 batch_size = 0
         view.release()
+        if scanner.broken is not None:
+            yield from _before_the_break(batch, consumed, scanner.broken)
         del pending[: consumed - pending_at]
         pending_at = consumed
         if scanner.start is None:  # between documents: nothing here is handed out
@@ -218,8 +225,12 @@ def split_documents(
             pending.clear()
             pending_at = read_so_far
         if scanner.start is not None and read_so_far - scanner.start > MAX_DOCUMENT_BYTES:
-            raise MotionFileError(
-                scanner.start, f"a document larger than {MAX_DOCUMENT_BYTES // 2**20} MB"
+            yield from _before_the_break(
+                batch,
+                consumed,
+                MotionFileError(
+                    scanner.start, f"a document larger than {MAX_DOCUMENT_BYTES // 2**20} MB"
+                ),
             )
     if stray_at is not None and scanner.start is None and not scanner.in_string:
         batch.bad.append(BadDocument(index, stray_at, "not a JSON object"))
@@ -229,6 +240,21 @@ def split_documents(
     if scanner.start is not None or scanner.in_string:
         where = scanner.start if scanner.start is not None else read_so_far
         raise MotionFileError(where, "the file ends inside a document")
+    if scanner.top_depth == 1 and scanner.depth > 0:
+        # between two documents of an array never closed: a file cut short read as whole
+        raise MotionFileError(read_so_far, "the file ends inside its top-level array (cut short)")
+
+
+def _before_the_break(
+    batch: DocumentBatch, consumed: int, error: MotionFileError
+) -> Iterator[DocumentBatch]:
+    """Hand out the documents read before the structure broke, then raise `error`: the batch
+    being built and the documents of the chunk the break is in were lost with the error, while
+    the importer recorded the file as imported and said the documents before it were."""
+    batch.bytes_read = consumed
+    if batch.texts or batch.bad:
+        yield batch
+    raise error
 
 
 def parse_batch(batch: DocumentBatch) -> tuple[pa.Table, list[int]]:

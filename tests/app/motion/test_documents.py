@@ -103,3 +103,32 @@ def test_a_file_cut_inside_a_document_says_where_after_the_whole_ones() -> None:
 def test_a_closing_bracket_without_its_opening_is_refused() -> None:
     with pytest.raises(MotionFileError, match="'}' closes nothing"):
         list(split_documents(io.BytesIO(b'{"a": 1}}')))
+
+
+def read_texts(stream: io.BytesIO, chunk_bytes: int, texts: list[bytes]) -> None:
+    """Every document's text into `texts`, as far as the file lets `split_documents` go."""
+    for batch in split_documents(stream, chunk_bytes=chunk_bytes):
+        texts.extend(batch.texts)
+
+
+@pytest.mark.parametrize("chunk_bytes", [4, 2**20])
+def test_the_documents_before_a_break_are_handed_out_before_it_is_raised(
+    chunk_bytes: int,
+) -> None:
+    """A break ("closes nothing", a document over the size limit) raised out of the scan with
+    the documents of its chunk and the batch being built: lost, while the importer recorded
+    the file and said the documents before the break were imported."""
+    data = b'[{"a": 1}, {"b": 2}, {"c": 3}]]'
+    texts: list[bytes] = []
+    with pytest.raises(MotionFileError, match=f"byte {len(data) - 1}: ']' closes nothing"):
+        read_texts(io.BytesIO(data), chunk_bytes, texts)
+    assert texts == [b'{"a": 1}', b'{"b": 2}', b'{"c": 3}']
+
+
+def test_a_file_cut_between_two_documents_of_its_array_is_refused_after_them() -> None:
+    """A file cut right after a document's closing brace imported as whole, exit 0."""
+    data = b'[{"a": 1}, {"b": 2},'
+    texts: list[bytes] = []
+    with pytest.raises(MotionFileError, match="ends inside its top-level array"):
+        read_texts(io.BytesIO(data), 2**20, texts)
+    assert texts == [b'{"a": 1}', b'{"b": 2}']
