@@ -23,6 +23,7 @@ from app.motion.edie import EdieWindow, day_window, edie_field
 from app.motion.figure import window_figure
 from app.motion.fleet import FleetDay, engagement_share, fleet_pings
 from app.motion.store import MotionStoreEmpty, imported_days, motion_store
+from contract.values import EARLIEST, LATEST
 from dashboards.auth import PageError, UserDep
 from dashboards.rendering import display_zone, render, settings_of
 
@@ -41,9 +42,14 @@ def _day(value: str | None, days: list[str]) -> date | None:
     if value is None:
         return date.fromisoformat(days[0]) if days else None
     try:
-        return date.fromisoformat(value)
+        chosen = date.fromisoformat(value)
     except ValueError:
         raise PageError(400, "Not a date", f"{value!r} is not a date (YYYY-MM-DD).") from None
+    # the warehouse's days lie between 1970 and 2200 (contract.values.plausible_time): a day
+    # past them has no data, and 9999-12-31's next day, the end of its window, overflowed (500)
+    if not EARLIEST.date() <= chosen < LATEST.date():
+        raise PageError(400, "Not a date", f"{value} is outside 1970-2199, where data can be.")
+    return chosen
 
 
 @router.get("/analytics/motion")

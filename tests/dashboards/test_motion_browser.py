@@ -102,3 +102,9 @@ def test_the_motion_page_draws_the_day_with_the_fleet_on_top(
         assert png.body()[:8] == b"\x89PNG\r\n\x1a\n"
         missing = page.request.get(f"{base}/analytics/motion.png?date=2001-01-01")
         assert missing.status == 404
+        # the last day of the calendar: its window's end overflowed, a 500 (the page); a day
+        # no data can have is refused as a bad date
+        for path in ("/analytics/motion", "/analytics/motion.png"):
+            beyond = page.request.get(f"{base}{path}?date=9999-12-31")
+            assert beyond.status == 400, path
+            assert "outside 1970-2199" in beyond.text()
