@@ -46,3 +46,21 @@ def test_a_single_point_trajectory_stands_for_nothing() -> None:
         [0.0],
         [0.0],
     )
+
+
+def test_a_trajectorys_acceleration_does_not_depend_on_the_others_in_its_batch() -> None:
+    """The window's half in points came from the batch's median step: a 10 Hz document beside
+    longer 25 Hz ones was read over 2.5 s, not 1 s, and its fuel depended on its neighbours."""
+    ten_hz = np.arange(0.0, 20.0001, 0.1)
+    # a wave: speed 15 +/- 5 m/s with a 4 s period
+    x_ten = 15 * ten_hz - (5 * 4 / (2 * np.pi)) * np.cos(2 * np.pi * ten_hz / 4)
+    alone = trajectory_steps(ten_hz, x_ten, np.array([0]), np.zeros(len(ten_hz), dtype=np.int64))
+    twenty_five = np.arange(100.0, 140.0001, 0.04)
+    time_s = np.concatenate([twenty_five, ten_hz])
+    x_m = np.concatenate([20 * (twenty_five - 100.0), x_ten])
+    classes = np.zeros(len(time_s), dtype=np.int64)
+    beside = trajectory_steps(time_s, x_m, np.array([0, len(twenty_five)]), classes)
+    ours = slice(len(twenty_five), None)
+    assert beside.accel_mps2[ours] == pytest.approx(alone.accel_mps2)
+    assert beside.fuel_g[ours].sum() == pytest.approx(alone.fuel_g.sum())
+    assert beside.accel_mps2[: len(twenty_five)] == pytest.approx(0.0, abs=1e-6)
