@@ -117,6 +117,12 @@ class PingSpool:
             ).fetchall()
         return [(int(row[0]), json.loads(row[1])) for row in rows]
 
+    def newest(self) -> tuple[int, dict[str, Any]] | None:
+        """The last ping spooled, with its spool id (None: the spool is empty)."""
+        with self._lock:
+            row = self._db.execute("SELECT id, body FROM ping ORDER BY id DESC LIMIT 1").fetchone()
+        return None if row is None else (int(row[0]), json.loads(row[1]))
+
     def remove(self, ids: Sequence[int], rejected: int = 0) -> None:
         """Forget pings the server has answered for."""
         if not ids:

@@ -4,8 +4,10 @@ server cannot take more.
 Each batch the server answers ping by ping leaves the spool, but for the pings it refused for
 now (`Rejection.retryable`: its clock or roster behind) that are young enough to send again.
 A batch refused whole is split (`vehicle_agent.batching`), and a lone ping refused whole is
-given up, so that no ping blocks the ones behind it. The agent decides what an outcome means
-for its schedule and its counters (`Agent.upload`); this module only speaks the protocol.
+given up, so that no ping blocks the ones behind it, once the newest ping sent alone is taken:
+a server that refuses every ping whole would otherwise empty the spool, one ping at a time.
+The agent decides what an outcome means for its schedule and its counters (`Agent.upload`);
+this module only speaks the protocol.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any
 
-from contract.vehicles import Rejection
+from contract.vehicles import PingAnswer, Rejection
 from vehicle_agent.batching import PingBatchSize
 from vehicle_agent.server import RequestRefused, ServerClient, ServerError, ServerTimeout
 from vehicle_agent.spool import PingSpool
@@ -79,8 +81,13 @@ class PingUplink:
                 answer = server.post_pings([ping for _, ping in rows])
             except RequestRefused as error:
                 outcome.errors.append(error)
-                outcome.given_up += self._split_refused_batch(rows, error)
-                continue
+                if len(rows) > 1:  # the next batch is half as large
+                    self.batch.refused(len(rows), too_large=error.too_large)
+                    continue
+                if self._refused_for_itself(server, rows[0], outcome):
+                    continue
+                outcome.completed = False
+                return outcome
             except ServerError as error:
                 if isinstance(error, ServerTimeout):
                     self.batch.timed_out(len(rows))
@@ -88,29 +95,51 @@ class PingUplink:
                 outcome.completed = False
                 return outcome
             self.batch.taken()
-            kept = self._held_back(rows, answer.rejected)
-            gone = [row_id for row_id, _ in rows if row_id not in kept]
-            self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
-            outcome.uploaded += len(gone)
-            if kept:
+            if self._settle(rows, answer, outcome):
                 # the server cannot take them yet: try again later, backing off, not in a loop
-                outcome.held_back += len(kept)
                 outcome.completed = False
                 return outcome
             if len(rows) < batch_size:
                 break
         return outcome
 
-    def _split_refused_batch(self, rows: SpoolRows, error: RequestRefused) -> int:
-        """After a batch refused whole: the next batch is half as large, and a lone ping
-        refused whole leaves the spool as rejected. How many pings left the spool."""
-        if len(rows) > 1:
-            self.batch.refused(len(rows), too_large=error.too_large)
-            return 0
-        [(row_id, ping)] = rows
+    def _settle(self, rows: SpoolRows, answer: PingAnswer, outcome: UploadOutcome) -> bool:
+        """The answered pings leave the spool but those refused for now; whether any stay."""
+        kept = self._held_back(rows, answer.rejected)
+        gone = [row_id for row_id, _ in rows if row_id not in kept]
+        self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
+        outcome.uploaded += len(gone)
+        outcome.held_back += len(kept)
+        return bool(kept)
+
+    def _refused_for_itself(
+        self, server: ServerClient, row: tuple[int, dict[str, Any]], outcome: UploadOutcome
+    ) -> bool:
+        """Whether a lone ping refused whole was refused for itself, and so given up (a ping a
+        newer server cannot read must not block the ones behind it), rather than by a server
+        that refuses any ping whole (a proxy's 413 for every body, a schema the agent does not
+        speak): then every ping would be given up in turn, the spool emptied at five a second.
+        The newest ping spooled, sent alone, tells: taken, the lone one leaves the spool as
+        rejected; refused as well, or no other ping to ask with, both stay and uploads back
+        off."""
+        row_id, ping = row
+        newest = self.spool.newest()
+        if newest is None or newest[0] == row_id:
+            return False
+        try:
+            answer = server.post_pings([newest[1]])
+        except ServerError as error:
+            if isinstance(error, RequestRefused):
+                log.warning(
+                    "server refuses pings whole (%s): the spool kept, uploads back off", error
+                )
+            outcome.errors.append(error)
+            return False
+        self._settle([newest], answer, outcome)
         log.warning("server refused ping %s on its own: given up", ping.get("ts"))
         self.spool.remove([row_id], rejected=1)
-        return 1
+        outcome.given_up += 1
+        return True
 
     def _held_back(self, rows: SpoolRows, rejected: Sequence[Rejection]) -> set[int]:
         """The spool rows of the pings refused for now and young enough to send again; a

@@ -111,7 +111,10 @@ def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
             if not r.agent.spool.backlog():
                 break
         assert r.agent.spool.backlog() == 0
-        assert stored == [ts for ts in spooled if ts != spooled[7]]  # each once, in order
+        # each once, in order, but for the newest ping, sent alone to tell a refusal of that
+        # one ping from a server refusing every ping whole (it was taken: the refused one is
+        # given up)
+        assert stored == spooled[:7] + [spooled[-1]] + spooled[8:-1]
         assert r.agent.spool.counter("rejected") == 1
         assert r.agent.stats.pings_uploaded == 39
         assert requests < 40  # split by halves, not sent one by one
@@ -157,3 +160,28 @@ def test_leftover_downloads_that_cannot_be_removed_do_not_stop_the_agent(tmp_pat
     store = PolicyStore(store_dir)
     assert stale.exists()
     assert not store.holds("a" * 64)
+
+
+@pytest.mark.parametrize("status", [409, 413, 422])
+def test_a_server_that_refuses_every_ping_whole_empties_no_spool(
+    status: int, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """Each batch refused whole was halved down to one ping, which was given up: a server (or
+    a proxy) refusing every body emptied the spool at five pings a second, counted only as
+    "rejected". The newest ping sent alone tells a refusal of everything from one of a ping."""
+
+    def refusing(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(status, json={"detail": "not today"})
+
+    transport = httpx.MockTransport(refusing)
+    with (
+        httpx.Client(base_url="http://server.test", transport=transport) as http,
+        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
+    ):
+        r.run(30.0)
+        spooled = r.agent.spool.backlog()
+        assert spooled >= 25
+        for _ in range(40):
+            r.agent.upload()
+        assert r.agent.spool.backlog() == spooled
+        assert r.agent.spool.counter("rejected") == 0
