@@ -194,7 +194,8 @@ class ServerClient:
         try:
             body = response.json()
             return CorridorGeometry.from_segments(corridor_id, int(body["lanes"]), body["segments"])
-        except (ValueError, KeyError, TypeError) as error:
+        # OverflowError: "lanes": 1e400 (infinity, which int() cannot take)
+        except (ValueError, KeyError, TypeError, OverflowError) as error:
             raise UnexpectedAnswer(f"corridor: unusable geometry ({error})") from None
 
     def plan(self, lane: int, etag: str | None) -> PlanFetch:

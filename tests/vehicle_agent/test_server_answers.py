@@ -53,6 +53,17 @@ def test_a_corridor_without_sub_segments_is_an_unexpected_answer() -> None:
     with pytest.raises(UnexpectedAnswer, match="has no sub-segments"):
         client_answering({"lanes": 4, "segments": []}).corridor("I-24-WB")
 
+    # an infinite lane count escaped as an OverflowError, and config and corridor were asked
+    # again on every network pass
+    def infinite_lanes(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, content=b'{"lanes": 1e400, "segments": []}')
+
+    http = httpx.Client(
+        base_url="http://server.test", transport=httpx.MockTransport(infinite_lanes)
+    )
+    with pytest.raises(UnexpectedAnswer, match="unusable geometry"):
+        ServerClient(http, "SF-001", "token").corridor("I-24-WB")
+
 
 @pytest.mark.parametrize(
     "call",
