@@ -129,11 +129,8 @@ def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
 def test_a_spool_that_cannot_be_written_backs_uploads_off(tmp_path: Path, dbc_cache: Path) -> None:
     """A spool error (a full or read-only card) left the upload before its schedule was
     updated: the next network pass, 0.2 s later, posted the same batch again, and so on."""
-    posts = 0
 
     def server(request: httpx.Request) -> httpx.Response:
-        nonlocal posts
-        posts += 1
         pings = json.loads(request.content)["pings"]
         return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
 
