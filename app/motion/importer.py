@@ -62,6 +62,13 @@ SECONDS_PER_DAY = 86_400
 # read as seconds lie some 50,000 years ahead) and no day of the store could hold it.
 EARLIEST_UNIX_S = 0.0  # 1970-01-01 UTC
 LATEST_UNIX_S = 4_102_444_800.0  # 2100-01-01 UTC
+# MOTION positions are feet along I-24 (x, its mileposts x 5,280: the testbed near mile 60) and
+# across it from the median (y, a few lanes either side). A point beyond I-24's length in
+# Tennessee (about 185 miles), or further across than any roadway, is a unit or data mistake:
+# one point at 1e9 m sized the day figure's grid at 5 M boxes a column, and a point of 1e300 ft
+# was stored as an infinite x with NaN fuel.
+MAX_X_FT = 200 * 5280.0
+MAX_ABS_Y_FT = 500.0
 # The manifest keeps this many bad documents' reasons (the counts are always complete).
 REASONS_KEPT = 1000
 HASH_CHUNK_BYTES = 8 * 1024 * 1024
@@ -246,10 +253,11 @@ def _accept(
     finite = np.isfinite(time_s) & np.isfinite(x_ft) & np.isfinite(y_ft)
     with np.errstate(invalid="ignore"):
         in_era = (time_s >= EARLIEST_UNIX_S) & (time_s < LATEST_UNIX_S)
+        on_road = (x_ft >= 0.0) & (x_ft <= MAX_X_FT) & (np.abs(y_ft) <= MAX_ABS_Y_FT)
     step_ok = np.ones(len(time_s), dtype=bool)
     step_ok[1:] = np.diff(time_s) > 0
     step_ok[starts] = True
-    good_points = finite & in_era & step_ok
+    good_points = finite & in_era & on_road & step_ok
     doc_ok = np.logical_and.reduceat(good_points, starts) if len(starts) else np.zeros(0, bool)
     for position in np.flatnonzero(~doc_ok):
         first = starts[position]
@@ -260,6 +268,12 @@ def _accept(
             reason = (
                 f"timestamp {time_s[first + broken]:.15g} at point {broken} is no time in "
                 "seconds between 1970 and 2100 (milliseconds?)"
+            )
+        elif not on_road[first + broken]:
+            reason = (
+                f"position ({x_ft[first + broken]:.15g}, {y_ft[first + broken]:.15g}) ft at point "
+                f"{broken} is not on I-24 (x 0 to {MAX_X_FT:,.0f} ft along it, y within "
+                f"{MAX_ABS_Y_FT:.0f} ft across; metres?)"
             )
         else:
             reason = f"timestamps do not increase at point {broken}"
