@@ -68,6 +68,8 @@ LATEST_UNIX_S = 4_102_444_800.0  # 2100-01-01 UTC
 # one point at 1e9 m sized the day figure's grid at 5 M boxes a column, and a point of 1e300 ft
 # was stored as an infinite x with NaN fuel.
 MAX_X_FT = 200 * 5280.0
+# The store keeps a vehicle class in 16 bits (MOTION's coarse classes are single digits).
+MAX_VEHICLE_CLASS = 32_767
 MAX_ABS_Y_FT = 500.0
 # The manifest keeps this many bad documents' reasons (the counts are always complete).
 REASONS_KEPT = 1000
@@ -221,6 +223,8 @@ def _accept(
         for column in ("timestamp", "x_position", "y_position")
     }
     direction = pc.fill_null(table.column("direction"), 0).to_numpy()
+    # stored as int16: a larger class wrapped silently (70000 became 4464)
+    vehicle_class = pc.fill_null(table.column("coarse_vehicle_class"), -1).to_numpy()
     keep = np.ones(table.num_rows, dtype=bool)
 
     def refuse(row: int, reason: str) -> None:
@@ -235,6 +239,11 @@ def _accept(
             counts["y_position"][row],
             int(direction[row]),
         )
+        if not reason and not -1 <= vehicle_class[row] <= MAX_VEHICLE_CLASS:
+            reason = (
+                f"coarse_vehicle_class {vehicle_class[row]} is no vehicle class "
+                f"(0 to {MAX_VEHICLE_CLASS:,})"
+            )
         if reason:
             refuse(row, reason)
         elif direction[row] != frame.direction:

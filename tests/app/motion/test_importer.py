@@ -117,20 +117,23 @@ def test_timestamps_in_milliseconds_are_one_documents_error(tmp_path: Path) -> N
     assert not any((tmp_path / "s" / "staging").glob("*/*"))
 
 
-def test_a_position_off_i24_is_one_documents_error(tmp_path: Path) -> None:
+def test_a_position_off_i24_or_a_class_past_16_bits_is_one_documents_error(tmp_path: Path) -> None:
     """Positions were taken as given: one point 1e9 m along sized the day figure's grid at 5 M
     boxes a column, 1e300 ft was stored as an infinite x with NaN fuel, and a lane 300,000 ft
     across the road was lane 17,797."""
     good = document("good", [1.6e9, 1.6e9 + 1], [0.0, 20.0])
     far = document("far", [1.6e9, 1.6e9 + 1], [0.0, 1e9])
     across = document("across", [1.6e9, 1.6e9 + 1], [0.0, 20.0]) | {"y_position": [-18.0, 3e5]}
+    # and a class over the store's 16 bits wrapped (70000 was stored as 4464)
+    wide = document("wide", [1.6e9, 1.6e9 + 1], [0.0, 20.0], vehicle_class=70_000)
     report = import_motion_file(
-        write(tmp_path / "m.json", [good, far, across]), tmp_path / "s", METRIC_FRAME
+        write(tmp_path / "m.json", [good, far, across, wide]), tmp_path / "s", METRIC_FRAME
     )
     assert report.documents == 1
-    reasons = [bad.reason for bad in report.bad]
-    assert reasons[0].startswith("position (3280839895.01312, -18) ft at point 1 is not on I-24")
-    assert reasons[1].startswith("position (65.6167979002625, 300000) ft at point 1 is not on I-24")
+    reasons = {bad.index: bad.reason for bad in report.bad}
+    assert reasons[1].startswith("position (3280839895.01312, -18) ft at point 1 is not on I-24")
+    assert reasons[2].startswith("position (65.6167979002625, 300000) ft at point 1 is not on I-24")
+    assert reasons[3] == "coarse_vehicle_class 70000 is no vehicle class (0 to 32,767)"
     assert _count(tmp_path / "s", "motion_trajectories") == 1
 
 
