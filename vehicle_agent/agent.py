@@ -201,6 +201,8 @@ class AgentStats:
     policies_refused: int = 0
     # Assigned policies downloaded whole but not kept: the car could not write them (OSError).
     policies_not_kept: int = 0
+    # Uploads stopped by the spool's own disk (full, read-only), not by the server.
+    spool_errors: int = 0
 
 
 class Agent:
@@ -967,7 +969,7 @@ class Agent:
             # the spool's disk (full, read-only): what the server took stays spooled and is
             # resent as duplicates later, but not on every network pass (it was: the same
             # batch of up to 1,000 pings five times a second)
-            self.stats.server_errors["spool"] += 1
+            self.stats.spool_errors += 1
             log.warning("ping spool: %s; uploads back off", spool_error)
             self._upload_schedule.failed(now, 1.0)
             return 0

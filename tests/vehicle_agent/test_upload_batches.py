@@ -6,14 +6,30 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
 import pytest
 
+from sim.emulator.rig import Rig
 from tests.support.cars import car_served_by
 from vehicle_agent.batching import PingBatchSize
 from vehicle_agent.policies import PolicyStore
+
+
+@contextmanager
+def car_answered_by(
+    answer: Callable[[httpx.Request], httpx.Response], tmp_path: Path, dbc_cache: Path
+) -> Iterator[Rig]:
+    """SF-001 and its agent, whose server is `answer`."""
+    transport = httpx.MockTransport(answer)
+    with (
+        httpx.Client(base_url="http://server.test", transport=transport) as http,
+        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
+    ):
+        yield r
 
 
 def test_a_refused_batch_halves_and_the_size_grows_back_to_its_ceiling() -> None:
@@ -62,11 +78,7 @@ def test_on_an_uplink_too_slow_for_a_full_batch_the_backlog_drains(
             json={"accepted": len(new), "duplicates": len(pings) - len(new), "rejected": []},
         )
 
-    transport = httpx.MockTransport(slow_link)
-    with (
-        httpx.Client(base_url="http://server.test", transport=transport) as http,
-        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
-    ):
+    with car_answered_by(slow_link, tmp_path, dbc_cache) as r:
         r.run(1500.0)
         spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(2000)]
         assert len(spooled) >= 1000
@@ -97,11 +109,7 @@ def test_a_ping_a_newer_server_refuses_whole_is_given_up_and_the_rest_arrive(
         stored.extend(ping["ts"] for ping in pings)
         return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
 
-    transport = httpx.MockTransport(newer_server)
-    with (
-        httpx.Client(base_url="http://server.test", transport=transport) as http,
-        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
-    ):
+    with car_answered_by(newer_server, tmp_path, dbc_cache) as r:
         r.run(40.0)
         spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(100)]
         assert len(spooled) == 40
@@ -131,20 +139,20 @@ def test_a_spool_that_cannot_be_written_backs_uploads_off(tmp_path: Path, dbc_ca
     updated: the next network pass, 0.2 s later, posted the same batch again, and so on."""
 
     def server(request: httpx.Request) -> httpx.Response:
+        if request.url.path != "/api/v1/pings":
+            return httpx.Response(503)  # config, plan, status: away, as they may be
         pings = json.loads(request.content)["pings"]
         return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
 
-    transport = httpx.MockTransport(server)
-    with (
-        httpx.Client(base_url="http://server.test", transport=transport) as http,
-        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
-    ):
+    with car_answered_by(server, tmp_path, dbc_cache) as r:
         r.run(5.0)
-        r.agent.spool.close()  # every spool call now raises sqlite3.ProgrammingError
-        now = r.clock.monotonic()
-        assert r.agent.upload(now) == 0
-        assert r.agent.stats.server_errors["spool"] == 1
-        assert not r.agent._upload_schedule.due(now + 0.2)
+        # a card remounted read-only: the spool still reads, every write fails
+        r.agent.spool._db.execute("PRAGMA query_only = ON")
+        assert r.agent.upload() == 0
+        assert r.agent.stats.spool_errors == 1
+        r.clock.advance(0.2)  # the next network pass: the upload waits out its back-off
+        r.agent.network()
+        assert r.agent.stats.spool_errors == 1
 
 
 def test_leftover_downloads_that_cannot_be_removed_do_not_stop_the_agent(tmp_path: Path) -> None:
@@ -170,11 +178,7 @@ def test_a_server_that_refuses_every_ping_whole_empties_no_spool(
     def refusing(request: httpx.Request) -> httpx.Response:
         return httpx.Response(status, json={"detail": "not today"})
 
-    transport = httpx.MockTransport(refusing)
-    with (
-        httpx.Client(base_url="http://server.test", transport=transport) as http,
-        car_served_by(http, "SF-001", "token", tmp_path, dbc_cache) as r,
-    ):
+    with car_answered_by(refusing, tmp_path, dbc_cache) as r:
         r.run(30.0)
         spooled = r.agent.spool.backlog()
         assert spooled >= 25
