@@ -157,12 +157,10 @@ def crossing_times_s(position_m: FloatArray, dt_s: float, point_m: float) -> Flo
     for column in range(position_m.shape[1]):
         track = position_m[:, column]
         present = np.isfinite(track)
-        if not present.all():
-            if not (present.any() and track[present][0] <= point_m <= track[present][-1]):
-                continue
-            times[column] = _first_arrival_s(track[present], time_s[present], point_m)
-        else:
+        if present.all():
             times[column] = _first_arrival_s(track, time_s, point_m)
+        elif present.any() and track[present][0] <= point_m <= track[present][-1]:
+            times[column] = _first_arrival_s(track[present], time_s[present], point_m)
     return times
 
 
