@@ -108,7 +108,7 @@ def windowed_accel(
     half a window before and after i, clipped to the trajectory's steps (0 without two steps).
     Half a window is counted in each trajectory's own steps (its median step): counted in the
     batch's, a 10 Hz document imported beside 25 Hz ones was read over 2.5 s, not 1 s, and its
-    fuel came out 27 % low, depending on which documents shared its batch.
+    fuel depended on which documents shared its batch (tests/app/motion/test_kinematics.py).
     """
     points = len(time_s)
     if points == 0:
