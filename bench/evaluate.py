@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.evaluate [--workers N]
 
-(as a module: run as a script, this file would shadow the `sim` package)
+(as a module, like the other benches)
 
 Figures, measured in one run:
 - the baseline: the all-human platoons of every case alone (the floor any evaluation pays);

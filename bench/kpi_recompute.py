@@ -10,12 +10,16 @@ per time, throughput without the cars that cut in (`tput_no_merged`), network sp
 leader (docs/simulation.md, "What the verdict still leaves out").
 """
 
-import sys
+import argparse
 
 import numpy as np
 import pandas as pd
 
-runs_dir, eval_csv = sys.argv[1], sys.argv[2]
+_arguments = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+_arguments.add_argument("runs_dir", help="the folder `sim evaluate --save-runs` wrote")
+_arguments.add_argument("eval_csv", help="that run's evaluation.csv")
+_given = _arguments.parse_args()
+runs_dir, eval_csv = _given.runs_dir, _given.eval_csv
 # RAV4_2019 coefficients (../shared/reference/energy-model.md), written out here
 C = {
     "c0": 0.14631964767035743,

@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.optimum [--drive PATH ...] [--repeat 5]
 
-(as a module: run as a script, the repository's `sim` package would be shadowed)
+(as a module, like the other benches)
 
 Figures per drive, wall and CPU seconds (the machine is shared: CPU time is the steadier one):
 - the whole bound: baseline run, L-BFGS-B over the adjoint, verifying replay;

@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.run_fingerprints OUT.json [--compare BEFORE.json]
 
-(as a module: run as a script, `bench/sim.py` would shadow the `sim` package)
+(as a module, like the other benches)
 
 Every registered controller and the all-human baseline, with 1 and with 4 AVs, under the
 recommended planner, on two cases of each scenario (its first and its middle drive): 140 runs.

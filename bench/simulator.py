@@ -1,8 +1,8 @@
 """Simulator speed: time steps per second for a 200-vehicle platoon over a whole real drive.
 
-    .venv/bin/python -m bench.sim [--drive PATH] [--vehicles 200] [--repeat 3]
+    .venv/bin/python -m bench.simulator [--drive PATH] [--vehicles 200] [--repeat 3]
 
-(as a module: run as a script, this file would shadow the `sim` package)
+(as a module, like the other benches)
 
 Figures, each the best of --repeat runs:
 - the vectorised simulator (sim.platoon) with 200 IDM humans behind the leader;
