@@ -100,10 +100,11 @@ class Rejection(BaseModel):
 
 
 class PingAnswer(BaseModel):
-    """Sent only after the accepted rows are committed."""
+    """Sent only after the accepted rows are committed. Counts are never negative: a car sums
+    them with the rejections to check every ping of its batch is answered for once."""
 
-    accepted: int
-    duplicates: int
+    accepted: int = Field(ge=0)
+    duplicates: int = Field(ge=0)
     rejected: list[Rejection]
 
 

@@ -34,6 +34,8 @@ def client_answering(body: dict[str, Any]) -> ServerClient:
         ({"accepted": 1, "duplicates": 0, "rejected": [{"index": 0, "error": "x"}] * 2}, "batch"),
         # an answer that accounts for fewer pings than were sent: the rest would be forgotten
         ({"accepted": 1, "duplicates": 0, "rejected": []}, "accounts for 1 of 3"),
+        # counts that sum to the batch only with one below zero: no ping is answered for once
+        ({"accepted": 4, "duplicates": -1, "rejected": []}, "unexpected answer"),
     ],
 )
 def test_a_ping_answer_that_does_not_account_for_the_batch_is_refused(
