@@ -13,7 +13,9 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
   1.2 s takes a second one on the fleet's cars, 2 x the 0.6 s long-press step);
 - rate: no faster than 0.8 x the make's command period (but for the one release that ends a
   press: a stopping agent must not leave a press in the car's last frame);
-- the car: ACC engaged by the driver, the car state valid and fresh, no press while the stock
+- the car: ACC engaged by the driver, the car state valid and fresh, a press only while the
+  frames it is judged from (engagement, set points, pedals: `CarInterface.press_inputs`) were
+  read at most 2 of their periods ago, no press while the stock
   ACC holds a standstill for the driver (the 2023 Rogue's CRUISE_STATE 4: + resumes it), and no
   release of a standstill the stock ACC may hold for the driver to resume (the RAV4's
   RELEASE_STANDSTILL)
@@ -246,6 +248,19 @@ class SafetyLayer:
             return Refusal("standstill", "releases a standstill held for the driver to resume")
         return None
 
+    def _check_press_inputs(self, context: SafetyContext) -> Refusal | None:
+        """Why a press may not be judged from the car's frames of its `press_inputs`: one
+        never read, or read over `fresh_periods` of its periods ago (aged by the clock)."""
+        received_at = context.car_state.received_at
+        for name in self.car.press_inputs:
+            read_s = received_at.get(name)
+            if read_s is None:
+                return Refusal("car state", f"a press with no {name} read")
+            age = self._age_s(read_s, context)
+            if age > self._fresh_age_s(name):
+                return Refusal("car state", f"a press judged from a {name} {age:.2f} s old")
+        return None
+
     def _fresh_age_s(self, name: str) -> float:
         """The oldest the car's frame of `name` may be for a command to be built from it:
         `fresh_periods` of its periods."""
@@ -299,7 +314,7 @@ class SafetyLayer:
         if not pressed:
             return None
         now = context.time_s
-        problem = self._check_car(context)
+        problem = self._check_car(context) or self._check_press_inputs(context)
         if problem is not None:
             return problem
         reading = context.car_state.reading

@@ -12,7 +12,7 @@ from sim.emulator.car import BOARD_LINES, CarEmulator
 from sim.emulator.rig import Rig, rig
 from vehicle_agent.agent import Agent
 from vehicle_agent.bus import open_bus
-from vehicle_agent.cars import CarReading, CarState, CruiseButton, car_for
+from vehicle_agent.cars import CARS, CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.clock import ManualClock
 from vehicle_agent.codec import codec_for
 from vehicle_agent.engage import Mode
@@ -250,7 +250,41 @@ def test_the_safety_layer_refuses_a_press_while_the_stock_acc_holds_a_standstill
         lead_present=True,
         standstill_held=True,
     )
-    context = SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, held))
+    read = dict.fromkeys(car.messages, 1.0)
+    context = SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, held, read))
     assert not safety.admit_press(frozenset({CruiseButton.PLUS}), context)
     assert safety.refused == {"standstill": 1}
     assert safety.admit_press(frozenset(), context)  # letting go always is
+
+
+def test_no_press_is_judged_from_an_engagement_frame_gone_stale(dbc_cache: Path) -> None:
+    """The car state stays valid on a CRUISE 10 periods (1 s) old, and the 2023 Rogue shows the
+    driver's brake only as CRUISE_ENGAGED 0: a press judged from a CRUISE 0.95 s old could land
+    on an ACC the driver has just cancelled (the board's - is SET, which engages it again). A
+    press waits for a CRUISE and an ACC_HUD at most 2 periods old; a release never waits."""
+    car = car_for("nissan_rogue")
+    safety = SafetyLayer(car, codec_for(car.dbc_name, car.checksums, dbc_cache))
+    engaged = CarReading(
+        speed_mps=25.0,
+        acc_available=True,
+        acc_engaged=True,
+        acc_speed_setting_mph=56.0,
+        acc_gap_setting=3,
+        lead_present=True,
+    )
+    read = {"SPEED": 1.0, "WHEEL_BUTTONS": 1.0, "ACC_HUD": 1.0, "CRUISE": 0.05}
+    stale = SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, engaged, read))
+    assert not safety.admit_press(frozenset({CruiseButton.MINUS}), stale)
+    assert safety.refused == {"car state": 1}
+    assert safety.admit_press(frozenset(), stale)
+
+    fresh = {**read, "CRUISE": 0.85}  # 0.15 s: one frame late
+    context = SafetyContext(time_s=1.0, car_state=CarState(1.0, True, None, engaged, fresh))
+    assert safety.admit_press(frozenset({CruiseButton.MINUS}), context)
+
+
+@pytest.mark.parametrize("key", sorted(CARS))
+def test_every_button_make_names_the_frames_a_press_is_judged_from(key: str) -> None:
+    car = CARS[key]
+    assert (car.actuation == "acc") == bool(car.press_inputs)
+    assert set(car.press_inputs) <= set(car.messages)

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from tests.vehicle_agent.test_state import TOYOTA_FRAMES
 from tests.vehicle_agent.test_state import frame as car_frame
 from vehicle_agent.actuators import AccelLimiter
-from vehicle_agent.cars import CarInterface, CarReading, CarState, CruiseButton, car_for
+from vehicle_agent.cars import CARS, CarInterface, CarReading, CarState, CruiseButton, car_for
 from vehicle_agent.cars.base import Signals
 from vehicle_agent.codec import Codec, codec_for
 from vehicle_agent.ports import CanAccelPort, CanButtonPort, GpioButtonBoard
@@ -53,7 +53,16 @@ def car_state(
             **({} if setting_mph is None else {"acc_speed_setting_mph": setting_mph}),
         }
     )
-    return CarState(time_s, valid, None if valid else "SPEED missing", reading if valid else None)
+    # what every make's presses are judged from, read at `time_s` (no standstill message, so
+    # no release of a standstill, which needs one read)
+    received_at = {name: time_s for car in CARS.values() for name in car.press_inputs}
+    return CarState(
+        time_s,
+        valid,
+        None if valid else "SPEED missing",
+        reading if valid else None,
+        received_at if valid else {},
+    )
 
 
 @pytest.fixture

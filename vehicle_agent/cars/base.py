@@ -113,6 +113,13 @@ class CarInterface(ABC):
     # (`holds_standstill`), for makes whose command frame may release one: a release goes out
     # only while a fresh frame of it shows none held (`SafetyLayer.check_standstill_release`).
     standstill_message: ClassVar[str | None] = None
+    # The messages a press is judged from (button makes): whether the ACC is engaged, its set
+    # points, the driver's pedals and the standstill hold. The car state stays valid on a frame
+    # 10 periods old (1 s of the 2023 Rogue's CRUISE), and a press judged from one that old
+    # could land on an ACC the driver has since cancelled (on a car where SET engages it), so a
+    # press goes out only while each was read at most `fresh_periods` of its periods ago
+    # (`SafetyLayer.check_press`).
+    press_inputs: ClassVar[tuple[str, ...]] = ()
 
     @abstractmethod
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:

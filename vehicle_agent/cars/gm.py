@@ -58,6 +58,7 @@ class CadillacXT5(CarInterface):
     checksums: ClassVar[dict[str, Checksum]] = {"ASCMSteeringButton": GmSteeringButtonChecksum()}
     command_message = "ASCMSteeringButton"
     command_period_s = 0.05
+    press_inputs = ("ECMEngineStatus", "ASCMActiveCruiseControlStatus", "AcceleratorPedal2")
     command_counter_signal = "RollingCounter"
     command_counter_modulo = 4
 

@@ -63,6 +63,7 @@ class NissanRogue2018(CarInterface):
     }
     command_message = "CRUISE_THROTTLE"
     command_period_s = 0.05
+    press_inputs = ("PRO_PILOT", "PROPILOT_HUD", "CRUISE_THROTTLE")
     command_counter_signal = "COUNTER"
     command_counter_modulo = 4
     copies_command_frame = True

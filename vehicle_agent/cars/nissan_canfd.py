@@ -73,6 +73,7 @@ class NissanRogue(CarInterface):
     # car takes none); the agent's loop runs at the 20 Hz of the other button cars.
     command_message = "WHEEL_BUTTONS"
     command_period_s = 0.05
+    press_inputs = ("CRUISE", "ACC_HUD")
 
     def interpret(self, signals: Mapping[str, Signals]) -> CarReading:
         """Speed, cruise state, HUD set points and the wheel's buttons."""
