@@ -5,6 +5,9 @@ again with the make's DBC and must pass every check, or it is not sent, counted 
 - allowed: the make's one command message (standard id, DBC length, valid checksum), and none
   to a car that acts on no frame of the agent's (the 2023 Rogue: a GPIO board presses its
   buttons, through `admit_press`);
+- the command message's other signals: what the agent's frame builder sets, and nothing else
+  (`CarInterface.foreign_inputs`: on the RAV4's ACC_CONTROL a second acceleration field, the
+  distance button, a malfunction shown on the dash or braking not permitted are refused);
 - values: finite, acceleration within [-3, 1.5] m/s^2 and within the jerk limits of the last
   request (or of the car's measured acceleration when taking over), no cancel request, no
   request for more speed 2 mph over the fleet's top speed (73 mph, the limiter's); only the
@@ -173,11 +176,13 @@ class SafetyLayer:
         last = self._last_sent_s
         if last is not None and now - last < minimum_gap and not self._ends_a_press(signals):
             return Refusal("rate", f"rate: sent {now - last:.3f} s after the previous frame")
+        foreign = self.car.foreign_inputs(signals)
         if self.car.actuation == "accel":
+            if foreign is not None:
+                return Refusal("signal", f"{foreign}: not the agent's to send")
             return self._check_car(context) or self._check_accel(
                 self.car.commanded_accel(signals), signals, context
             )
-        foreign = self.car.foreign_inputs(signals)
         if foreign is not None:
             return Refusal("button", f"{foreign}: not the agent's to send")
         pressed = self.car.pressed_buttons(signals)

@@ -345,6 +345,41 @@ def test_a_button_frame_setting_what_is_no_known_press_is_no_release(
 
 
 @pytest.mark.parametrize(
+    "changes",
+    [
+        {"ACCEL_CMD_ALT": 1.5},  # a second acceleration field, out of the limits' sight
+        {"DISTANCE": 1},  # the following-distance button
+        {"ACC_MALFUNCTION": 1},  # a fault shown on the dash
+        {"PERMIT_BRAKING": 0},  # braking forbidden
+        {"ACC_TYPE": 2},  # the low-speed lockout
+        {"ALLOW_LONG_PRESS": 2},
+        {"RADAR_DIRTY": 1},
+    ],
+)
+def test_an_acceleration_frame_setting_anything_but_the_request_is_refused(
+    changes: dict[str, float], dbc_cache: Path
+) -> None:
+    """The layer checked only ACCEL_CMD, CANCEL_REQ and RELEASE_STANDSTILL of the RAV4's
+    ACC_CONTROL, and passed any value in its other signals; the agent's frame builder sets
+    them to one value each, and a frame with another asks the car for what the agent never
+    does."""
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    context = SafetyContext(1.0, car_state(1.0), 0.0)
+    frame_id = codec.frame_id(car.command_message)
+    request = car.accel_signals(0.0, release_standstill=False)
+    plain = codec.encode(car.command_message, request)
+    frame = can.Message(arbitration_id=frame_id, data=plain, is_extended_id=False)
+    assert SafetyLayer(car, codec).check(frame, context) is None
+    data = codec.encode(car.command_message, {**request, **changes})
+    frame = can.Message(arbitration_id=frame_id, data=data, is_extended_id=False)
+    refusal = SafetyLayer(car, codec).check(frame, context)
+    assert refusal is not None
+    assert refusal.kind == "signal"
+    assert next(iter(changes)) in refusal.detail
+
+
+@pytest.mark.parametrize(
     ("pedal", "shown"),
     [({"USER_BRAKE_PRESSED": 1}, "the brake pressed"), ({"GAS_PEDAL": 200}, "the gas pedal")],
 )
@@ -431,9 +466,7 @@ def test_no_frame_releases_a_standstill_from_a_pcm_cruise_over_two_periods_old(
     sender = SafeSender(agent_bus, safety)
     releasing = can.Message(
         arbitration_id=codec.frame_id(car.command_message),
-        data=codec.encode(
-            car.command_message, {"ACCEL_CMD": 0.0, "PERMIT_BRAKING": 1, "RELEASE_STANDSTILL": 1}
-        ),
+        data=codec.encode(car.command_message, car.accel_signals(0.0, release_standstill=True)),
         is_extended_id=False,
     )
     engaged = {**TOYOTA_FRAMES["PCM_CRUISE"], "CRUISE_STATE": 8}  # "adaptive engaged"

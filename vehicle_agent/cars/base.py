@@ -163,8 +163,9 @@ class CarInterface(ABC):
         return None
 
     def foreign_inputs(self, signals: Signals) -> str | None:
-        """What a decoded command frame sets besides the buttons `pressed_buttons` knows (a
-        code of no known button, another switch on the same message), or None. The safety
-        layer refuses such a frame: read as no press, it would pass as a release, which is
-        always allowed."""
+        """What a decoded command frame sets besides what the agent sends on it (button makes:
+        a code of no known button, another switch on the same message; accel makes: any signal
+        but the request at another value than the frame builder's), or None. The safety layer
+        refuses such a frame: read as no press, it would pass as a release, which is always
+        allowed, and an acceleration frame carries switches of its own."""
         return None

@@ -40,6 +40,15 @@ CRUISE_STATE_STANDSTILL = 7
 
 _CHECKSUM = ToyotaChecksum()
 
+# ACC_CONTROL's signals the agent sets to one value in every frame (`accel_signals`); every other
+# but the request's own (`_REQUEST_SIGNALS`) it leaves 0. A frame with another value asks the
+# car for something the agent never does: ACCEL_CMD_ALT is a second acceleration field, DISTANCE
+# cycles the following distance, ACC_MALFUNCTION shows a fault on the dash, PERMIT_BRAKING 0
+# forbids the brakes, ACC_TYPE 2 is a low-speed lockout.
+_FIXED_COMMAND_SIGNALS = {"ACC_TYPE": 1.0, "ALLOW_LONG_PRESS": 1.0, "PERMIT_BRAKING": 1.0}
+# What the request itself sets; CANCEL_REQ is the safety layer's own check.
+_REQUEST_SIGNALS = frozenset({"ACCEL_CMD", "RELEASE_STANDSTILL", "CANCEL_REQ", "CHECKSUM"})
+
 
 class ToyotaRav4(CarInterface):
     """TSS2 RAV4 without a separate DSU."""
@@ -110,6 +119,16 @@ class ToyotaRav4(CarInterface):
             "RELEASE_STANDSTILL": int(release_standstill),
             "CANCEL_REQ": 0,
         }
+
+    def foreign_inputs(self, signals: Signals) -> str | None:
+        """An ACC_CONTROL signal, other than the request's, at a value `accel_signals` never
+        sets (`_FIXED_COMMAND_SIGNALS`, else 0)."""
+        for name, value in signals.items():
+            if name in _REQUEST_SIGNALS:
+                continue
+            if float(value) != _FIXED_COMMAND_SIGNALS.get(name, 0.0):
+                return f"{name} {float(value):g}"
+        return None
 
     def commanded_accel(self, signals: Signals) -> float:
         """ACCEL_CMD of a decoded ACC_CONTROL frame."""
