@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -10,7 +11,7 @@ from alembic import command
 from alembic.config import Config
 from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
-from alembic.script.revision import ResolutionError
+from alembic.script.revision import ResolutionError, RevisionError
 from alembic.util import CommandError
 from sqlalchemy import Connection, Engine, text
 
@@ -78,18 +79,59 @@ def upgrade(engine: Engine, revision: str = "head") -> None:
         command.upgrade(config, revision)
 
 
-def revisions_undone(connection: Connection, revision: str) -> list[tuple[str, str]]:
-    """(revision, what it did) of each migration a downgrade to `revision` undoes, newest
-    first; UnknownRevision for a target that is not below the database's revision."""
+# A downgrade's relative target: N steps below the database's revision ("-1") or below a named
+# one ("0012-2").
+STEPS_DOWN = re.compile(r"(?P<start>[^+-]*)-(?P<steps>\d+)")
+
+
+@dataclass(frozen=True)
+class DowngradePlan:
+    """Where a downgrade goes (a revision id, or "base") and (revision, what it did) of each
+    migration it undoes, newest first."""
+
+    target: str
+    undone: list[tuple[str, str]]
+
+
+def plan_downgrade(connection: Connection, revision: str) -> DowngradePlan:
+    """What a downgrade to `revision` does from the database's revision. A relative target is
+    counted down from the database's revision (or the one it names), as Alembic's downgrade
+    counts it: listing it with Alembic's `iterate_revisions` counted from the newest migration
+    instead, so "-1" one step below head listed nothing, asked nothing, and dropped a column.
+    UnknownRevision for a target that is not at or below the database's revision."""
     current = current_revision(connection)
     if current is None:
-        return []
+        return DowngradePlan("base", [])
     script = ScriptDirectory.from_config(alembic_config())
+    target = revision
+    relative = STEPS_DOWN.fullmatch(revision)
+    if relative is not None:
+        target = _steps_below(script, relative["start"] or current, int(relative["steps"]))
+    elif RELATIVE_REVISION.fullmatch(revision):
+        raise UnknownRevision(f"a downgrade goes down: {revision!r} counts up")
     try:
-        undone = list(script.iterate_revisions(current, revision))
-    except (ResolutionError, CommandError) as error:
+        undone = list(script.iterate_revisions(current, target))
+    except (RevisionError, CommandError) as error:
         raise UnknownRevision(f"cannot downgrade from {current} to {revision!r}: {error}") from None
-    return [(one.revision, (one.doc or "").splitlines()[0]) for one in undone]
+    return DowngradePlan(
+        target, [(one.revision, (one.doc or "").splitlines()[0]) for one in undone]
+    )
+
+
+def _steps_below(script: ScriptDirectory, start: str, steps: int) -> str:
+    """The revision `steps` migrations below `start` ("base" below the first)."""
+    try:
+        below: str | None = script.get_revision(start).revision
+    except (RevisionError, CommandError) as error:
+        raise UnknownRevision(f"no migration revision {start!r} ({error})") from None
+    for taken in range(steps):
+        if below is None:
+            raise UnknownRevision(f"{start} is only {taken} step(s) above base, not {steps}")
+        down = script.get_revision(below).down_revision
+        if isinstance(down, tuple | list):
+            raise UnknownRevision(f"{below} merges {len(down)} branches: name the target")
+        below = down
+    return below or "base"
 
 
 def downgrade(engine: Engine, revision: str) -> None:

@@ -61,7 +61,7 @@ def db_downgrade(revision: str, yes: bool) -> None:
         check_revision,
         current_revision,
         downgrade,
-        revisions_undone,
+        plan_downgrade,
     )
 
     try:
@@ -72,12 +72,13 @@ def db_downgrade(revision: str, yes: bool) -> None:
         engine = make_sync_engine(url)
         with engine.connect() as connection:
             try:
-                undone = revisions_undone(connection, revision)
+                plan = plan_downgrade(connection, revision)
             except UnknownRevision as error:
                 raise click.BadParameter(str(error), param_hint="REVISION") from None
-        if undone and not yes:
-            _confirm_downgrade(revision, undone)
-        downgrade(engine, revision)
+        if plan.undone and not yes:
+            _confirm_downgrade(revision, plan.undone)
+        # to the target the listing was made for, not `revision` read again by Alembic
+        downgrade(engine, plan.target)
         with engine.connect() as connection:
             reached = current_revision(connection)
     # the revision reached, not the one asked for: "-1" says nothing of where it went

@@ -449,6 +449,17 @@ def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
     assert below_head is not None
     assert below_head != head_revision()
     assert f"database at {below_head}" in one_step.stdout
+    # "-1" again, from below head: it was listed from the newest migration (nothing undone),
+    # so it went ahead unasked and dropped a column; it is counted from the database now
+    asked = run_cli("db", "downgrade", "-1", env=env, stdin="")
+    assert asked.returncode == 1
+    assert "undoes 1 migration(s)" in asked.stderr
+    assert f"  {below_head}  " in asked.stderr
+    with engine.connect() as connection:
+        assert current_revision(connection) == below_head
+    too_far = run_cli("db", "downgrade", "-99", "--yes", env=env)
+    assert too_far.returncode != 0
+    assert f"{below_head} is only {int(below_head)} step(s) above base, not 99" in too_far.stderr
     down = run_cli("db", "downgrade", "base", "--yes", env=env)
     assert down.returncode == 0, down.stderr
     assert "database at base" in down.stdout
