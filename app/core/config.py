@@ -140,7 +140,8 @@ class Settings(BaseSettings):
     # six reports, so a server or car slowed for a minute never flips a car's verdict.
     readiness_hold_s: float = Field(60.0, ge=0)
     # Ping and status ages forgive a server that stores what the cars send late, by as much as
-    # its promptest car's newest ping shows (app.fleet.service._ingest_clock), up to this (s).
+    # its promptest car's newest ping shows (app.fleet.service._server_lag_s), up to this (s);
+    # no message is younger than the time since the server stored it.
     readiness_server_lag_s: float = Field(120.0, ge=0)
     readiness_gps_satellites: tuple[int, int] = (6, 4)
     readiness_agent_version: str | None = None  # the version every car should run (None: any)

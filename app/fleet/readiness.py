@@ -170,6 +170,10 @@ class VehicleFacts:
     earlier_statuses: tuple[LastStatus, ...] = ()
     # The roster's config version: the agent echoes the one it runs (None: not compared).
     config_version: int | None = None
+    # How far behind the server stores what the fleet sends (`app.fleet.service._server_lag_s`),
+    # by which the checks' `now` is set back: what this car sent is never younger than the time
+    # since the server stored it (`message_age_s`).
+    server_lag_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -275,17 +279,27 @@ def _sent_at(ts: datetime, received_at: datetime) -> datetime:
     return min(ts, received_at)
 
 
-def message_age_s(ts: datetime, received_at: datetime, now: datetime) -> float:
+def message_age_s(
+    ts: datetime, received_at: datetime, now: datetime, server_lag_s: float = 0.0
+) -> float:
     """How long ago a message was sent (`_sent_at`), never negative: what the age checks
-    grade and what the fleet's answer shows."""
-    return max((now - _sent_at(ts, received_at)).total_seconds(), 0.0)
+    grade and what the fleet's answer shows. `now` is set back by the server's lag, which
+    the fleet's delays measure; but never younger than the time since the server stored it
+    (`now` + the lag is the server's own clock). The lag is the least delay of the cars that
+    reported lately, and with one car reporting, that car's own: a car whose clock is behind,
+    or one uploading a backlog, set it for all, and a car silent for 151 s showed 41 s, and
+    cleared."""
+    sent = (now - _sent_at(ts, received_at)).total_seconds()
+    stored = (now - received_at).total_seconds() + server_lag_s
+    return max(sent, stored, 0.0)
 
 
 def check_ping(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     """Age of the newest ping (the car's GPS time)."""
     if facts.last_ping is None:
         return Grade("red", "never", "no ping received", "never pinged")
-    age = message_age_s(facts.last_ping.ts, facts.last_ping.received_at, now)
+    ping = facts.last_ping
+    age = message_age_s(ping.ts, ping.received_at, now, facts.server_lag_s)
     level = grade_rising(age, limits.ping_age_s)
     amber, red = limits.ping_age_s
     return Grade(
@@ -300,7 +314,8 @@ def check_status(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grad
     """Age of the newest status report (sent every ~10 s by a healthy agent)."""
     if facts.last_status is None:
         return Grade("red", "never", "no status report received", "never reported its status")
-    age = message_age_s(facts.last_status.ts, facts.last_status.received_at, now)
+    status = facts.last_status
+    age = message_age_s(status.ts, status.received_at, now, facts.server_lag_s)
     level = grade_rising(age, limits.status_age_s)
     amber, red = limits.status_age_s
     return Grade(
@@ -455,7 +470,9 @@ def check_plan(facts: VehicleFacts, now: datetime, limits: Thresholds) -> Grade:
     if status.plan_age_s is None:
         return Grade("amber", "none", "no plan held: the car drives on stock ACC", "no plan held")
     amber, red = limits.plan_age_s
-    age_s = status.plan_age_s + message_age_s(status.ts, status.received_at, now)
+    age_s = status.plan_age_s + message_age_s(
+        status.ts, status.received_at, now, facts.server_lag_s
+    )
     level = grade_rising(age_s, limits.plan_age_s)
     age = describe_age(age_s)
     return Grade(level, age, f"amber from {amber:g} s, red from {red:g} s", f"plan {age} old")
@@ -647,7 +664,8 @@ def _reports_as_sent(facts: VehicleFacts) -> tuple[ReportAsSent, ...]:
         return ()
     return tuple(
         ReportAsSent(
-            replace(facts, last_status=report),
+            # graded as of its sending, which the server's lag then has nothing to add to
+            replace(facts, last_status=report, server_lag_s=0.0),
             _sent_at(report.ts, report.received_at),
             report.ts.timestamp(),
         )

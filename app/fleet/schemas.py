@@ -20,7 +20,6 @@ from pydantic import (
     field_validator,
 )
 
-from app.fleet.readiness import message_age_s
 from app.fleet.service import MAX_NOTE_LENGTH, MAX_ROUTE_LENGTH, FleetCounts, FleetEntry
 from contract.controllers import controller_choice_schema
 from contract.values import NO_NUL_PATTERN, StorableText, json_number, storable_text
@@ -278,7 +277,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
         else PingOut(
             ts=ping.ts,
             received_at=ping.received_at,
-            age_s=message_age_s(ping.ts, ping.received_at, now),
+            age_s=entry.message_age_s(ping.ts, ping.received_at, now),
             speed_mps=ping.speed_mps,
             x_m=ping.x_m,
             postmile=entry.postmile,
@@ -294,7 +293,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
         else StatusOut(
             ts=status.ts,
             received_at=status.received_at,
-            age_s=message_age_s(status.ts, status.received_at, now),
+            age_s=entry.message_age_s(status.ts, status.received_at, now),
             agent_version=status.agent_version,
             uptime_s=status.uptime_s,
             can_ok=status.is_can_ok,

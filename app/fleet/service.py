@@ -27,6 +27,7 @@ from app.fleet.readiness import (
     Thresholds,
     VehicleFacts,
     assess,
+    message_age_s,
 )
 from app.models import Corridor, Vehicle, VehicleChange, VehiclePing, VehicleStatus
 from app.policies.service import policy_controller
@@ -83,6 +84,13 @@ class FleetEntry:
     last_ping: LastPing | None
     last_status: LastStatus | None
     readiness: Readiness
+    # how far behind the server stored what the fleet sent when this entry was graded
+    server_lag_s: float = 0.0
+
+    def message_age_s(self, ts: datetime, received_at: datetime, now: datetime) -> float:
+        """A message's age as the checks graded it (`readiness.message_age_s`)."""
+        clock = now - timedelta(seconds=self.server_lag_s)
+        return message_age_s(ts, received_at, clock, self.server_lag_s)
 
     @property
     def postmile(self) -> float | None:
@@ -259,14 +267,15 @@ async def _earlier_statuses(
     return history
 
 
-async def _ingest_clock(
+async def _server_lag_s(
     session: AsyncSession,
     now: datetime,
     limits: Thresholds,
     rows: Sequence[Any] | None,
-) -> datetime:
-    """The time the age checks measure against: now, less how far behind the server stores
-    what the cars send, never more than `limits.server_lag_s`.
+) -> float:
+    """How far behind the server stores what the cars send, never more than
+    `limits.server_lag_s`: the age checks measure against now less this, but no message is
+    younger than the time since the server stored it (`message_age_s`).
 
     A server that falls behind (a loaded machine, a database wait) stores every car's pings
     late alike; measured against the wall clock, every car would age. How far behind it is, is
@@ -286,8 +295,7 @@ async def _ingest_clock(
         for row in rows
         if row[3] is not None and row[3].received_at >= received_since
     ]
-    lag = min(max(min(delays, default=0.0), 0.0), limits.server_lag_s)
-    return now - timedelta(seconds=lag)
+    return min(max(min(delays, default=0.0), 0.0), limits.server_lag_s)
 
 
 VERDICT_ORDER = {"not cleared": 0, "maintenance": 1, "inactive": 2, "cleared": 3}
@@ -315,21 +323,23 @@ async def fleet(
     history = await _earlier_statuses(
         session, {row[0].vehicle_id: row[4].ts - replayed for row in rows if row[4] is not None}
     )
-    clock = await _ingest_clock(session, now, limits, rows if vehicle_id is None else None)
+    lag_s = await _server_lag_s(session, now, limits, rows if vehicle_id is None else None)
     # Grading is CPU alone, on a worker thread: on the event loop every ping arriving meanwhile
     # waited for it (a batch of 100 pings 73 ms at the median while the fleet page refreshed
     # in a loop, against 7 ms with no page viewed: `python -m bench.dashboard`).
-    return await anyio.to_thread.run_sync(_graded, rows, older, history, clock, limits)
+    return await anyio.to_thread.run_sync(_graded, rows, older, history, now, lag_s, limits)
 
 
 def _graded(
     rows: Sequence[Any],
     older: Mapping[str, VehiclePing | None],
     history: Mapping[str, Sequence[LastStatus]],
-    clock: datetime,
+    now: datetime,
+    lag_s: float,
     limits: Thresholds,
 ) -> list[FleetEntry]:
     """Each car's entry with its readiness, not cleared first, then in id order."""
+    clock = now - timedelta(seconds=lag_s)
     entries = []
     for vehicle, lanes, postmile_at_start, ping_row, status_row in rows:
         last_ping = _to_last_ping(
@@ -347,6 +357,7 @@ def _graded(
             model=vehicle.model,
             year=vehicle.year,
             config_version=vehicle.config_version,
+            server_lag_s=lag_s,
             earlier_statuses=tuple(
                 status
                 for status in history.get(vehicle.vehicle_id, ())
@@ -361,6 +372,7 @@ def _graded(
                 last_ping=last_ping,
                 last_status=last_status,
                 readiness=assess(facts, clock, limits),
+                server_lag_s=lag_s,
             )
         )
     entries.sort(key=lambda entry: VERDICT_ORDER[entry.readiness.verdict])

@@ -492,3 +492,38 @@ def test_a_car_reporting_alone_ages_once_it_falls_silent(api: Api, seeded_engine
     assert checks(silent)["ping"] == "red"
     assert re.fullmatch(r"no ping for (9\d|10\d) s", silent["problems"][0])
     assert silent["verdict"] == "not cleared"
+
+
+def test_one_cars_late_pings_make_no_other_silent_car_look_fresh(
+    api: Api, seeded_engine: Engine
+) -> None:
+    """6 a.m., two cars on. SF-002 reported promptly until 151 s ago, then fell silent; SF-001's
+    one ping comes in stamped 110 s before it arrived (a clock behind, or a spool's backlog).
+    The server's lag was that one delay, and every age was measured against now less it: the
+    silent car read "41 s", amber, and cleared, beside a status `age_s` of 151."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-002", now - timedelta(seconds=153), 0, 25, 3)
+    )
+    post_status(
+        api.client, api.tokens["admin"], "SF-002", **healthy_status(now - timedelta(seconds=151))
+    )
+    with seeded_engine.begin() as connection:  # stored as promptly as they were sent
+        for table in ("fact_vehicle_ping", "fact_vehicle_status"):
+            connection.execute(
+                text(
+                    f"UPDATE {table} SET received_at = ts + interval '0.5 s'"
+                    " WHERE vehicle_id = 'SF-002'"
+                )
+            )
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=110), 0, 25, 1)
+    )
+    silent = vehicle(api.get("/api/v1/fleet").json(), "SF-002")
+    assert checks(silent)["ping"] == "red"
+    assert checks(silent)["status"] == "red"
+    assert silent["verdict"] == "not cleared"
+    assert re.fullmatch(r"no ping for 15\d s", silent["problems"][0])
+    # the answer's ages are the ages graded
+    assert 150 <= silent["last_status"]["age_s"] <= 160
+    assert 150 <= silent["last_ping"]["age_s"] <= 160
