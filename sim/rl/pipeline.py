@@ -300,7 +300,10 @@ def _train_kept_restart(
     shutil.copyfile(scored[kept][0], path)
     record = {
         "kept_seed": scored[kept][1].seed,
-        "rule": "fewest collisions, then the least mean distance lost, on the training drives",
+        "rule": (
+            "fewest collisions, then fewest takeovers, then the least mean distance lost, on "
+            "the training drives"
+        ),
         "restarts": [restart.as_dict() for _, restart in scored],
     }
     return hashlib.sha256(path.read_bytes()).hexdigest(), record

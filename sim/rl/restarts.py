@@ -10,9 +10,11 @@ training, simulated INRIX), and the rule keeps the restart that drops back least
 
 1. a restart with a collision on its training drives is kept only if every restart has one
    (then the one with the fewest);
-2. among the rest, the smallest mean distance lost (`DriveScore.distance_lost_m`), which is what
+2. among the rest, the fewest takeovers (hand-backs to the driver, `DriveScore.takeovers`; since
+   2026-12-05, when the scores gained the hand-back `sim evaluate` has: before, none was seen);
+3. among the rest, the smallest mean distance lost (`DriveScore.distance_lost_m`), which is what
    the retrains gave away and what the fuel figures do not show;
-3. ties: the first seed.
+4. ties: the first seed.
 
 No held-out date is read, so the held-out scores of the kept restart stay held out. A seed is no
 property of the policy: the same seed on other drives is another draw, so the choice is made
@@ -46,6 +48,11 @@ class RestartScores:
         return sum(score.collisions for score in self.scores)
 
     @property
+    def takeovers(self) -> int:
+        """Takeovers over its training drives."""
+        return sum(score.takeovers or 0 for score in self.scores)
+
+    @property
     def mean_distance_lost_m(self) -> float:
         """Mean distance lost over its training drives (m)."""
         return math.fsum(score.distance_lost_m for score in self.scores) / len(self.scores)
@@ -55,6 +62,7 @@ class RestartScores:
         return {
             "seed": self.seed,
             "collisions": self.collisions,
+            "takeovers": self.takeovers,
             "mean_distance_lost_m": self.mean_distance_lost_m,
         }
 
@@ -68,6 +76,14 @@ def choose_restart(restarts: Sequence[RestartScores]) -> int:
             raise RestartChoiceError(f"restart of seed {restart.seed} has no scored drive")
         if math.isnan(restart.mean_distance_lost_m):
             raise RestartChoiceError(f"restart of seed {restart.seed} has no distance lost")
-    fewest = min(restart.collisions for restart in restarts)
-    candidates = [index for index, restart in enumerate(restarts) if restart.collisions == fewest]
-    return min(candidates, key=lambda index: (restarts[index].mean_distance_lost_m, index))
+        if any(score.takeovers is None for score in restart.scores):
+            raise RestartChoiceError(f"restart of seed {restart.seed} was scored with no hand-back")
+    return min(
+        range(len(restarts)),
+        key=lambda index: (
+            restarts[index].collisions,
+            restarts[index].takeovers,
+            restarts[index].mean_distance_lost_m,
+            index,
+        ),
+    )

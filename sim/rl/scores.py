@@ -39,7 +39,7 @@ from sim.kpi import (
     unmeasured_paper_kpis,
 )
 from sim.plans import SimulatedPlanner
-from sim.platoon import CutIns, PlatoonRun, platoon_roles, simulate_platoon
+from sim.platoon import CutIns, HandBack, PlatoonRun, platoon_roles, simulate_platoon
 from vehicle_agent.controllers import AccClip, Controller, build_controller
 from vehicle_agent.controllers.rl_acc import RlAccController
 from vehicle_agent.controllers.rl_accel import RlAccelController
@@ -103,6 +103,11 @@ class DriveScore:
     # `sim evaluate`'s distance lost): what a policy that drops back gives away. NaN in
     # manifests written before the field existed.
     distance_lost_m: float = math.nan
+    # The AV's hand-backs to its driver (`sim.platoon.HandBack`, as `sim evaluate` counts them)
+    # and the seconds the driver drove. None and NaN in manifests written before 2026-12-05,
+    # whose runs had no hand-back: an AV that needed its driver scored as if it had not.
+    takeovers: int | None = None
+    driver_seconds: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values (manifest, CSV)."""
@@ -125,7 +130,10 @@ def simulate_one_av(
 ) -> PlatoonRun:
     """The drive with one AV right behind the leader, run by `entry` with the real planner in
     the loop (its ACC car on `acc`), and `humans` I-24 IDM drivers behind it; with `cut_ins`,
-    cars from the next lane merge into wide gaps as in `sim evaluate`."""
+    cars from the next lane merge into wide gaps as in `sim evaluate`. The agent hands the AV
+    back to its driver as in `sim evaluate` (`HandBack`): without it, the scores that choose
+    restarts and reward weights saw an AV brake where its driver would have taken over, and
+    counted no takeover (rl_acc on 2021-04-05: 0 here, 2 in `sim evaluate`)."""
     schedule = SimulatedPlanner.for_drive(drive, planner, planner_params)
     policy = AgentPolicy(
         entry.build(),
@@ -139,6 +147,7 @@ def simulate_one_av(
         [policy],
         av_max_accel=lambda v: float(RAV4_2019.max_accel_mps2(v)),
         cut_ins=cut_ins,
+        hand_back=HandBack(),
     )
 
 
@@ -225,6 +234,8 @@ def score_run(
         unmeasured_by_baseline=";".join(unmeasured_paper_kpis(base)),
         gap_within_reachable_share=envelope_kpis.within_reachable_bounds_share,
         distance_lost_m=lost_m,
+        takeovers=run.takeovers,
+        driver_seconds=run.driver_seconds,
     )
 
 
@@ -251,10 +262,16 @@ def group_worst(scores: Sequence[DriveScore], column: str) -> float:
     return min(values)
 
 
+def _total_takeovers(scores: Sequence[DriveScore]) -> int | None:
+    """The takeovers over `scores`; None when any was scored without the hand-back."""
+    counts = [score.takeovers for score in scores]
+    return None if None in counts else sum(count for count in counts if count is not None)
+
+
 def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
     """Per controller and group: mean fuel saving, mean and worst throughput and network speed
-    changes (drives the all-human platoon cannot measure left out), collisions, the smallest
-    share of time within the gap envelope, the mean distance lost."""
+    changes (drives the all-human platoon cannot measure left out), collisions, takeovers, the
+    smallest share of time within the gap envelope, the mean distance lost."""
     rows = []
     for label in dict.fromkeys(score.controller for score in scores):
         for group, member in GROUPS.items():
@@ -274,6 +291,7 @@ def summarise(scores: Sequence[DriveScore]) -> list[dict[str, Any]]:
                         chosen, "network_speed_change_pct"
                     ),
                     "collisions": sum(s.collisions for s in chosen),
+                    "takeovers": _total_takeovers(chosen),
                     "min_gap_within_share": min(s.gap_within_share for s in chosen),
                     "min_gap_within_reachable_share": group_worst(
                         chosen, "gap_within_reachable_share"

@@ -8,10 +8,13 @@ from pathlib import Path
 
 import pytest
 
+from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
 from sim.drives import load_drive
+from sim.evaluate import ControllerVariant, run_case
 from sim.platoon import CutIns, platoon_roles, simulate_platoon
 from sim.rl.env import DEFAULT_PLANNER_PARAMS
 from sim.rl.scores import ControllerUnderTest, score_drives, simulate_one_av, summarise
+from sim.scenarios import Case
 from tests.sim.rl.test_reward_selection import score
 from tests.sim.test_evaluate import STOP_AND_GO
 
@@ -74,3 +77,27 @@ def test_scores_say_how_far_behind_the_av_ended_with_the_cut_ins_of_training(
         assert scored.distance_lost_m > 0.0  # its wide gaps leave it behind the human
     for row in summarise([scored]):  # its groups: stop-and-go and shockwave
         assert row["distance_lost_m"] == scored.distance_lost_m
+
+
+def test_training_scores_count_the_takeovers_sim_evaluate_counts(shared_dir: Path) -> None:
+    """The scores that choose restarts and reward weights ran with no hand-back: rl_acc on the
+    2021-04-05 stop-and-go drive closed to 1.2 m of its leader and scored no takeover, where
+    `sim evaluate`'s agent handed the car back to its driver twice."""
+    drive = load_drive(shared_dir / "data" / STOP_AND_GO)
+    rl_acc = ControllerUnderTest.registered("rl_acc", "acc", {})
+    planner = {"planner": RECOMMENDED_PLANNER, "planner_params": RECOMMENDED_PLANNER_PARAMS}
+    [scored] = score_drives([drive], [rl_acc], cut_ins=CutIns(), **planner)
+    case = Case("shockwave", drive)
+    evaluated = run_case(
+        case,
+        RECOMMENDED_PLANNER,
+        ControllerVariant("rl_acc", "acc"),
+        humans=24,
+        avs=1,
+        planner_params=RECOMMENDED_PLANNER_PARAMS,
+    )
+    assert evaluated.takeovers > 0
+    assert scored.takeovers == evaluated.takeovers
+    assert scored.driver_seconds == pytest.approx(evaluated.driver_seconds)
+    [row, *_] = summarise([scored])
+    assert row["takeovers"] == evaluated.takeovers
