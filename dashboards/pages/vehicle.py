@@ -226,14 +226,36 @@ async def _not_saved(
     )
 
 
+MAX_CONFIG_VERSION_DIGITS = 18
+
+
 def _config_version_read(config_version: str) -> int | None:
     """The config version the form was filled in against (its hidden field); none from a
     client that sends none, which saves without the check, as the API does."""
     if not config_version:
         return None
-    if not (config_version.isascii() and config_version.isdigit()):
-        raise AssignmentError("config_version", f"{config_version!r} is not a config version")
+    # Python reads no integer of over 4,300 digits (a ValueError, which was a 500); a config
+    # version is a count of saves, far below 19 digits
+    if not (
+        config_version.isascii()
+        and config_version.isdigit()
+        and len(config_version) <= MAX_CONFIG_VERSION_DIGITS
+    ):
+        raise AssignmentError("config_version", f"{config_version[:40]!r} is not a config version")
     return int(config_version)
+
+
+def _controller_params_read(params: str) -> dict[str, Any]:
+    """The controller's parameters typed into the form, a JSON object."""
+    try:
+        controller_params = json.loads(params or "{}")
+    except json.JSONDecodeError as error:
+        raise AssignmentError("controller.params", f"not valid JSON ({error.msg})") from None
+    except RecursionError:  # "[" * 100000: deeper than the parser goes (it was a 500)
+        raise AssignmentError("controller.params", "nested too deeply") from None
+    if not isinstance(controller_params, dict):
+        raise AssignmentError("controller.params", "must be a JSON object")
+    return controller_params
 
 
 @router.post("/vehicles/{vehicle_id}/assignment")
@@ -256,13 +278,8 @@ async def vehicle_assignment(
         try:
             lane_number = int(lane)
         except ValueError:
-            raise AssignmentError("lane", f"{lane!r} is not a lane number") from None
-        try:
-            controller_params = json.loads(params or "{}")
-        except json.JSONDecodeError as error:
-            raise AssignmentError("controller.params", f"not valid JSON ({error.msg})") from None
-        if not isinstance(controller_params, dict):
-            raise AssignmentError("controller.params", "must be a JSON object")
+            raise AssignmentError("lane", f"{lane[:40]!r} is not a lane number") from None
+        controller_params = _controller_params_read(params)
         read_version = _config_version_read(config_version)
         await change_assignment(
             session,

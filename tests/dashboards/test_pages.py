@@ -410,7 +410,8 @@ def test_a_form_sent_back_for_a_mistake_still_knows_which_config_its_operator_re
         assert save(second, "C", now.group(1), "{}").status_code == 303
 
 
-@pytest.mark.parametrize("version", ["²", "v3", "-1"])
+# 5,000 digits: more than Python reads as an integer (a ValueError, which was a 500)
+@pytest.mark.parametrize("version", ["²", "v3", "-1", "9" * 5000])
 def test_a_config_version_that_is_no_number_is_refused_by_name(site: str, version: str) -> None:
     with logged_in(site, "operator") as client:
         response = post_form(
@@ -427,6 +428,38 @@ def test_a_config_version_that_is_no_number_is_refused_by_name(site: str, versio
         assert "config_version:" in response.text
         assert "is not a config version" in response.text
         assert '<strong data-field="route">Z</strong>' not in client.get("/vehicles/SF-001").text
+
+
+def test_controller_parameters_nested_deeper_than_json_reads_are_refused_by_name(
+    site: str,
+) -> None:
+    """100,000 "[" ended the JSON parser in a RecursionError: a 500."""
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-001",
+            "/vehicles/SF-001/assignment",
+            lane="1",
+            controller="simple",
+            params="[" * 100_000,
+            route="Z",
+        )
+        assert response.status_code == 422
+        assert "controller.params: nested too deeply" in response.text
+
+
+def test_a_maintenance_config_version_too_long_to_read_is_refused_by_name(site: str) -> None:
+    with logged_in(site, "operator") as client:
+        response = post_form(
+            client,
+            "/vehicles/SF-004",
+            "/vehicles/SF-004/maintenance",
+            in_maintenance="on",
+            note="brake light",
+            config_version="9" * 5000,
+        )
+        assert response.status_code == 422
+        assert "is not a config version" in response.text
 
 
 def test_a_maintenance_note_the_database_cannot_store_is_shown_and_not_saved(site: str) -> None:
