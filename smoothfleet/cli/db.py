@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import click
+from sqlalchemy import text
 from sqlalchemy.engine import URL, make_url
 
 from app.core.db import libpq_url, make_sync_engine, redact, session_scope, sqlalchemy_url
@@ -154,7 +155,7 @@ def db_dump(dump_file: Path) -> None:
     second had truncated and half rewritten)."""
     output_file(dump_file, "FILE")
     current = settings()
-    executable = _newest_pg_dump()
+    executable = _newest_client("pg_dump")
     with database(current) as url, replaced_on_success(dump_file) as partial:
         child_url, environment = _for_child(url)
         code = subprocess.call(
@@ -166,16 +167,63 @@ def db_dump(dump_file: Path) -> None:
             os.fsync(written.fileno())
     console.print(
         f"{dump_file}: {dump_file.stat().st_size:,} bytes; restore it into an empty database "
-        f"with pg_restore --dbname=URL {dump_file}"
+        f"with smoothfleet db restore {dump_file}"
     )
 
 
-def _newest_pg_dump() -> str:
-    """The newest pg_dump at hand, the embedded server's or the system's: pg_dump refuses a
-    server newer than itself (Debian 12's 15 against the embedded 17), never an older one."""
+@db.command("restore")
+@click.argument(
+    "dump_file", metavar="FILE", type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
+def db_restore(dump_file: Path) -> None:
+    """Restore a `db dump` FILE into the database the commands use, which must be empty (a new
+    SMOOTHFLEET_DATA_DIR, or a new database in SMOOTHFLEET_DATABASE_URL).
+
+    All or nothing (one transaction). It runs the newest pg_restore at hand, as `db dump`
+    runs the newest pg_dump: a dump of the embedded server's pg_dump is a format the system's
+    older pg_restore refuses ("unsupported version (1.16) in file header" from Debian 12's),
+    and the embedded server, which stops when the last command using it exits, is held while
+    pg_restore runs. Objects are restored owned by the restoring role (`--no-owner`): a dump
+    of compose's `smoothfleet` role restores into the embedded server's, and back."""
+    from app.migrate import current_revision
+
+    current = settings()
+    executable = _newest_client("pg_restore")
+    with database(current) as url:
+        engine = make_sync_engine(url)
+        with engine.connect() as connection:
+            tables = connection.execute(
+                text("SELECT count(*) FROM pg_tables WHERE schemaname = current_schema()")
+            ).scalar_one()
+        if tables:
+            raise CliError(
+                f"the database holds {tables} table(s): restore into an empty one (a new "
+                "SMOOTHFLEET_DATA_DIR, or createdb NEW and SMOOTHFLEET_DATABASE_URL); nothing "
+                "was changed"
+            )
+        child_url, environment = _for_child(url)
+        code = subprocess.call(
+            [executable, "--single-transaction", "--no-owner", f"--dbname={child_url}", dump_file],
+            env=environment,
+        )
+        if code:
+            raise CliError(f"pg_restore exited {code}: nothing of {dump_file} was restored")
+        with engine.connect() as connection:
+            revision = current_revision(connection)
+        engine.dispose()
+    console.print(
+        f"restored {dump_file}: database at {revision or 'base (no table)'}; "
+        "`smoothfleet db upgrade` brings an older backup to head"
+    )
+
+
+def _newest_client(name: str) -> str:
+    """The newest of PostgreSQL's client `name` at hand, the embedded server's or the
+    system's: pg_dump refuses a server newer than itself (Debian 12's 15 against the embedded
+    17), and pg_restore a dump format newer than its own, never an older one."""
     from app.core.embedded import bin_dir
 
-    candidates = [str(bin_dir() / "pg_dump"), *filter(None, [shutil.which("pg_dump")])]
+    candidates = [str(bin_dir() / name), *filter(None, [shutil.which(name)])]
 
     def major(executable: str) -> int:
         try:

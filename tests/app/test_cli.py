@@ -15,8 +15,7 @@ import pytest
 from psycopg import sql
 from sqlalchemy import Engine, text
 
-from app.core.db import libpq_url, make_sync_engine
-from app.core.embedded import bin_dir
+from app.core.db import make_sync_engine
 from app.core.embedded import database_url as embedded_url
 from app.migrate import current_revision, head_revision
 from app.vehicles.service import RosterError, parse_roster_csv
@@ -281,12 +280,17 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(
     admin_execute(pg_server, sql.SQL("CREATE DATABASE {}").format(sql.Identifier(name)))
     restored = embedded_url(pg_server, name)
     try:
-        subprocess.run(
-            [str(bin_dir() / "pg_restore"), f"--dbname={libpq_url(restored)}", str(backup)],
-            capture_output=True,
-            text=True,
-            check=True,
-        )
+        # operations.md said `createdb NEW && pg_restore --dbname=NEW FILE`: Debian 12's
+        # pg_restore refuses the embedded pg_dump's format, and createdb finds no embedded
+        # server running; `db restore` holds it and runs the newest pg_restore at hand
+        into_new = cli_env(SMOOTHFLEET_DATABASE_URL=restored)
+        answer = run_cli("db", "restore", str(backup), env=into_new)
+        assert answer.returncode == 0, answer.stderr
+        assert f"database at {head_revision()}" in answer.stdout
+        # over a database that holds tables, nothing is restored
+        again = run_cli("db", "restore", str(backup), env=into_new)
+        assert again.returncode == 1
+        assert "restore into an empty one" in again.stderr
         engine = make_sync_engine(restored)
         with engine.connect() as connection:
             assert current_revision(connection) == head_revision()
