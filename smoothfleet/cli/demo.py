@@ -41,7 +41,7 @@ from app.core.security import issue_token, revoke_tokens
 from app.models.dimensions import InrixSegment, Vehicle
 from app.users.service import new_password, save_user
 from contract.units import METRES_PER_MILE, MPH_PER_MPS
-from sim.drives import Drive, load_drive
+from sim.drives import Drive, DriveError, load_drive, shared_data_dir
 from sim.energy import GALLONS_PER_GRAM_GASOLINE
 from sim.fleet.traffic import CorridorTraffic, Segment, synthetic_waves
 from sim.fleet.worker import VehicleSpec, WorkerSpec
@@ -51,10 +51,23 @@ from smoothfleet.cli.serve import ensure_port_free, with_overrides
 
 CORRIDOR = "I-24-WB"
 # The strongest stop-and-go drive of the shared data, 300 s in: waves from the first minute.
-TRAFFIC_DRIVE = (
-    Path(__file__).resolve().parents[3]
-    / "shared/data/trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
-)
+TRAFFIC_DRIVE_FILE = "trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
+
+
+def traffic_drive_path() -> Path:
+    """Where the demo's traffic drive is: in the shared data `sim.drives.shared_data_dir` finds
+    ($SMOOTHFLEET_SHARED_DATA, or `shared/data` beside the checkout or the working directory),
+    as every other command finds it. It was looked for beside this file alone, so a demo
+    installed other than in editable mode ran synthetic waves whatever the setting said. Where
+    no shared data is found, the relative path, which the demo reports missing before it falls
+    back to synthetic waves."""
+    try:
+        return shared_data_dir() / TRAFFIC_DRIVE_FILE
+    except DriveError:
+        return Path("shared/data") / TRAFFIC_DRIVE_FILE
+
+
+TRAFFIC_DRIVE = traffic_drive_path()
 TRAFFIC_OFFSET_S = 300.0
 FEED_PERIOD_S = 60.0
 FEED_BACKFILL_MINUTES = 15

@@ -104,3 +104,14 @@ def test_demo_closes_the_loop(database_url: str, engine: Engine, tmp_path: Path)
     assert [(r.max_difference_mps, r.buffer_cells_differing) for r in reports] == [(0.0, 0)] * len(
         reports
     )
+
+
+def test_the_demo_finds_its_traffic_drive_where_every_command_finds_the_shared_data(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """It looked beside its own file alone: installed other than in editable mode, it ran
+    synthetic waves whatever SMOOTHFLEET_SHARED_DATA said."""
+    from smoothfleet.cli.demo import TRAFFIC_DRIVE_FILE, traffic_drive_path
+
+    monkeypatch.setenv("SMOOTHFLEET_SHARED_DATA", str(tmp_path / "data"))
+    assert traffic_drive_path() == tmp_path / "data" / TRAFFIC_DRIVE_FILE
