@@ -86,14 +86,36 @@ async def vehicle_changes(
     session: AsyncSession, vehicle_id: str, limit: int = 10
 ) -> Sequence[RowMapping]:
     """The operators' newest changes to the vehicle's assignment and maintenance, newest first
-    (fact_vehicle_change: who, when, what)."""
+    (fact_vehicle_change: who, when, what), each maintenance change with `switched`: whether it
+    took the car out or put it back, or only changed the note of a car already so (every save
+    is a change: read as a fresh "taken out", a note edited named its editor as the one who
+    took the car out, and when)."""
     return await _rows(
         session,
-        "SELECT * FROM fact_vehicle_change WHERE vehicle_id = :vehicle "
-        "ORDER BY config_version DESC LIMIT :limit",
+        "SELECT * FROM ("
+        " SELECT *, in_maintenance IS DISTINCT FROM lag(in_maintenance)"
+        "  OVER (PARTITION BY change ORDER BY config_version) AS switched"
+        " FROM fact_vehicle_change WHERE vehicle_id = :vehicle"
+        ") AS history ORDER BY config_version DESC LIMIT :limit",
         vehicle=vehicle_id,
         limit=limit,
     )
+
+
+async def out_of_service_since(session: AsyncSession, vehicle_id: str) -> RowMapping | None:
+    """The change that took the vehicle out of service this time (`changed_at`, `changed_by`):
+    the first marking it out after the last putting it back, however many changes came since
+    (read from the ten newest, "since ... by" named a note's editor, or vanished)."""
+    rows = await _rows(
+        session,
+        "SELECT changed_at, changed_by FROM fact_vehicle_change"
+        " WHERE vehicle_id = :vehicle AND change = 'maintenance' AND in_maintenance"
+        " AND config_version > COALESCE((SELECT max(config_version) FROM fact_vehicle_change"
+        "  WHERE vehicle_id = :vehicle AND change = 'maintenance' AND NOT in_maintenance), 0)"
+        " ORDER BY config_version LIMIT 1",
+        vehicle=vehicle_id,
+    )
+    return rows[0] if rows else None
 
 
 async def engagement_per_day(

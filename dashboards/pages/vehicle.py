@@ -134,10 +134,16 @@ async def _vehicle_history(
 async def _live_context(session: AsyncSession, entry: FleetEntry) -> dict[str, Any]:
     """What the refreshed top of the page shows: the car's assignment and maintenance (who
     changed them, when), its verdict and checks."""
+    vehicle_id = entry.vehicle.vehicle_id
     return {
         "entry": entry,
         "generated_at": datetime.now(UTC),
-        "changes": await data.vehicle_changes(session, entry.vehicle.vehicle_id),
+        "changes": await data.vehicle_changes(session, vehicle_id),
+        "out_of_service_since": (
+            await data.out_of_service_since(session, vehicle_id)
+            if entry.vehicle.is_in_maintenance
+            else None
+        ),
     }
 
 

@@ -929,3 +929,37 @@ def test_a_car_on_the_bundled_policy_is_not_shown_as_running_something_else(
         f"{bundled[:12]}</code></td>"
     ) in row
     assert 'data-field="reported"' not in row
+
+
+def test_in_maintenance_since_names_who_took_the_car_out_not_who_edited_the_note(
+    site: str,
+) -> None:
+    """Every save is a change: the page read the newest maintenance change as the one that took
+    the car out, so an admin who only extended the note was named, at the edit's time, and
+    after ten more changes "since ... by" was gone."""
+    with logged_in(site, "operator") as operator, logged_in(site, "admin") as admin:
+        out = post_form(
+            operator,
+            "/vehicles/SF-041",
+            "/vehicles/SF-041/maintenance",
+            in_maintenance="on",
+            note="brake light out",
+        )
+        assert out.status_code == 303
+        for edit in range(11):
+            edited = post_form(
+                admin,
+                "/vehicles/SF-041",
+                "/vehicles/SF-041/maintenance",
+                in_maintenance="on",
+                note=f"brake light out; part ordered ({edit})",
+            )
+            assert edited.status_code == 303
+        page = admin.get("/vehicles/SF-041").text
+        assert re.search(
+            r"in maintenance since [^<]+ by dashboard user operator: brake light out; part "
+            r"ordered \(10\)",
+            page,
+        )
+        assert "maintenance note now: brake light out; part ordered (10)" in page
+        assert "taken out for maintenance" not in page  # beyond the ten newest changes
