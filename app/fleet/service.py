@@ -29,7 +29,14 @@ from app.fleet.readiness import (
     assess,
     message_age_s,
 )
-from app.models import Corridor, Vehicle, VehicleChange, VehiclePing, VehicleStatus
+from app.models import (
+    Corridor,
+    Vehicle,
+    VehicleAssignment,
+    VehicleChange,
+    VehiclePing,
+    VehicleStatus,
+)
 from app.policies.service import policy_controller
 from contract.controllers import (
     ControllerConfigError,
@@ -80,12 +87,16 @@ class FleetEntry:
 
     vehicle: Vehicle
     corridor_lanes: int
-    postmile_at_start: float
     last_ping: LastPing | None
     last_status: LastStatus | None
     readiness: Readiness
     # how far behind the server stored what the fleet sent when this entry was graded
     server_lag_s: float = 0.0
+    # The corridor the last ping's x_m lies along: the one the car was assigned at the ping's
+    # ts (`dim_vehicle_assignment`, as ingest matched it), and its postmile at x = 0. A car
+    # moved to another corridor since is still where its last ping put it, not on its new road.
+    ping_corridor_id: str | None = None
+    ping_postmile_at_start: float | None = None
 
     def message_age_s(self, ts: datetime, received_at: datetime, now: datetime) -> float:
         """A message's age as the checks graded it (`readiness.message_age_s`)."""
@@ -94,10 +105,11 @@ class FleetEntry:
 
     @property
     def postmile(self) -> float | None:
-        """Postmile of the last ping, if it was on the corridor."""
-        if self.last_ping is None or self.last_ping.x_m is None:
+        """Postmile of the last ping along the corridor it was matched on, if it was on it."""
+        ping = self.last_ping
+        if ping is None or ping.x_m is None or self.ping_postmile_at_start is None:
             return None
-        return self.postmile_at_start + self.last_ping.x_m / METRES_PER_MILE
+        return self.ping_postmile_at_start + ping.x_m / METRES_PER_MILE
 
     def has_problem(self, problem: str) -> bool:
         """Whether the vehicle matches a problem filter (see PROBLEM_FILTERS)."""
@@ -203,7 +215,7 @@ def _to_last_status(status: VehicleStatus | None) -> LastStatus | None:
 
 def _latest_query(
     recent_since: datetime | None, vehicle_ids: Sequence[str] | None
-) -> Select[Vehicle, int, float, VehiclePing, VehicleStatus]:
+) -> Select[Vehicle, int, VehiclePing, VehicleStatus]:
     ping_query = select(VehiclePing).where(VehiclePing.vehicle_id == Vehicle.vehicle_id)
     if recent_since is not None:
         ping_query = ping_query.where(VehiclePing.ts >= recent_since)
@@ -219,7 +231,7 @@ def _latest_query(
         .lateral("last_status"),
     )
     query = (
-        select(Vehicle, Corridor.lanes, Corridor.postmile_at_start, last_ping, last_status)
+        select(Vehicle, Corridor.lanes, last_ping, last_status)
         .join(Corridor, Corridor.corridor_id == Vehicle.corridor_id)
         .outerjoin(last_ping, true())
         .outerjoin(last_status, true())
@@ -228,6 +240,36 @@ def _latest_query(
     if vehicle_ids is not None:
         query = query.where(Vehicle.vehicle_id.in_(vehicle_ids))
     return query
+
+
+async def _corridors_at(
+    session: AsyncSession, pinged_at: Mapping[str, datetime]
+) -> dict[str, tuple[str, float]]:
+    """Each vehicle's corridor (id, postmile at x = 0) in force at `pinged_at[vehicle_id]`,
+    from the assignment history, as ingest matched the ping to it."""
+    if not pinged_at:
+        return {}
+    pings = (
+        func.unnest(
+            bindparam("vehicle_ids", list(pinged_at), type_=ARRAY(Text)),
+            bindparam("ts", list(pinged_at.values()), type_=ARRAY(DateTime(timezone=True))),
+        )
+        .table_valued("vehicle_id", "ts")
+        .render_derived(name="last_ping")
+    )
+    rows = await session.execute(
+        select(pings.c.vehicle_id, Corridor.corridor_id, Corridor.postmile_at_start)
+        .join(
+            VehicleAssignment,
+            and_(
+                VehicleAssignment.vehicle_id == pings.c.vehicle_id,
+                VehicleAssignment.valid_from <= pings.c.ts,
+                pings.c.ts < VehicleAssignment.valid_to,
+            ),
+        )
+        .join(Corridor, Corridor.corridor_id == VehicleAssignment.corridor_id)
+    )
+    return {vehicle_id: (corridor, float(start)) for vehicle_id, corridor, start in rows}
 
 
 async def _earlier_statuses(
@@ -291,9 +333,9 @@ async def _server_lag_s(
         rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, None))).all()
     received_since = now - timedelta(seconds=limits.server_lag_s)
     delays = [
-        (row[3].received_at - row[3].ts).total_seconds()
+        (row[2].received_at - row[2].ts).total_seconds()
         for row in rows
-        if row[3] is not None and row[3].received_at >= received_since
+        if row[2] is not None and row[2].received_at >= received_since
     ]
     return min(max(min(delays, default=0.0), 0.0), limits.server_lag_s)
 
@@ -312,28 +354,37 @@ async def fleet(
     not cleared first (an operator's question at 6 a.m.), then in id order."""
     ids = None if vehicle_id is None else [vehicle_id]
     rows = (await session.execute(_latest_query(now - RECENT_PING_WINDOW, ids))).all()
-    silent = [row[0].vehicle_id for row in rows if row[3] is None]
+    silent = [row[0].vehicle_id for row in rows if row[2] is None]
     older: dict[str, VehiclePing | None] = {}
     if silent:
         for row in (await session.execute(_latest_query(None, silent))).all():
-            older[row[0].vehicle_id] = row[3]
+            older[row[0].vehicle_id] = row[2]
     # the hold periods replayed run back from each car's newest report, not from now: a server
     # behind its fleet (or a car whose clock is behind) must replay as many as a prompt one
     replayed = timedelta(seconds=HOLD_PERIODS_REPLAYED * limits.hold_s)
     history = await _earlier_statuses(
-        session, {row[0].vehicle_id: row[4].ts - replayed for row in rows if row[4] is not None}
+        session, {row[0].vehicle_id: row[3].ts - replayed for row in rows if row[3] is not None}
     )
     lag_s = await _server_lag_s(session, now, limits, rows if vehicle_id is None else None)
+    last_pings = {
+        row[0].vehicle_id: ping.ts
+        for row in rows
+        if (ping := row[2] if row[2] is not None else older.get(row[0].vehicle_id)) is not None
+    }
+    corridors = await _corridors_at(session, last_pings)
     # Grading is CPU alone, on a worker thread: on the event loop every ping arriving meanwhile
     # waited for it (a batch of 100 pings 73 ms at the median while the fleet page refreshed
     # in a loop, against 7 ms with no page viewed: `python -m bench.dashboard`).
-    return await anyio.to_thread.run_sync(_graded, rows, older, history, now, lag_s, limits)
+    return await anyio.to_thread.run_sync(
+        _graded, rows, older, history, corridors, now, lag_s, limits
+    )
 
 
 def _graded(
     rows: Sequence[Any],
     older: Mapping[str, VehiclePing | None],
     history: Mapping[str, Sequence[LastStatus]],
+    corridors: Mapping[str, tuple[str, float]],
     now: datetime,
     lag_s: float,
     limits: Thresholds,
@@ -341,7 +392,8 @@ def _graded(
     """Each car's entry with its readiness, not cleared first, then in id order."""
     clock = now - timedelta(seconds=lag_s)
     entries = []
-    for vehicle, lanes, postmile_at_start, ping_row, status_row in rows:
+    for vehicle, lanes, ping_row, status_row in rows:
+        ping_corridor = corridors.get(vehicle.vehicle_id)
         last_ping = _to_last_ping(
             ping_row if ping_row is not None else older.get(vehicle.vehicle_id)
         )
@@ -368,11 +420,12 @@ def _graded(
             FleetEntry(
                 vehicle=vehicle,
                 corridor_lanes=int(lanes),
-                postmile_at_start=float(postmile_at_start),
                 last_ping=last_ping,
                 last_status=last_status,
                 readiness=assess(facts, clock, limits),
                 server_lag_s=lag_s,
+                ping_corridor_id=ping_corridor[0] if ping_corridor else None,
+                ping_postmile_at_start=ping_corridor[1] if ping_corridor else None,
             )
         )
     entries.sort(key=lambda entry: VERDICT_ORDER[entry.readiness.verdict])

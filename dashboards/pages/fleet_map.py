@@ -30,7 +30,8 @@ def map_cars(entries: list[FleetEntry], corridor_id: str) -> list[MapCar]:
     cars = []
     for entry in entries:
         ping = entry.last_ping
-        if entry.vehicle.corridor_id != corridor_id or ping is None or ping.x_m is None:
+        # drawn where its last ping was matched, on the corridor it was assigned then
+        if entry.ping_corridor_id != corridor_id or ping is None or ping.x_m is None:
             continue
         state: CarState
         if entry.readiness.level_of("ping") == "red":
@@ -84,8 +85,11 @@ async def _map_context(
     context["states"] = {state: sum(car.state == state for car in cars) for state in CAR_COLOURS}
     # The corridor's cars the map cannot draw (no ping yet, or none placed on the corridor):
     # counted, so the map's figures add up to the fleet page's instead of leaving them out.
-    assigned = sum(entry.vehicle.corridor_id == corridor.corridor_id for entry in entries)
-    context["unplaced"] = assigned - len(cars)
+    drawn = {car.vehicle_id for car in cars}
+    context["unplaced"] = sum(
+        entry.vehicle.corridor_id == corridor.corridor_id and entry.vehicle.vehicle_id not in drawn
+        for entry in entries
+    )
     return context
 
 

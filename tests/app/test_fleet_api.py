@@ -13,6 +13,7 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.fleet.schemas import WHITE_SPACE
+from tests.dashboards.support import add_users, logged_in
 from tests.support.fleet import drive, healthy_status, post_pings, post_status
 from tests.support.servers import live_server
 from tests.support.tokens import bearer, issue
@@ -527,3 +528,40 @@ def test_one_cars_late_pings_make_no_other_silent_car_look_fresh(
     # the answer's ages are the ages graded
     assert 150 <= silent["last_status"]["age_s"] <= 160
     assert 150 <= silent["last_ping"]["age_s"] <= 160
+
+
+def test_a_car_moved_to_another_corridor_is_where_its_last_ping_put_it(
+    api: Api, seeded_engine: Engine
+) -> None:
+    """SF-050 parked 3,000 m along I-24-WB, then the roster moved it to a second corridor: its
+    postmile added the new corridor's start to a position matched on the old one (a road it
+    had never been on), and the map drew it there and dropped it from the road it was on."""
+    now = datetime.now(UTC).replace(microsecond=0)
+    post_pings(
+        api.client, api.tokens["admin"], drive("SF-050", now - timedelta(seconds=3), 3000.0, 0.0, 2)
+    )
+    with seeded_engine.begin() as connection:
+        start = connection.execute(
+            text("SELECT postmile_at_start FROM dim_corridor WHERE corridor_id = 'I-24-WB'")
+        ).scalar_one()
+        connection.execute(
+            text(
+                "INSERT INTO dim_corridor (corridor_id, name, direction, lanes, length_m,"
+                " speed_limit_mps, min_target_speed_mps, postmile_at_start)"
+                " VALUES ('TEST-2', 'a second road', 'EB', 3, 10000, 31.3, 8.9, 100.0)"
+            )
+        )
+        connection.execute(
+            text(
+                "UPDATE dim_vehicle SET corridor_id = 'TEST-2', assigned_lane = 1"
+                " WHERE vehicle_id = 'SF-050'"
+            )
+        )
+    moved = vehicle(api.get("/api/v1/fleet").json(), "SF-050")
+    assert moved["last_ping"]["postmile"] == pytest.approx(start + 3000.0 / 1609.344, abs=1e-3)
+    add_users(seeded_engine)
+    with logged_in(str(api.client.base_url), "viewer") as viewer:
+        on_its_road = viewer.get("/map", params={"corridor": "I-24-WB"}).text
+        on_its_new_road = viewer.get("/map", params={"corridor": "TEST-2"}).text
+    assert 'data-vehicle="SF-050"' in on_its_road
+    assert 'data-vehicle="SF-050"' not in on_its_new_road
