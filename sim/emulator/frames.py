@@ -184,6 +184,7 @@ TOYOTA: dict[str, SignalBuilder] = {
         "BRAKE_PRESSED": int(s.brake_pressed),
         "SET_SPEED": round((s.set_speed_mph or 0) * KPH_PER_MPH),
     },
+    "BRAKE_MODULE": lambda s: {"BRAKE_PRESSED": int(s.brake_pressed)},
     "PCM_CRUISE_SM": lambda s: {
         "MAIN_ON": int(s.acc_main_on),
         "UI_SET_SPEED": s.set_speed_mph if s.acc_engaged and s.set_speed_mph else 0,

@@ -77,7 +77,8 @@ START_MARGIN_M = 300.0
 READY_TIMEOUT_S = 90.0
 STOP_TIMEOUT_S = 90.0
 # The emulated cars send each watched message at most once per 0.1 s control step (sim.emulator:
-# 40 frames/s for a 2023 Rogue, whose schedule is 80/s; 50 of a RAV4's 140/s, the least share),
+# 40 frames/s for a 2023 Rogue, whose schedule is 80/s; 60 of a RAV4's 180/s and 50 of a 2018-20
+# Rogue's 150/s, the least share, a third),
 # so the demo's server expects CAN traffic at half of that (amber below 1/6 of the schedule) and
 # keeps red where the agent's inputs go stale.
 DEMO_SERVER_SETTINGS = {"SMOOTHFLEET_READINESS_CAN_SHARE": "[0.167, 0.1]"}

@@ -306,14 +306,15 @@ def test_a_2018_20_rogue_is_graded_against_its_own_frames() -> None:
 
 
 def test_each_make_has_its_own_can_thresholds() -> None:
-    # XT5: 50 + 20 + 10 + 20 + 20 = 120/s; RAV4: 50 + 30 + 30 + 10 + 20 = 140/s.
+    # XT5: 50 + 20 + 10 + 20 + 20 = 120/s; RAV4: 50 + 30 + 30 + 10 + 40 + 20 = 180/s (the
+    # brake module's 40/s since 2026-12-05).
     status = healthy_status(can_msgs_per_s=13.0)
     xt5 = assess(healthy_facts(make="Cadillac", model="XT5", last_status=status), NOW, LIMITS)
     rav4 = assess(healthy_facts(make="Toyota", model="RAV4", last_status=status), NOW, LIMITS)
     assert xt5.level_of("can") == "amber"  # 13 > 12 = 120 / 10
     assert xt5.reasons == ("CAN 13/s ≤ 60/s for XT5",)
-    assert rav4.level_of("can") == "red"  # 13 <= 14 = 140 / 10
-    assert rav4.problems == ("CAN 13/s ≤ 14/s for RAV4",)
+    assert rav4.level_of("can") == "red"  # 13 <= 18 = 180 / 10
+    assert rav4.problems == ("CAN 13/s ≤ 18/s for RAV4",)
 
 
 def test_the_red_can_share_is_where_the_agent_calls_its_inputs_stale() -> None:

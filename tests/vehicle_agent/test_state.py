@@ -98,6 +98,7 @@ TOYOTA_FRAMES = {
     "PCM_CRUISE": {"CRUISE_ACTIVE": 1, "GAS_RELEASED": 1},
     "PCM_CRUISE_2": {"MAIN_ON": 1, "BRAKE_PRESSED": 0, "SET_SPEED": 100},
     "PCM_CRUISE_SM": {"UI_SET_SPEED": 62, "DISTANCE_LINES": 1},
+    "BRAKE_MODULE": {"BRAKE_PRESSED": 0},
     "LEAD_INFO": {"LEAD_LONG_DIST": 35.5, "LEAD_REL_SPEED": -1.25},
 }
 
@@ -140,7 +141,7 @@ TOYOTA_FRAMES = {
                 speed_mps=20.0,
                 acc_available=True,
                 acc_engaged=True,
-                acc_speed_setting_mph=62.0,
+                acc_speed_setting_mph=62.0,  # the display's, in mph: the PCM's 100 km/h
                 acc_gap_setting=1,
                 lead_present=True,
                 lead_distance_m=35.5,
@@ -301,3 +302,38 @@ def test_gm_button_checksum_round_trips_and_detects_corruption(dbc_cache: Path) 
     tampered[5] ^= 0x60  # flips ACCButtons bits without fixing the checksum
     with pytest.raises(FrameError, match="checksum"):
         codec.decode(481, bytes(tampered))
+
+
+@pytest.mark.parametrize(
+    ("changes", "brake"),
+    [
+        ({}, False),
+        ({"BRAKE_MODULE": {"BRAKE_PRESSED": 1}}, True),  # the bit openpilot and panda read
+        ({"PCM_CRUISE_2": {**TOYOTA_FRAMES["PCM_CRUISE_2"], "BRAKE_PRESSED": 1}}, True),
+    ],
+)
+def test_the_rav4s_brake_is_pressed_when_either_message_says_so(
+    changes: dict[str, dict[str, float]], brake: bool, dbc_cache: Path
+) -> None:
+    """The brake was read from opendbc's PCM_CRUISE_2 bit 3 alone, a bit the field team's DBC
+    does not define; openpilot and panda read BRAKE_MODULE's."""
+    _, codec, reader = reader_for("toyota_rav4", dbc_cache)
+    for name, signals in {**TOYOTA_FRAMES, **changes}.items():
+        reader.ingest(frame(codec, name, signals), time_s=10.0)
+    state = reader.snapshot(10.01)
+    assert state.reading is not None
+    assert state.reading.brake_pressed is brake
+
+
+def test_the_rav4s_set_speed_is_the_pcms_whatever_unit_its_display_shows(
+    dbc_cache: Path,
+) -> None:
+    """UI_SET_SPEED is in the unit of the car's display: a car showing km/h, set to 100 km/h,
+    was read as set to 100 mph. The PCM's own set speed is always km/h."""
+    _, codec, reader = reader_for("toyota_rav4", dbc_cache)
+    metric = {**TOYOTA_FRAMES, "PCM_CRUISE_SM": {"UI_SET_SPEED": 100, "DISTANCE_LINES": 1}}
+    for name, signals in metric.items():
+        reader.ingest(frame(codec, name, signals), time_s=10.0)
+    state = reader.snapshot(10.01)
+    assert state.reading is not None
+    assert state.reading.acc_speed_setting_mph == 62.1

@@ -1,9 +1,16 @@
 """2020-21 Toyota RAV4 on opendbc's `toyota_nodsu_pt` DBC (actuation `accel`).
 
 Read (the signals the field team used, README of ../shared/data/can): SPEED (km/h, checksum),
-PCM_CRUISE (ACC active, gas released; checksum), PCM_CRUISE_2 (main on, brake pressed;
-checksum), PCM_CRUISE_SM (UI set speed in mph, distance lines 1-3), LEAD_INFO (radar lead distance
-and relative speed; checksum). The RAV4 is the make that measures the leader (paper Table 2); a
+PCM_CRUISE (ACC active, gas released; checksum), PCM_CRUISE_2 (main on, brake pressed, the set
+speed in km/h; checksum), PCM_CRUISE_SM (distance lines 1-3), BRAKE_MODULE (brake pressed),
+LEAD_INFO (radar lead distance and relative speed; checksum). The brake is pressed when either
+message says so: BRAKE_MODULE's bit is the one openpilot and panda read, and the only one the
+field team's DBC defines (its PCM_CRUISE_2 has no BRAKE_PRESSED); opendbc's PCM_CRUISE_2 bit 3
+was read alone until 2026-12-05. The set speed: PCM_CRUISE_SM's UI_SET_SPEED is in the unit
+the car's display is set to (opendbc: "with the vehicle's unit", which openpilot reads from
+BODY_CONTROL_STATE_2), and read as mph a car showing km/h reported 100 km/h as 100 mph; the
+PCM's own (PCM_CRUISE_2's SET_SPEED) is always km/h, so the display's unit is the one the two
+agree in (`set_speed_mph`). The RAV4 is the make that measures the leader (paper Table 2); a
 distance of 252 m or more, or 0, means no leader, the field team's convention for "none".
 Sent: ACC_CONTROL with ACCEL_CMD at ~30 Hz (checksum). The RAV4 has no button actuation, so a
 change of the set speed or the distance lines is the driver's doing.
@@ -24,7 +31,7 @@ from collections.abc import Mapping
 from typing import ClassVar
 
 from contract.controllers import Actuation
-from contract.units import kph_to_mps
+from contract.units import KPH_PER_MPH, kph_to_mps
 from vehicle_agent.cars.base import (
     CarInterface,
     CarReading,
@@ -50,6 +57,18 @@ _FIXED_COMMAND_SIGNALS = {"ACC_TYPE": 1.0, "ALLOW_LONG_PRESS": 1.0, "PERMIT_BRAK
 _REQUEST_SIGNALS = frozenset({"ACCEL_CMD", "RELEASE_STANDSTILL", "CANCEL_REQ", "CHECKSUM"})
 
 
+def set_speed_mph(shown: float, pcm_kph: float) -> float:
+    """The ACC's set speed in mph from the display's figure (`shown`, in the display's unit)
+    and the PCM's (km/h, whole): the display's figure in the unit the PCM's agrees with, to a
+    km/h (a set speed of 60 mph is the PCM's 97 km/h, 60.3 mph: the display's 60 is the
+    driver's); the PCM's when neither agrees. Both can agree only below 3.3, no set speed."""
+    if abs(shown * KPH_PER_MPH - pcm_kph) <= 1.0:
+        return shown
+    if abs(shown - pcm_kph) <= 1.0:
+        return round(shown / KPH_PER_MPH, 1)
+    return round(pcm_kph / KPH_PER_MPH, 1)
+
+
 class ToyotaRav4(CarInterface):
     """TSS2 RAV4 without a separate DSU."""
 
@@ -64,6 +83,7 @@ class ToyotaRav4(CarInterface):
         "PCM_CRUISE": MessageRule(1 / 30),
         "PCM_CRUISE_2": MessageRule(1 / 30),
         "PCM_CRUISE_SM": MessageRule(0.1),
+        "BRAKE_MODULE": MessageRule(0.025),  # 40 Hz (openpilot's Toyota car state)
         "LEAD_INFO": MessageRule(0.05),
     }
     checksums: ClassVar[dict[str, Checksum]] = dict.fromkeys(
@@ -85,7 +105,7 @@ class ToyotaRav4(CarInterface):
         present = 0.0 < distance < NO_LEAD_DISTANCE_M
         engaged = bool(cruise["CRUISE_ACTIVE"])
         lines = int(ui["DISTANCE_LINES"])
-        set_speed = float(ui["UI_SET_SPEED"])
+        set_speed = set_speed_mph(float(ui["UI_SET_SPEED"]), float(cruise_2["SET_SPEED"]))
         return CarReading(
             speed_mps=kph_to_mps(float(signals["SPEED"]["SPEED"])),
             acc_available=bool(cruise_2["MAIN_ON"]),
@@ -95,7 +115,8 @@ class ToyotaRav4(CarInterface):
             lead_present=present,
             lead_distance_m=distance if present else None,
             lead_rel_speed_mps=float(lead["LEAD_REL_SPEED"]) if present else None,
-            brake_pressed=bool(cruise_2["BRAKE_PRESSED"]),
+            brake_pressed=bool(cruise_2["BRAKE_PRESSED"])
+            or bool(signals["BRAKE_MODULE"]["BRAKE_PRESSED"]),
             gas_pressed=not cruise["GAS_RELEASED"],
             standstill_held=self.holds_standstill(signals),
         )
