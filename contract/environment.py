@@ -22,3 +22,28 @@ TOOL_VARIABLES = frozenset(
         "SMOOTHFLEET_STALL_LOG",
     }
 )
+
+# The agent's settings (`vehicle_agent.settings.AgentSettings`, each under AGENT_ENV_PREFIX;
+# tests/vehicle_agent hold the two lists equal). The server has settings under the same prefix
+# (`agent_ping_period_s`, the periods it hands the cars), so it cannot pass over the prefix
+# whole: a misspelt `SMOOTHFLEET_AGENT_PING_PERIOD` of its own was ignored without a word.
+AGENT_VARIABLES = frozenset(
+    AGENT_ENV_PREFIX + name
+    for name in (
+        "BUTTON_BOARD",
+        "CAN",
+        "DBC_CACHE_DIR",
+        "GPIO_ROOT",
+        "GPS",
+        "HTTP_TIMEOUT_S",
+        "LOG_LEVEL",
+        "MAKE",
+        "POLICY_DIR",
+        "SERVER_URL",
+        "SPOOL_MAX_ROWS",
+        "SPOOL_PATH",
+        "TOKEN",
+        "VEHICLE_ID",
+        "WAVE_SPEED_MPS",
+    )
+)

@@ -20,7 +20,7 @@ import platformdirs
 from pydantic import Field, SecretStr, ValidationError, field_validator, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from contract.environment import AGENT_ENV_PREFIX, SERVER_ENV_PREFIX, TOOL_VARIABLES
+from contract.environment import AGENT_VARIABLES, SERVER_ENV_PREFIX, TOOL_VARIABLES
 from contract.values import http_url
 from contract.vehicles import (
     MAX_PING_PERIOD_S,
@@ -331,14 +331,14 @@ def _describe(error: ValidationError) -> str:
 
 def unknown_variables(environ: Mapping[str, str]) -> list[str]:
     """The names under the server's prefix that no program of ours reads: misspelt settings
-    (pydantic-settings matches names without regard to case, and so does this)."""
-    known = {SERVER_ENV_PREFIX + name.upper() for name in Settings.model_fields} | TOOL_VARIABLES
+    (pydantic-settings matches names without regard to case, and so does this). The agent's
+    names are known one by one, not by their prefix, which four server settings share."""
+    server = {SERVER_ENV_PREFIX + name.upper() for name in Settings.model_fields}
+    known = server | TOOL_VARIABLES | AGENT_VARIABLES
     return sorted(
         name
         for name in environ
-        if name.upper().startswith(SERVER_ENV_PREFIX)
-        and not name.upper().startswith(AGENT_ENV_PREFIX)
-        and name.upper() not in known
+        if name.upper().startswith(SERVER_ENV_PREFIX) and name.upper() not in known
     )
 
 

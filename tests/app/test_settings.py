@@ -171,3 +171,19 @@ def test_a_misspelt_setting_is_refused_in_production_and_logged_in_development(
         SettingsError, match=r"^SMOOTHFLEET_PLANER_PERIOD_S: no server setting of that name"
     ):
         load_settings()
+
+
+def test_a_misspelt_server_setting_under_the_agents_prefix_is_refused(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Four server settings share the agent's prefix (the periods handed to the cars), and the
+    server passed over every name under it: SMOOTHFLEET_AGENT_PING_PERIOD (no _S) left the
+    ping period at its default without a word."""
+    for name in [name for name in os.environ if name.upper().startswith("SMOOTHFLEET_")]:
+        monkeypatch.delenv(name)
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_PING_PERIOD_S", "0.5")  # the server's own
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_SERVER_URL", "https://fleet.test")  # the agent's
+    assert unknown_variables(os.environ) == []
+    assert load_settings().agent_ping_period_s == 0.5
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_PING_PERIOD", "0.5")
+    assert unknown_variables(os.environ) == ["SMOOTHFLEET_AGENT_PING_PERIOD"]

@@ -9,10 +9,16 @@ from pathlib import Path
 
 import pytest
 
+from contract.environment import AGENT_VARIABLES
 from vehicle_agent.actuators import ButtonSequencer
 from vehicle_agent.cars import CruiseButton
 from vehicle_agent.loop import RateKeeper
-from vehicle_agent.settings import AgentSettingsError, board_lines, load_agent_settings
+from vehicle_agent.settings import (
+    AgentSettingsError,
+    board_lines,
+    load_agent_settings,
+    setting_names,
+)
 
 
 def run_agent_cli(
@@ -329,3 +335,9 @@ def test_the_service_releases_the_buttons_after_every_exit_of_the_agent() -> Non
     # systemd runs ExecStopPost after any exit, a SIGKILL included, with the agent's settings
     assert service["ExecStopPost"] == service["ExecStart"] + " --release-buttons"
     assert service["Restart"] == "always"
+
+
+def test_the_server_knows_every_agent_setting_by_name() -> None:
+    """The server refuses a name under the shared prefix that no program reads; it knows the
+    agent's one by one (contract.environment), so the two lists must not drift apart."""
+    assert setting_names() == AGENT_VARIABLES
