@@ -40,7 +40,11 @@ class AgentSettings(BaseSettings):
     """Everything the agent can be told."""
 
     # NaN and infinity are no setting (they pass a bound's comparison or make a timeout endless)
-    model_config = SettingsConfigDict(env_prefix=ENV_PREFIX, extra="ignore", allow_inf_nan=False)
+    # A variable set empty is unset: an empty spool path was "cannot open the ping spool ." (no
+    # setting named), an empty DBC cache dir wrote the cache into the working directory.
+    model_config = SettingsConfigDict(
+        env_prefix=ENV_PREFIX, extra="ignore", allow_inf_nan=False, env_ignore_empty=True
+    )
 
     server_url: str
     token: SecretStr

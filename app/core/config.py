@@ -54,8 +54,15 @@ class Settings(BaseSettings):
     # period, a lifetime or a limit endless. JSON-valued settings (a tuple, the planner's
     # parameters) come through as text, decoded by `_json_text` below, so that text which is no
     # JSON is a validation error naming its variable, as every other wrong setting is.
+    # A variable set empty (`SMOOTHFLEET_DATA_DIR=` in an env file, compose's `${X:-}`) is unset:
+    # read as given, an empty data dir put the embedded cluster in the working directory and an
+    # empty agent version graded every car amber.
     model_config = SettingsConfigDict(
-        env_prefix=SERVER_ENV_PREFIX, extra="ignore", allow_inf_nan=False, enable_decoding=False
+        env_prefix=SERVER_ENV_PREFIX,
+        extra="ignore",
+        allow_inf_nan=False,
+        enable_decoding=False,
+        env_ignore_empty=True,
     )
 
     environment: Literal["development", "production"] = "development"

@@ -187,3 +187,15 @@ def test_a_misspelt_server_setting_under_the_agents_prefix_is_refused(
     assert load_settings().agent_ping_period_s == 0.5
     monkeypatch.setenv("SMOOTHFLEET_AGENT_PING_PERIOD", "0.5")
     assert unknown_variables(os.environ) == ["SMOOTHFLEET_AGENT_PING_PERIOD"]
+
+
+def test_a_setting_left_empty_is_unset(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`SMOOTHFLEET_DATA_DIR=` put the embedded cluster in the working directory, and
+    `SMOOTHFLEET_READINESS_AGENT_VERSION=` graded every car amber for running no version ""."""
+    monkeypatch.setenv("SMOOTHFLEET_DATA_DIR", "")
+    monkeypatch.setenv("SMOOTHFLEET_READINESS_AGENT_VERSION", "")
+    settings = load_settings()
+    assert settings.data_dir == Settings.model_fields["data_dir"].get_default(
+        call_default_factory=True
+    )
+    assert settings.readiness_agent_version is None

@@ -341,3 +341,26 @@ def test_the_server_knows_every_agent_setting_by_name() -> None:
     """The server refuses a name under the shared prefix that no program reads; it knows the
     agent's one by one (contract.environment), so the two lists must not drift apart."""
     assert setting_names() == AGENT_VARIABLES
+
+
+def test_a_setting_left_empty_is_unset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`SMOOTHFLEET_AGENT_SPOOL_PATH=` was the path "": "cannot open the ping spool .", naming
+    no setting, and an empty DBC cache dir wrote opendbc's cache into the working directory.
+    Empty is unset: the default, or, for a setting the agent needs, the setting named."""
+    env_file = tmp_path / "agent.env"
+    env_file.write_text(
+        "SMOOTHFLEET_AGENT_SERVER_URL=https://fleet.example/\n"
+        "SMOOTHFLEET_AGENT_TOKEN=secret-token-1\n"
+        "SMOOTHFLEET_AGENT_VEHICLE_ID=SF-010\n"
+        "SMOOTHFLEET_AGENT_SPOOL_PATH=\n"
+    )
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_DBC_CACHE_DIR", "")
+    settings = load_agent_settings(env_file)
+    assert settings.spool_path is None
+    assert settings.dbc_cache_dir is None
+    monkeypatch.setenv("SMOOTHFLEET_AGENT_SERVER_URL", "")
+    env_file.write_text(
+        "SMOOTHFLEET_AGENT_TOKEN=secret-token-1\nSMOOTHFLEET_AGENT_VEHICLE_ID=SF-010\n"
+    )
+    with pytest.raises(AgentSettingsError, match="SMOOTHFLEET_AGENT_SERVER_URL: Field required"):
+        load_agent_settings(env_file)
