@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from contract.controllers import RlParams
 from tests.support.policies import acc_policy_bytes
 from vehicle_agent.controllers import AccelCommand, AccSetPoint, Observation, TargetProfile
+from vehicle_agent.controllers.base import NonFiniteAction
 from vehicle_agent.controllers.policy import (
     ACC_SPEED_ACTION,
     PolicyFileError,
@@ -41,6 +42,15 @@ def test_accel_features_read_no_leader_as_the_radar_range_and_no_relative_speed(
     np.testing.assert_allclose(seen, [1.0, 1.0, 1.0, 1.0, 0.4, -0.5])
     unseen = accel_features(30.0, 30.0, 30.0, False, math.inf, 7.0)
     np.testing.assert_allclose(unseen, [1.0, 1.0, 1.0, 0.0, 1.0, 0.0])
+
+
+def test_a_leader_measured_beyond_the_radar_range_of_training_reads_as_none() -> None:
+    """Training's radar sees no leader past 100 m; the RAV4 reports them up to 250 m, and the
+    policy, never shown one present that far, asked for twice the acceleration."""
+    far = accel_features(30.0, 20.0, 20.0, True, 180.0, -8.0)
+    np.testing.assert_allclose(far, accel_features(30.0, 20.0, 20.0, False, math.inf, 0.0))
+    edge = accel_features(30.0, 20.0, 20.0, True, 100.0, -8.0)
+    np.testing.assert_allclose(edge, [1.0, 2 / 3, 2 / 3, 1.0, 1.0, -0.8])
 
 
 def test_the_commanded_accel_observation_adds_the_limiters_last_output_over_three() -> None:
@@ -120,6 +130,33 @@ def test_network_is_a_tanh_mlp_with_a_linear_clipped_head(tmp_path: Path) -> Non
     batch[:, 0] = [0.5, 0.8, 5.0]
     np.testing.assert_allclose(network.action(batch)[:, 0], [0.0, math.tanh(0.6), math.tanh(9)])
     assert len(network.sha256) == 64
+
+
+@pytest.mark.parametrize("lead", [False, True])
+def test_a_policy_answering_no_number_fails_its_controller_whatever_it_decodes(
+    tmp_path: Path, lead: bool
+) -> None:
+    """Finite weights of 1e308 load, and the outputs sum to inf - inf. rl_acc with no leader in
+    sight reads only the gap output, and read NaN as 3 bars and the speed as the ceiling: the
+    bad policy drove on. Any output that is no number is the controller's failure now."""
+    hidden = np.zeros((6, 4))
+    hidden[0, :] = [10.0, 10.0, -10.0, -10.0]  # tanh: (1, 1, -1, -1) at any speed
+    path = tmp_path / "overflowing.npz"
+    sha256 = save_policy(path, "acc", [hidden, np.full((4, 2), 1e308)], [np.zeros(4), np.zeros(2)])
+    controller = RlAccController("acc", RlParams(policy=str(path), policy_sha256=sha256))
+    observation = Observation(
+        time_s=0.1,
+        speed_mps=25.0,
+        target_speed_mps=25.0,
+        lead_present=lead,
+        acc_speed_setting_mph=56.0,
+        acc_gap_setting=2,
+    )
+    with (
+        np.errstate(over="ignore", invalid="ignore"),
+        pytest.raises(NonFiniteAction, match="answered"),
+    ):
+        controller.step(observation)
 
 
 def test_policy_files_are_checked_before_use(tmp_path: Path) -> None:

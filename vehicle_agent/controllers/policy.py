@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from contract.units import MPS_PER_MPH
 from vehicle_agent.controllers.acc_clip import MAX_SETTING_MPH
+from vehicle_agent.controllers.base import NonFiniteAction
 
 FloatArray = NDArray[np.float64]
 PolicyActuation = Literal["acc", "accel"]
@@ -135,10 +136,14 @@ def accel_features(
     """The `accel` observation (v, v_s, v_s ahead, l, gap, lead - ego speed and, given it, the
     commanded acceleration), scaled: the `radar` observation, or `commanded_accel`'s.
 
-    Without a leader in radar range the gap reads as the range and the relative speed as 0.
+    Without a leader in radar range the gap reads as the range and the relative speed as 0,
+    and so does a leader measured beyond it: training's radar sees none past `GAP_SCALE_M`
+    (`sim.av.RADAR_RANGE_M`), while the RAV4 reports leaders up to 250 m, which the policy,
+    never shown "present" with a gap past the range, answered with twice the acceleration.
     """
-    present = np.asarray(lead_present, dtype=bool)
-    measured = np.minimum(np.asarray(gap_m, dtype=np.float64), GAP_SCALE_M)
+    gap_measured = np.asarray(gap_m, dtype=np.float64)
+    present = np.asarray(lead_present, dtype=bool) & (gap_measured <= GAP_SCALE_M)
+    measured = np.minimum(gap_measured, GAP_SCALE_M)
     gap = np.where(present, measured, GAP_SCALE_M)
     rel = np.where(present, np.asarray(rel_speed_mps, dtype=np.float64), 0.0)
     columns = [
@@ -244,14 +249,20 @@ class PolicyNetwork:
     accel_observation: AccelObservation = "radar"
 
     def action(self, features: FloatArray) -> FloatArray:
-        """The mean action for one observation (1-D) or a batch (rows), clipped to [-1, 1]."""
+        """The mean action for one observation (1-D) or a batch (rows), clipped to [-1, 1];
+        `NonFiniteAction` when any output is not a number. A file of finite but huge weights
+        (1e308) loads and answers NaN, and each controller decodes only some outputs, each its
+        own way: a NaN gap output read as 3 bars, a NaN time margin as none, a NaN speed with no
+        leader as the ceiling, and the bad policy drove on instead of handing the car back."""
         hidden = features
         last = len(self.weights) - 1
         for index, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
             hidden = hidden @ weight + bias
             if index < last:
                 hidden = np.tanh(hidden)
-        # minimum(maximum()) is np.clip (NaN passes through both) without its wrapper's cost
+        if not np.isfinite(hidden).all():
+            raise NonFiniteAction(f"policy {self.sha256[:12]} answered {hidden}")
+        # minimum(maximum()) is np.clip without its wrapper's cost
         clipped: FloatArray = np.minimum(np.maximum(hidden, -1.0), 1.0)
         return clipped
 
