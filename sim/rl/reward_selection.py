@@ -10,7 +10,8 @@ see. The inner scores have the cut-ins the training had (`EnvConfig.cut_ins`).
 
 The rule (`admissibility`, `choose`) is the issue's: a candidate is admissible when, in every
 group of drives, mean throughput and network speed stay within `MAX_LOSS_PCT`, on the freeflow
-drives within `MAX_FREEFLOW_LOSS_PCT`, no AV touches its leader, and the AVs keep the gap
+drives within `MAX_FREEFLOW_LOSS_PCT`, no AV touches its leader nor needs its driver to stop
+(a takeover, `DriveScore.takeovers`), and the AVs keep the gap
 envelope at least `MIN_WITHIN_SHARE` of the time. Among the admissible, the highest mean fuel
 saving on the shockwave drives wins; a tie, or no admissible candidate, goes to the first
 candidate (the weights used until the data shows better ones).
@@ -119,6 +120,12 @@ def admissibility(scores: Sequence[DriveScore]) -> list[str]:
     collisions = sum(score.collisions for score in scores)
     if collisions:
         broken.append(f"{collisions} collision(s)")
+    # Since the scores run the agent's hand-back (2026-12-05), a stop the AV could not make is
+    # its driver's, not a collision: counted as one here, or a candidate that needed its
+    # driver would pass where, without the hand-back, it was refused for the collision.
+    takeovers = sum(score.takeovers or 0 for score in scores)
+    if takeovers:
+        broken.append(f"{takeovers} takeover(s)")
     within = float(np.mean([score.gap_within_share for score in scores]))
     if within < MIN_WITHIN_SHARE:
         broken.append(f"within the envelope {100 * within:.1f} % < {100 * MIN_WITHIN_SHARE:.0f} %")

@@ -29,6 +29,7 @@ def score(
     throughput: float = 0.0,
     speed: float = 0.0,
     collisions: int = 0,
+    takeovers: int = 0,
     within: float = 1.0,
     stop_and_go: bool = False,
     unmeasured: str = "",
@@ -44,6 +45,7 @@ def score(
         network_speed_change_pct=speed,
         accel_rms_change_pct=0.0,
         collisions=collisions,
+        takeovers=takeovers,
         gap_within_share=within,
         unmeasured_by_baseline=unmeasured,
     )
@@ -79,15 +81,20 @@ def test_admissibility_names_every_broken_bound() -> None:
     broken = admissibility(
         [
             score("shockwave", 3.0, throughput=-2.5, collisions=1),
-            score("freeflow", 0.0, speed=-1.5, within=0.97),
+            score("freeflow", 0.0, speed=-1.5, within=0.97, takeovers=2),
         ]
     )
     assert broken == [
         "shockwave throughput -2.50 % < -2 %",
         "freeflow network speed -1.50 % < -1 %",
         "1 collision(s)",
+        "2 takeover(s)",
         "within the envelope 98.5 % < 99 %",
     ]
+    # the hand-back turns a stop the AV could not make into its driver's: a candidate that
+    # needed its driver is no more admissible than one that collided was
+    needing_its_driver = [score("shockwave", 9.0, takeovers=12), score("freeflow", 0.0)]
+    assert choose([[score("shockwave", 1.0)], needing_its_driver]) == 0
     # the stop-and-go drives are a group of their own (a -2 % floor), freeflow's is -1 %
     assert admissibility([score("shockwave", 3.0, speed=-1.5, stop_and_go=True)]) == []
 
