@@ -121,9 +121,12 @@ def plan_downgrade(connection: Connection, revision: str) -> DowngradePlan:
 def _steps_below(script: ScriptDirectory, start: str, steps: int) -> str:
     """The revision `steps` migrations below `start` ("base" below the first)."""
     try:
-        below: str | None = script.get_revision(start).revision
+        found = script.get_revision(start)
     except (RevisionError, CommandError) as error:
         raise UnknownRevision(f"no migration revision {start!r} ({error})") from None
+    if found is None:  # "base": nothing is below it
+        raise UnknownRevision(f"no migration is below {start!r}")
+    below: str | None = found.revision
     for taken in range(steps):
         if below is None:
             raise UnknownRevision(f"{start} is only {taken} step(s) above base, not {steps}")

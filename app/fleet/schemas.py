@@ -139,8 +139,10 @@ class MaintenanceOut(MaintenanceIn):
 
 
 MESSAGE_AGE = (
-    "seconds since the car sent it, by the server's clock: from its ts, or from when the server "
-    "received it if that was earlier (a car clock ahead shows no negative age)"
+    "seconds since the car sent it, as the readiness checks grade it: from its ts, or from when "
+    "the server received it if that was earlier (a car clock ahead shows no negative age), less "
+    "how far behind the server stores what the fleet sends (READINESS_SERVER_LAG_S at most), "
+    "but never less than the time since the server stored it"
 )
 
 
@@ -153,6 +155,11 @@ class PingOut(BaseModel):
     speed_mps: float
     x_m: float | None
     postmile: float | None
+    corridor_id: str | None = Field(
+        None,
+        description="the corridor x_m and postmile lie along: the one the car was assigned at "
+        "the ping's ts (which the vehicle's current corridor_id need not be)",
+    )
     lane: int | None
     acc_engaged: bool | None
     controller_engaged: bool | None
@@ -281,6 +288,7 @@ def fleet_vehicle_out(entry: FleetEntry, now: datetime) -> FleetVehicleOut:
             speed_mps=ping.speed_mps,
             x_m=ping.x_m,
             postmile=entry.postmile,
+            corridor_id=entry.ping_corridor_id,
             lane=ping.lane,
             acc_engaged=ping.is_acc_engaged,
             controller_engaged=ping.is_controller_engaged,

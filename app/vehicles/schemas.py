@@ -47,6 +47,8 @@ class RosterRow(BaseModel):
                 return json.loads(value)
             except json.JSONDecodeError as error:
                 raise ValueError(f"not valid JSON ({error.msg})") from None
+            except RecursionError:  # "[" * 100000: deeper than the parser goes
+                raise ValueError("nested too deeply") from None
         return value
 
     @model_validator(mode="after")

@@ -3,8 +3,9 @@ requests in, a stock ACC in between, and a leader ahead.
 
 Stepped by whoever owns the clock (`step(now)`): a test or the simulator advances simulation
 time, the demo its own loop. Frames go out at each message's nominal period (the agent's table
-in vehicle_agent.cars, scaled by `period_scale` to lighten a hundred emulated cars: the agent
-tolerates 10 missed periods, so a scale up to ~5 keeps every input fresh).
+in vehicle_agent.cars, scaled by `period_scale` to lighten a hundred emulated cars: the car
+state tolerates 10 missed periods, but a press is judged only from frames at most 2 periods old
+(`SafetyLayer.check_press`), so a scale of 3 already has presses refused; nothing scales it).
 
 The car's own button message reports every button held, the driver's and the agent's alike, as a
 button board pressing the real switches would; the agent tells its own presses apart. A board is

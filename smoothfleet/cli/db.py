@@ -171,6 +171,17 @@ def db_dump(dump_file: Path) -> None:
     )
 
 
+# Tables and views in any schema but PostgreSQL's own: a restore adds the dump's, and the
+# analytics schema's views count as much as the public tables.
+RELATIONS_HELD = text(
+    "SELECT n.nspname || '.' || c.relname FROM pg_class c"
+    " JOIN pg_namespace n ON n.oid = c.relnamespace"
+    " WHERE c.relkind IN ('r', 'p', 'v', 'm')"
+    " AND n.nspname NOT IN ('pg_catalog', 'information_schema')"
+    " AND n.nspname NOT LIKE 'pg_toast%' ORDER BY 1"
+)
+
+
 @db.command("restore")
 @click.argument(
     "dump_file", metavar="FILE", type=click.Path(exists=True, dir_okay=False, path_type=Path)
@@ -192,14 +203,19 @@ def db_restore(dump_file: Path) -> None:
     with database(current) as url:
         engine = make_sync_engine(url)
         with engine.connect() as connection:
-            tables = connection.execute(
-                text("SELECT count(*) FROM pg_tables WHERE schemaname = current_schema()")
-            ).scalar_one()
-        if tables:
+            held = connection.execute(RELATIONS_HELD).scalars().all()
+        if held:
+            hint = (
+                " (`db downgrade base` leaves alembic_version: drop it with smoothfleet db psql "
+                "-c 'DROP TABLE alembic_version')"
+                if held == ["public.alembic_version"]
+                else ""
+            )
             raise CliError(
-                f"the database holds {tables} table(s): restore into an empty one (a new "
-                "SMOOTHFLEET_DATA_DIR, or createdb NEW and SMOOTHFLEET_DATABASE_URL); nothing "
-                "was changed"
+                f"the database holds {len(held)} table(s) or view(s), {', '.join(held[:3])}"
+                f"{' ...' if len(held) > 3 else ''}: restore into an empty one (a new "
+                "SMOOTHFLEET_DATA_DIR, or createdb NEW and SMOOTHFLEET_DATABASE_URL)"
+                f"{hint}; nothing was changed"
             )
         child_url, environment = _for_child(url)
         code = subprocess.call(

@@ -83,6 +83,19 @@ def test_a_roster_that_is_not_utf8_is_one_line_naming_it(tmp_path: Path) -> None
         parse_roster_csv(roster)
 
 
+def test_roster_parameters_nested_past_the_json_parsers_depth_name_their_row(
+    tmp_path: Path,
+) -> None:
+    """100,000 "[" escaped as a RecursionError ("unexpected RecursionError" from the CLI)."""
+    nested = '"' + "[" * 100_000 + '"'
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        f"SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,1,microaccel_acc,{nested}",
+    )
+    with pytest.raises(RosterError, match=r"fleet.csv row 2: .*nested too deeply"):
+        parse_roster_csv(roster)
+
+
 def test_a_reimport_that_changes_a_cars_assignment_is_a_new_config_version(
     seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
 ) -> None:
@@ -297,6 +310,11 @@ def test_a_backup_of_the_embedded_database_is_whole_and_restores(
             tokens = connection.execute(text("SELECT role FROM api_token")).scalars().all()
         engine.dispose()
         assert tokens == ["viewer"]
+        # a database downgraded to base keeps alembic_version: the refusal says so
+        assert run_cli("db", "downgrade", "base", "--yes", env=into_new).returncode == 0
+        emptied = run_cli("db", "restore", str(backup), env=into_new)
+        assert emptied.returncode == 1
+        assert "DROP TABLE alembic_version" in emptied.stderr.replace("\n", "")
     finally:
         admin_execute(
             pg_server,
@@ -461,6 +479,9 @@ def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
     assert f"  {below_head}  " in asked.stderr
     with engine.connect() as connection:
         assert current_revision(connection) == below_head
+    below_base = run_cli("db", "downgrade", "base-1", "--yes", env=env)
+    assert below_base.returncode != 0
+    assert "no migration is below 'base'" in below_base.stderr  # was an AttributeError
     too_far = run_cli("db", "downgrade", "-99", "--yes", env=env)
     assert too_far.returncode != 0
     assert f"{below_head} is only {int(below_head)} step(s) above base, not 99" in too_far.stderr

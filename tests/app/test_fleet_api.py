@@ -559,6 +559,8 @@ def test_a_car_moved_to_another_corridor_is_where_its_last_ping_put_it(
         )
     moved = vehicle(api.get("/api/v1/fleet").json(), "SF-050")
     assert moved["last_ping"]["postmile"] == pytest.approx(start + 3000.0 / 1609.344, abs=1e-3)
+    assert moved["last_ping"]["corridor_id"] == "I-24-WB"
+    assert moved["corridor_id"] == "TEST-2"
     add_users(seeded_engine)
     with logged_in(str(api.client.base_url), "viewer") as viewer:
         on_its_road = viewer.get("/map", params={"corridor": "I-24-WB"}).text

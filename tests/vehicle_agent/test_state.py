@@ -8,6 +8,7 @@ import can
 import pytest
 
 from vehicle_agent.cars import CarInterface, CarReading, CruiseButton, car_for
+from vehicle_agent.cars.toyota import set_speed_mph
 from vehicle_agent.codec import Codec, FrameError, codec_for
 from vehicle_agent.recording import read_libpanda_csv
 from vehicle_agent.state import CarStateReader
@@ -337,3 +338,11 @@ def test_the_rav4s_set_speed_is_the_pcms_whatever_unit_its_display_shows(
     state = reader.snapshot(10.01)
     assert state.reading is not None
     assert state.reading.acc_speed_setting_mph == 62.1
+
+
+def test_the_rav4s_display_and_pcm_set_speeds_agree_as_loosely_as_the_field_dbc_says() -> None:
+    """The field team's DBC: "43 kph are shown as 28mph, so conversion isnt perfect"."""
+    assert set_speed_mph(28.0, 43.0) == 28.0
+    assert set_speed_mph(60.0, 97.0) == 60.0
+    assert set_speed_mph(100.0, 100.0) == 62.1  # a display in km/h
+    assert set_speed_mph(0.0, 97.0) == 60.3  # no display figure: the PCM's

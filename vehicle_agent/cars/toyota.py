@@ -57,14 +57,21 @@ _FIXED_COMMAND_SIGNALS = {"ACC_TYPE": 1.0, "ALLOW_LONG_PRESS": 1.0, "PERMIT_BRAK
 _REQUEST_SIGNALS = frozenset({"ACCEL_CMD", "RELEASE_STANDSTILL", "CANCEL_REQ", "CHECKSUM"})
 
 
+# How far the display's set speed, in its unit, and the PCM's may differ and still be the same
+# setting: the field team's DBC notes "43 kph are shown as 28mph, so conversion isnt perfect"
+# (45.1 km/h: 2.1 off).
+UNIT_AGREEMENT_KPH = 2.5
+
+
 def set_speed_mph(shown: float, pcm_kph: float) -> float:
     """The ACC's set speed in mph from the display's figure (`shown`, in the display's unit)
-    and the PCM's (km/h, whole): the display's figure in the unit the PCM's agrees with, to a
-    km/h (a set speed of 60 mph is the PCM's 97 km/h, 60.3 mph: the display's 60 is the
-    driver's); the PCM's when neither agrees. Both can agree only below 3.3, no set speed."""
-    if abs(shown * KPH_PER_MPH - pcm_kph) <= 1.0:
+    and the PCM's (km/h, whole): the display's figure in the unit the PCM's agrees with, to
+    `UNIT_AGREEMENT_KPH` (a set speed of 60 mph is the PCM's 97 km/h, 60.3 mph: the display's
+    60 is the driver's); the PCM's when neither agrees. Both can agree only below 8 mph, no
+    set speed."""
+    if abs(shown * KPH_PER_MPH - pcm_kph) <= UNIT_AGREEMENT_KPH:
         return shown
-    if abs(shown - pcm_kph) <= 1.0:
+    if abs(shown - pcm_kph) <= UNIT_AGREEMENT_KPH:
         return round(shown / KPH_PER_MPH, 1)
     return round(pcm_kph / KPH_PER_MPH, 1)
 
