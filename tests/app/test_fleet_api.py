@@ -471,24 +471,32 @@ def test_a_server_behind_its_fleet_replays_the_whole_hold_window(api: Api) -> No
     assert flickering["verdict"] == "not cleared"
 
 
-def test_a_car_reporting_alone_ages_once_it_falls_silent(api: Api, seeded_engine: Engine) -> None:
-    """6 a.m., one car on: it reported promptly until 100 s ago, then fell silent. Measured
-    against the newest ping stored (its own), it read "0 s" and cleared for 2 minutes."""
+def reported_promptly_until(
+    api: Api, engine: Engine, vehicle_id: str, *, seconds_ago: int
+) -> datetime:
+    """The car's pings up to 2 s before its status `seconds_ago`, each stored 0.5 s after it
+    was sent (a prompt car, fallen silent since); now, to the second."""
     now = datetime.now(UTC).replace(microsecond=0)
-    post_pings(
-        api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=102), 0, 25, 3)
-    )
-    post_status(
-        api.client, api.tokens["admin"], "SF-001", **healthy_status(now - timedelta(seconds=100))
-    )
-    with seeded_engine.begin() as connection:  # stored as promptly as they were sent
+    start = now - timedelta(seconds=seconds_ago + 2)
+    post_pings(api.client, api.tokens["admin"], drive(vehicle_id, start, 0, 25, 3))
+    sent = now - timedelta(seconds=seconds_ago)
+    post_status(api.client, api.tokens["admin"], vehicle_id, **healthy_status(sent))
+    with engine.begin() as connection:
         for table in ("fact_vehicle_ping", "fact_vehicle_status"):
             connection.execute(
                 text(
                     f"UPDATE {table} SET received_at = ts + interval '0.5 s'"
-                    " WHERE vehicle_id = 'SF-001'"
-                )
+                    " WHERE vehicle_id = :vehicle"
+                ),
+                {"vehicle": vehicle_id},
             )
+    return now
+
+
+def test_a_car_reporting_alone_ages_once_it_falls_silent(api: Api, seeded_engine: Engine) -> None:
+    """6 a.m., one car on: it reported promptly until 100 s ago, then fell silent. Measured
+    against the newest ping stored (its own), it read "0 s" and cleared for 2 minutes."""
+    reported_promptly_until(api, seeded_engine, "SF-001", seconds_ago=100)
     silent = vehicle(api.get("/api/v1/fleet").json(), "SF-001")
     assert checks(silent)["ping"] == "red"
     assert re.fullmatch(r"no ping for (9\d|10\d) s", silent["problems"][0])
@@ -502,21 +510,7 @@ def test_one_cars_late_pings_make_no_other_silent_car_look_fresh(
     one ping comes in stamped 110 s before it arrived (a clock behind, or a spool's backlog).
     The server's lag was that one delay, and every age was measured against now less it: the
     silent car read "41 s", amber, and cleared, beside a status `age_s` of 151."""
-    now = datetime.now(UTC).replace(microsecond=0)
-    post_pings(
-        api.client, api.tokens["admin"], drive("SF-002", now - timedelta(seconds=153), 0, 25, 3)
-    )
-    post_status(
-        api.client, api.tokens["admin"], "SF-002", **healthy_status(now - timedelta(seconds=151))
-    )
-    with seeded_engine.begin() as connection:  # stored as promptly as they were sent
-        for table in ("fact_vehicle_ping", "fact_vehicle_status"):
-            connection.execute(
-                text(
-                    f"UPDATE {table} SET received_at = ts + interval '0.5 s'"
-                    " WHERE vehicle_id = 'SF-002'"
-                )
-            )
+    now = reported_promptly_until(api, seeded_engine, "SF-002", seconds_ago=151)
     post_pings(
         api.client, api.tokens["admin"], drive("SF-001", now - timedelta(seconds=110), 0, 25, 1)
     )
