@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io
 import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -403,13 +405,27 @@ def test_archives_no_policy_could_be_are_refused_as_policy_files(tmp_path: Path)
         layer_0_bias=np.zeros(2),
     )
     assert bomb.stat().st_size < 100_000  # 32 MiB of zeros, packed small
+    # an array header declaring (2**40,) floats over no data: numpy allocated 8 TiB to read it
+    declares_more = io.BytesIO()
+    with zipfile.ZipFile(declares_more, "w") as archive:
+        archive.writestr("actuation.npy", npy_bytes(np.array("acc")))
+        header = npy_bytes(np.zeros(64)).replace(b"(64,)", b"(1099511627776,)")
+        archive.writestr("layer_0_weight.npy", header[: header.index(b"\n") + 1])
     cases = {
         "deflate64": (deflate64, "not a policy file"),
         "encrypted": (encrypted, "not a policy file"),
         "newer zip": (newer_zip, "not a policy file .zip file version 8.4"),
         "bomb": (bomb.read_bytes(), "unpacks to 33554[0-9]+ bytes, more than a policy's"),
         "structured": (structured.read_bytes(), "not a policy file"),
+        "declares more": (declares_more.getvalue(), r"declares \(1099511627776,\) of float64"),
     }
     for name, (content, message) in cases.items():
         with pytest.raises(PolicyFileError, match=message):
             read_policy(content, "acc", name)
+
+
+def npy_bytes(array: np.ndarray) -> bytes:
+    """`array` as the bytes of an .npy file."""
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    return buffer.getvalue()

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import math
 import zipfile
 import zlib
 from collections.abc import Mapping
@@ -326,6 +327,28 @@ def _accel_variant(
     )
 
 
+def _check_declared_size(listing: zipfile.ZipFile, member: zipfile.ZipInfo, label: str) -> None:
+    """Refuse an array whose header declares more data than its member holds: numpy allocates
+    what the header declares before reading, so a 567-byte file declaring (2**40,) floats asked
+    for 8 TiB (a MemoryError, which was the server's 500, on the loop that takes pings)."""
+    if not member.filename.endswith(".npy"):
+        return
+    with listing.open(member) as stream:
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(stream)
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(stream)
+        else:
+            raise PolicyFileError(f"{label}: {member.filename} is an .npy of version {version}")
+    declared = math.prod(shape) * dtype.itemsize
+    if declared > member.file_size:
+        raise PolicyFileError(
+            f"{label}: {member.filename} declares {shape} of {dtype}, {declared} bytes, in "
+            f"{member.file_size}"
+        )
+
+
 def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> PolicyNetwork:
     """A policy from the bytes of its `.npz` (`label` names it in errors): the server checks an
     upload and the agent a download with this before either is kept."""
@@ -334,15 +357,25 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     try:
         with zipfile.ZipFile(io.BytesIO(content)) as listing:
             unpacked = sum(member.file_size for member in listing.infolist())
+            if unpacked > MAX_POLICY_UNPACKED_BYTES:
+                raise PolicyFileError(
+                    f"{label}: unpacks to {unpacked} bytes, more than a policy's "
+                    f"{MAX_POLICY_UNPACKED_BYTES}"
+                )
+            for member in listing.infolist():
+                _check_declared_size(listing, member, label)
     # NotImplementedError: a member needing a newer zip version than zipfile reads (its
     # "version needed to extract"), raised while the directory is read
-    except (OSError, ValueError, zipfile.BadZipFile, NotImplementedError) as error:
+    # RuntimeError: an encrypted member, opened without its password
+    except (
+        OSError,
+        ValueError,
+        zipfile.BadZipFile,
+        NotImplementedError,
+        zlib.error,
+        RuntimeError,
+    ) as error:
         raise PolicyFileError(f"{label}: not a policy file ({error})") from None
-    if unpacked > MAX_POLICY_UNPACKED_BYTES:
-        raise PolicyFileError(
-            f"{label}: unpacks to {unpacked} bytes, more than a policy's "
-            f"{MAX_POLICY_UNPACKED_BYTES}"
-        )
     try:
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
