@@ -372,7 +372,7 @@ class Agent:
                 stop_within_authority=not self.stopping.needs_hand_back(now, reading),
                 within_commandable_speed=self.buttons is not None
                 or self._commandable_speed(reading, measured_accel),
-                driver_active=self._driver_active(reading, now, previous.commanding),
+                driver_active=self._driver_active(reading, now, previous),
             ),
             self.engage_policy,
         )
@@ -452,9 +452,14 @@ class Agent:
             return True
         return fix.lane == assignment.config.assigned_lane
 
-    def _driver_active(self, reading: CarReading | None, now: float, commanding: bool) -> bool:
+    def _driver_active(
+        self, reading: CarReading | None, now: float, previous: engage.EngageState
+    ) -> bool:
         """Brake, gas, a cruise button the agent is not pressing, or (on acceleration-actuated
-        cars, whose set points the agent never touches) a changed set point."""
+        cars, whose set points the agent never touches) a changed set point while the agent
+        commands the car or is held off by the driver: the hold-off runs from the driver's last
+        change, not the first (a RAV4 driver stepping the set speed down every 0.5 s had the car
+        taken back 0.2 s after a change, and handed back at the next)."""
         if reading is None:
             return False
         settings = (reading.acc_speed_setting_mph, reading.acc_gap_setting)
@@ -469,7 +474,11 @@ class Agent:
             reading.brake_pressed
             or reading.gas_pressed
             or bool(reading.buttons - own)
-            or (self.car.actuation == "accel" and commanding and changed)
+            or (
+                self.car.actuation == "accel"
+                and changed
+                and (previous.commanding or previous.mode is engage.Mode.OVERRIDDEN)
+            )
         )
 
     def _estimate_accel(self, reading: CarReading | None, now: float) -> float | None:

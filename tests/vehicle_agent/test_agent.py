@@ -587,6 +587,30 @@ def test_driver_override_hands_back_within_one_period(
         assert r.agent.state.mode is Mode.OVERRIDDEN
 
 
+def test_a_rav4_driver_stepping_the_set_speed_holds_the_agent_off_until_the_last_step(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """docs/agent.md: a changed set point on a RAV4 holds the agent off "3 s after the last
+    touch". Changes counted only while the agent commanded, so the hold-off ran from the first:
+    the agent took the car back 0.2 s after a later step, and handed it back at the next."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        r.emulator.driver_engage(set_speed_mph=50)
+        r.run(5.0, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        assert r.agent.state.mode is Mode.ENGAGED
+        start = r.clock.monotonic()
+        modes = []
+        for step in range(1, 9):  # the driver steps down 1 mph every 0.5 s for 4 s
+            r.emulator.acc.set_speed_mph = 50 - step
+            r.run(0.5)
+            modes.append(r.agent.state.mode)
+        last_step = start + 3.5
+        assert modes == [Mode.OVERRIDDEN] * 8
+        r.run(last_step + 3.0 - r.clock.monotonic() - 0.2)
+        assert r.agent.state.mode is Mode.OVERRIDDEN  # 2.8 s after the last step
+        r.run(3.0, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        assert r.agent.state.mode is Mode.ENGAGED
+
+
 def play_the_pcm(
     r: Rig, listener: can.BusABC, seconds: float, cruise_state: int | None
 ) -> list[dict[str, float]]:
