@@ -915,9 +915,12 @@ class Agent:
         path = self.policies.fetch(model.policy_sha256, actuation, download)
         return {**params, "policy": str(path)}
 
-    def accept_plan(self, plan: Plan, etag: str | None = None) -> bool:
+    def accept_plan(
+        self, plan: Plan, etag: str | None = None, served_at: datetime | None = None
+    ) -> bool:
         """Hold `plan` for the assigned lane; False (and no plan held) when it has no such lane
-        or is another corridor's (an answer for the assignment before a reassignment)."""
+        or is another corridor's (an answer for the assignment before a reassignment).
+        `served_at`, the server's clock when it sent the plan, dates its age on arrival."""
         config = self.config
         if config is None:
             return False
@@ -927,7 +930,9 @@ class Agent:
                     f"plan {plan.plan_id} is of corridor {plan.corridor}, the car is assigned "
                     f"{config.corridor_id}: not followed"
                 )
-            self.lane_plan = LanePlan(plan, config.assigned_lane, etag, self.clock.monotonic())
+            self.lane_plan = LanePlan(
+                plan, config.assigned_lane, etag, self.clock.monotonic(), served_at
+            )
         except PlanError as error:
             self.stats.plans_refused += 1
             log.warning("%s", error)
@@ -957,7 +962,7 @@ class Agent:
             if fetched.retry_after_s:
                 self._retry_after(now, fetched.retry_after_s)
         elif isinstance(fetched, NewPlan):
-            self.accept_plan(fetched.plan, fetched.etag)
+            self.accept_plan(fetched.plan, fetched.etag, fetched.served_at)
 
     def _retry_after(self, now: float, retry_after_s: float) -> None:
         """The next plan poll no sooner than the server asked (bounded by MAX_RETRY_AFTER_S)."""

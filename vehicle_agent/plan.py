@@ -126,7 +126,12 @@ class LanePlan:
     """One lane of a plan, ready for lookups, and what the agent knows about its freshness."""
 
     def __init__(
-        self, plan: Plan, lane: int, etag: str | None, received_s: float | None = None
+        self,
+        plan: Plan,
+        lane: int,
+        etag: str | None,
+        received_s: float | None = None,
+        served_at: datetime | None = None,
     ) -> None:
         lane_plan = plan.lane(lane)
         if lane_plan is None:
@@ -137,6 +142,12 @@ class LanePlan:
         # The car's monotonic time when the plan arrived: its age by the car's own steady
         # clock, which no wall-clock error or step can make younger.
         self.received_s = received_s
+        # How old the plan was when the server sent it, by the server's own clock (its answer's
+        # Date less published_at, 0 when unknown): counted on from arrival by the steady clock,
+        # the age a car's clock behind the server's cannot take away.
+        self.age_when_served_s = (
+            0.0 if served_at is None else max((served_at - plan.published_at).total_seconds(), 0.0)
+        )
         self.x_m, self.speeds = lane_plan.profile_points()
 
     @property
@@ -146,12 +157,13 @@ class LanePlan:
 
     def age_s(self, wall: datetime, now_s: float | None = None) -> float:
         """Seconds since the plan was published, by the car's wall clock; given the monotonic
-        `now_s`, at least the seconds since it arrived. A car whose clock runs behind the
-        server's (a Pi without a real-time clock after boot) or steps back would otherwise
-        take an old plan for a young one."""
+        `now_s`, at least its age when the server sent it plus the seconds since it arrived.
+        A car whose clock runs behind the server's (a Pi without a real-time clock after boot)
+        or steps back would otherwise take an old plan for a young one: with the time since
+        arrival alone, a plan served 150 s old was followed 150 s past its validity."""
         age = (wall - self.plan.published_at).total_seconds()
         if now_s is not None and self.received_s is not None:
-            age = max(age, now_s - self.received_s)
+            age = max(age, self.age_when_served_s + now_s - self.received_s)
         return age
 
     def reaches(self, x_m: float, shift_m: float = 0.0) -> bool:

@@ -24,6 +24,8 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from datetime import UTC, datetime
+from email.utils import parsedate_to_datetime
 from typing import Any
 
 import httpx
@@ -79,10 +81,12 @@ class RequestRefused(UnexpectedAnswer):
 
 @dataclass(frozen=True)
 class NewPlan:
-    """200: a plan (new, or changed since the ETag the car sent)."""
+    """200: a plan (new, or changed since the ETag the car sent), and when the server sent it
+    by its own clock (the answer's `Date`, to the second; None without one)."""
 
     plan: Plan
     etag: str | None
+    served_at: datetime | None = None
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,18 @@ def _retry_after(response: httpx.Response) -> float | None:
         return float(value) if value is not None else None
     except ValueError:
         return None
+
+
+def _served_at(response: httpx.Response) -> datetime | None:
+    """The answer's `Date` (RFC 9110: the server's clock when it answered), or None."""
+    value = response.headers.get("Date")
+    if value is None:
+        return None
+    try:
+        served = parsedate_to_datetime(value)
+    except (TypeError, ValueError, IndexError):
+        return None
+    return served if served.tzinfo is not None else served.replace(tzinfo=UTC)
 
 
 def _error_body(response: httpx.Response) -> ErrorResponse | None:
@@ -217,7 +233,7 @@ class ServerClient:
             plan = parse_plan(response.content)
         except PlanError as error:
             raise UnexpectedAnswer(str(error), response.status_code) from None
-        return NewPlan(plan, response.headers.get("ETag"))
+        return NewPlan(plan, response.headers.get("ETag"), _served_at(response))
 
     def policy(self, sha256: str) -> bytes:
         """The bytes of the policy file with this sha256 (the caller verifies them before use:

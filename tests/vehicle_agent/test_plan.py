@@ -110,6 +110,24 @@ def test_a_car_clock_behind_the_servers_cannot_keep_a_plan_past_its_validity() -
     assert not lane.is_fresh(behind, 600.0, now_s=1000.0 + 181.0)
 
 
+def test_a_plan_served_old_to_a_car_clock_behind_keeps_the_age_it_had_when_served() -> None:
+    """The server sent the plan 150 s after publishing it (its answer's Date). Counted from its
+    arrival alone, its age lost those 150 s on a car whose clock is an hour behind: followed
+    150 s past its validity, its targets read 625 m short at -4 m/s (audit)."""
+    served = PUBLISHED + timedelta(seconds=150)
+    lane = LanePlan(parse_plan(body()), 2, None, received_s=1000.0, served_at=served)
+    behind = PUBLISHED - timedelta(hours=1)
+    assert lane.age_s(behind, now_s=1000.0 + 31.0) == 181.0
+    assert lane.is_fresh(behind, 600.0, now_s=1000.0 + 30.0)
+    assert not lane.is_fresh(behind, 600.0, now_s=1000.0 + 31.0)
+    assert lane.profile(behind, -4.0, now_s=1000.0).shift_m == 600.0
+    # a Date before publishing (the server's clock stepped back): no age at arrival, not less
+    early = LanePlan(
+        parse_plan(body()), 2, None, received_s=1000.0, served_at=PUBLISHED - timedelta(hours=1)
+    )
+    assert early.age_s(behind, now_s=1000.0 + 31.0) == 31.0
+
+
 def test_the_plan_reaches_the_car_where_its_target_is_read_not_where_it_is() -> None:
     """The lane's targets run to 300 m (its last sub-segment ends there), read 50 m downstream
     of the car (a 12.5 s old plan at -4 m/s): a car at 290 m reads its target at 340 m, within

@@ -10,10 +10,10 @@ from typing import Any
 import httpx
 import pytest
 
-from sim.emulator.rig import vehicle_config
+from sim.emulator.rig import uniform_plan, vehicle_config
 from vehicle_agent.agent import MAX_BACKOFF_S, Schedule
 from vehicle_agent.gps import GpsdSource
-from vehicle_agent.server import ServerClient, UnexpectedAnswer
+from vehicle_agent.server import NewPlan, ServerClient, UnexpectedAnswer
 
 PINGS = [{"vehicle_id": "SF-001", "ts": f"2026-12-02T10:00:0{i}Z"} for i in range(3)]
 
@@ -197,3 +197,25 @@ def test_a_config_whose_period_would_stop_a_job_for_the_run_is_refused(
     http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(answer))
     with pytest.raises(UnexpectedAnswer, match=field):
         ServerClient(http, "SF-001", "token").config()
+
+
+def test_a_plan_answer_says_when_the_server_sent_it_by_its_own_clock() -> None:
+    """Its Date dates the plan's age on arrival, which a car clock behind cannot take away."""
+    plan = uniform_plan(25.0, published=datetime(2026, 12, 5, 12, 0, tzinfo=UTC))
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        headers = {"Date": "Sat, 05 Dec 2026 12:02:30 GMT", "ETag": '"7"'}
+        return httpx.Response(200, content=plan.model_dump_json(), headers=headers)
+
+    http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(answer))
+    fetched = ServerClient(http, "SF-001", "token").plan(2, None)
+    assert isinstance(fetched, NewPlan)
+    assert fetched.served_at == datetime(2026, 12, 5, 12, 2, 30, tzinfo=UTC)
+
+    def undated(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, content=plan.model_dump_json(), headers={"Date": "soon"})
+
+    http = httpx.Client(base_url="http://server.test", transport=httpx.MockTransport(undated))
+    fetched = ServerClient(http, "SF-001", "token").plan(2, None)
+    assert isinstance(fetched, NewPlan)
+    assert fetched.served_at is None
