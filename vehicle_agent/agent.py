@@ -348,6 +348,7 @@ class Agent:
                 time_s=now,
                 controller_built=not self._controller_unbuilt,
                 enabled=self._enabled(assignment),
+                assignment_current=self._running is None or self._running is assignment,
                 can_ok=car_state.valid,
                 acc_engaged=reading is not None and reading.acc_engaged,
                 set_point_reported=self.buttons is None
@@ -417,10 +418,7 @@ class Agent:
         if assignment is None:
             return False
         config = assignment.config
-        if not config.active or config.in_maintenance:
-            return False
-        # A new assignment while commanding: hand back, then take over with the new one.
-        return self._running is None or self._running is assignment
+        return config.active and not config.in_maintenance
 
     def _locate(
         self, fix: GpsFix | None, reading: CarReading | None, now: float
@@ -832,16 +830,16 @@ class Agent:
         except ServerError as error:
             # the assigned policy could not be downloaded: no good policy, no controller
             self._server_failed("policy", error)
+            self._controller_unbuilt = True  # first: the control pass reads the two apart
             self.assignment = None
-            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except PolicyFileError as error:
             # a download (or kept file) that is not the policy assigned: never run, retried
             log.error("vehicle %s: policy refused: %s", self.vehicle_id, error)
             self.stats.policies_refused += 1
+            self._controller_unbuilt = True  # first: the control pass reads the two apart
             self.assignment = None
-            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except OSError as error:
@@ -849,15 +847,15 @@ class Agent:
             # assigned policy cannot run, and the one before it is no longer assigned
             log.error("vehicle %s: policy not kept on disk: %s", self.vehicle_id, error)
             self.stats.policies_not_kept += 1
+            self._controller_unbuilt = True  # first: the control pass reads the two apart
             self.assignment = None
-            self._controller_unbuilt = True
             self._config_schedule.failed(now, 2.0)
             return
         except (ControllerConfigError, ValueError) as error:
             log.error("vehicle %s: config not usable: %s", self.vehicle_id, error)
             self.stats.server_errors["config"] += 1
+            self._controller_unbuilt = True  # first: the control pass reads the two apart
             self.assignment = None
-            self._controller_unbuilt = True
             self._config_schedule.done(now, CONFIG_REFRESH_S)
             return
         self._controller_unbuilt = False

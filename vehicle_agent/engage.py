@@ -39,7 +39,12 @@ class EngageInputs:
     # parameters valid. Without it the car has no controller, and the reason says so rather
     # than "not enabled", which is an operator's choice.
     controller_built: bool
+    # Active and not in maintenance: the operator's choice.
     enabled: bool
+    # The controller running is the one of the assignment held: a new config (any field of it)
+    # hands the car back, and the agent takes over anew with the new controller. Reported as
+    # its own reason: it was "not enabled", the operator's choice, which it is not.
+    assignment_current: bool
     can_ok: bool
     acc_engaged: bool
     # The car reports the ACC set speed and gap a button car's presses step from (always true
@@ -77,6 +82,7 @@ class EngageInputs:
 CHECKS: tuple[tuple[str, str], ...] = (
     ("controller_built", "the assigned controller cannot run (its policy or parameters)"),
     ("enabled", "agent not enabled for this vehicle"),
+    ("assignment_current", "a new assignment: taking over anew"),
     ("can_ok", "CAN inputs not healthy"),
     ("acc_engaged", "ACC not engaged by the driver"),
     ("set_point_reported", "ACC set speed or gap not reported by the car"),

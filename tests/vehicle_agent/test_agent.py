@@ -1106,6 +1106,25 @@ def test_a_car_moved_to_another_corridor_follows_no_plan_of_the_old_one(
         assert r.agent.stats.plans_refused == 1
 
 
+def test_a_new_config_hands_back_saying_so_not_that_the_operator_disabled_the_car(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """A config whose status period alone changed hands the car back to take over anew with a
+    new controller; the reason (status, log, hand-back counts) said "agent not enabled for this
+    vehicle", the operator's choice, which it was not."""
+    with rig("cadillac_xt5", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        config = r.agent.config
+        assert config is not None
+        assert r.agent.assignment is not None
+        corridor = r.agent.assignment.corridor
+        r.agent.configure(config.model_copy(update={"status_period_s": 20.0}), corridor)
+        r.run(0.1)
+        assert r.agent.stats.handbacks == {"a new assignment: taking over anew": 1}
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r)
+
+
 def test_lane_change_recovery_engages_on_a_cut_in_and_releases(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
