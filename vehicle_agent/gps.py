@@ -8,7 +8,7 @@ import logging
 import socket
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime
 from typing import Any, Protocol
 
@@ -106,6 +106,12 @@ class GpsdSource:
                 satellites=self._satellites,
                 utc=_utc(report.get("time")),
             )
+        elif report.get("class") == "TPV" and "mode" in report and int(report["mode"]) < 2:
+            # gpsd's word that the receiver lost its fix comes with no position: the last fix
+            # stops being one now, not 2 s later when it ages out, while the car drove on
+            # extrapolated from it
+            if self._latest is not None:
+                self._latest = replace(self._latest, time_s=self.clock(), has_fix=False)
 
     def _run(self) -> None:
         while not self._stop.is_set():

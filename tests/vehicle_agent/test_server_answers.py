@@ -107,6 +107,20 @@ def test_a_sky_report_without_its_satellites_keeps_the_count() -> None:
     assert gpsd({"class": "SKY", "uSat": 7}, tpv).latest().satellites == 7  # type: ignore[union-attr]
 
 
+def test_gpsds_no_fix_report_ends_the_fix_at_once() -> None:
+    """gpsd reports a lost fix as a TPV of mode 1 with no position; it was dropped, and the
+    last 3D fix stayed current for 2 s more, the car driving on extrapolated from it."""
+    fixed = {"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6}
+    lost = gpsd(fixed, {"class": "TPV", "mode": 1}).latest()
+    assert lost is not None
+    assert not lost.has_fix
+    assert (lost.lat, lost.lon) == (36.0, -86.6)  # where it was last known, for the record
+    regained = gpsd(fixed, {"class": "TPV", "mode": 1}, fixed).latest()
+    assert regained is not None
+    assert regained.has_fix
+    assert gpsd({"class": "TPV", "mode": 1}).latest() is None  # no fix yet: still none
+
+
 def test_a_fix_carries_the_receivers_time_where_gpsd_gives_one() -> None:
     tpv = {"class": "TPV", "mode": 3, "lat": 36.0, "lon": -86.6}
     timed = gpsd(tpv | {"time": "2026-12-03T07:30:00.250Z"}).latest()
