@@ -195,16 +195,35 @@ def replay(recording: Path, speed: float, shift_to_now: bool) -> None:
     offset = live_offset(snapshots, speed, datetime.now(UTC)) if shift_to_now else timedelta(0)
     current = settings()
 
+    skipped: list[str] = []
+
     async def work(sessions: async_sessionmaker[AsyncSession]) -> int:
         store = _storer(sessions, lambda snapshot: offset, current.ping_max_future_s)
-        return await replay_snapshots(snapshots, store, speed=speed)
+
+        async def store_or_skip(snapshot: RecordedSnapshot) -> None:
+            # A line the poller recorded as fetched but no usable answer (an expired token's
+            # 200): skipped as the poller skipped it, the rest stored. Stopping at the first
+            # left every later minute of a backfill unstored.
+            try:
+                await store(snapshot)
+            except PollFailed as error:
+                skipped.append(str(error))
+                click.echo(f"skipped {error}", err=True)
+
+        return await replay_snapshots(snapshots, store_or_skip, speed=speed)
 
     with database(current) as database_url:
         try:
             count = asyncio.run(_with_database(database_url, work))
-        except (PollFailed, StoreFailed) as error:
+        except StoreFailed as error:
             raise CliError(f"{recording.name}: {error}") from None
-    click.echo(f"replayed {count} snapshot(s) from {recording}")
+    stored = count - len(skipped)
+    if skipped:
+        raise CliError(
+            f"{recording.name}: stored {stored} of {count} snapshot(s); {len(skipped)} "
+            "unusable line(s) skipped (above)"
+        )
+    click.echo(f"replayed {stored} snapshot(s) from {recording}")
 
 
 @inrix.command("convert")

@@ -422,11 +422,12 @@ def test_a_broken_recording_is_one_line_naming_the_line(
     assert len(result.stderr.strip().splitlines()) == 1
 
 
-def test_a_replayed_snapshot_stamped_in_the_future_stops_the_replay_naming_its_line(
+def test_a_replayed_snapshot_stamped_in_the_future_is_skipped_naming_its_line(
     seeded_database_url: str, seeded_engine: Engine, drive: Path, tmp_path: Path
 ) -> None:
     """Replays and polls stored readings a year ahead (and one shifted to the year 4216): only
-    the API refused a stamp in the future."""
+    the API refused a stamp in the future. The replay skips that snapshot, stores the rest (it
+    stopped there until 2026-12-05, and a backfill lost every later minute) and fails."""
     env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
     recording = tmp_path / "inrix.jsonl"
     run_cli("inrix", "convert", str(drive), str(recording), env=env)
@@ -440,23 +441,32 @@ def test_a_replayed_snapshot_stamped_in_the_future_stops_the_replay_naming_its_l
     result = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
 
     assert result.returncode == 1
-    assert "inrix.jsonl: line 2: timestamp " in result.stderr
+    assert "line 2: timestamp " in result.stderr
     assert "s in the future; nothing of this snapshot was stored" in result.stderr
+    assert f"stored {len(lines) - 1} of {len(lines)} snapshot(s); 1 unusable" in result.stderr
     stored = {measured for _, measured in estimates(seeded_engine)}
-    assert len(stored) == 1  # the snapshot before it, none from the future
+    assert len(stored) == len(lines) - 1  # every snapshot but the one from the future
     assert max(stored) < datetime.now(UTC)
 
 
-def test_a_recorded_snapshot_that_is_not_a_response_stops_the_replay(
-    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+def test_a_recorded_answer_that_is_no_response_is_skipped_and_the_rest_replayed(
+    seeded_database_url: str, seeded_engine: Engine, drive: Path, tmp_path: Path
 ) -> None:
-    recording = tmp_path / "odd.jsonl"
-    recording.write_text('{"recorded_at": "2021-03-15T13:18:00Z", "response": {"result": 1}}\n')
+    """`inrix poll --record` keeps every answer it fetched, an expired token's 200 included;
+    the replay stopped at the first such line, and a backfill lost every later minute."""
     env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
-    result = run_cli("inrix", "replay", str(recording), env=env)
+    recording = tmp_path / "odd.jsonl"
+    run_cli("inrix", "convert", str(drive), str(recording), env=env)
+    lines = recording.read_text().splitlines()
+    expired = {"statusId": 43, "statusText": "Token expired", "result": None}
+    entry = json.loads(lines[1])
+    lines.insert(1, json.dumps({"recorded_at": entry["recorded_at"], "response": expired}))
+    recording.write_text("\n".join(lines) + "\n")
+    result = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
     assert result.returncode == 1
-    assert "odd.jsonl: line 1: not an INRIX segment-speed response: result" in result.stderr
-    assert estimates(seeded_engine) == {}
+    assert "line 2: not an INRIX segment-speed response: result" in result.stderr
+    assert f"stored {len(lines) - 1} of {len(lines)} snapshot(s)" in result.stderr
+    assert len({measured for _, measured in estimates(seeded_engine)}) == len(lines) - 1
 
 
 def test_a_feed_folder_with_empty_cells_converts_leaving_them_out(tmp_path: Path) -> None:
