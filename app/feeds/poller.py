@@ -49,7 +49,39 @@ MAX_RESPONSE_BYTES = 32 * 1024 * 1024
 
 
 class PollFailed(Exception):
-    """One poll did not yield a usable response; the message is safe to log."""
+    """One poll did not yield a usable response; the message is safe to log.
+
+    `wait_s`: the provider asked to be left alone this long (429 or 503 with Retry-After);
+    `final_this_period`: asking again within the period would get the same answer (a 4xx but
+    408 and 429: a key refused, a wrong URL), so the next request waits for the next period."""
+
+    def __init__(
+        self, message: str, *, wait_s: float | None = None, final_this_period: bool = False
+    ) -> None:
+        super().__init__(message)
+        self.wait_s = wait_s
+        self.final_this_period = final_this_period
+
+
+# Statuses a provider answers that asking again at once may change (a timeout, a rate limit).
+RETRYABLE_CLIENT_ERRORS = frozenset({408, 429})
+
+
+def _provider_refusal(response: httpx.Response) -> PollFailed:
+    """The PollFailed for a non-200 answer, carrying what it says about asking again."""
+    status = response.status_code
+    wait_s: float | None = None
+    if status in (429, 503):
+        try:
+            wait_s = max(float(response.headers.get("Retry-After", "")), 0.0)
+        except ValueError:  # absent, or an HTTP date: the doubling back-off stands
+            wait_s = None
+    return PollFailed(
+        f"provider answered HTTP {status}"
+        + (f", asking to wait {wait_s:.0f} s" if wait_s is not None else ""),
+        wait_s=wait_s,
+        final_this_period=400 <= status < 500 and status not in RETRYABLE_CLIENT_ERRORS,
+    )
 
 
 class StoreFailed(Exception):
@@ -107,7 +139,7 @@ class InrixPoller:
                 "GET", self._url, headers=headers, timeout=REQUEST_TIMEOUT_S
             ) as response:
                 if response.status_code != 200:
-                    raise PollFailed(f"provider answered HTTP {response.status_code}")
+                    raise _provider_refusal(response)
                 content = await self._read_capped(response)
         except httpx.HTTPError as error:
             reason = str(error) or type(error).__name__
@@ -152,18 +184,25 @@ class InrixPoller:
         """
         stored = 0
         next_poll = self._clock()
+        # the provider's Retry-After: no request before this (the poller's clock)
+        quiet_until = next_poll
         while count is None or stored < count:
             period_ends = next_poll + self._period_s
             delay = self._first_retry_s
             fetched = False
             while True:
                 failures: list[str] = []
-                if not fetched:
+                if not fetched and self._clock() >= quiet_until:
                     try:
                         self._keep(await self._fetch_within_deadline(), record)
                         fetched = True
                     except PollFailed as error:
                         failures.append(f"INRIX poll failed: {error}")
+                        if error.wait_s is not None:
+                            quiet_until = self._clock() + error.wait_s
+                            delay = max(delay, error.wait_s)
+                        if error.final_this_period:
+                            fetched = True  # no second request this period: the same answer
                 # the backlog is stored whether or not this period's fetch succeeded: minutes
                 # kept while the database was down need the database, not the provider
                 try:
@@ -194,7 +233,9 @@ class InrixPoller:
                 delay = min(delay * 2, self._max_retry_s)
             if count is not None and stored >= count:
                 break
-            next_poll = period_ends
+            # a period overrun (a slow provider, a slow store) skips the periods it covered
+            # rather than polling back to back to catch up; a Retry-After pushes it further
+            next_poll = max(period_ends, self._clock(), quiet_until)
             await self._sleep(max(0.0, next_poll - self._clock()))
         return stored
 

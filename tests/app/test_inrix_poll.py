@@ -487,3 +487,53 @@ def test_a_database_error_in_a_store_is_a_store_failure_not_a_poll_failure(
             await engine.dispose()
 
     asyncio.run(run())
+
+
+def test_a_provider_asking_to_wait_is_left_alone_that_long(snapshot: RecordedSnapshot) -> None:
+    """A 429 with Retry-After: 300 for 5 minutes drew 31 requests (the back-off restarted at
+    1 s every period); a refused key (401) was asked 6 times a minute. Now: none before the
+    wait is over, and one a period for an answer asking again cannot change."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    asked_at: list[float] = []
+
+    def limited(request: httpx.Request) -> httpx.Response:
+        asked_at.append(clock.now - 1000)
+        if clock.now < 1300:
+            return httpx.Response(429, headers={"Retry-After": "300"})
+        return httpx.Response(200, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        return None
+
+    assert polling(snapshot, clock, limited, store, count=1) == 1
+    assert asked_at == [0, 300]
+    asked_at.clear()
+    clock = FakeClock()
+
+    def refusing(request: httpx.Request) -> httpx.Response:
+        asked_at.append(clock.now - 1000)
+        return httpx.Response(200 if clock.now >= 1180 else 401, content=body)
+
+    assert polling(snapshot, clock, refusing, store, count=1) == 1
+    assert asked_at == [0, 60, 120, 180]
+
+
+def test_a_period_overrun_skips_the_periods_it_covered(snapshot: RecordedSnapshot) -> None:
+    """Two stores taking 90 s of a 60 s period: the next poll was due in the past, and once the
+    database recovered the poller asked back to back to catch up (0 s apart)."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    asked_at: list[float] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        asked_at.append(clock.now - 1000)
+        return httpx.Response(200, content=body)
+
+    async def slow_store(recorded_snapshot: RecordedSnapshot) -> None:
+        if len(asked_at) <= 2:  # the first two stores take 90 s, then the database recovers
+            await clock.sleep(90.0)
+
+    assert polling(snapshot, clock, answer, slow_store, count=4) == 4
+    gaps = [later - earlier for earlier, later in zip(asked_at, asked_at[1:], strict=False)]
+    assert min(gaps) >= 60.0
