@@ -13,6 +13,7 @@ import base64
 import hashlib
 import hmac
 import json
+import math
 import secrets
 import time
 from dataclasses import dataclass
@@ -82,7 +83,9 @@ def session_cookie(settings: Settings, username: str, password_hash: str, now: f
     payload = json.dumps(
         {
             "u": username,
-            "t": int(now),
+            # to the millisecond: a logout ends the sessions issued before its instant, and a
+            # login in the same second after it must not read as before it
+            "t": math.floor(now * 1000) / 1000,
             "n": secrets.token_hex(16),
             "p": password_fingerprint(password_hash),
         },
@@ -210,6 +213,9 @@ async def current_user(request: Request, session: SessionDep) -> PageUser:
         raise LoginRequired(_next_path(request))
     user = await session.scalar(select(OpsUser).where(OpsUser.username == claims.username))
     if user is None or password_fingerprint(user.password_hash) != claims.fingerprint:
+        raise LoginRequired(_next_path(request))
+    ended = user.sessions_valid_from
+    if ended is not None and claims.issued_at < ended.timestamp():
         raise LoginRequired(_next_path(request))
     return PageUser(user.username, user.role, csrf_token(settings, claims.nonce))
 

@@ -65,4 +65,6 @@ class OpsUser(Base):
     failed_logins: Mapped[int] = mapped_column(Integer, server_default=text("0"))
     last_failed_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     last_login_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
+    # Sessions issued before this are over (set at logout: every session of the user ends).
+    sessions_valid_from: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     created_at: Mapped[datetime] = created_at_column()

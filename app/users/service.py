@@ -20,7 +20,7 @@ from datetime import datetime, timedelta
 from typing import Literal
 
 import anyio.to_thread
-from sqlalchemy import literal_column, select
+from sqlalchemy import literal_column, select, update
 from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import Session
@@ -193,6 +193,14 @@ async def log_in(session: AsyncSession, username: str, password: str, now: datet
     user.last_login_at = now
     await session.flush()
     return LoginResult(user)
+
+
+async def end_sessions(session: AsyncSession, username: str, now: datetime) -> None:
+    """End every session of the user issued before `now` (a logout): the dashboard refuses a
+    cookie issued before `sessions_valid_from`."""
+    await session.execute(
+        update(OpsUser).where(OpsUser.username == username).values(sessions_valid_from=now)
+    )
 
 
 def list_users(session: Session) -> list[OpsUser]:

@@ -13,7 +13,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
 from app.core.ratelimit import RateLimiter, retry_after_header
 from app.core.sessions import SessionDep
-from app.users.service import log_in
+from app.users.service import end_sessions, log_in
 from dashboards.auth import (
     UserDep,
     check_form,
@@ -98,9 +98,14 @@ async def login_submit(
 
 
 @router.post("/logout")
-async def logout(user: UserDep, csrf_token: Annotated[str, Form()] = "") -> RedirectResponse:
-    """End the session."""
+async def logout(
+    user: UserDep, session: SessionDep, csrf_token: Annotated[str, Form()] = ""
+) -> RedirectResponse:
+    """End the user's sessions: this browser's cookie, and every cookie issued to the user
+    before now (`ops_user.sessions_valid_from`). Deleting the cookie alone left a copy of it
+    valid for the rest of its 12 h."""
     check_form(user, csrf_token, needs_operator=False)
+    await end_sessions(session, user.username, datetime.now(UTC))
     response = RedirectResponse("/login", status_code=303)
     clear_session(response)
     return response

@@ -198,6 +198,22 @@ def test_logout_ends_the_session(site: str) -> None:
         assert client.get("/fleet").status_code == 303
 
 
+def test_logout_ends_a_copy_of_the_cookie_and_the_users_other_sessions(site: str) -> None:
+    """Logging out only deleted the browser's cookie: a copy of it (a shared computer, a
+    proxy's log) opened the dashboard for the rest of its 12 h. Every session of the user
+    issued before the logout ends; a new login works."""
+    with logged_in(site, "operator") as client, logged_in(site, "operator") as other_device:
+        copied = client.cookies.get("sf_session")
+        assert copied is not None
+        assert post_form(client, "/fleet", "/logout").status_code == 303
+        with httpx.Client(base_url=site, timeout=30) as thief:
+            thief.cookies.set("sf_session", copied)
+            assert thief.get("/fleet").status_code == 303
+        assert other_device.get("/fleet").status_code == 303
+    with logged_in(site, "operator") as again:
+        assert again.get("/fleet").status_code == 200
+
+
 # --- roles and CSRF -----------------------------------------------------------------------------
 
 
