@@ -180,7 +180,9 @@ class InrixPoller:
         """Poll until `count` snapshots were stored (forever if None); returns how many.
 
         Each period fetches one response (retried on PollFailed, from the fetch or from `store`
-        finding it unusable), hands it to `record` at once, and stores the backlog oldest first.
+        finding it unusable), hands it to `record` at once, and stores the backlog oldest first,
+        all of it: minutes fetched while the database was away are stored though that passes
+        `count` (stopping at `count` left them fetched and never stored).
         """
         stored = 0
         next_poll = self._clock()
@@ -206,7 +208,7 @@ class InrixPoller:
                 # the backlog is stored whether or not this period's fetch succeeded: minutes
                 # kept while the database was down need the database, not the provider
                 try:
-                    while self.backlog and (count is None or stored < count):
+                    while self.backlog:
                         try:
                             await self._store_within_deadline(store, self.backlog[0])
                         except PollFailed:  # not a usable response: dropped

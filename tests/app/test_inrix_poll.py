@@ -537,3 +537,24 @@ def test_a_period_overrun_skips_the_periods_it_covered(snapshot: RecordedSnapsho
     assert polling(snapshot, clock, answer, slow_store, count=4) == 4
     gaps = [later - earlier for earlier, later in zip(asked_at, asked_at[1:], strict=False)]
     assert min(gaps) >= 60.0
+
+
+def test_a_counted_poll_stores_every_minute_it_fetched_before_it_stops(
+    snapshot: RecordedSnapshot,
+) -> None:
+    """`inrix poll --count 2` after 3 minutes without a database stored minutes 0 and 1 and
+    exited, minutes 2 and 3 fetched and never stored."""
+    clock = FakeClock()
+    body = orjson.dumps(snapshot.response)
+    stored: list[float] = []
+
+    def answer(request: httpx.Request) -> httpx.Response:
+        return httpx.Response(200, content=body)
+
+    async def store(recorded_snapshot: RecordedSnapshot) -> None:
+        if clock.now < 1180:
+            raise StoreFailed("database: connection refused")
+        stored.append(clock.now)
+
+    assert polling(snapshot, clock, answer, store, count=2) == 4
+    assert len(stored) == 4
