@@ -196,9 +196,18 @@ class TokenCache:
             del self._pending[token_hash]
         future.set_result(found)
         if len(self._entries) >= MAX_CACHED_TOKENS:
-            self._entries.clear()
+            self._make_room()
         self._entries[token_hash] = (self._clock() + self._ttl_s, found)
         return found
+
+    def _make_room(self) -> None:
+        """Drop the refused tokens' entries, and everything only if the cache is still full:
+        clearing it whole, 10,000 made-up tokens (a 401 each, unthrottled) sent every car's
+        next request to the database."""
+        for refused in [key for key, (_, found) in self._entries.items() if found is None]:
+            del self._entries[refused]
+        if len(self._entries) >= MAX_CACHED_TOKENS:
+            self._entries.clear()
 
     async def _lookup(self, token_hash: str) -> Principal | None:
         async with self._engine.begin() as connection:

@@ -9,6 +9,7 @@ import pytest
 from sqlalchemy import Engine, text
 
 from app.auth import Principal, TokenCache
+from app.auth import tokens as tokens_module
 from app.auth.tokens import OUTAGE_GRACE_S, LookupAbandoned
 from app.core.db import make_async_engine
 from tests.support.api import ping, serving
@@ -84,6 +85,31 @@ def test_a_revoked_token_is_refused_once_its_cache_entry_expires(
             await engine.dispose()
 
     assert asyncio.run(scenario()) == [True, True, False]
+
+
+def test_made_up_tokens_filling_the_cache_do_not_push_out_the_fleets(
+    seeded_database_url: str, seeded_engine: Engine, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A full cache was cleared whole: made-up tokens (a 401 each) flushed every car's entry,
+    and the fleet's next requests all went to the database. Refused entries go first now; the
+    car's token, revoked meanwhile, is still answered from its entry (no lookup)."""
+    monkeypatch.setattr(tokens_module, "MAX_CACHED_TOKENS", 20)
+    token = issue(seeded_engine, "vehicle", "SF-001")
+
+    async def scenario() -> bool:
+        engine = make_async_engine(seeded_database_url)
+        cache = TokenCache(engine, ttl_s=60)
+        try:
+            assert await cache.principal(token) is not None
+            revoke(seeded_engine)
+            for made_up in range(40):
+                assert await cache.principal(f"sf_made_up_{made_up}") is None
+            return await cache.principal(token) is not None
+        finally:
+            await cache.close(timeout_s=5.0)
+            await engine.dispose()
+
+    assert asyncio.run(scenario())
 
 
 def test_a_token_known_long_ago_is_no_answer_when_its_lookup_fails(
