@@ -36,6 +36,12 @@ DOCS = [
     *_COMMON,
     (b"content-security-policy", _POLICY.format(inline=" 'unsafe-inline'").encode()),
 ]
+# Answers are a car's config, a fleet's state, a logged-in page: no browser or proxy keeps
+# them (a shared computer's cache showed the dashboard to whoever came next). The dashboard's
+# and the docs' own assets (`/static/`) are not such answers, and stay cacheable; a response
+# that says how it may be cached itself keeps its say.
+NO_STORE = (b"cache-control", b"no-store")
+ASSETS_PREFIX = "/static/"
 # Browsers honour HSTS only over HTTPS; behind a TLS-terminating proxy (proxy_headers on) the
 # scheme is https, and the header keeps later visits off plain HTTP.
 HSTS = (b"strict-transport-security", b"max-age=31536000")
@@ -52,6 +58,8 @@ class SecurityHeaders:
             await self.app(scope, receive, send)
             return
         headers = DOCS if scope["path"] in DOCS_PATHS else STRICT
+        if not scope["path"].startswith(ASSETS_PREFIX):
+            headers = [*headers, NO_STORE]
         if scope.get("scheme") == "https":
             headers = [*headers, HSTS]
 

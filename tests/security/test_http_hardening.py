@@ -56,7 +56,13 @@ def test_every_kind_of_response_carries_the_security_headers(
         policy = answer.headers["content-security-policy"]
         assert "script-src 'self';" in policy, kind
         assert "frame-ancestors 'none'" in policy, kind
+        # kept by no browser or proxy: a shared computer's cache showed the next user the
+        # fleet's state (security audit)
+        assert answer.headers["cache-control"] == "no-store", kind
     assert answers["fast ping path"].status_code == 200
+    asset = api.get("/static/dashboard.js")
+    assert asset.status_code == 200
+    assert "no-store" not in asset.headers.get("cache-control", "")
 
 
 def test_api_docs_are_served_from_local_assets(api: httpx.Client) -> None:
