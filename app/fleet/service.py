@@ -16,6 +16,7 @@ from sqlalchemy import DateTime, Select, Text, and_, bindparam, func, select, tr
 from sqlalchemy.dialects.postgresql import ARRAY
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import aliased
+from sqlalchemy.sql.selectable import TableValuedAlias
 
 from app.fleet.readiness import (
     CHECK_NAMES,
@@ -242,6 +243,19 @@ def _latest_query(
     return query
 
 
+def _per_vehicle_instants(instants: Mapping[str, datetime], name: str) -> TableValuedAlias:
+    """`instants` as a derived table `name` of (vehicle_id, ts) rows, bound as two arrays: one
+    join for the whole fleet, where a branch a car made a hundred to build and compile."""
+    return (
+        func.unnest(
+            bindparam("vehicle_ids", list(instants), type_=ARRAY(Text)),
+            bindparam("ts", list(instants.values()), type_=ARRAY(DateTime(timezone=True))),
+        )
+        .table_valued("vehicle_id", "ts")
+        .render_derived(name=name)
+    )
+
+
 async def _corridors_at(
     session: AsyncSession, pinged_at: Mapping[str, datetime]
 ) -> dict[str, tuple[str, float]]:
@@ -249,14 +263,7 @@ async def _corridors_at(
     from the assignment history, as ingest matched the ping to it."""
     if not pinged_at:
         return {}
-    pings = (
-        func.unnest(
-            bindparam("vehicle_ids", list(pinged_at), type_=ARRAY(Text)),
-            bindparam("ts", list(pinged_at.values()), type_=ARRAY(DateTime(timezone=True))),
-        )
-        .table_valued("vehicle_id", "ts")
-        .render_derived(name="last_ping")
-    )
+    pings = _per_vehicle_instants(pinged_at, "last_ping")
     rows = await session.execute(
         select(pings.c.vehicle_id, Corridor.corridor_id, Corridor.postmile_at_start)
         .join(
@@ -284,21 +291,14 @@ async def _earlier_statuses(
     # Each car's window comes as two arrays joined against the reports, not as one OR branch a
     # car: building and compiling a hundred branches held the event loop for milliseconds a
     # view (`python -m bench.dashboard --profile-fleet 20`).
-    windows = (
-        func.unnest(
-            bindparam("vehicle_ids", list(since), type_=ARRAY(Text)),
-            bindparam("since", list(since.values()), type_=ARRAY(DateTime(timezone=True))),
-        )
-        .table_valued("vehicle_id", "since")
-        .render_derived(name="report_window")
-    )
+    windows = _per_vehicle_instants(since, "report_window")
     rows = await session.execute(
         select(VehicleStatus.vehicle_id, *STATUS_COLUMNS)
         .join(
             windows,
             and_(
                 VehicleStatus.vehicle_id == windows.c.vehicle_id,
-                VehicleStatus.ts >= windows.c.since,
+                VehicleStatus.ts >= windows.c.ts,
             ),
         )
         .order_by(VehicleStatus.vehicle_id, VehicleStatus.ts)
