@@ -29,10 +29,10 @@ ENV PYTHONUNBUFFERED=1 \
     SMOOTHFLEET_PORT=8000 \
     SMOOTHFLEET_DATA_DIR=/data
 EXPOSE 8000
-# The start period covers the migrations `serve` runs first (28 s measured on a fresh database
-# by the same command on a loaded 2-core machine; `serve` gives its workers 120 s): without it
-# three failed checks, 30 s, marked the api unhealthy and compose gave up on the services
-# waiting for it.
+# The start period covers the migrations `serve` runs first (an audit saw 28 s on a fresh
+# database on a loaded 2-core machine; `serve` gives its workers 120 s): without it three
+# failed checks, 30 s, could mark the api unhealthy before it served, and compose gave up on
+# the services waiting for it.
 HEALTHCHECK --interval=10s --timeout=3s --retries=3 --start-period=120s \
     CMD python -c "import httpx,sys; sys.exit(httpx.get('http://127.0.0.1:8000/readyz').status_code != 200)"
 ENTRYPOINT ["smoothfleet"]

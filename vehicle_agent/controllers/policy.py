@@ -139,8 +139,8 @@ def accel_features(
 
     Without a leader in radar range the gap reads as the range and the relative speed as 0,
     and so does a leader measured beyond it: training's radar sees none past `GAP_SCALE_M`
-    (`sim.av.RADAR_RANGE_M`), while the RAV4 reports leaders up to 250 m, which the policy,
-    never shown "present" with a gap past the range, answered with twice the acceleration.
+    (`sim.av.RADAR_RANGE_M`), while the RAV4 reports leaders up to 250 m: the policy was never
+    shown "present" with a gap past the range, and its answer there is untrained.
     """
     gap_measured = np.asarray(gap_m, dtype=np.float64)
     present = np.asarray(lead_present, dtype=bool) & (gap_measured <= GAP_SCALE_M)
