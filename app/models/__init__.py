@@ -1,6 +1,6 @@
 """The star schema in one place: dimensions, facts, access."""
 
-from app.models.access import ApiToken, OpsUser
+from app.models.access import ApiToken, OpsLoginFailure, OpsUser
 from app.models.base import Base
 from app.models.dimensions import (
     Corridor,
@@ -27,6 +27,7 @@ __all__ = [
     "I24Segment",
     "InrixEstimate",
     "InrixSegment",
+    "OpsLoginFailure",
     "OpsUser",
     "PlanRun",
     "Policy",

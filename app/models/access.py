@@ -68,3 +68,23 @@ class OpsUser(Base):
     # Sessions issued before this are over (set at logout: every session of the user ends).
     sessions_valid_from: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     created_at: Mapped[datetime] = created_at_column()
+
+
+class OpsLoginFailure(Base):
+    """Failed logins of one account from one client address since that address's last success.
+
+    The wait between attempts is counted per (account, address): counted per account alone, a
+    stranger's one wrong guess every five minutes kept the account's owner out for good.
+    """
+
+    __tablename__ = "ops_login_failure"
+    __table_args__ = (
+        {"comment": "Failed dashboard logins per (user, client address) since its last success."},
+    )
+
+    username: Mapped[str] = mapped_column(
+        ForeignKey("ops_user.username", ondelete="CASCADE"), primary_key=True
+    )
+    client_address: Mapped[str] = mapped_column(Text, primary_key=True)
+    failures: Mapped[int] = mapped_column(Integer)
+    last_failed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

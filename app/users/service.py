@@ -1,11 +1,16 @@
 """Dashboard users (table ops_user): salted scrypt passwords and a login that slows down guessing.
 
-A wrong password (or unknown username) counts against the account; from the third failure in a
-row the account must wait 1, 2, 4, ... s (at most LOCKOUT_MAX_S) after its last failure before
-another attempt is even checked. A success resets the count. A username that is no account is
-counted and made to wait the same way, in the server process's memory (an account's count is
-in its row): the answers do not tell which usernames exist. With several workers a made-up
-name's count is per worker, so its waits can come later than an account's.
+A wrong password (or unknown username) counts against the account *from that client address*
+(table ops_login_failure); from the third failure in a row there, that address must wait 1, 2,
+4, ... s (at most LOCKOUT_MAX_S) after its last failure before another attempt from it is even
+checked. A success resets that address's count. Counted per account alone, a stranger's one
+wrong guess every five minutes kept the owner out for good (a security audit); per (account,
+address), the stranger waits and the owner, elsewhere, does not. Guessing from many addresses
+meets the dashboard's per-address limit on each and the account's count (`failed_logins`,
+shown by `smoothfleet users list`), which counts every address's failures since the account's
+last success. A username that is no account is counted and made to wait the same way, in the
+server process's memory: the answers do not tell which usernames exist. With several workers a
+made-up name's count is per worker, so its waits can come later than an account's.
 """
 
 from __future__ import annotations
@@ -20,12 +25,12 @@ from datetime import datetime, timedelta
 from typing import Literal
 
 import anyio.to_thread
-from sqlalchemy import literal_column, select, update
+from sqlalchemy import delete, literal_column, select, update
 from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.ext.asyncio import AsyncSession
 from sqlalchemy.orm import Session
 
-from app.models import OpsUser
+from app.models import OpsLoginFailure, OpsUser
 
 OpsRole = Literal["viewer", "operator", "admin"]
 OPS_ROLES: tuple[OpsRole, ...] = ("viewer", "operator", "admin")
@@ -40,7 +45,7 @@ SCRYPT_P = 1
 SCRYPT_KEY_BYTES = 32
 SALT_BYTES = 16
 
-FREE_FAILURES = 2  # failures before the account starts waiting between attempts
+FREE_FAILURES = 2  # failures before an (account, address) starts waiting between attempts
 LOCKOUT_MAX_S = 300.0
 
 
@@ -96,7 +101,8 @@ def check_new_user(username: str, role: str, password: str) -> None:
 
 
 def save_user(session: Session, username: str, role: str, password: str) -> bool:
-    """Create the user, or reset its role and password; True when it was created."""
+    """Create the user, or reset its role and password (which ends every address's wait on it:
+    the admin's way to let a user in); True when it was created."""
     check_new_user(username, role, password)
     statement = insert(OpsUser).values(
         username=username, role=role, password_hash=hash_password(password)
@@ -111,7 +117,9 @@ def save_user(session: Session, username: str, role: str, password: str) -> bool
         },
     )
     # xmax = 0 on the returned row means it was inserted rather than updated (PostgreSQL).
-    return bool(session.execute(statement.returning(literal_column("xmax = 0"))).scalar_one())
+    created = bool(session.execute(statement.returning(literal_column("xmax = 0"))).scalar_one())
+    session.execute(delete(OpsLoginFailure).where(OpsLoginFailure.username == username))
+    return created
 
 
 def new_password() -> str:
@@ -120,7 +128,8 @@ def new_password() -> str:
 
 
 def wait_before_next_attempt(failures: int) -> float:
-    """Seconds an account must wait after its last failure: 0, then 1, 2, 4, ... up to the cap."""
+    """Seconds an address must wait after its last failure on an account: 0, then 1, 2, 4, ...
+    up to the cap."""
     if failures <= FREE_FAILURES:
         return 0.0
     return float(min(2.0 ** (failures - FREE_FAILURES - 1), LOCKOUT_MAX_S))
@@ -137,11 +146,12 @@ class LoginResult:
 
 WRONG_CREDENTIALS = "Wrong username or password."
 
-# Failures of usernames that are no account, per server process, as an account's are counted
-# in its row: if only real accounts slowed down, three bad guesses would tell which usernames
-# exist. Bounded, so guessing many names cannot grow the process: past the bound it starts over.
+# Failures of usernames that are no account, per (username, address) and server process, as an
+# account's are counted in ops_login_failure: if only real accounts slowed down, three bad
+# guesses would tell which usernames exist. Bounded, so guessing many names cannot grow the
+# process: past the bound it starts over.
 MAX_UNKNOWN_USERNAMES = 10_000
-_unknown_failures: dict[str, tuple[int, datetime]] = {}
+_unknown_failures: dict[tuple[str, str], tuple[int, datetime]] = {}
 
 
 def _locked_out(
@@ -155,39 +165,61 @@ def _locked_out(
         return None
     wait_s = (unlocks_at - now).total_seconds()
     return LoginResult(
-        None, f"Too many failed logins for this account: wait {wait_s:.0f} s and try again.", wait_s
+        None,
+        "Too many failed logins for this account from this address: "
+        f"wait {wait_s:.0f} s and try again.",
+        wait_s,
     )
 
 
-async def _unknown_username(username: str, password: str, now: datetime) -> LoginResult:
+async def _unknown_username(
+    username: str, password: str, client_address: str, now: datetime
+) -> LoginResult:
     """Answer as for an account: the same scrypt time, the same count, the same waits."""
-    failures, last_failed_at = _unknown_failures.get(username, (0, None))
+    key = (username, client_address)
+    failures, last_failed_at = _unknown_failures.get(key, (0, None))
     locked = _locked_out(failures, last_failed_at, now)
     if locked is not None:
         return locked
     await anyio.to_thread.run_sync(verify_password, password, _DUMMY_HASH)
     if len(_unknown_failures) >= MAX_UNKNOWN_USERNAMES:
         _unknown_failures.clear()
-    _unknown_failures[username] = (failures + 1, now)
+    _unknown_failures[key] = (failures + 1, now)
     return LoginResult(None, WRONG_CREDENTIALS)
 
 
-async def log_in(session: AsyncSession, username: str, password: str, now: datetime) -> LoginResult:
-    """Check a login; failures are counted and slow the account down."""
+async def log_in(
+    session: AsyncSession, username: str, password: str, client_address: str, now: datetime
+) -> LoginResult:
+    """Check a login from `client_address`; failures are counted and slow that address down on
+    this account (the account's row is locked, so concurrent attempts count one by one)."""
     user = await session.scalar(
         select(OpsUser).where(OpsUser.username == username).with_for_update()
     )
     if user is None:
-        return await _unknown_username(username, password, now)
-    locked = _locked_out(user.failed_logins, user.last_failed_at, now)
-    if locked is not None:
-        return locked
+        return await _unknown_username(username, password, client_address, now)
+    failed = await session.get(OpsLoginFailure, (username, client_address))
+    if failed is not None:
+        locked = _locked_out(failed.failures, failed.last_failed_at, now)
+        if locked is not None:
+            return locked
     # scrypt takes tens of milliseconds: off the event loop.
     if not await anyio.to_thread.run_sync(verify_password, password, user.password_hash):
+        if failed is None:
+            session.add(
+                OpsLoginFailure(
+                    username=username, client_address=client_address, failures=1, last_failed_at=now
+                )
+            )
+        else:
+            failed.failures += 1
+            failed.last_failed_at = now
         user.failed_logins += 1
         user.last_failed_at = now
         await session.flush()
         return LoginResult(None, WRONG_CREDENTIALS)
+    if failed is not None:
+        await session.delete(failed)
     user.failed_logins = 0
     user.last_failed_at = None
     user.last_login_at = now

@@ -1,5 +1,5 @@
 """The login form and logout. Login attempts are limited per client address here and per
-account in `app.users`; a failure says so, and repeated failures must wait.
+(account, address) in `app.users`; a failure says so, and repeated failures must wait.
 """
 
 from __future__ import annotations
@@ -78,14 +78,15 @@ async def login_submit(
 ) -> Response:
     """Check the password; a failure says so, and repeated failures must wait."""
     check_login_csrf(request, csrf_token)
-    wait_s = _login_limiter(request).wait_s(request.client.host if request.client else "")
+    client_address = request.client.host if request.client else ""
+    wait_s = _login_limiter(request).wait_s(client_address)
     if wait_s:
         response = _login_page(
             request, safe_next(next), "Too many login attempts from here: wait a minute.", 429
         )
         response.headers.update(retry_after_header(wait_s))
         return response
-    result = await log_in(session, username.strip(), password, datetime.now(UTC))
+    result = await log_in(session, username.strip(), password, client_address, datetime.now(UTC))
     if result.user is None:
         status_code = 429 if result.retry_after_s else 401
         response = _login_page(request, safe_next(next), result.message, status_code)

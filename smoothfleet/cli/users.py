@@ -48,8 +48,11 @@ def users_add(username: str, role: str, password_stdin: bool) -> None:
 def users_list() -> None:
     """Show the dashboard users."""
     with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
-        table = Table("user", "role", "last login", "failed logins")
+        table = Table("user", "role", "last login", "failed logins", "last failed")
         for user in list_users(session):
             last = user.last_login_at.isoformat(timespec="seconds") if user.last_login_at else ""
-            table.add_row(user.username, user.role, last, str(user.failed_logins))
+            failed = (
+                user.last_failed_at.isoformat(timespec="seconds") if user.last_failed_at else ""
+            )
+            table.add_row(user.username, user.role, last, str(user.failed_logins), failed)
     console.print(table)

@@ -128,11 +128,46 @@ def test_repeated_failures_make_the_account_wait(site: str, seeded_engine: Engin
             # ... and after the wait it is let in, which resets the count.
             connection.execute(
                 text(
-                    "UPDATE ops_user SET last_failed_at = now() - interval '2 s' "
+                    "UPDATE ops_login_failure SET last_failed_at = now() - interval '2 s' "
                     "WHERE username = 'operator'"
                 )
             )
         assert log_in(client, "operator", PASSWORDS["operator"]).status_code == 303
+        with seeded_engine.begin() as connection:
+            assert (
+                connection.execute(
+                    text("SELECT failed_logins FROM ops_user WHERE username = 'operator'")
+                ).scalar_one()
+                == 0
+            )
+            assert connection.execute(text("SELECT count(*) FROM ops_login_failure")).scalar() == 0
+
+
+def test_a_strangers_failures_do_not_keep_the_owner_out(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """The wait was the account's: one wrong guess every five minutes from anywhere kept the
+    owner out for good. It is counted per (account, client address): the stranger waits, the
+    owner from another address is let in, and the owner's success leaves the stranger's count."""
+    add_users(seeded_engine)
+    stranger = {"X-Forwarded-For": "203.0.113.9"}
+    owner = {"X-Forwarded-For": "198.51.100.7"}
+    with live_server(
+        seeded_database_url, planner_enabled=False, trusted_proxies="127.0.0.1"
+    ) as base:
+        with httpx.Client(base_url=base, headers=stranger) as client:
+            for _ in range(3):
+                assert log_in(client, "admin", "guess-guess").status_code == 401
+            waiting = log_in(client, "admin", PASSWORDS["admin"])
+            assert waiting.status_code == 429
+            assert "from this address" in waiting.text
+        with httpx.Client(base_url=base, headers=owner) as client:
+            assert log_in(client, "admin", PASSWORDS["admin"]).status_code == 303
+    with seeded_engine.begin() as connection:
+        rows = connection.execute(
+            text("SELECT client_address, failures FROM ops_login_failure WHERE username = 'admin'")
+        ).all()
+    assert [tuple(row) for row in rows] == [("203.0.113.9", 3)]
 
 
 def test_a_username_that_is_no_account_waits_as_an_account_does(site: str) -> None:
