@@ -83,22 +83,52 @@ def test_the_backlog_matches_the_file_through_drops_removals_and_a_restart(
     assert smaller.counter("dropped") == 5
 
 
-def test_a_full_disk_is_the_error_raised_and_the_spool_goes_on_after(tmp_path: Path) -> None:
-    """SQLite rolls a transaction back itself when the disk is full; the spool's own ROLLBACK
-    then failed with "no transaction is active", and that was the error the agent logged."""
-    spool = PingSpool(tmp_path / "spool.sqlite")
-    connection = spool._db  # the file's limit, as SQLite sees a full SD card
+def full_disk(spool: PingSpool) -> sqlite3.Connection:
+    """The spool's file limited to what it holds, as SQLite sees a full SD card."""
+    connection = spool._db
     (pages,) = connection.execute("PRAGMA page_count").fetchone()
-    connection.execute(f"PRAGMA max_page_count = {pages + 2}")
+    connection.execute(f"PRAGMA max_page_count = {pages}")
+    return connection
 
-    def fill() -> None:
-        for index in range(1000):
+
+def test_pings_a_full_disk_cannot_take_are_held_and_written_in_order_after(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """On a full disk every ping was lost, and nothing counted them: 30 s engaged on a full
+    card left 30 holes in the drive and `spool_dropped` at 0. They wait in memory, count in the
+    backlog, and are written first, in order, once the disk takes them. (SQLite rolls a
+    transaction back itself when the disk is full; the spool's own ROLLBACK must not then fail
+    with "no transaction is active".)"""
+    spool = PingSpool(tmp_path / "spool.sqlite")
+    spool.add({"n": "before"})
+    connection = full_disk(spool)
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        for index in range(30):
             spool.add({"n": index, "pad": "x" * 500})
-
-    with pytest.raises(sqlite3.OperationalError, match="full"):
-        fill()
-    written = spool.backlog()
-    assert written == len(spool.oldest(1000)) > 0
+    assert spool.backlog() == 31
+    assert spool.counter("dropped") == 0
+    assert [record.message for record in caplog.records] == [
+        "ping spool cannot write (database or disk is full): 1 pings held in memory (at most "
+        "3600, then the oldest are dropped and counted)"
+    ]
     connection.execute("PRAGMA max_page_count = 1000000")  # space freed
     spool.add({"n": "after"})
-    assert spool.backlog() == written + 1
+    assert spool.backlog() == 32
+    assert [ping["n"] for _, ping in spool.oldest(100)] == ["before", *range(30), "after"]
+
+
+def test_past_the_memory_bound_the_oldest_held_pings_are_dropped_and_counted(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr("vehicle_agent.spool.MAX_UNWRITTEN", 5)
+    spool = PingSpool(tmp_path / "spool.sqlite")
+    connection = full_disk(spool)
+    for index in range(8):
+        spool.add({"n": index, "pad": "x" * 5000})
+    assert (spool.backlog(), spool.counter("dropped")) == (5, 3)
+    connection.execute("PRAGMA max_page_count = 1000000")
+    spool.add({"n": 8})
+    assert [ping["n"] for _, ping in spool.oldest(100)] == [4, 5, 6, 7, 8]
+    assert (spool.backlog(), spool.counter("dropped")) == (5, 4)
+    reopened = PingSpool(tmp_path / "spool.sqlite")  # the count was written with them
+    assert reopened.counter("dropped") == 4
