@@ -28,7 +28,6 @@ from app.models import OpsUser
 
 SESSION_COOKIE = "sf_session"
 LOGIN_CSRF_COOKIE = "sf_login_csrf"
-CSRF_FIELD = "csrf_token"
 OPERATOR_ROLES = frozenset({"operator", "admin"})
 
 

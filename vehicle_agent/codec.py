@@ -92,11 +92,6 @@ class Codec:
         """The DBC length of message `name` (bytes)."""
         return int(self._by_name[name].length)
 
-    def name_of(self, frame_id: int) -> str | None:
-        """The message name for an arbitration id, or None when the DBC does not define it."""
-        message = self._by_id.get(frame_id)
-        return None if message is None else str(message.name)
-
     def encode(self, name: str, signals: Mapping[str, float]) -> bytes:
         """The payload for `signals` (missing signals are 0), checksum filled in."""
         message = self._by_name[name]

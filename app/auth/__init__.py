@@ -7,7 +7,6 @@ Use `AuthDep` for "any valid token" and `allow(...)` for a set of roles, e.g.
 from app.auth.dependencies import (
     CHALLENGE,
     PING_WRITER_ROLES,
-    AdminDep,
     AuthDep,
     FeedWriterDep,
     OperatorDep,
@@ -22,7 +21,6 @@ from app.auth.tokens import Principal, TokenCache, bearer_token, token_cache_for
 __all__ = [
     "CHALLENGE",
     "PING_WRITER_ROLES",
-    "AdminDep",
     "AuthDep",
     "FeedWriterDep",
     "OperatorDep",

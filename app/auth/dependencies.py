@@ -58,8 +58,6 @@ ViewerDep = Annotated[Principal, Depends(allow("viewer", "operator", "admin"))]
 """Any ops token (read-only operations)."""
 OperatorDep = Annotated[Principal, Depends(allow("operator", "admin"))]
 """Operators and admins (changing assignments)."""
-AdminDep = Annotated[Principal, Depends(allow("admin"))]
-"""Admins only."""
 PING_WRITER_ROLES: tuple[TokenRole, ...] = ("vehicle", "operator", "admin")
 PingWriterDep = Annotated[Principal, Depends(allow(*PING_WRITER_ROLES))]
 """Who may post pings and status reports (a vehicle token only for its own vehicle)."""

@@ -19,7 +19,6 @@ from vehicle_agent.controllers.registry import (
     CONTROLLERS,
     ControllerSpec,
     build_controller,
-    validate_params,
 )
 
 __all__ = [
@@ -36,5 +35,4 @@ __all__ = [
     "build_controller",
     "clip_speed_setting",
     "require_finite",
-    "validate_params",
 ]

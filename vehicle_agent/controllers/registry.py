@@ -12,8 +12,6 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pydantic import BaseModel
-
 from contract.controllers import (
     ACTUATIONS,
     CONTROLLER_SCHEMAS,
@@ -49,11 +47,6 @@ BUILDERS: dict[str, Callable[[Actuation, Any], Controller]] = {
 CONTROLLERS: dict[str, ControllerSpec] = {
     name: ControllerSpec(schema, BUILDERS[name]) for name, schema in CONTROLLER_SCHEMAS.items()
 }
-
-
-def validate_params(name: str, params: Mapping[str, Any] | None) -> BaseModel:
-    """The controller's params model from a plain mapping (the server's `controller.params`)."""
-    return validate_controller(name, None, params)
 
 
 def build_controller(
