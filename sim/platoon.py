@@ -486,7 +486,7 @@ def simulate_platoon(
                 request = min(request, av_max_accel(own))
             if limits is not None and math.isfinite(limits[i]):
                 # The AV keeps the posted limit like every driver (IDM free-road term).
-                request = min(request, amax * (1.0 - (own / float(limits[i])) ** 4))
+                request = min(request, amax * (1.0 - (own / float(limits[i])) ** idm.delta))
             accel[i] = request
         # no harder than the tyres give, and never reverse within the step
         np.maximum(accel, -MAX_BRAKING_MPS2, out=accel)

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contract.idm import I24_IDM, equilibrium_gap_m
+from contract.idm import I24_IDM, equilibrium_gap_m, idm_accel
 from sim.drives import Drive, drive_from_speeds, load_drive
 from sim.kpi import platoon_kpis
 from sim.platoon import (
@@ -334,3 +334,36 @@ def test_cut_in_hazard_hand_worked() -> None:
         np.array([119.0, 94.0, 30.0, 15.0, 30.0]), np.array([25.0, 25.0, 5.0, 3.0, 0.5])
     )
     np.testing.assert_allclose(hazard, [0.1, 0.0, 0.0, 0.0, 0.0], atol=1e-12)
+
+
+class PostedLimit:
+    """A posted limit of `limit_mps` everywhere."""
+
+    def __init__(self, limit_mps: float) -> None:
+        self.limit_mps = limit_mps
+
+    def limits_mps(self, position_m: np.ndarray) -> np.ndarray:
+        return np.full(np.shape(position_m), self.limit_mps)
+
+
+def test_every_follower_drives_the_contracts_idm_with_its_delta_under_a_posted_limit() -> None:
+    """The platoon writes the IDM out in place (for speed); it must be `contract.idm`'s, with the
+    parameters' delta for humans and for the AV's free-road term alike (that term was written
+    with delta 4 whatever the parameters said)."""
+    idm = replace(I24_IDM, delta=2.0)
+    limit = PostedLimit(24.0)
+    leader = drive_from_speeds("steady", np.full(50, 20.0))
+    greedy = Constant(3.0)  # more than the free-road term allows near the limit
+    run = simulate_platoon(
+        leader, platoon_roles(humans=3, avs=1), [greedy], idm=idm, speed_limit=limit
+    )
+    step = 10
+    gaps = run.gap_m[step]
+    speeds = run.speed_mps[step, 1:]
+    expected = idm_accel(
+        idm, gaps, speeds, run.lead_speed_mps[step], desired_speed_mps=np.full(4, 24.0)
+    )
+    av = int(np.flatnonzero(platoon_roles(humans=3, avs=1))[0])
+    free_road = idm.max_accel_mps2 * (1.0 - (speeds[av] / 24.0) ** idm.delta)
+    expected[av] = min(3.0, free_road)
+    np.testing.assert_allclose(run.accel_mps2[step, 1:], expected, rtol=1e-9, atol=1e-9)
