@@ -26,6 +26,9 @@ MAX_GAP_SETTING = 3
 # window, vehicle_agent.actuators.AccelLimits). a_safe's gap assumes the ego can brake this
 # hard, so no controller parameter may plan with harder braking than it can command.
 AGENT_MIN_ACCEL_MPS2 = -3.0
+# The largest acceleration the agent commands (m/s^2, the window's top): a controller may plan
+# with more (MicroAccel's a_max), and the agent's limiter caps what it sends.
+AGENT_MAX_ACCEL_MPS2 = 1.5
 # The fleet's top speed (mph): the paper's "modest speeds in excess of the posted speed limit
 # of 70 mph", the top of its clip on every ACC speed setting. An `acc` car's stock ACC holds the
 # clipped setting; an `accel` car has no setting holding it, so the agent's acceleration limiter
@@ -84,8 +87,9 @@ class MicroAccelParams(BaseModel):
     # a_l,min: the leader's hardest possible braking (m/s^2, negative); harder than ours keeps
     # the equilibrium gap near 1.9 s at 25 m/s with the defaults.
     lead_min_accel_mps2: float = Field(-5.0, lt=0, ge=-10)
-    # a_max: the ego's largest acceleration (m/s^2), also the command ceiling.
-    max_accel_mps2: float = Field(1.5, gt=0, le=4)
+    # a_max: the ego's largest acceleration (m/s^2), also the command ceiling; above
+    # AGENT_MAX_ACCEL_MPS2 the agent's limiter caps what is sent.
+    max_accel_mps2: float = Field(AGENT_MAX_ACCEL_MPS2, gt=0, le=4)
     # k2: gain of the anticipation term when the leader accelerates (1/(m/s)).
     k2: float = Field(0.2, ge=0, le=5)
     # Time constant (s) of the low-pass on the leader's finite-difference acceleration.
@@ -100,7 +104,7 @@ class SimpleParams(BaseModel):
 
     # Gain of the target term (1/s) and the bounds of the command (m/s^2), accel cars.
     k: float = Field(0.5, gt=0, le=5)
-    max_accel_mps2: float = Field(1.0, gt=0, le=1.5)
+    max_accel_mps2: float = Field(1.0, gt=0, le=AGENT_MAX_ACCEL_MPS2)
     min_accel_mps2: float = Field(-2.0, lt=0, ge=AGENT_MIN_ACCEL_MPS2)
     # Safety term parameters (see MicroAccelParams).
     standstill_gap_m: float = Field(5.0, ge=0, le=50)

@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 from contract.controllers import (
+    AGENT_MAX_ACCEL_MPS2,
     AGENT_MIN_ACCEL_MPS2,
     FLEET_TOP_SPEED_MPS,
     MAX_GAP_SETTING,
@@ -183,7 +184,7 @@ class AccelLimits:
     comfort jerk limits."""
 
     min_accel_mps2: float = AGENT_MIN_ACCEL_MPS2
-    max_accel_mps2: float = 1.5
+    max_accel_mps2: float = AGENT_MAX_ACCEL_MPS2
     # Jerk (m/s^3): rising gently (ISO 15622 ACC comfort ~2.5), falling twice as fast so a
     # safety braking reaches -3 m/s^2 within 0.6 s.
     max_jerk_up_mps3: float = 2.5
