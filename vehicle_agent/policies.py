@@ -80,7 +80,7 @@ class PolicyStore:
         actual = hashlib.sha256(content).hexdigest()
         if actual != sha256:
             raise PolicyDigestMismatch(
-                f"policy {sha256}: the download's sha256 is {actual}; not kept"
+                f"policy {sha256}", f"the download's sha256 is {actual}; not kept"
             )
         read_policy(content, actuation, f"policy {sha256}")
         self.directory.mkdir(parents=True, exist_ok=True)

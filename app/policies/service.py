@@ -163,7 +163,7 @@ def check_policy(content: bytes, manifest: object, controller: str | None = None
     try:
         read_policy(content, RL_CONTROLLERS[implied], "policy")
     except PolicyFileError as error:
-        raise PolicyError("policy", str(error).removeprefix("policy: ")) from None
+        raise PolicyError("policy", error.reason) from None
     return CheckedPolicy(actual, implied, dict(manifest), content)
 
 

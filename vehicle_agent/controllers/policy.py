@@ -102,7 +102,12 @@ ACCEL_ACTION_SIZES: dict[AccelAction, int] = {"request": 1, "request_time_margin
 
 
 class PolicyFileError(ValueError):
-    """A policy file that cannot be used; the message names the file and what is wrong."""
+    """A policy file that cannot be used: `label` names the file, `reason` says what is wrong."""
+
+    def __init__(self, label: str, reason: str) -> None:
+        super().__init__(f"{label}: {reason}")
+        self.label = label
+        self.reason = reason
 
 
 def acc_features(
@@ -304,7 +309,7 @@ def load_policy(path: Path, actuation: PolicyActuation) -> PolicyNetwork:
     try:
         content = path.read_bytes()
     except OSError as error:
-        raise PolicyFileError(f"{path}: {error.strerror or error}") from None
+        raise PolicyFileError(str(path), f"{error.strerror or error}") from None
     return read_policy(content, actuation, str(path))
 
 
@@ -322,8 +327,9 @@ def _accel_variant(
         if stored == variant and (actuation == "accel" or variant == next(iter(known))):
             return variant
     raise PolicyFileError(
-        f"{label}: an {actuation} policy trained {trained} {stored!r}, which this agent does "
-        f"not {verb} (accel policies: one of {', '.join(known)}; acc policies: none)"
+        label,
+        f"an {actuation} policy trained {trained} {stored!r}, which this agent does "
+        f"not {verb} (accel policies: one of {', '.join(known)}; acc policies: none)",
     )
 
 
@@ -340,12 +346,13 @@ def _check_declared_size(listing: zipfile.ZipFile, member: zipfile.ZipInfo, labe
         elif version == (2, 0):
             shape, _, dtype = np.lib.format.read_array_header_2_0(stream)
         else:
-            raise PolicyFileError(f"{label}: {member.filename} is an .npy of version {version}")
+            raise PolicyFileError(label, f"{member.filename} is an .npy of version {version}")
     declared = math.prod(shape) * dtype.itemsize
     if declared > member.file_size:
         raise PolicyFileError(
-            f"{label}: {member.filename} declares {shape} of {dtype}, {declared} bytes, in "
-            f"{member.file_size}"
+            label,
+            f"{member.filename} declares {shape} of {dtype}, {declared} bytes, in "
+            f"{member.file_size}",
         )
 
 
@@ -353,14 +360,15 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
     """A policy from the bytes of its `.npz` (`label` names it in errors): the server checks an
     upload and the agent a download with this before either is kept."""
     if not zipfile.is_zipfile(io.BytesIO(content)):
-        raise PolicyFileError(f"{label}: not a policy file (not an .npz archive)")
+        raise PolicyFileError(label, "not a policy file (not an .npz archive)")
     try:
         with zipfile.ZipFile(io.BytesIO(content)) as listing:
             unpacked = sum(member.file_size for member in listing.infolist())
             if unpacked > MAX_POLICY_UNPACKED_BYTES:
                 raise PolicyFileError(
-                    f"{label}: unpacks to {unpacked} bytes, more than a policy's "
-                    f"{MAX_POLICY_UNPACKED_BYTES}"
+                    label,
+                    f"unpacks to {unpacked} bytes, more than a policy's "
+                    f"{MAX_POLICY_UNPACKED_BYTES}",
                 )
             for member in listing.infolist():
                 _check_declared_size(listing, member, label)
@@ -375,7 +383,7 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         zlib.error,
         RuntimeError,
     ) as error:
-        raise PolicyFileError(f"{label}: not a policy file ({error})") from None
+        raise PolicyFileError(label, f"not a policy file ({error})") from None
     try:
         with np.load(io.BytesIO(content), allow_pickle=False) as archive:
             stored = str(archive["actuation"])
@@ -408,9 +416,9 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         # numpy: an array of a structured dtype, which is no weight matrix
         TypeError,
     ) as error:
-        raise PolicyFileError(f"{label}: not a policy file ({error})") from None
+        raise PolicyFileError(label, f"not a policy file ({error})") from None
     if stored != actuation:
-        raise PolicyFileError(f"{label}: a policy for actuation {stored}, not {actuation}")
+        raise PolicyFileError(label, f"a policy for actuation {stored}, not {actuation}")
     if actuation == "acc" and speed_action != ACC_SPEED_ACTION:
         trained_for = (
             "a change from the last second's mean speed (before 2026-12-01)"
@@ -418,10 +426,11 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             else repr(speed_action)
         )
         raise PolicyFileError(
-            f"{label}: an acc policy trained for the speed action {trained_for}, which this "
+            label,
+            f"an acc policy trained for the speed action {trained_for}, which this "
             f"agent does not read ({ACC_SPEED_ACTION!r}: the plan's target +/- "
             f"{SPEED_AROUND_PLAN_MPH:.0f} mph, the clip's ceiling with no leader detected): "
-            "retrain it"
+            "retrain it",
         )
     accel_action = _accel_variant(
         label, actuation, stored_accel_action, ACCEL_ACTION_SIZES, "for the accel action", "read"
@@ -430,16 +439,17 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
         label, actuation, stored_observation, ACCEL_OBSERVATION_SIZES, "on the observation", "build"
     )
     if not weights:
-        raise PolicyFileError(f"{label}: no layers")
+        raise PolicyFileError(label, "no layers")
     inputs = observation_size(actuation, accel_observation)
     for index, (weight, bias) in enumerate(zip(weights, biases, strict=True)):
         if weight.ndim != 2 or weight.shape[0] != inputs or bias.shape != (weight.shape[1],):
             raise PolicyFileError(
-                f"{label}: layer {index} has shape {weight.shape} and bias {bias.shape}, "
-                f"expected ({inputs}, n) and (n,)"
+                label,
+                f"layer {index} has shape {weight.shape} and bias {bias.shape}, "
+                f"expected ({inputs}, n) and (n,)",
             )
         if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
-            raise PolicyFileError(f"{label}: layer {index} holds non-finite weights")
+            raise PolicyFileError(label, f"layer {index} holds non-finite weights")
         inputs = weight.shape[1]
     outputs = action_size(actuation, accel_action)
     if inputs != outputs:
@@ -448,7 +458,7 @@ def read_policy(content: bytes, actuation: PolicyActuation, label: str) -> Polic
             if actuation == "accel"
             else "an acc policy"
         )
-        raise PolicyFileError(f"{label}: {inputs} outputs, {kind} has {outputs}")
+        raise PolicyFileError(label, f"{inputs} outputs, {kind} has {outputs}")
     return PolicyNetwork(
         actuation,
         weights,

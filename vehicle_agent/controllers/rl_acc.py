@@ -46,7 +46,7 @@ def load_assigned_policy(params: RlParams, actuation: Actuation) -> PolicyNetwor
     network = load_policy(path, actuation)
     if params.policy_sha256 is not None and network.sha256 != params.policy_sha256:
         raise PolicyFileError(
-            f"{path}: sha256 {network.sha256}, the assignment names {params.policy_sha256}"
+            str(path), f"sha256 {network.sha256}, the assignment names {params.policy_sha256}"
         )
     return network
 
