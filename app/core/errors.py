@@ -105,11 +105,6 @@ def is_database_outage(error: BaseException) -> bool:
     return isinstance(error, PoolTimeoutError | ConnectionError)
 
 
-# FastAPI answers a body it cannot even decode (not UTF-8, ...) with this 400; the interface
-# promises 422 for a body that is not the expected JSON at all.
-UNREADABLE_BODY = "There was an error parsing the body"
-
-
 HTTP_METHODS = frozenset({"get", "put", "post", "delete", "options", "head", "patch", "trace"})
 
 
@@ -148,7 +143,10 @@ def install_error_handlers(app: FastAPI) -> None:
             # FastAPI wraps what stopped it reading the body in a 400: a chunked body cut off
             # at the limit is the body-size middleware's 413, as a declared length over it is
             raise error.__cause__
-        if error.status_code == 400 and error.detail == UNREADABLE_BODY:
+        if error.status_code == 400 and isinstance(error.__cause__, ValueError):
+            # FastAPI answers a body it cannot decode with a 400 raised from what failed (text
+            # that is not UTF-8 is a UnicodeDecodeError, an over-long integer a ValueError); the
+            # interface promises 422 for a body that is not the expected JSON at all
             why = _unread_body(request.headers)
             # FastAPI answers a JSON syntax error itself (422); what reaches here failed after
             # the syntax: text that is not UTF-8, or an integer Python will not read
