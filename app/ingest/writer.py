@@ -222,6 +222,12 @@ class PingWriter:
                 seen.add(key)
                 sent.append(row)
                 owner.append(number)
+        # In key order: two groups holding the same pings (a car resending to another replica,
+        # an operator's bulk upload) take their index locks in one order. In arrival order
+        # PostgreSQL found a deadlock and aborted one, and its cars read that as an outage.
+        order = sorted(range(len(sent)), key=lambda i: (sent[i].vehicle_id, sent[i].ts))
+        sent = [sent[i] for i in order]
+        owner = [owner[i] for i in order]
         started = time.perf_counter()
         values = [
             (*row[: _LANE + 1], position, *row[_LANE + 1 : -1])

@@ -134,3 +134,50 @@ def test_the_group_writer_fails_only_the_request_holding_an_unstorable_row(
     with seeded_engine.connect() as connection:
         stored = connection.execute(text("SELECT vehicle_id FROM fact_vehicle_ping")).scalars()
         assert sorted(stored) == sorted(rows[0].vehicle_id for rows in clean)
+
+
+def test_groups_holding_the_same_pings_take_their_locks_in_one_order(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """Two replicas writing the same pings in opposite orders (a car resending to another
+    replica, an operator's bulk upload) deadlocked: PostgreSQL aborted one, and its cars read
+    the abort as a database outage (503). Rows are written in key order, so a writer meeting a
+    key another transaction holds waits on it before it holds any later key."""
+    ts = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    first, second = ts, ts + timedelta(seconds=1)
+    insert = text(
+        "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps) "
+        "VALUES ('SF-001', :ts, 36.0, -86.6, 25.0)"
+    )
+    outcome: list[WriteOutcome | BaseException] = []
+
+    async def write_in_arrival_order() -> None:
+        engine = make_async_engine(seeded_database_url)
+        writer = PingWriter(engine, concurrency=1)
+        writer.start()
+        try:
+            rows = [_row("SF-001", second, None), _row("SF-001", first, None)]
+            outcome.extend(await asyncio.gather(writer.write(rows), return_exceptions=True))
+        finally:
+            await writer.stop()
+            await engine.dispose()
+
+    with seeded_engine.connect() as other_replica:
+        transaction = other_replica.begin()
+        other_replica.execute(insert, {"ts": first})
+        writing = threading.Thread(target=lambda: asyncio.run(write_in_arrival_order()))
+        writing.start()
+        with seeded_engine.connect() as watcher:
+            waiting = 0
+            for _ in range(200):  # until the writer waits on a lock (at most 10 s)
+                waiting = watcher.execute(
+                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
+                ).scalar_one()
+                if waiting:
+                    break
+                time.sleep(0.05)
+        assert waiting == 1
+        other_replica.execute(insert, {"ts": second})  # a deadlock here, rows in arrival order
+        transaction.commit()
+        writing.join(timeout=30)
+    assert outcome == [WriteOutcome(0, 2)]
