@@ -27,6 +27,10 @@ ENSURE_SQL = text(
 RETENTION_SQL = text(
     f"SELECT drop_ping_partitions_before({UTC_TODAY} - CAST(:keep_days AS integer))"
 )
+# Workers and replicas each run the pass (at start-up, then hourly): one at a time, or two
+# reaching a new day together both created its partition and the later failed whole (a unique
+# violation in PostgreSQL's catalog), its retention rolled back with it.
+MAINTENANCE_LOCK_SQL = text("SELECT pg_advisory_xact_lock(hashtext('smoothfleet-maintenance'))")
 # Rows past retention, deleted where whole days cannot be dropped: the status reports (one table)
 # and the pings that wait in the default partition.
 RETENTION_DELETE_SQL = (
@@ -51,6 +55,7 @@ def maintain(connection: Connection, *, ahead_days: int, retention_days: int) ->
     """Create the coming days' ping partitions and drop those past retention, and delete the
     rows past retention that wait in the default partition and the status reports past it."""
     keep = {"keep_days": retention_days}
+    connection.execute(MAINTENANCE_LOCK_SQL)
     created = connection.execute(ENSURE_SQL, {"ahead": ahead_days}).scalar_one()
     dropped = connection.execute(RETENTION_SQL, keep).scalar_one()
     deleted = connection.execute(DEFAULT_RETENTION_SQL, keep).rowcount

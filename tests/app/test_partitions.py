@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+import time as time_module
 from datetime import UTC, date, datetime, time, timedelta
 
 import pytest
@@ -152,3 +154,41 @@ def test_retention_counts_utc_days_whatever_the_sessions_time_zone(seeded_engine
         kept = connection.execute(text("SELECT ts FROM fact_vehicle_status")).scalars().all()
     assert days == first_kept
     assert kept == [kept_ts]
+
+
+def test_two_passes_at_once_make_each_partition_once_and_both_succeed(
+    seeded_engine: Engine,
+) -> None:
+    """Every worker and replica runs the pass; two reaching new days together both created
+    the same partitions, and the later failed whole (a unique violation in PostgreSQL's
+    catalog), its retention rolled back with it. The passes now run one at a time."""
+    outcome: list[object] = []
+
+    def second_pass() -> None:
+        try:
+            with seeded_engine.begin() as connection:
+                outcome.append(maintain(connection, ahead_days=60, retention_days=90))
+        except Exception as error:  # the failure is the finding
+            outcome.append(error)
+
+    with seeded_engine.connect() as first:
+        transaction = first.begin()
+        created = maintain(first, ahead_days=60, retention_days=90).partitions_created
+        assert created > 40
+        racing = threading.Thread(target=second_pass)
+        racing.start()
+        with seeded_engine.connect() as watcher:
+            waiting = 0
+            for _ in range(200):  # until the second pass waits (at most 10 s)
+                waiting = watcher.execute(
+                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
+                ).scalar_one()
+                if waiting:
+                    break
+                time_module.sleep(0.05)
+        assert waiting == 1
+        transaction.commit()
+        racing.join(timeout=30)
+    assert len(outcome) == 1
+    assert not isinstance(outcome[0], Exception), outcome[0]
+    assert outcome[0].partitions_created == 0
