@@ -67,3 +67,12 @@ def test_equilibrium_density_worked_by_hand() -> None:
     assert equilibrium_density_per_m(I24_IDM, [35.0, 40.0]).tolist() == [0.0, 0.0]
     with pytest.raises(ValueError, match="must not be negative"):
         equilibrium_density_per_m(I24_IDM, -1.0)
+
+
+def test_a_gap_at_or_below_zero_brakes_as_hard_as_the_model_can_without_inf_or_nan() -> None:
+    # a collision's gap reads as MIN_MODEL_GAP_M (0.01 m): s* = 2 + 10 x 1.24 = 14.4 m, so
+    # 1.3 [1 - (10/35)^4 - (14.4 / 0.01)^2] = -2,695,678.7 m/s^2 (bounded later by the tyres)
+    expected = 1.3 * (1.0 - (10.0 / 35.0) ** 4 - (14.4 / 0.01) ** 2)
+    accel = idm_accel(I24_IDM, np.array([0.0, -3.0]), 10.0, 10.0)
+    np.testing.assert_allclose(accel, [expected, expected])
+    assert expected == pytest.approx(-2_695_678.7, abs=0.1)

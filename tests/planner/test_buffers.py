@@ -51,6 +51,20 @@ def test_buffer_length_and_speed_worked_by_hand() -> None:
     assert np.all(np.isinf(ceiling[90:]))  # the queue and beyond: the smoothed TSE
 
 
+def test_a_queue_of_mixed_speeds_is_buffered_at_its_slowest_plus_the_margin() -> None:
+    # The same queue, its first half at 6 m/s and its second at 10: the buffer holds the
+    # slowest, 6 + 2 = 8 m/s (their mean would be 10), and stores what both halves hold.
+    mixed = TSE.copy()
+    mixed[0, 90:95] = 6.0
+    mixed[0, 95:100] = 10.0
+    (buffer,) = design(mixed).buffers
+    assert buffer.target_speed_mps == 8.0
+    held = 500 * float(
+        equilibrium_density_per_m(I24_IDM, 6.0) + equilibrium_density_per_m(I24_IDM, 10.0)
+    )
+    assert buffer.queue_vehicles == pytest.approx(held)
+
+
 def test_the_floor_keeps_targets_near_the_smoothed_speed() -> None:
     target, is_buffer = apply_buffers(SMOOTHED, design(), PARAMS)
     assert np.argwhere(is_buffer[0]).ravel().tolist() == list(range(38, 90))

@@ -68,3 +68,21 @@ def test_a_stopped_car_next_to_a_slow_prior_never_makes_traffic_reverse() -> Non
     near = math.exp(-1.0)
     assert tse[0, 3] == pytest.approx(30.0 - 25.0 * near / (1 + near))
     assert np.all(tse >= 0.0)
+
+
+def test_observations_on_both_sides_and_in_another_lane_add_their_weights() -> None:
+    """Every other test has one observed cell, where the weights' sum and their largest are
+    the same: two residuals of -10 at 100 m on either side, and one of -6 in the other lane."""
+    grid = uniform_grid(5, lanes=2)
+    params = PlannerParams(correction_length_m=100.0, other_lane_weight=0.5)
+    both_sides = LaneObservations(
+        lane=[1, 1, 2], cell=[1, 3, 2], mean_speed_mps=[20.0, 20.0, 24.0], ping_count=[10, 10, 10]
+    )
+    tse = FUSERS.get("precedence")(PRIOR, both_sides, grid, params)
+    near = math.exp(-1.0)
+    # lane 1, cell 2: w = e^-1, e^-1 (own lane), 0.5 (the other lane's, 0 m away)
+    own = 2 * near * -10.0 + 0.5 * -6.0
+    assert tse[0, 2] == pytest.approx(30.0 + own / (1 + 2 * near + 0.5))
+    # lane 2, cell 1: its own observation 100 m away (e^-1), lane 1's at 0 m (0.5) and 200 m
+    other = near * -6.0 + 0.5 * -10.0 + 0.5 * math.exp(-2.0) * -10.0
+    assert tse[1, 1] == pytest.approx(30.0 + other / (1 + near + 0.5 + 0.5 * math.exp(-2.0)))

@@ -55,6 +55,10 @@ def test_the_window_is_cut_at_the_corridors_end() -> None:
     tse = (10.0 + 0.001 * GRID.center_x_m)[None, :]
     smoothed = forward_kernel_smooth(tse, GRID, KERNELS.get("uniform"), 1500.0, 5.0)
     assert smoothed[0, -1] == pytest.approx(10.0 + 0.001 * 14950)
+    # 950 m from the end (centre 14050 m) the window holds 900 m of the slope, whose mean is
+    # v(14500) = 24.5, and 50 m held flat at v(14950) = 24.95: (900 x 24.5 + 50 x 24.95) / 950.
+    # The whole 1500 m window would read 24.68 there.
+    assert smoothed[0, -10] == pytest.approx((900 * 24.5 + 50 * 24.95) / 950, abs=2e-3)
 
 
 def test_every_lane_is_smoothed_on_its_own() -> None:

@@ -21,6 +21,11 @@ def test_space_bounds_and_time_gap() -> None:
     assert bounds.outside_space_bounds(gaps).tolist() == [True, False, False, False, True]
     # 25 m at 30 m/s is 0.83 s: under the 1 s time gap; at standstill no time gap applies
     assert bounds.under_time_gap(gaps, speeds).tolist() == [False, False, True, False, False]
+    # slow traffic still has a time gap: 2 m at 4 m/s is 0.5 s; below 1 m/s none applies
+    assert bounds.under_time_gap(np.array([2.0, 0.5]), np.array([4.0, 0.9])).tolist() == [
+        True,
+        False,
+    ]
 
 
 def test_gap_kpis_count_seconds() -> None:

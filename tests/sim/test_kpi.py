@@ -86,6 +86,10 @@ def test_comfort_acceleration_and_jerk() -> None:
     assert accel_rms_mps2(speeds, 1.0) == pytest.approx(np.sqrt(0.5))
     assert jerk_rms_mps3(speeds, 1.0) == pytest.approx(np.sqrt(2.0))
     assert accel_rms_mps2(SPEEDS, 1.0) == 0.0
+    # at the simulator's 0.1 s: accelerations +1 and -1 m/s^2, jerk (-1 - 1) / 0.1 = -20 m/s^3
+    fine = np.array([[10.0], [10.1], [10.0]])
+    assert accel_rms_mps2(fine, 0.1) == pytest.approx(1.0)
+    assert jerk_rms_mps3(fine, 0.1) == pytest.approx(20.0)
 
 
 def test_time_to_collision_only_when_closing_in() -> None:

@@ -44,6 +44,13 @@ def test_required_braking_hand_worked() -> None:
     # not closing: no braking needed; closing with the room gone: unbounded
     assert required_braking_mps2(20.0, 30.0, 22.0) == 0.0
     assert required_braking_mps2(20.0, 1.5, 10.0) == math.inf
+    # a leader braking moderately (2.5 m/s^2) 30 m ahead, 20 against the ego's 30 m/s: it stops
+    # in 20^2 / 5 = 80 m, so the ego must stop in 28 + 80 m: 900 / 216 = 4.17 m/s^2, more than
+    # its closing speed alone asks (100 / 56 = 1.79) and than an accel car's authority
+    assert required_braking_mps2(30.0, 30.0, 20.0, -2.5) == pytest.approx(900 / 216)
+    assert stop_exceeds_authority(30.0, 30.0, 20.0, braking_authority_mps2("accel"), -2.5)
+    # slowing by less than 0.5 m/s^2 is holding speed: the closing need alone
+    assert required_braking_mps2(30.0, 30.0, 20.0, -0.4) == pytest.approx(100 / 56)
 
 
 def test_the_crash_of_issue_12_hands_back_at_once() -> None:
