@@ -14,6 +14,7 @@ from pydantic import (
 )
 
 from contract.controllers import ControllerConfigError, controller_actuations, validate_controller
+from contract.values import Text64
 
 # Which controllers can drive which actuation, from the vehicle agent's controller registry (the
 # single source of truth: a controller added there is accepted here).
@@ -27,12 +28,15 @@ class RosterRow(BaseModel):
 
     vehicle_id: str = Field(pattern=r"^[A-Za-z0-9_-]{1,32}$")
     vin: str = Field(pattern=r"^[A-HJ-NPR-Z0-9]{17}$")
-    make: str = Field(min_length=1)
-    model: str = Field(min_length=1)
+    # Text as the API stores it (no NUL, at most 64 characters, as an assignment's route): a
+    # NUL reached the database as a raw error naming no row, and a 5,000-character route
+    # was imported that the car's next assignment change then refused.
+    make: Text64 = Field(min_length=1)
+    model: Text64 = Field(min_length=1)
     year: int = Field(ge=1990, le=2100)
     actuation: Literal["acc", "accel"]
-    corridor_id: str = Field(min_length=1)
-    route: str = Field(min_length=1)
+    corridor_id: Text64 = Field(min_length=1)
+    route: Text64 = Field(min_length=1)
     assigned_lane: int = Field(ge=1)
     controller_name: str
     controller_params: dict[str, Any] = Field(default_factory=dict)

@@ -506,3 +506,25 @@ def test_db_downgrade_upgrade_and_maintain_from_the_command_line(
     assert "no migration revision 'no_such_revision'" in unknown.stderr
     assert "the revisions: base, 0001," in unknown.stderr
     assert "Traceback" not in unknown.stderr
+
+
+@pytest.mark.parametrize(
+    ("model", "route", "refusal"),
+    [
+        ("Ro\x00gue", "A", r"row 2: model: .*NUL"),
+        ("Rogue", "R" * 65, r"row 2: route: .*at most 64 characters"),
+    ],
+    ids=["nul", "long-route"],
+)
+def test_roster_text_is_refused_by_row_as_the_api_would_refuse_it(
+    tmp_path: Path, model: str, route: str, refusal: str
+) -> None:
+    """A NUL reached the database as a raw error (the whole statement, no row); a route the
+    assignment API refuses (over 64 characters) was imported, and the car's next lane change
+    was then refused for a route the operator never typed."""
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        f"SF-201,JN8BT3BB3PW906499,Nissan,{model},2023,acc,I-24-WB,{route},1,microaccel_acc,{{}}",
+    )
+    with pytest.raises(RosterError, match=refusal):
+        parse_roster_csv(roster)
