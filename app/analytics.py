@@ -28,6 +28,10 @@ class NotPerVehicle(ViewRequestError):
     """A vehicle was named for a view whose rows are not per vehicle."""
 
 
+class UnknownVehicle(ViewRequestError):
+    """The vehicle named is not on the roster: a misspelt id would read as a car with no data."""
+
+
 class EmptyWindow(ViewRequestError):
     """The window ends before it starts: reversed bounds are a mistake in the request, not a
     question whose answer is no rows. (Equal bounds are a window: a day or hour view widens it
@@ -199,8 +203,17 @@ def read_view(
     until: datetime | date | None = None,
     vehicle_id: str | None = None,
 ) -> pd.DataFrame:
-    """One analytics view as a DataFrame (optionally a time window and one vehicle)."""
+    """One analytics view as a DataFrame (optionally a time window and one vehicle, which must
+    be on the roster: UnknownVehicle)."""
     sql, params = view_query(name, since=since, until=until, vehicle_id=vehicle_id)
+    if (
+        vehicle_id is not None
+        and not connection.execute(
+            text("SELECT 1 FROM dim_vehicle WHERE vehicle_id = :vehicle_id"),
+            {"vehicle_id": vehicle_id},
+        ).first()
+    ):
+        raise UnknownVehicle(f"no vehicle {vehicle_id!r} on the roster")
     return _frame(connection, sql, params)
 
 

@@ -82,7 +82,10 @@ def analytics_export(
     if output != "-":
         output_file(Path(output), "--output")
     with database(settings()) as url, make_sync_engine(url).connect() as connection:
-        frame = read_view(connection, view_name, vehicle_id=vehicle_id, **window)
+        try:
+            frame = read_view(connection, view_name, vehicle_id=vehicle_id, **window)
+        except ViewRequestError as error:
+            raise CliError(f"analytics export: {error}") from None
     if output == "-":
         rows = export_csv(frame, sys.stdout)
     else:

@@ -186,6 +186,12 @@ def test_analytics_export_names_the_views_when_one_is_unknown(database_url: str)
     assert "the window ends before it starts: until 2026-01-01T00:00:00+00:00 is before since" in (
         reversed_window.stderr
     )
+    # a misspelt car read as a car with no data: an empty file and exit 0
+    unknown_car = run_cli(
+        "analytics", "export", "engagement_daily", "--vehicle", "SF-NOPE", env=env
+    )
+    assert unknown_car.returncode == 1
+    assert "analytics export: no vehicle 'SF-NOPE' on the roster" in unknown_car.stderr
 
 
 def test_a_refused_export_leaves_the_earlier_file_whole(database_url: str, tmp_path: Path) -> None:
