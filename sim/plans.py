@@ -199,6 +199,8 @@ class SimulatedPlanner:
             plan_id=self.plans_run + 1,
             corridor=self.grid.corridor_id,
             published_at=published,
+            # as the server's default (`plan_valid_for_s`): the car's limit decides first
+            valid_until=published + timedelta(seconds=STALE_PLAN_AFTER_S),
             lanes=[
                 PlanLane(
                     lane=SIM_LANE,

@@ -1,10 +1,10 @@
 """Plans as the agent holds them: validated on arrival, looked up at the car's position.
 
-A plan lane gives target speeds per sub-segment, `target_speed_mps[i]` holding from `x_m[i]` to
-`end_x_m[i]` (without `end_x_m`, the targets are points joined linearly). A plan that could make
-the car misbehave is refused whole: no lanes, arrays of different lengths, positions not
-increasing, a speed that is negative or not finite. The agent then has no fresh plan and leaves
-the car to its stock ACC.
+The document is the contract's (`contract.plans.PlanTargets`, the fields of the server's
+`PlanOut` a car reads). A plan lane gives target speeds per sub-segment, `target_speed_mps[i]`
+holding from `x_m[i]` to `end_x_m[i]`. A plan that could make the car misbehave is refused
+whole: no lanes, arrays of different lengths, positions not increasing, a speed that is
+negative or not finite. The agent then has no fresh plan and leaves the car to its stock ACC.
 """
 
 from __future__ import annotations
@@ -13,8 +13,9 @@ import math
 from datetime import datetime
 
 import numpy as np
-from pydantic import AwareDatetime, BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import Field, ValidationError, model_validator
 
+from contract.plans import LaneTargets, PlanTargets
 from vehicle_agent.controllers import TargetProfile
 
 # Waves travel upstream at about this speed (m/s; negative = upstream): 15 km/h, the speed the
@@ -37,24 +38,8 @@ class PlanError(ValueError):
     """A plan the agent refuses; the message says what was wrong."""
 
 
-class PlanBuffer(BaseModel):
-    """A buffer region of a lane (informational: its targets are in the lane's arrays)."""
-
-    start_x_m: float
-    end_x_m: float
-    target_speed_mps: float
-
-
-class PlanLane(BaseModel):
-    """One lane's targets along the corridor."""
-
-    model_config = ConfigDict(extra="ignore")
-
-    lane: int = Field(ge=1)
-    x_m: list[float]
-    end_x_m: list[float] | None = None
-    target_speed_mps: list[float]
-    buffers: list[PlanBuffer] = Field(default_factory=list)
+class PlanLane(LaneTargets):
+    """One lane's targets along the corridor, checked as the car needs them."""
 
     @model_validator(mode="after")
     def _consistent(self) -> PlanLane:
@@ -63,18 +48,14 @@ class PlanLane(BaseModel):
             raise ValueError(
                 f"lane {self.lane}: {n} positions but {len(self.target_speed_mps)} speeds"
             )
-        if self.end_x_m is not None and len(self.end_x_m) != n:
+        if len(self.end_x_m) != n:
             raise ValueError(f"lane {self.lane}: {n} positions but {len(self.end_x_m)} ends")
-        if self.end_x_m is None and n < 2:
-            raise ValueError(f"lane {self.lane}: a profile needs at least two points")
-        values = [*self.x_m, *(self.end_x_m or [])]
+        values = [*self.x_m, *self.end_x_m]
         if not all(math.isfinite(v) for v in values):
             raise ValueError(f"lane {self.lane}: a position is not finite")
         if any(b <= a for a, b in zip(self.x_m, self.x_m[1:], strict=False)):
             raise ValueError(f"lane {self.lane}: positions do not increase")
-        if self.end_x_m is not None and any(
-            end <= start for start, end in zip(self.x_m, self.end_x_m, strict=True)
-        ):
+        if any(end <= start for start, end in zip(self.x_m, self.end_x_m, strict=True)):
             raise ValueError(f"lane {self.lane}: a sub-segment ends before it starts")
         for speed in self.target_speed_mps:
             if not math.isfinite(speed) or speed < 0 or speed > MAX_TARGET_SPEED_MPS:
@@ -85,8 +66,6 @@ class PlanLane(BaseModel):
         """Positions and speeds for linear lookup (steps drawn as flat runs)."""
         speeds = np.asarray(self.target_speed_mps, dtype=np.float64)
         starts = np.asarray(self.x_m, dtype=np.float64)
-        if self.end_x_m is None:
-            return starts, speeds
         ends = np.asarray(self.end_x_m, dtype=np.float64)
         inner_ends = np.maximum(
             np.minimum(ends, np.append(starts[1:], np.inf)) - STEP_EDGE_M, starts + STEP_EDGE_M / 2
@@ -95,15 +74,9 @@ class PlanLane(BaseModel):
         return x, np.repeat(speeds, 2)
 
 
-class Plan(BaseModel):
+class Plan(PlanTargets):
     """A published plan (the fields the agent uses; the rest is ignored)."""
 
-    model_config = ConfigDict(extra="ignore")
-
-    plan_id: int
-    corridor: str
-    published_at: AwareDatetime
-    valid_until: AwareDatetime | None = None
     lanes: list[PlanLane] = Field(min_length=1)
 
     def lane(self, lane: int) -> PlanLane | None:
@@ -188,8 +161,7 @@ class LanePlan:
         long as its publisher said, so a server restart or a network gap does not end it.
         """
         age = self.age_s(wall, now_s)
-        valid_until = self.plan.valid_until
-        if valid_until is not None and age > (valid_until - self.plan.published_at).total_seconds():
+        if age > (self.plan.valid_until - self.plan.published_at).total_seconds():
             return False
         return age <= stale_after_s
 

@@ -56,12 +56,20 @@ def test_non_finite_speeds_and_missing_lanes_are_refused() -> None:
                     "plan_id": 1,
                     "corridor": "I-24-WB",
                     "published_at": PUBLISHED.isoformat(),
+                    "valid_until": (PUBLISHED + timedelta(minutes=3)).isoformat(),
                     "lanes": [],
                 }
             )
         )
     with pytest.raises(PlanError):
         parse_plan(body().replace("10.0]", "NaN]"))
+    # the contract's document: a plan without its lifetime or a lane without its ends is not one
+    without_lifetime = json.loads(body())
+    del without_lifetime["valid_until"]
+    with pytest.raises(PlanError, match="valid_until: Field required"):
+        parse_plan(json.dumps(without_lifetime))
+    with pytest.raises(PlanError, match="end_x_m: Field required"):
+        parse_plan(body(end_x_m=None).replace('"end_x_m": null, ', ""))
     with pytest.raises(PlanError, match="has no lane 3"):
         LanePlan(parse_plan(body()), 3, None)
 
