@@ -10,6 +10,14 @@ MPH_PER_MPS = 1.0 / MPS_PER_MPH
 KPH_PER_MPH = 1.609344
 MPS_PER_KPH = 1.0 / 3.6
 KPH_PER_MPS = 3.6
+# I-24 MOTION measures in feet along the interstate's mileposts.
+METRES_PER_FOOT = 0.3048
+FEET_PER_MILE = 5280.0
+
+# Congestion waves travel upstream at about 15 km/h (paper, the Speed Planner's INRIX
+# prediction): the speed a plan is made with (planner), aged with (car) and simulated with (sim),
+# here as a magnitude; upstream is the sign each use gives it.
+WAVE_SPEED_MPS = 15.0 * MPS_PER_KPH
 
 
 def mps_to_mph(speed_mps: float) -> float:

@@ -14,7 +14,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from contract.idm import I24_IDM
-from contract.units import MPS_PER_MPH
+from contract.units import MPS_PER_MPH, WAVE_SPEED_MPS
 from planner.inputs import EngagedPings
 
 
@@ -46,7 +46,7 @@ class PlannerParams(BaseModel):
         description="share of the segments INRIX must have read within max_inrix_age_s",
     )
     wave_speed_mps: float = Field(
-        15 / 3.6, ge=0, le=15, description="speed at which changes travel upstream (15 km/h)"
+        WAVE_SPEED_MPS, ge=0, le=15, description="speed at which changes travel upstream (15 km/h)"
     )
     trend_snapshots: int = Field(
         3, ge=2, le=30, description="snapshots (the newest included) the trend is fitted over"

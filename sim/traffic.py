@@ -21,16 +21,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from contract.units import METRES_PER_MILE, WAVE_SPEED_MPS
 from sim.drives import Drive
 
 FloatArray = NDArray[np.float64]
 
 # Speed at which congestion waves travel upstream on I-24 (15 km/h).
-WAVE_SPEED_MPS = 15.0 / 3.6
 # INRIX: one reading per segment every 60 s, about 3 minutes late, segments of about 0.5 mile.
 INRIX_PERIOD_S = 60.0
 INRIX_LATENCY_S = 180.0
-INRIX_SEGMENT_M = 804.672
+INRIX_SEGMENT_M = METRES_PER_MILE / 2
 # Samples per segment when averaging the field (every 50 m).
 SAMPLE_SPACING_M = 50.0
 

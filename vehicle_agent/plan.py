@@ -16,12 +16,13 @@ import numpy as np
 from pydantic import Field, ValidationError, model_validator
 
 from contract.plans import LaneTargets, PlanTargets
+from contract.units import WAVE_SPEED_MPS
 from vehicle_agent.controllers import TargetProfile
 
 # Waves travel upstream at about this speed (m/s; negative = upstream): 15 km/h, the speed the
 # Speed Planner's INRIX prediction assumes (planner/params.py), so a plan is aged the way it was
 # made. Plan lookups move downstream by it x the plan's age.
-DEFAULT_WAVE_SPEED_MPS = -15.0 / 3.6
+DEFAULT_WAVE_SPEED_MPS = -WAVE_SPEED_MPS
 
 # Fastest plausible target (m/s, about 134 mph): anything above is garbage.
 MAX_TARGET_SPEED_MPS = 60.0

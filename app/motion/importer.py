@@ -54,7 +54,8 @@ from app.motion.store import (
     files,
     write_views_file,
 )
-from sim.motion.frame import METRES_PER_FOOT, MotionFrame
+from contract.units import FEET_PER_MILE, METRES_PER_FOOT
+from sim.motion.frame import MotionFrame
 
 IntArray = NDArray[np.int64]
 SECONDS_PER_DAY = 86_400
@@ -67,7 +68,7 @@ LATEST_UNIX_S = 4_102_444_800.0  # 2100-01-01 UTC
 # Tennessee (about 185 miles), or further across than any roadway, is a unit or data mistake:
 # one point at 1e9 m sized the day figure's grid at 5 M boxes a column, and a point of 1e300 ft
 # was stored as an infinite x with NaN fuel.
-MAX_X_FT = 200 * 5280.0
+MAX_X_FT = 200 * FEET_PER_MILE
 # The store keeps a vehicle class in 16 bits (MOTION's coarse classes are single digits).
 MAX_VEHICLE_CLASS = 32_767
 MAX_ABS_Y_FT = 500.0

@@ -32,11 +32,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from contract.units import FEET_PER_MILE, METRES_PER_FOOT
+
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int16]
 
-METRES_PER_FOOT = 0.3048
-FEET_PER_MILE = 5280.0
 # Westbound in MOTION documents (eastbound is +1).
 WESTBOUND = -1
 EASTBOUND = 1

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contract.idm import I24_IDM, IdmParams, idm_accel
+from contract.units import METRES_PER_FOOT
 from sim.drives import Drive
 
 FloatArray = NDArray[np.float64]
@@ -41,7 +42,6 @@ VEHICLE_CLASSES: dict[int, tuple[str, float, tuple[float, float, float]]] = {
     5: ("truck", 0.02, (30.0, 8.0, 11.0)),
 }
 FLEET_CLASS = 1  # the fleet's RAV4s, Rogues and XT5s are midsize SUVs
-METRES_PER_FOOT = 0.3048
 # Past the section's end a vehicle approaches the downstream speed with this time constant,
 # within comfortable limits (the IDM's b and a), never faster than the IDM would allow.
 BOUNDARY_RELAXATION_S = 2.0

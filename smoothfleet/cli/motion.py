@@ -25,6 +25,7 @@ from app.motion.documents import MotionFileError
 from app.motion.edie import H_T_S, H_X_M, EdieWindow, EdieWindowError, edie_field
 from app.motion.importer import ImportReport, import_motion_file
 from app.motion.store import MotionStoreEmpty, motion_store
+from contract.units import FEET_PER_MILE
 from sim.drives import DriveError, load_drive, shared_data_dir
 from sim.motion.frame import DEFAULT_ANCHOR_X_FT, DEFAULT_ANCHOR_X_M, MotionFrame
 from sim.motion.traffic import MotionRunConfig, boundary_speeds, simulate_motion_run
@@ -46,7 +47,7 @@ DEFAULT_BOUNDARY_DRIVES = (
     "2021-03-09-13-35-04_masterArray_0_4633.csv",
 )
 # The testbed's section on the seed corridor under the default frame: mileposts 62.7 to 58.7.
-TESTBED_START_X_M = float(MotionFrame().x_m(62.7 * 5280.0))
+TESTBED_START_X_M = float(MotionFrame().x_m(62.7 * FEET_PER_MILE))
 REASONS_SHOWN = 20
 
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from contract.units import WAVE_SPEED_MPS
 from sim.drives import drive_from_speeds
-from sim.traffic import WAVE_SPEED_MPS, InrixFeed, segment_bounds, wave_field_speed
+from sim.traffic import InrixFeed, segment_bounds, wave_field_speed
 
 C = WAVE_SPEED_MPS  # 4.1667 m/s upstream
 

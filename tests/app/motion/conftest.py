@@ -7,7 +7,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sim.motion.frame import EASTBOUND, METRES_PER_FOOT, MotionFrame
+from contract.units import METRES_PER_FOOT
+from sim.motion.frame import EASTBOUND, MotionFrame
 
 # x_m = x_ft * 0.3048: positions in the tests are written in metres.
 METRIC_FRAME = MotionFrame(direction=EASTBOUND, anchor_x_ft=0.0, anchor_x_m=0.0)

@@ -9,7 +9,7 @@ import pytest
 
 from app.motion.importer import import_motion_file
 from app.motion.store import connect
-from sim.motion.frame import METRES_PER_FOOT
+from contract.units import METRES_PER_FOOT
 from tests.app.motion.conftest import METRIC_FRAME, document, write
 
 REAL_RECORD = "i24motion/INCEPTION.22-11-22.single_record_from_tutorial_notebook.json"

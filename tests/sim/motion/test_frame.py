@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.motion.frame import EASTBOUND, METRES_PER_FOOT, MotionFrame
+from contract.units import METRES_PER_FOOT
+from sim.motion.frame import EASTBOUND, MotionFrame
 
 
 def test_default_tie_point_is_milepost_66_at_the_reference_lines_origin() -> None:
