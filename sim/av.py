@@ -104,6 +104,7 @@ class AgentPolicy:
         plan: PlanSource,
         *,
         senses_lead_state: bool,
+        lead_state_range_m: float = RADAR_RANGE_M,
         stock_acc: StockAcc | None = None,
     ) -> None:
         if controller.actuation == "acc" and stock_acc is None:
@@ -113,6 +114,7 @@ class AgentPolicy:
         self.controller = controller
         self.plan = plan
         self.senses_lead_state = senses_lead_state
+        self.lead_state_range_m = lead_state_range_m
         self.stock_acc = stock_acc
         self.braking_authority_mps2 = braking_authority_mps2(controller.actuation)
         # The ACC that drives while the agent holds no fresh plan: the `acc` car's own, or
@@ -175,7 +177,7 @@ class AgentPolicy:
             return self._acc_drives(observation, lead_present)
         self._without_plan = False
         self._engaged = True
-        measured = lead_present and self.senses_lead_state
+        measured = self.senses_lead_state and observation.gap_m <= self.lead_state_range_m
         rel_speed = observation.lead_speed_mps - observation.speed_mps
         if self.controller.actuation == "accel" and not self._limiting:
             self.accel_limiter.reset(self._measured_accel_mps2, time_s)
@@ -187,7 +189,7 @@ class AgentPolicy:
                 target_speed_mps=profile.at(observation.position_m),
                 position_m=observation.position_m,
                 target=profile,
-                lead_present=lead_present,
+                lead_present=lead_present or measured,
                 lead_distance_m=observation.gap_m if measured else None,
                 lead_rel_speed_mps=rel_speed if measured else None,
                 acc_speed_setting_mph=self.stock_acc.speed_setting_mph if self.stock_acc else None,
@@ -232,12 +234,19 @@ def agent_policy(
     params: Mapping[str, Any] | None = None,
     *,
     stock_acc: StockAcc | None = None,
+    lead_state_range_m: float = RADAR_RANGE_M,
 ) -> AgentPolicy:
-    """A policy around a controller built exactly as the agent builds it from its config."""
+    """A policy around a controller built exactly as the agent builds it from its config.
+
+    An `accel` car (the RAV4) measures its leader's distance and speed out to
+    `lead_state_range_m`: its controller's bound acts on them, while a policy's features read a
+    leader past RADAR_RANGE_M as none, as on the car. The real RAV4 reports leaders to 252 m;
+    100 m, the common range, is the default (`sim evaluate --accel-lead-range`)."""
     controller = build_controller(controller_name, actuation, params)
     return AgentPolicy(
         controller,
         plan,
         senses_lead_state=actuation == "accel",
+        lead_state_range_m=lead_state_range_m,
         stock_acc=stock_acc,
     )

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from contract.controllers import RL_CONTROLLERS, RlParams
-from sim.av import StockAcc, agent_policy
+from sim.av import RADAR_RANGE_M, StockAcc, agent_policy
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
 from sim.folds import drive_date
@@ -373,6 +373,8 @@ class Realism:
     bounds: GapBounds = GapBounds()
     hand_back: HandBack = HandBack()
     cut_ins: CutIns | None = CutIns()
+    # How far an `accel` car measures its leader for its controller (`sim.av.agent_policy`)
+    accel_lead_range_m: float = RADAR_RANGE_M
 
 
 RunSaver = Callable[[RunResult, PlatoonRun], None]
@@ -414,6 +416,7 @@ def run_case(
                 schedule,
                 variant.params,
                 stock_acc=stock_acc() if variant.actuation == "acc" else None,
+                lead_state_range_m=realism.accel_lead_range_m,
             )
             for _ in range(avs)
         ]

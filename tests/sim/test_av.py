@@ -202,6 +202,28 @@ def test_a_leader_beyond_radar_range_is_not_seen() -> None:
     assert near.lead_rel_speed_mps == pytest.approx(-1.0)
 
 
+def test_an_accel_car_can_measure_its_leader_as_far_as_the_rav4_does() -> None:
+    """The RAV4 reports leaders to 252 m and the agent's controller bounds by them; the
+    simulator's accel car measures to `lead_state_range_m` (100 m unless asked), and a policy's
+    features still read a leader past 100 m as none (vehicle_agent.controllers.policy)."""
+    controller = Recording()
+    policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=True, lead_state_range_m=252.0)
+    policy.accel_mps2(AvObservation(0.0, 0.0, 30.0, 150.0, 15.0))
+    policy.accel_mps2(AvObservation(0.1, 3.0, 30.0, 260.0, 15.0))
+    measured, beyond = controller.seen
+    assert (measured.lead_present, measured.lead_distance_m) == (True, 150.0)
+    assert measured.lead_rel_speed_mps == pytest.approx(-15.0)
+    assert (beyond.lead_present, beyond.lead_distance_m) == (False, None)
+    rl_accel = agent_policy(
+        "rl_accel", "accel", FixedPlan(), lead_state_range_m=252.0
+    )  # the shipped policy: its bound brakes for the queue 150 m ahead, as on the car
+    default = agent_policy("rl_accel", "accel", FixedPlan())
+    for step in range(10):  # a second closing at 15 m/s from 150 m (the jerk limit acts)
+        closing = AvObservation(step * 0.1, step * 3.0, 30.0, 150.0 - step * 1.5, 15.0)
+        bounded, unbounded = rl_accel.accel_mps2(closing), default.accel_mps2(closing)
+    assert bounded < 0.0 < unbounded
+
+
 def test_an_acc_car_senses_only_the_minicar_flag() -> None:
     controller = Recording()
     policy = AgentPolicy(controller, FixedPlan(), senses_lead_state=False)

@@ -12,6 +12,7 @@ from typing import Any
 import click
 
 from planner.recommended import RECOMMENDED_PLANNER, RECOMMENDED_PLANNER_PARAMS
+from sim.av import RADAR_RANGE_M
 from sim.evaluate import (
     BASELINE,
     Evaluation,
@@ -209,6 +210,15 @@ def _planner_params(text: str | None) -> dict[str, Any]:
     "(sim.platoon.HandBack).",
 )
 @click.option(
+    "--accel-lead-range",
+    "accel_lead_range_m",
+    type=click.FloatRange(1.0, 300.0),
+    default=RADAR_RANGE_M,
+    show_default=True,
+    help="Metres to which an accel car (the RAV4, which reports leaders to 252 m) measures its "
+    "leader for its controller's bound; a policy's features still read none past 100 m.",
+)
+@click.option(
     "--save-runs",
     "runs_dir",
     type=click.Path(path_type=Path, file_okay=False),
@@ -241,6 +251,7 @@ def evaluate_command(
     avs: list[int],
     optimum_csv: Path | None,
     reaction_time_s: float,
+    accel_lead_range_m: float,
     runs_dir: Path | None,
     workers: int,
     out_dir: Path,
@@ -306,7 +317,10 @@ def evaluate_command(
                 avs=avs,
                 planner_params=params,
                 recommended=(RECOMMENDED_PLANNER, RECOMMENDED_CONTROLLER),
-                realism=Realism(hand_back=HandBack(reaction_time_s=reaction_time_s)),
+                realism=Realism(
+                    hand_back=HandBack(reaction_time_s=reaction_time_s),
+                    accel_lead_range_m=accel_lead_range_m,
+                ),
                 save_dir=runs_dir,
                 workers=workers,
                 progress=advance,
