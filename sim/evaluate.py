@@ -204,7 +204,12 @@ class Evaluation:
         return distance_lost_m(base, result.final_position_m, result.av_columns)
 
     def optimum_pct(self, result: RunResult) -> float:
-        """The optimal bound's fuel saving on this run's drive (NaN when not computed)."""
+        """The optimal bound's fuel saving on this run's drive, for a run the bound was made
+        for: one AV on the drive as driven (NaN otherwise, and when not computed). The bound is
+        per drive; a bottleneck case on the same drive, or 4 AVs on it, divided by it read
+        "348 %" and "117 %" of an optimum made for another question."""
+        if len(result.av_columns) != 1 or result.case.bottleneck is not None:
+            return float("nan")
         return float(self.optimum_fuel_saving_pct.get(result.case.drive.name, float("nan")))
 
     def unmeasured(self) -> dict[str, list[str]]:

@@ -26,7 +26,7 @@ from sim.evaluate import (
 from sim.gaps import GapKpis
 from sim.kpi import UNMEASURED_COLUMN, Kpis, fuel_economy_mpg, measured_mean
 from sim.report import best_pair, markdown_table, write_csv, write_heatmap
-from sim.scenarios import Case
+from sim.scenarios import Bottleneck, Case
 from tests.support.servers import cli_env, run_cli
 
 STOP_AND_GO = "trajectories/2021-04-05-21-39-05_masterArray_1_9955.csv"
@@ -566,3 +566,24 @@ def test_a_drive_with_a_glitch_is_named_before_its_figures(
     assert "fast: the leader's speed changes faster than 9.81 m/s^2 at 2 step(s), the first" in (
         flat
     )
+
+
+def test_of_optimum_is_read_only_where_the_bound_was_made_for_the_run() -> None:
+    """The bound is one AV on the drive as driven; a bottleneck case on the same drive, or
+    4 AVs on it, divided by it printed "348 %" and "117 %" of an optimum made for another
+    question. Those rows read n/a now."""
+    drive = drive_from_speeds("d", np.full(100, 20.0))
+    plain = Case("shockwave", drive)
+    narrowed = Case("bottleneck", drive, Bottleneck(100.0, 200.0))
+    evaluation = Evaluation(
+        [
+            RunResult(plain, "p", "c", kpis(30.0, 2000.0, 20.0), avs=1, av_columns=(5,)),
+            RunResult(plain, "p", "c", kpis(30.0, 2000.0, 20.0), avs=4, av_columns=(1, 7, 13, 19)),
+            RunResult(narrowed, "p", "c", kpis(30.0, 2000.0, 20.0), avs=1, av_columns=(5,)),
+        ],
+        optimum_fuel_saving_pct={"d": 6.0},
+    )
+    shares = [evaluation.optimum_pct(result) for result in evaluation.results]
+    assert shares[0] == 6.0
+    assert math.isnan(shares[1])
+    assert math.isnan(shares[2])
