@@ -824,3 +824,35 @@ def test_no_frame_asks_for_more_speed_well_over_the_fleets_top_speed(
     assert request(2, -0.5, 76.0)
     assert request(40, 0.1, 74.5)  # over 0.5 s later: no jerk reference to the braking
     assert len(received(car_bus)) == 2
+
+
+def test_the_jerk_check_judges_from_a_recent_request_over_the_time_elapsed(
+    buses: tuple[can.BusABC, can.BusABC], dbc_cache: Path
+) -> None:
+    """The jerk band is the last request's, over the time since it, while it is under 0.5 s
+    old; older, or after the agent let go (`idle`), the car's measured acceleration over one
+    period (RAV4: 2.5 m/s^3 up, 5 down, 0.01 m/s^2 tolerance, 1/30 s)."""
+    agent_bus, _ = buses
+    car = car_for("toyota_rav4")
+    codec = codec_for(car.dbc_name, car.checksums, dbc_cache)
+    safety = SafetyLayer(car, codec)
+    port = CanAccelPort(car, codec, SafeSender(agent_bus, safety))
+    period = car.command_period_s
+
+    def request(now: float, accel: float, measured: float) -> bool:
+        return port.request(accel, SafetyContext(now, car_state(now), measured))
+
+    # two seconds after -2.5 the reference is the car's 0: +1.5 in one period is a jerk step
+    assert request(0.0, -2.5, -2.5)
+    assert not request(2.0, 1.5, 0.0)
+    # a frame late by two periods: 0 -> +0.2 in 0.1 s is 2 m/s^3 (within 0.1 x 2.5 + 0.01)
+    assert request(10.0, 0.0, 0.0)
+    assert request(10.1, 0.2, 0.0)
+    # a frame early: +0.09 after 0.8 of a period is 3.4 m/s^3 (over 0.8 x 2.5 / 30 + 0.01)
+    assert request(20.0, 0.0, 0.0)
+    assert not request(20.0 + 0.8 * period, 0.09, 0.0)
+    # handed back just after braking, taken over again: judged from the car, not the -2.5
+    assert request(30.0, -2.5, -2.5)
+    safety.idle()
+    assert request(30.1, 0.05, 0.0)
+    assert safety.refused["jerk"] == 2
