@@ -348,3 +348,47 @@ def test_no_car_merges_while_the_room_ahead_of_the_av_is_full() -> None:
     _, _, _, _, infos = env.step(np.zeros((1, 1)))
     assert infos["cut_ins"].tolist() == [True]
     assert env.merged[0] == MAX_MERGED_CARS
+
+
+def spread_platoon(env: PlatoonVecEnv) -> None:
+    """The AV 60 m behind the leader at 20 m/s, the humans 60 m apart behind it at 10 m/s:
+    every follower free of its leader, the humans speeding up, the AV holding its speed."""
+    for column in range(1, env.position.shape[1]):
+        env.position[:, column] = env.position[:, 0] - column * (60.0 + VEHICLE_LENGTH_M)
+    env.speed[:, 2:] = 10.0
+
+
+def test_the_fuel_term_averages_every_follower_at_the_speeds_the_step_starts_from() -> None:
+    """The steady test has every car at 20 m/s, where the AV's fuel is the mean and the speed
+    before the step the speed after it: here the humans at 10 m/s speed up."""
+    env = steady_env("accel", RewardWeights(0.0, 0.0, 0.2, 0.0, 0.0))
+    spread_platoon(env)
+    before = env.speed[:, 1:].copy()
+    _, reward, *_ = env.step(np.zeros((2, 1)))
+    accel = (env.speed[:, 1:] - before) / 0.1
+    assert np.all(accel[:, 1:] > 0.5)  # the humans do speed up
+    per_car = RAV4_2019.fuel_rate_gps(before, accel)
+    np.testing.assert_allclose(reward, 1.0 - 0.2 * per_car.mean(axis=1))
+    assert not np.allclose(per_car[:, 0], per_car.mean(axis=1), atol=0.01)
+
+
+def test_the_acceleration_term_is_the_avs_own() -> None:
+    """c1 a^2 with a the AV's applied acceleration (the humans behind accelerate otherwise)."""
+    env = steady_env("accel", RewardWeights(0.1, 0.0, 0.0, 0.0, 0.0))
+    spread_platoon(env)
+    for _ in range(5):  # braking: the limiter's jerk limit lets it build over the steps
+        before = env.speed[:, 1].copy()
+        _, reward, *_ = env.step(np.full((2, 1), -1.0))
+        av_accel = (env.speed[:, 1] - before) / 0.1
+        np.testing.assert_allclose(reward, 1.0 - 0.1 * av_accel**2)
+    assert np.all(av_accel < -1.0)
+
+
+def test_an_acc_policys_speed_is_asked_around_the_plans_target_in_mph() -> None:
+    """v_action = v_s + 20 mph x a, v_s the plan's target at the AV (m/s to mph), then the
+    clip (the last second's mean speed -15/+5 mph): with a = 0 the sequencer is asked for the
+    plan's target, not the clip's floor."""
+    env = steady_env("acc", ONLY_GAP, envs=1)
+    env.target_here[:] = 16.0  # 35.8 mph, inside the clip around 44.7 mph
+    env.step(np.array([[0.0, 0.0]]))
+    assert env.cars[0].sequencer.target_speed_mph == 36
