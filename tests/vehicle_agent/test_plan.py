@@ -150,3 +150,30 @@ def test_the_plan_reaches_the_car_where_its_target_is_read_not_where_it_is() -> 
     assert lane.reaches(310.0)  # where the car itself is, the lane covers it
     assert lane.reaches(-60.0, shift)
     assert not lane.reaches(-60.0)
+
+
+def test_a_car_clock_ahead_of_publishing_reads_the_plan_where_it_was_published() -> None:
+    """A wall clock a minute behind the plan's publishing, and no steady clock to age it by:
+    its age reads -60 s, and the lookup must not move upstream by it (250 m at -4 m/s)."""
+    lane = LanePlan(parse_plan(body()), 2, None)
+    behind = PUBLISHED - timedelta(minutes=1)
+    profile = lane.profile(behind, -4.0)
+    assert profile.shift_m == 0.0
+    assert profile.at(150.0) == 20.0
+
+
+def test_a_sub_segment_whose_end_overlaps_the_next_holds_only_until_the_next_starts() -> None:
+    """A plan whose first sub-segment is drawn to 1500 m while the second starts at 1000 m is
+    valid; the first target holds up to 1000 m, the second from there (drawn past the next
+    start, the lookup's positions would not increase and np.interp's answer is undefined)."""
+    lane = LanePlan(
+        parse_plan(
+            body(x_m=[0.0, 1000.0], end_x_m=[1500.0, 2000.0], target_speed_mps=[30.0, 10.0])
+        ),
+        2,
+        None,
+    )
+    profile = lane.profile(PUBLISHED, -4.0)
+    assert profile.at(900.0) == 30.0
+    assert profile.at(1200.0) == 10.0
+    assert profile.at(1900.0) == 10.0
