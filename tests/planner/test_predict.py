@@ -10,6 +10,7 @@ import pytest
 from planner.inputs import InrixHistory
 from planner.params import PlannerParams
 from planner.predict import PREDICTORS, NoInrixEstimate, oldest_reading_used_s, usable_history
+from planner.predict.wave_trend import trend_mps2
 
 CENTERS = np.array([0.0, 1000.0, 2000.0])
 
@@ -145,3 +146,28 @@ def test_the_trend_is_fitted_on_readings_only() -> None:
     params = PlannerParams(wave_speed_mps=0.0, trend_weight=1.0, trend_damping_s=1e9)
     predicted = PREDICTORS.get("wave_trend")(usable, CENTERS, 180.0, params)
     assert predicted[2] == pytest.approx(18.0 - 0.05 * 60.0, rel=1e-6)
+
+
+def test_a_lost_reading_is_left_out_of_the_trends_fit() -> None:
+    # read 24, (lost), 18, 15 at 0, 60, 120, 180 s: centred times -100, 20, 80 about their
+    # mean 100 s, speeds 5, -1, -4 about 19 m/s: slope = (-500 - 20 - 320) / 16,800 = -0.05
+    history = InrixHistory(
+        [0.0, 60.0, 120.0, 180.0],
+        [[30.0, 30.0, 24.0], [30.0, 30.0, np.nan], [30.0, 30.0, 18.0], [30.0, 30.0, 15.0]],
+        CENTERS,
+    )
+    usable = usable_history(history, 180.0, PlannerParams())
+    assert trend_mps2(usable, 4).tolist() == pytest.approx([0.0, 0.0, -0.05])
+
+
+def test_a_recovering_segment_may_reach_the_fastest_speed_of_the_recent_snapshots() -> None:
+    # the corridor recovers; the prediction is capped by the fastest speed the recent
+    # snapshots read (33 m/s, in the oldest), not by the newest snapshot's (28 m/s)
+    history = InrixHistory(
+        [0.0, 60.0, 120.0],
+        [[33.0, 30.0, 10.0], [28.0, 30.0, 20.0], [25.0, 26.0, 28.0]],
+        CENTERS,
+    )
+    params = PlannerParams(trend_weight=1.0)
+    predicted = PREDICTORS.get("wave_trend")(history, CENTERS, 300.0, params)
+    assert predicted[1:].tolist() == [33.0, 33.0]
