@@ -33,15 +33,24 @@ def _times(duration_s: float) -> np.ndarray:
     return np.arange(0.0, duration_s + 0.05, 0.1)
 
 
-def test_adjoint_gradient_matches_finite_differences() -> None:
+@pytest.mark.parametrize(
+    "envelope",
+    [
+        # a tight envelope: the space bounds bind (the 1.05 s time gap never does at 20 m/s)
+        GapBounds(min_gap_m=25.0, max_gap_m=35.0),
+        # a 2.5 s time gap: its term binds (a sign error in its adjoint passed the first)
+        GapBounds(min_gap_m=5.0, max_gap_m=200.0, min_time_gap_s=2.5),
+    ],
+    ids=["space-bounds", "time-gap"],
+)
+def test_adjoint_gradient_matches_finite_differences(envelope: GapBounds) -> None:
     """The hand-derived adjoint is the forward sweep's derivative, clips and penalties included."""
     t = _times(40.0)
     drive = drive_from_speeds("dip", 20.0 - 6.0 * np.exp(-(((t - 15.0) / 4.0) ** 2)))
     baseline = simulate_platoon(drive, platoon_roles(6, 0))
     steps = drive.steps
-    # a tight envelope and end targets out of reach, so every penalty term is active
-    tight = GapBounds(min_gap_m=25.0, max_gap_m=35.0)
-    inputs = _sweep_inputs(drive, baseline, tight, OptimumSettings(), I24_IDM, RAV4_2019)
+    # end targets out of reach, so the end penalties are active too
+    inputs = _sweep_inputs(drive, baseline, envelope, OptimumSettings(), I24_IDM, RAV4_2019)
     end_state = inputs[-1].copy()
     end_state[3] += 50.0  # the followers' end positions fall short
     end_state[4:] = 21.0  # and so do their end speeds
