@@ -32,6 +32,9 @@ def test_clip_uses_the_mean_of_the_last_second_without_zero_and_missing_speeds()
     assert clip_speed_setting(70.0, recent) == 66  # 65.5 rounds half up
     assert clip_speed_setting(40.0, recent) == 46  # 45.5
     assert clip_speed_setting(58.2, recent) == 58
+    # half up, not Python's half to even (which agrees on 65.5 and 45.5 above)
+    assert clip_speed_setting(44.5, []) == 45
+    assert clip_speed_setting(46.5, [50.0] * 10) == 47
 
 
 def test_clip_keeps_the_setting_within_20_and_73_mph() -> None:
