@@ -22,7 +22,7 @@ from sim.optimum import (
     optimal_trajectory,
     platoon_fuel_g,
 )
-from sim.platoon import platoon_roles, simulate_platoon
+from sim.platoon import AvObservation, PlatoonRun, platoon_roles, simulate_platoon
 
 SHARED_DRIVES = Path(__file__).resolve().parents[3] / "shared" / "data" / "trajectories"
 WAVE_DRIVE = SHARED_DRIVES / "2021-03-08-22-35-14_masterArray_0_5373.csv"
@@ -193,3 +193,29 @@ def test_a_leader_that_never_moves_is_refused_naming_the_drive() -> None:
     """Fuel per distance, the objective, is undefined over no distance (it divided by zero)."""
     with pytest.raises(ValueError, match="standing: the leader never moves"):
         optimal_trajectory(drive_from_speeds("standing", np.zeros(100)))
+
+
+def test_a_replay_plays_each_steps_own_acceleration_at_the_simulators_times() -> None:
+    # the platoon asks at k x 0.1 s, which is not always k tenths in floating point (4.3 / 0.1
+    # is 42.99...): truncating replayed step k - 1's acceleration on 22 of the first 400 steps
+    replay = ReplayPolicy(np.arange(400.0), 0.1)
+    played = [replay.accel_mps2(AvObservation(k * 0.1, 0.0, 20.0, 30.0, 20.0)) for k in range(400)]
+    assert played == list(np.arange(400.0))
+
+
+def test_platoon_fuel_is_each_steps_rate_at_the_speed_it_starts_from() -> None:
+    # one car at 10 then 20 m/s (a = 10 m/s^2 over 1 s), f(v, a) at the step's start, x dt
+    run = PlatoonRun(
+        drive_name="one car",
+        dt_s=1.0,
+        is_av=np.array([False]),
+        position_m=np.array([[0.0], [15.0]]),
+        speed_mps=np.array([[10.0], [20.0]]),
+        vehicle_length_m=5.0,
+        gap_violation_m=0.0,
+    )
+    expected = float(RAV4_2019.fuel_rate_gps(np.array([10.0]), np.array([10.0]))[0])
+    assert platoon_fuel_g(run) == pytest.approx(expected)
+    assert expected != pytest.approx(
+        float(RAV4_2019.fuel_rate_gps(np.array([20.0]), np.array([10.0]))[0])
+    )
