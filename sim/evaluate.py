@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from contract.controllers import RL_CONTROLLERS, RlParams
+from contract.controllers import ACTUATIONS, RL_CONTROLLERS, RlParams
 from sim.av import RADAR_RANGE_M, StockAcc, agent_policy
 from sim.emulator.acc import SimulatedAccCar
 from sim.energy import RAV4_2019
@@ -87,10 +87,10 @@ class ControllerVariant:
     def parse(cls, text: str) -> ControllerVariant:
         """`name:actuation[:{json params}]`, e.g. `microaccel:accel:{"k": 0.4}`."""
         parts = text.split(":", 2)
-        if len(parts) < 2 or not parts[0] or parts[1] not in ("acc", "accel"):
+        if len(parts) < 2 or not parts[0] or parts[1] not in ACTUATIONS:
             raise ValueError(
                 f"controller variant {text!r}: expected NAME:ACTUATION[:JSON] with ACTUATION "
-                "acc or accel"
+                f"one of {', '.join(ACTUATIONS)}"
             )
         params: dict[str, Any] = {}
         if len(parts) == 3:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -240,3 +242,16 @@ def test_the_clip_window_is_the_last_second_even_across_a_hand_back() -> None:
     action = controller.step(Observation(later, 70.0 * MPS_PER_MPH, 70.0 * MPS_PER_MPH))
     assert isinstance(action, AccSetPoint)
     assert action.speed_setting_mph == 70  # not clipped to 30 + 5 mph
+
+
+def test_a_controller_with_a_schema_and_no_builder_stops_the_import_naming_it() -> None:
+    """The contract's schemas and the agent's builders are two registries: a schema alone was
+    accepted by the server for cars that could not build it, a builder alone left out."""
+    code = (
+        "import contract.controllers as c\n"
+        "c.CONTROLLER_SCHEMAS['hold'] = c.CONTROLLER_SCHEMAS['simple']\n"
+        "import vehicle_agent.controllers\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 1
+    assert "RegistryMismatch: controllers with a schema but no builder: ['hold']" in result.stderr

@@ -44,6 +44,22 @@ BUILDERS: dict[str, Callable[[Actuation, Any], Controller]] = {
     "rl_acc": RlAccController,
     "rl_accel": RlAccelController,
 }
+
+
+class RegistryMismatch(RuntimeError):
+    """A controller with a schema in the contract and no builder here, or the reverse."""
+
+
+# The contract's schemas (what the server accepts) and the builders (what the car runs) name the
+# same controllers: a builder alone was silently left out, and a schema alone was accepted by
+# the server for cars that could not build it.
+if BUILDERS.keys() != CONTROLLER_SCHEMAS.keys():
+    _unbuilt = sorted(CONTROLLER_SCHEMAS.keys() - BUILDERS.keys())
+    _unschemed = sorted(BUILDERS.keys() - CONTROLLER_SCHEMAS.keys())
+    raise RegistryMismatch(
+        f"controllers with a schema but no builder: {_unbuilt}; with a builder but no schema "
+        f"in contract.controllers.CONTROLLER_SCHEMAS: {_unschemed}"
+    )
 CONTROLLERS: dict[str, ControllerSpec] = {
     name: ControllerSpec(schema, BUILDERS[name]) for name, schema in CONTROLLER_SCHEMAS.items()
 }
