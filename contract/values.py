@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Annotated
 from urllib.parse import urlsplit
@@ -22,6 +23,7 @@ from pydantic import (
     Field,
     Strict,
     StringConstraints,
+    ValidationError,
 )
 
 # The JSON Schema side of StorableText, so clients and fuzzers know NUL is not text here.
@@ -133,3 +135,32 @@ Text120 = Annotated[
     Field(json_schema_extra={"pattern": NO_NUL_PATTERN}),
 ]
 Timestamp = Annotated[AwareDatetime, BeforeValidator(time_text), AfterValidator(plausible_time)]
+
+
+@dataclass(frozen=True)
+class Problem:
+    """The first thing a validation found wrong: where (the location's parts) and what."""
+
+    location: tuple[str, ...]
+    message: str
+
+    @property
+    def where(self) -> str:
+        """The location as `a.b.0`."""
+        return ".".join(self.location)
+
+    def __str__(self) -> str:
+        return f"{self.where}: {self.message}" if self.location else self.message
+
+
+def first_problem(error: ValidationError) -> Problem:
+    """The first problem of a validation failure, in the words of the check that failed: a
+    validator's ValueError read from the exception itself (pydantic's message wraps it in
+    "Value error, "), any other check's message as pydantic words it."""
+    detail = error.errors(include_url=False)[0]
+    raised = detail.get("ctx", {}).get("error")
+    if detail["type"] == "value_error" and isinstance(raised, ValueError):
+        message = str(raised)
+    else:
+        message = str(detail["msg"])
+    return Problem(tuple(str(part) for part in detail["loc"]), message)

@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from contract.idm import I24_IDM
 from contract.units import MPS_PER_MPH, WAVE_SPEED_MPS
+from contract.values import first_problem
 from planner.inputs import EngagedPings
 
 
@@ -132,10 +133,9 @@ class PlannerParams(BaseModel):
         try:
             return cls.model_validate(values or {})
         except ValidationError as error:
-            first = error.errors()[0]
-            name = ".".join(str(part) for part in first.get("loc", ())) or "params"
-            message = str(first.get("msg", "invalid")).removeprefix("Value error, ")
-            raise InvalidParams(f"planner parameter {name}: {message}") from None
+            problem = first_problem(error)
+            name = problem.where or "params"
+            raise InvalidParams(f"planner parameter {name}: {problem.message}") from None
 
     def stored(self) -> dict[str, Any]:
         """The parameters as stored with a plan (JSON-ready)."""

@@ -17,6 +17,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from contract.plans import LaneTargets, PlanTargets
 from contract.units import WAVE_SPEED_MPS
+from contract.values import first_problem
 from vehicle_agent.controllers import TargetProfile
 
 # Waves travel upstream at about this speed (m/s; negative = upstream): 15 km/h, the speed the
@@ -90,10 +91,7 @@ def parse_plan(body: bytes | str) -> Plan:
     try:
         return Plan.model_validate_json(body)
     except ValidationError as error:
-        detail = error.errors()[0]
-        where = ".".join(str(part) for part in detail.get("loc", ()))
-        message = str(detail.get("msg", "invalid")).removeprefix("Value error, ")
-        raise PlanError(f"plan refused: {where + ': ' if where else ''}{message}") from None
+        raise PlanError(f"plan refused: {first_problem(error)}") from None
 
 
 class LanePlan:

@@ -14,7 +14,7 @@ from pydantic import Field, SecretStr, ValidationError, field_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from contract.environment import AGENT_ENV_PREFIX
-from contract.values import http_url
+from contract.values import first_problem, http_url
 from vehicle_agent.cars import CARS, CruiseButton
 from vehicle_agent.plan import DEFAULT_WAVE_SPEED_MPS
 
@@ -183,11 +183,9 @@ def load_agent_settings(env_file: Path | None = None, **overrides: object) -> Ag
     try:
         return AgentSettings(_env_file=env_file, **given)  # type: ignore[arg-type]
     except ValidationError as error:
-        first = error.errors()[0]
-        location = [str(part) for part in first.get("loc", ())]
-        name = ENV_PREFIX + location[0].upper() if location else "settings"
-        message = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
-        raise AgentSettingsError(f"{name}: {message}") from None
+        problem = first_problem(error)
+        name = ENV_PREFIX + problem.location[0].upper() if problem.location else "settings"
+        raise AgentSettingsError(f"{name}: {problem.message}") from None
 
 
 def setting_names() -> set[str]:

@@ -21,7 +21,7 @@ from pydantic import Field, SecretStr, ValidationError, field_validator, model_v
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from contract.environment import AGENT_VARIABLES, SERVER_ENV_PREFIX, TOOL_VARIABLES
-from contract.values import http_url
+from contract.values import first_problem, http_url
 from contract.vehicles import (
     MAX_PING_PERIOD_S,
     MAX_PLAN_POLL_S,
@@ -327,10 +327,10 @@ class Settings(BaseSettings):
 
 def _describe(error: ValidationError) -> str:
     """Turn pydantic's report into one line naming the environment variable."""
-    first = error.errors()[0]
-    location = [str(part) for part in first.get("loc", ()) if part != "__root__"]
+    problem = first_problem(error)
+    location = [part for part in problem.location if part != "__root__"]
     name = "SMOOTHFLEET_" + location[0].upper() if location else "settings"
-    message = str(first.get("msg", "invalid value")).removeprefix("Value error, ")
+    message = problem.message
     if name == "settings":
         return message
     return f"{name}: {message}"

@@ -19,6 +19,7 @@ from pydantic import ConfigDict, ValidationError
 
 from app.auth import Principal
 from app.ingest.directory import CorridorInfo, FleetDirectory
+from contract.values import first_problem
 from contract.vehicles import MAX_PINGS_PER_BATCH, VEHICLE_ID_PATTERN, Ping, PingBatch
 
 REQUIRED_FIELDS = ("vehicle_id", "ts", "lat", "lon", "speed_mps")
@@ -173,10 +174,7 @@ def _refuse_foreign(vehicle_ids: Iterable[object], principal: Principal, count: 
 
 
 def _describe(error: ValidationError) -> str:
-    first = error.errors(include_url=False)[0]
-    where = ".".join(str(part) for part in first["loc"])
-    message = first["msg"].removeprefix("Value error, ")
-    return f"{where}: {message}" if where else message
+    return str(first_problem(error))
 
 
 class _BareBatch(PingBatch):

@@ -15,18 +15,11 @@ from sqlalchemy.orm import Session
 from app.models import Corridor, Policy, Vehicle
 from app.vehicles.schemas import RosterRow
 from contract.controllers import RL_CONTROLLERS
+from contract.values import first_problem
 
 
 class RosterError(ValueError):
     """A roster row is wrong; the message names the row and the field."""
-
-
-def first_error(error: ValidationError) -> str:
-    """The first field error of a validation failure as `field: message`."""
-    detail = error.errors()[0]
-    field = ".".join(str(part) for part in detail.get("loc", ()))
-    message = str(detail.get("msg", "invalid")).removeprefix("Value error, ")
-    return f"{field}: {message}" if field else message
 
 
 def parse_roster_csv(path: Path) -> list[RosterRow]:
@@ -62,7 +55,7 @@ def _roster_rows(path: Path, handle: TextIO) -> list[RosterRow]:
         try:
             rows.append(RosterRow.model_validate(record))
         except ValidationError as error:
-            raise RosterError(f"{path.name} row {number}: {first_error(error)}") from None
+            raise RosterError(f"{path.name} row {number}: {first_problem(error)}") from None
     return rows
 
 

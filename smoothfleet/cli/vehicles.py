@@ -11,7 +11,8 @@ from sqlalchemy.exc import IntegrityError
 
 from app.core.db import make_sync_engine, session_scope
 from app.vehicles.schemas import RosterRow
-from app.vehicles.service import first_error, list_vehicles, parse_roster_csv, upsert_vehicles
+from app.vehicles.service import list_vehicles, parse_roster_csv, upsert_vehicles
+from contract.values import first_problem
 from smoothfleet.cli.common import CliError, console, database, settings
 
 
@@ -61,7 +62,7 @@ def vehicles_add(**fields: object) -> None:
     try:
         row = RosterRow.model_validate(fields)
     except ValidationError as error:
-        raise CliError(f"vehicle: {first_error(error)}") from None
+        raise CliError(f"vehicle: {first_problem(error)}") from None
     with database(settings()) as url:
         _write_roster(url, [row], label=None)
     console.print(f"vehicle {row.vehicle_id} saved")
