@@ -107,7 +107,9 @@ def main() -> None:
     print(f"vectorised, 1 AV + planner : {steps / t_av:10,.0f} steps/s")
     print(f"baseline, per-vehicle loop : {steps / t_loop:10,.0f} steps/s")
     print(f"speed-up vs baseline       : {t_loop / t_vector:10.1f}x (all human)")
-    print(f"goal >= 20,000 steps/s     : {'met' if steps / t_vector >= 20_000 else 'NOT met'}")
+    for label, seconds in (("all human", t_vector), ("1 AV + planner", t_av)):
+        verdict = "met" if steps / seconds >= 20_000 else "NOT met"
+        print(f"goal >= 20,000 steps/s     : {verdict} ({label})")
 
 
 if __name__ == "__main__":
