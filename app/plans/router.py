@@ -200,5 +200,7 @@ async def get_plan_history(
         )
     if corridor_id is not None and await corridor_lanes(session, corridor_id) is None:
         raise HTTPException(404, f"unknown corridor {corridor_id}")
-    runs = await plan_history(session, corridor_id, since, until, status, limit)
-    return PlanHistoryOut(plans=runs)
+    # one more than asked for tells whether the window held more (the answer said nothing, and
+    # a window of more than `limit` planner cycles read as complete)
+    runs = await plan_history(session, corridor_id, since, until, status, limit + 1)
+    return PlanHistoryOut(plans=runs[:limit], truncated=len(runs) > limit)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import datetime
 from typing import Any
 
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 
 class PlanRunOut(BaseModel):
@@ -28,3 +28,8 @@ class PlanHistoryOut(BaseModel):
     """Planner runs, newest first."""
 
     plans: list[PlanRunOut]
+    truncated: bool = Field(
+        False,
+        description="more runs lie in the window than `limit`: ask again with `until` set to "
+        "the oldest run's started_at",
+    )

@@ -193,7 +193,19 @@ def test_the_history_lists_every_run_with_its_provenance(served: Served) -> None
         until=runs[0]["started_at"],
     ).json()["plans"]
     assert [run["plan_id"] for run in window] == [runs[1]["plan_id"], runs[2]["plan_id"]]
-    assert served.get("/api/v1/plans", status="failed").json() == {"plans": []}
+    assert served.get("/api/v1/plans", status="failed").json() == {
+        "plans": [],
+        "truncated": False,
+    }
+    assert history.json()["truncated"] is False
+    # a window holding more runs than asked for says so; the rest lies before the oldest
+    first_two = served.get("/api/v1/plans", corridor="I-24-WB", limit=2).json()
+    assert [run["plan_id"] for run in first_two["plans"]] == served.plan_ids[:-3:-1]
+    assert first_two["truncated"] is True
+    rest = served.get(
+        "/api/v1/plans", corridor="I-24-WB", until=first_two["plans"][-1]["started_at"]
+    ).json()
+    assert [run["plan_id"] for run in rest["plans"]] == served.plan_ids[-3::-1]
     naive = served.get("/api/v1/plans", since="2026-01-01T00:00:00")
     assert naive.status_code == 422
 
@@ -208,7 +220,7 @@ def test_a_history_window_that_ends_before_it_starts_is_refused(served: Served) 
         "detail": "until (2026-01-01T00:00:00+00:00) is before since (2026-01-02T00:00:00+00:00)"
     }
     empty = served.get("/api/v1/plans", since="2026-01-01T00:00:00Z", until="2026-01-01T00:00:00Z")
-    assert empty.json() == {"plans": []}  # [t, t) holds no run, and asks nothing wrong
+    assert empty.json() == {"plans": [], "truncated": False}  # [t, t): no run, nothing wrong
 
 
 def test_the_history_of_an_unknown_corridor_is_a_404_naming_it(served: Served) -> None:
