@@ -64,6 +64,21 @@ class InrixSegment(BaseModel):
     _integers = field_validator("score", mode="before")(json_number)
     _real = field_validator("speed", "average", "reference", "travel_time_minutes", "c_value")(real)
 
+    @field_validator("code", mode="before")
+    @classmethod
+    def _code_as_text(cls, value: object) -> object:
+        """An XD code is digits: sent as a JSON integer it names the same segment (a float or
+        a boolean does not)."""
+        if isinstance(value, int) and not isinstance(value, bool) and value >= 0:
+            return str(value)
+        return value
+
+    @field_validator("segment_closed", mode="before")
+    @classmethod
+    def _closed_unless_said(cls, value: object) -> object:
+        """`"segmentClosed": null` says no more than an absent flag: open."""
+        return False if value is None else value
+
 
 class InrixSegmentSet(BaseModel):
     """Readings of one provider timestamp."""

@@ -20,7 +20,7 @@ from sqlalchemy import Engine, text
 from sqlalchemy.ext.asyncio import async_sessionmaker
 
 from app.core.db import make_async_engine
-from app.feeds.inrix import SegmentReading, SnapshotReadings
+from app.feeds.inrix import SegmentReading, SnapshotReadings, readings
 from app.feeds.recording import read_recording, snapshots_from_drive
 from app.feeds.service import StoreResult, store_readings
 from tests.support.api import serving
@@ -488,3 +488,18 @@ def test_a_feed_folder_with_empty_cells_converts_leaving_them_out(tmp_path: Path
     assert "score" not in first[1]  # the empty score cell
     assert first[1]["speed"] == pytest.approx(20.0 / MPH, abs=1e-3)
     assert [segment["code"] for segment in second] == ["SF-I24WB-00"]  # the empty speed cell
+
+
+def test_a_numeric_xd_code_and_a_null_closure_flag_are_read_as_the_provider_means_them() -> None:
+    """Both refused the segment: XD codes are digits, sent as a JSON integer they name the same
+    segment; `"segmentClosed": null` says no more than an absent flag."""
+    read = readings(
+        provider_response(
+            {"code": 449620170, "speed": 45, "segmentClosed": None},
+            {"code": 4.5, "speed": 45},
+            {"code": True, "speed": 45},
+            timestamp="2026-11-23T08:00:00Z",
+        )
+    )
+    assert [(r.xd_code, r.is_closed) for r in read.readings] == [("449620170", False)]
+    assert [r.segment for r in read.refused] == [1, 2]
