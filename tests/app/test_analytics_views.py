@@ -408,6 +408,12 @@ def test_inrix_latency_per_snapshot(
     row = analytics.read_view(connection, "inrix_latency").iloc[-1]
     assert (row["segments"], row["closed_segments"]) == (3, 1)
     assert row["mean_speed_mps"] == pytest.approx(1541.63 / (35.89 + 37.49), rel=1e-3)
+    # an open segment of standing traffic takes unbounded time to drive: the road's space-mean
+    # speed is 0 (it was left out, and the road read as fast as its moving segments)
+    standing = measured + timedelta(minutes=2)
+    post_inrix(client, token, standing, dict(zip(codes, [44.7, 0.0, 53.7], strict=True)))
+    row = analytics.read_view(connection, "inrix_latency").iloc[-1]
+    assert row["mean_speed_mps"] == 0.0
 
 
 # --- plan adherence ----------------------------------------------------------------------------
