@@ -193,6 +193,10 @@ async def log_in(
 ) -> LoginResult:
     """Check a login from `client_address`; failures are counted and slow that address down on
     this account (the account's row is locked, so concurrent attempts count one by one)."""
+    if not USERNAME_PATTERN.match(username):
+        # no account has such a name; asked of the database, a NUL in it was PostgreSQL's
+        # DataError, which the login form showed as the API's JSON 422
+        return await _unknown_username(username, password, client_address, now)
     user = await session.scalar(
         select(OpsUser).where(OpsUser.username == username).with_for_update()
     )

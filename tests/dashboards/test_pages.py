@@ -100,7 +100,11 @@ def test_login_sets_a_protected_session_cookie_and_goes_where_the_user_was_going
         assert page.text.count('<tr data-vehicle="') == 100
 
 
-@pytest.mark.parametrize(("username", "password"), [("viewer", "wrong-password"), ("nobody", "x")])
+@pytest.mark.parametrize(
+    ("username", "password"),
+    [("viewer", "wrong-password"), ("nobody", "x"), ("vie\x00wer", PASSWORDS["viewer"])],
+    ids=["wrong-password", "no-account", "nul-in-name"],
+)
 def test_a_wrong_login_says_so_without_telling_which_part(
     site: str, username: str, password: str
 ) -> None:
