@@ -38,9 +38,16 @@ class StoreResult:
 
 
 async def store_readings(
-    session: AsyncSession, snapshot: SnapshotReadings, received_at: datetime
+    session: AsyncSession,
+    snapshot: SnapshotReadings,
+    received_at: datetime,
+    fetched_at: datetime | None = None,
 ) -> StoreResult:
-    """Store the readings of known segments; count the rest. The caller commits."""
+    """Store the readings of known segments; count the rest. The caller commits.
+
+    `fetched_at`: when the answer was fetched from the provider, if earlier than now (the
+    poller's backlog, a replay): the latency the analytics read is the provider's, not an
+    outage's."""
     readings = snapshot.readings
     codes = sorted({reading.xd_code for reading in readings})
     found = await session.execute(
@@ -62,6 +69,7 @@ async def store_readings(
                         "xd_code": reading.xd_code,
                         "measured_at": reading.measured_at,
                         "received_at": received_at,
+                        "fetched_at": fetched_at,
                         "speed_mps": reading.speed_mps,
                         "average_speed_mps": reading.average_speed_mps,
                         "reference_speed_mps": reading.reference_speed_mps,

@@ -151,6 +151,9 @@ class InrixEstimate(Base):
     xd_code: Mapped[str] = mapped_column(ForeignKey("dim_inrix_segment.xd_code"), primary_key=True)
     measured_at: Mapped[datetime] = mapped_column(DateTime(timezone=True), primary_key=True)
     received_at: Mapped[datetime] = received_at_column()
+    # When the poller fetched the provider's answer, where it stored it later (a backlog kept
+    # through a database outage, a replayed recording); NULL: stored as it arrived.
+    fetched_at: Mapped[datetime | None] = mapped_column(DateTime(timezone=True))
     speed_mps: Mapped[float | None] = mapped_column(REAL)
     average_speed_mps: Mapped[float | None] = mapped_column(REAL)
     reference_speed_mps: Mapped[float | None] = mapped_column(REAL)

@@ -79,9 +79,12 @@ def _storer(
             refuse_future(found, now, max_future_s)
         except (InrixFormatError, SnapshotTimeRefused) as error:
             raise PollFailed(f"{where}{error}") from None
+        # when the answer came from the provider (now, for a live fetch stored at once; a
+        # backlog's or a recording's own time otherwise), never after it is stored
+        fetched_at = min(snapshot.recorded_at + shift(snapshot), now)
         try:
             async with sessions() as session, session.begin():
-                result = await store_readings(session, found, now)
+                result = await store_readings(session, found, now, fetched_at)
         except (DBAPIError, OSError, PoolTimeout) as error:
             reason = str(error).strip().splitlines()[0] if str(error).strip() else "unreachable"
             raise StoreFailed(f"database: {reason}") from None

@@ -503,3 +503,35 @@ def test_a_numeric_xd_code_and_a_null_closure_flag_are_read_as_the_provider_mean
     )
     assert [(r.xd_code, r.is_closed) for r in read.readings] == [("449620170", False)]
     assert [r.segment for r in read.refused] == [1, 2]
+
+
+def test_a_minute_stored_late_keeps_the_latency_it_was_fetched_with(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path
+) -> None:
+    """The poller's backlog (a database outage) and a replay store minutes long after they
+    were fetched: the latency analytics counted that delay as the provider's. A minute fetched
+    180 s after its time and stored an hour later reads 180 s."""
+    measured = datetime.now(UTC).replace(second=0, microsecond=0) - timedelta(hours=1)
+    recording = tmp_path / "backlog.jsonl"
+    response = provider_response(
+        {"code": "SF-I24WB-05", "speed": 45},
+        {"code": "SF-I24WB-06", "speed": 50},
+        timestamp=measured.isoformat(),
+    )
+    fetched = measured + timedelta(seconds=180)
+    recording.write_text(
+        json.dumps({"recorded_at": fetched.isoformat(), "response": response}) + "\n"
+    )
+    env = cli_env(SMOOTHFLEET_DATABASE_URL=seeded_database_url)
+    replayed = run_cli("inrix", "replay", str(recording), "--speed", "0", env=env)
+    assert replayed.returncode == 0, replayed.stderr
+    with seeded_engine.connect() as connection:
+        latency, fetched_at, received_at = connection.execute(
+            text(
+                "SELECT v.latency_s, e.fetched_at, e.received_at FROM analytics.inrix_latency v "
+                "JOIN fact_inrix_estimate e USING (corridor_id, measured_at) LIMIT 1"
+            )
+        ).one()
+    assert latency == pytest.approx(180.0)
+    assert fetched_at == fetched
+    assert (received_at - measured).total_seconds() > 3500  # stored an hour later
