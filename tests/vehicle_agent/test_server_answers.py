@@ -4,6 +4,9 @@ reports that are not what gpsd documents: refused with a reason, never a crash o
 from __future__ import annotations
 
 import json
+import socket
+import threading
+import time
 from datetime import UTC, datetime
 from typing import Any
 
@@ -13,7 +16,7 @@ import pytest
 from sim.emulator.rig import uniform_plan, vehicle_config
 from vehicle_agent.agent import MAX_BACKOFF_S, Schedule
 from vehicle_agent.gps import GpsdSource
-from vehicle_agent.server import NewPlan, ServerClient, UnexpectedAnswer
+from vehicle_agent.server import NewPlan, ServerClient, ServerTimeout, UnexpectedAnswer
 
 PINGS = [{"vehicle_id": "SF-001", "ts": f"2026-12-02T10:00:0{i}Z"} for i in range(3)]
 
@@ -127,8 +130,8 @@ def test_a_fix_carries_the_receivers_time_where_gpsd_gives_one() -> None:
     assert timed is not None
     assert timed.utc == datetime(2026, 12, 3, 7, 30, 0, 250000, tzinfo=UTC)
     # no time, or one that is no time with its zone: the fix stands, with no receiver time
-    for time in (None, "soon", "2026-12-03T07:30:00"):
-        fix = gpsd(tpv | {"time": time}).latest()
+    for stamp in (None, "soon", "2026-12-03T07:30:00"):
+        fix = gpsd(tpv | {"time": stamp}).latest()
         assert fix is not None
         assert fix.utc is None
 
@@ -233,3 +236,36 @@ def test_a_plan_answer_says_when_the_server_sent_it_by_its_own_clock() -> None:
     fetched = ServerClient(http, "SF-001", "token").plan(2, None)
     assert isinstance(fetched, NewPlan)
     assert fetched.served_at is None
+
+
+def test_an_answer_dripped_slower_than_its_deadline_is_a_timeout_at_the_deadline() -> None:
+    """httpx's timeout bounds each read: a body dripped a byte every 0.2 s never meets a 1 s
+    read timeout, and held the network thread for the whole body (19 s against 3 s in an
+    audit). The answer is read against a deadline of the timeout."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+
+    def drip() -> None:
+        connection, _ = listener.accept()
+        with connection:
+            connection.recv(65536)
+            connection.sendall(
+                b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 20\r\n\r\n"
+            )
+            for _ in range(20):
+                time.sleep(0.2)
+                try:
+                    connection.sendall(b" ")
+                except OSError:
+                    return  # the client gave up
+
+    server = threading.Thread(target=drip, daemon=True)
+    server.start()
+    with httpx.Client(base_url=f"http://127.0.0.1:{port}") as http:
+        client = ServerClient(http, "SF-001", "t", 1.0)
+        started = time.monotonic()
+        with pytest.raises(ServerTimeout, match="the answer took over 1 s"):
+            client.config()
+        assert time.monotonic() - started < 2.0
+    server.join(timeout=5)
+    listener.close()
