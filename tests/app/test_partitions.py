@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time as time_module
 from datetime import UTC, date, datetime, time, timedelta
 
 import pytest
@@ -11,6 +10,7 @@ from sqlalchemy import Engine, text
 from sqlalchemy.exc import IntegrityError
 
 from app.maintenance import maintain
+from tests.support.databases import sessions_waiting_on_a_lock
 
 INSERT_PING = text(
     "INSERT INTO fact_vehicle_ping (vehicle_id, ts, lat, lon, speed_mps) "
@@ -177,15 +177,7 @@ def test_two_passes_at_once_make_each_partition_once_and_both_succeed(
         assert created > 40
         racing = threading.Thread(target=second_pass)
         racing.start()
-        with seeded_engine.connect() as watcher:
-            waiting = 0
-            for _ in range(200):  # until the second pass waits (at most 10 s)
-                waiting = watcher.execute(
-                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
-                ).scalar_one()
-                if waiting:
-                    break
-                time_module.sleep(0.05)
+        waiting = sessions_waiting_on_a_lock(seeded_engine)
         assert waiting == 1
         transaction.commit()
         racing.join(timeout=30)

@@ -24,6 +24,7 @@ from app.ingest.pings import PingRow
 from app.ingest.sql import SMALL_GROUP_ROWS
 from app.ingest.writer import PingWriter, UnstorableValue, WriteOutcome
 from tests.support.api import ping, serving
+from tests.support.databases import sessions_waiting_on_a_lock
 from tests.support.tokens import bearer, issue
 
 CLEAN_CARS = 10
@@ -167,15 +168,7 @@ def test_groups_holding_the_same_pings_take_their_locks_in_one_order(
         other_replica.execute(insert, {"ts": first})
         writing = threading.Thread(target=lambda: asyncio.run(write_in_arrival_order()))
         writing.start()
-        with seeded_engine.connect() as watcher:
-            waiting = 0
-            for _ in range(200):  # until the writer waits on a lock (at most 10 s)
-                waiting = watcher.execute(
-                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
-                ).scalar_one()
-                if waiting:
-                    break
-                time.sleep(0.05)
+        waiting = sessions_waiting_on_a_lock(seeded_engine)
         assert waiting == 1
         other_replica.execute(insert, {"ts": second})  # a deadlock here, rows in arrival order
         transaction.commit()

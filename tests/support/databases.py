@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import itertools
 import os
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 import psycopg
 from psycopg import sql
+from sqlalchemy import Engine, text
 
 from app.core.db import libpq_url, make_sync_engine, session_scope
 from app.core.embedded import database_url
@@ -65,3 +67,19 @@ def database_from_template(server_url: str, template: str) -> Iterator[str]:
             server_url,
             sql.SQL("DROP DATABASE IF EXISTS {} WITH (FORCE)").format(sql.Identifier(name)),
         )
+
+
+def sessions_waiting_on_a_lock(engine: Engine, within_s: float = 10.0) -> int:
+    """How many sessions wait on a lock, as soon as any does (0 if none within `within_s`):
+    a test holding a transaction open lets the code under test meet it first."""
+    deadline = time.monotonic() + within_s
+    with engine.connect() as watcher:
+        while True:
+            waiting = int(
+                watcher.execute(
+                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
+                ).scalar_one()
+            )
+            if waiting or time.monotonic() > deadline:
+                return waiting
+            time.sleep(0.05)
