@@ -50,12 +50,17 @@ def _roster_rows(path: Path, handle: TextIO) -> list[RosterRow]:
         raise RosterError(f"{path.name} row 1: unknown column(s) {', '.join(unknown)}")
     rows = []
     for number, record in enumerate(reader, start=2):
+        # the record's number, and the file's line it ends on where they differ (blank lines
+        # skipped, a quoted field over several lines): an editor shows lines
+        where = f"row {number}" + (
+            f" (line {reader.line_num})" if reader.line_num != number else ""
+        )
         if None in record:
-            raise RosterError(f"{path.name} row {number}: more fields than the header")
+            raise RosterError(f"{path.name} {where}: more fields than the header")
         try:
             rows.append(RosterRow.model_validate(record))
         except ValidationError as error:
-            raise RosterError(f"{path.name} row {number}: {first_problem(error)}") from None
+            raise RosterError(f"{path.name} {where}: {first_problem(error)}") from None
     return rows
 
 

@@ -528,3 +528,17 @@ def test_roster_text_is_refused_by_row_as_the_api_would_refuse_it(
     )
     with pytest.raises(RosterError, match=refusal):
         parse_roster_csv(roster)
+
+
+def test_a_bad_row_after_blank_lines_names_its_line_too(tmp_path: Path) -> None:
+    """Rows count records, which a blank line or a quoted field over two lines sets apart from
+    the lines an editor shows: the line is named where they differ."""
+    roster = write_roster(
+        tmp_path / "fleet.csv",
+        "SF-201,JN8BT3BB3PW906499,Nissan,Rogue,2023,acc,I-24-WB,A,1,microaccel_acc,{}",
+        "",
+        "",
+        "SF-202,JN8BT3BB3PW906498,Nissan,Rogue,2023,acc,I-24-WB,A,0,microaccel_acc,{}",
+    )
+    with pytest.raises(RosterError, match=r"fleet.csv row 3 \(line 5\): assigned_lane: "):
+        parse_roster_csv(roster)
