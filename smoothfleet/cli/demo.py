@@ -16,6 +16,7 @@ Given a migrated and seeded database (the CLI starts the embedded PostgreSQL), t
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import os
@@ -24,7 +25,8 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -632,11 +634,36 @@ def demo(
         pgdata_dir,
     )
 
-    with embedded_server(pgdata_dir(current.data_dir)) as server_url:
+    with (
+        one_demo_per_data_dir(current.data_dir),
+        embedded_server(pgdata_dir(current.data_dir)) as server_url,
+    ):
         if not keep:
             drop_database(server_url, DEMO_DATABASE)
         ensure_database(server_url, DEMO_DATABASE)
         _demo_on(database_url(server_url, DEMO_DATABASE), current, duration, vehicles, rl=rl)
+
+
+@contextmanager
+def one_demo_per_data_dir(data_dir: Path) -> Iterator[None]:
+    """Hold the data dir's demo lock for the demo's life. A second demo on the same data dir
+    (another port, another terminal) dropped the running one's database: the first went on
+    failing in its server log and printed a summary of the second's pings."""
+    data_dir.mkdir(parents=True, exist_ok=True)
+    with (data_dir / "demo.lock").open("a+") as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.seek(0)
+            holder = lock.read().strip() or "unknown"
+            raise CliError(
+                f"demo: a demo is already running on {data_dir} (pid {holder}): stop it, or "
+                "give this one another SMOOTHFLEET_DATA_DIR"
+            ) from None
+        lock.truncate(0)
+        lock.write(str(os.getpid()))
+        lock.flush()
+        yield
 
 
 def _say_whole(line: str) -> None:

@@ -8,6 +8,7 @@ the plan, and the feed's snapshots are in the warehouse.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 from pathlib import Path
 
@@ -16,6 +17,8 @@ from sqlalchemy import Engine, text
 from sqlalchemy.orm import Session
 
 from planner.warehouse import replay_plan
+from smoothfleet.cli.common import CliError
+from smoothfleet.cli.demo import one_demo_per_data_dir
 from tests.support.servers import cli_env, free_port, run_cli
 from vehicle_agent.controllers.rl_acc import BUNDLED_POLICIES
 
@@ -115,3 +118,18 @@ def test_the_demo_finds_its_traffic_drive_where_every_command_finds_the_shared_d
 
     monkeypatch.setenv("SMOOTHFLEET_SHARED_DATA", str(tmp_path / "data"))
     assert traffic_drive_path() == tmp_path / "data" / TRAFFIC_DRIVE_FILE
+
+
+def test_a_second_demo_on_the_same_data_dir_is_refused_naming_the_first(tmp_path: Path) -> None:
+    """A second demo on the data dir (another port, another terminal) dropped the running
+    one's database, which went on failing in its server log and printed the second's pings."""
+    with one_demo_per_data_dir(tmp_path):
+        with (
+            pytest.raises(
+                CliError, match=rf"a demo is already running on .* \(pid {os.getpid()}\)"
+            ),
+            one_demo_per_data_dir(tmp_path),
+        ):
+            pass
+    with one_demo_per_data_dir(tmp_path):  # the first ended: the next may run
+        pass
