@@ -696,8 +696,8 @@ def _demo_on(
     finally:
         engine.dispose()
     public = (current.public_url or f"http://{current.host}:{current.port}").rstrip("/")
-    console.print(f"[bold]smoothfleet demo[/bold]: database {redact(url)}")
-    console.print(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
+    _say_whole(f"smoothfleet demo: database {redact(url)}")
+    _say_whole(f"seeded {counts.vehicles} vehicles on {counts.i24_segments} sub-segments")
     for controller, sha256 in counts.policies.items():
         _say_whole(f"{controller}: policy {sha256[:12]} held for the seeded cars that run it")
     for controller, sha256 in policies.items():
@@ -708,11 +708,11 @@ def _demo_on(
                 f"{controller}: the seed roster does not run it (the simulator's verdict is not "
                 "to assign it: docs/simulation.md); --rl runs it as the paper's fleet did"
             )
-    console.print(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
-    console.print(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
+    _say_whole(f"dashboard: {public}/   login: {DEMO_ADMIN} / {admin_password} (new each run)")
+    _say_whole(f"API docs: {public}/docs   health: {public}/readyz   (Ctrl-C stops)")
     try:
         summary = run_demo(url, current, duration_s=duration, vehicles=vehicles, say=_say_whole)
     except DemoError as error:
         raise CliError(f"demo: {error}") from None
     for line in summary.lines():
-        console.print(line)
+        _say_whole(line)

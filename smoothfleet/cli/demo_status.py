@@ -62,7 +62,7 @@ def status_line(status: FleetStatus, zone: Any = None) -> str:
         else f"{status.step_interval_s:.2f} s ({100 * (status.late_share or 0.0):.0f} % late)"
     )
     return (
-        f"{status.at.astimezone(zone).strftime('%H:%M:%S')}  pings {pings} · reporting "
+        f"{status.at.astimezone(zone).strftime('%H:%M:%S %Z')}  pings {pings} · reporting "
         f"{status.reporting}/{status.vehicles} · cleared {status.cleared} · engaged "
         f"{status.engaged} · plan {age(status.plan_age_s)} · INRIX {age(status.inrix_age_s)} · "
         f"fleet step {step} · verdict changes {status.verdict_changes} "
@@ -136,6 +136,7 @@ class StatusMonitor:
         self.tracker = VerdictTracker()
         self.stop = threading.Event()
         self._pings: tuple[float, float] | None = None
+        self._unanswered: str | None = None
 
     def _pings_per_s(self) -> float | None:
         try:
@@ -156,10 +157,13 @@ class StatusMonitor:
         pings = self._pings_per_s()
         try:
             response = self.http.get("/api/v1/fleet")
-        except httpx.HTTPError:
+        except httpx.HTTPError as error:
+            self._no_answer(type(error).__name__)
             return None
         if response.status_code != 200:
+            self._no_answer(f"HTTP {response.status_code} {response.text[:120]}")
             return None
+        self._unanswered = None
         fleet: dict[str, Any] = response.json()
         at = datetime.now(UTC)
         changed = self.tracker.update(
@@ -190,6 +194,13 @@ class StatusMonitor:
             verdict_changes=len(self.tracker.changes),
             verdict_flips=self.tracker.flips,
         )
+
+    def _no_answer(self, why: str) -> None:
+        """Say once why the fleet API gave no status (the status line went silent: a run whose
+        database another demo dropped said nothing for two minutes)."""
+        if why != self._unanswered:
+            self._unanswered = why
+            self.say(f"status: GET /api/v1/fleet -> {why}")
 
     def run(self) -> None:
         """A status line every STATUS_PERIOD_S until stopped."""

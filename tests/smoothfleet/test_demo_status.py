@@ -7,7 +7,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from zoneinfo import ZoneInfo
 
-from smoothfleet.cli.demo_status import FleetStatus, VerdictTracker, read_progress, status_line
+import httpx
+
+from smoothfleet.cli.demo_status import (
+    FleetStatus,
+    StatusMonitor,
+    VerdictTracker,
+    read_progress,
+    status_line,
+)
 
 AT = datetime(2022, 11, 16, 12, 2, 5, tzinfo=UTC)  # 06:02:05 in Nashville
 
@@ -28,8 +36,9 @@ def test_the_status_line_reads_in_the_pages_units() -> None:
         verdict_flips=0,
     )
     assert status_line(status, ZoneInfo("America/Chicago")) == (
-        "06:02:05  pings 99.8/s · reporting 100/100 · cleared 98 · engaged 71 · plan 42 s old · "
-        "INRIX 212 s old · fleet step 0.10 s (2 % late) · verdict changes 98 (0 after clearance)"
+        "06:02:05 CST  pings 99.8/s · reporting 100/100 · cleared 98 · engaged 71 · "
+        "plan 42 s old · INRIX 212 s old · fleet step 0.10 s (2 % late) · "
+        "verdict changes 98 (0 after clearance)"
     )
 
 
@@ -65,3 +74,17 @@ def test_progress_of_all_workers_is_pooled(tmp_path: Path) -> None:
     assert step == 4.2 / 40
     assert late == 2 / 40
     assert read_progress(paths[2:]) == (None, None)
+
+
+def test_a_fleet_api_that_does_not_answer_is_said_once_per_cause() -> None:
+    """The status line went silent: a run whose database another demo had dropped said
+    nothing for two minutes while every poll got a 401."""
+    said: list[str] = []
+    monitor = StatusMonitor("http://demo.test", "token", None, [], said.append)  # type: ignore[arg-type]
+    refused = httpx.Response(401, json={"detail": "invalid or revoked token"})
+    monitor.http = httpx.Client(
+        base_url="http://demo.test", transport=httpx.MockTransport(lambda request: refused)
+    )
+    assert monitor.poll() is None
+    assert monitor.poll() is None
+    assert said == ['status: GET /api/v1/fleet -> HTTP 401 {"detail":"invalid or revoked token"}']
