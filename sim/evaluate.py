@@ -571,7 +571,8 @@ def evaluate(
         # the results keep the cases' order.
         longest_first = sorted(range(len(cases)), key=lambda index: -cases[index].drive.steps)
         finished: dict[int, list[RunResult]] = {}
-        with ProcessPoolExecutor(max_workers=workers) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers)
+        try:
             futures = {
                 pool.submit(
                     _run_jobs, cases[index], jobs, followers, planner_params, realism, save_dir
@@ -583,6 +584,12 @@ def evaluate(
                 finished[index] = future.result()
                 if progress is not None:
                     progress(cases[index].name)
+        except BaseException:
+            # stopped (SIGTERM, Ctrl-C) or failed: the cases not begun are dropped; leaving
+            # the pool's block waited for every one of them (10 min past a `timeout 120`)
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        pool.shutdown()
         for index in range(len(cases)):
             results += finished[index]
     return Evaluation(results)

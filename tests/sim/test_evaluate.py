@@ -587,3 +587,37 @@ def test_of_optimum_is_read_only_where_the_bound_was_made_for_the_run() -> None:
     assert shares[0] == 6.0
     assert math.isnan(shares[1])
     assert math.isnan(shares[2])
+
+
+class _Stopped(Exception):
+    """What a Ctrl-C or SIGTERM raises in the middle of the run."""
+
+
+def test_a_run_stopped_midway_drops_the_cases_not_begun(tmp_path: Path) -> None:
+    """Stopped (SIGTERM from `timeout`, Ctrl-C), the process pool's block waited for every
+    queued case: `timeout 120` on the README's evaluation ended after 598 s. The cases not
+    begun are dropped now: of 12 cases on 2 workers, the one finished, the 2 running and the 3
+    the pool hands its workers ahead at most (it ran all 12 before)."""
+    cases = [
+        Case("shockwave", drive_from_speeds(f"2021-01-{day:02d}-steady", np.full(3000, 20.0)))
+        for day in range(1, 13)
+    ]
+    finished: list[str] = []
+
+    def stop_after_the_first(name: str) -> None:
+        finished.append(name)
+        raise _Stopped
+
+    with pytest.raises(_Stopped):
+        evaluate(
+            cases,
+            ["kernel_smooth"],
+            [ControllerVariant("microaccel", "accel")],
+            humans=3,
+            workers=2,
+            save_dir=tmp_path / "runs",
+            progress=stop_after_the_first,
+        )
+    runs = list((tmp_path / "runs").glob("*.parquet"))  # a case's baseline and its AV run
+    assert len(finished) == 1
+    assert len(runs) <= 2 * (1 + 2 + 3)
