@@ -103,6 +103,9 @@ STEP_FAILED = "agent step failed"
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
+# How long the first status report waits for the first config (a config retried with back-off
+# meets it within 1 + 2 + 4 + 8 + 16 s; `_first_status_may_go`).
+FIRST_STATUS_WAIT_S = 30.0
 # The longest Retry-After honoured (s): a server asking for more is polled again after this.
 MAX_RETRY_AFTER_S = 300.0
 # Low-pass time constant of the acceleration estimated from the speed (s).
@@ -283,6 +286,7 @@ class Agent:
         self._config_schedule = Schedule()
         self._plan_schedule = Schedule()
         self._status_schedule = Schedule()
+        self._status_sent = False
         self._upload_schedule = Schedule()
         self.uplink = PingUplink(spool, clock.now)
         self._next_ping_s = 0.0
@@ -784,15 +788,32 @@ class Agent:
         if config is not None and self._plan_schedule.due(now):
             self._poll_plan(now, config)
         status_period = config.status_period_s if config else 10.0
-        if self._status_schedule.due(now):
+        if self._status_schedule.due(now) and self._first_status_may_go(now):
             try:
                 self.server.post_status(self.status_report())
+                self._status_sent = True
                 self._status_schedule.done(now, status_period)
             except ServerError as error:
                 self._server_failed("status", error)
                 self._status_schedule.failed(now, status_period)
         if self._upload_schedule.due(now):
             self.upload(now)
+
+    def _first_status_may_go(self, now: float) -> bool:
+        """The first status report waits for the car's first config and a control pass with
+        it, for at most FIRST_STATUS_WAIT_S after start. Sent before, it told the server the
+        agent ran no controller ("agent not enabled for this vehicle"), which the fleet page
+        then held red for a whole hold period: at a demo's start half the fleet read "not
+        cleared" while every car drove. A car that gets no config in that time says so."""
+        if self._status_sent or now - self.started_s >= FIRST_STATUS_WAIT_S:
+            return True
+        snapshot = self.snapshot
+        config = self.config
+        return (
+            config is not None
+            and snapshot is not None
+            and snapshot.config_version == config.config_version
+        )
 
     def _server_failed(self, what: str, error: ServerError) -> None:
         self.stats.server_errors[what] += 1

@@ -308,3 +308,55 @@ def test_a_backlog_over_the_servers_body_limit_reaches_it_in_smaller_batches(
     stored = ping_keys(seeded_engine, "SF-003")
     assert len(stored) == 120
     assert [datetime.fromisoformat(ping["ts"]) for ping in backlog] == stored[:60]
+
+
+class FirstConfigsRefused(httpx.BaseTransport):
+    """The real server, but its first `refusals` config answers are 503 (a server busy at
+    the fleet's start)."""
+
+    def __init__(self, refusals: int) -> None:
+        self.left = refusals
+        self.inner = httpx.HTTPTransport()
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        if request.url.path.endswith("/config") and self.left > 0:
+            self.left -= 1
+            return httpx.Response(
+                503,
+                json={
+                    "detail": "database unavailable, retry later",
+                    "code": "database_unavailable",
+                },
+                headers={"Retry-After": "1"},
+            )
+        return self.inner.handle_request(request)
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def test_the_first_status_report_waits_for_the_cars_first_config(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """Sent before the config, the first report said the agent ran no controller, and the
+    fleet page held that red for a whole hold period: at a demo's start half the fleet read
+    "not cleared" while every car drove. It waits (at most 30 s) for the config and a control
+    pass with it."""
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base, transport=FirstConfigsRefused(2)) as http,
+        car_served_by(http, "SF-001", token, tmp_path, dbc_cache) as r,
+    ):
+        r.run(12.0, network=True)
+        assert r.agent.config is not None
+        assert r.agent.stats.server_errors["config"] == 2
+    with seeded_engine.connect() as connection:
+        reports = connection.execute(
+            text(
+                "SELECT controller, config_version FROM fact_vehicle_status "
+                "WHERE vehicle_id = 'SF-001' ORDER BY ts"
+            )
+        ).all()
+    assert reports
+    assert reports[0] == (r.agent.config.controller.name, r.agent.config.config_version)
