@@ -375,7 +375,10 @@ def run_fleet(
     """The simulated INRIX feed and fleet against the server at `base_url` (tokens issued in
     the database at `url`), until Ctrl-C or `duration_s`; returns the summary."""
     if drive_path is not None and not drive_path.is_file():
-        say(f"no {drive_path}: the traffic is synthetic stop-and-go waves instead")
+        say(
+            f"no {drive_path}: the traffic is synthetic stop-and-go waves instead (the shared "
+            "data is found at ../shared beside the checkout, or at SMOOTHFLEET_SHARED_DATA)"
+        )
         drive_path = None
     engine = make_sync_engine(url)
     epoch = time.time()
