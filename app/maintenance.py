@@ -39,6 +39,11 @@ RETENTION_DELETE_SQL = (
 )
 STATUS_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_status"))
 DEFAULT_RETENTION_SQL = text(RETENTION_DELETE_SQL.format(table="fact_vehicle_ping_default"))
+# A client address's failed logins on an account, kept while they slow it down (at most 5 min
+# after its last failure) and a day beyond: a guesser rotating addresses adds a row an attempt.
+LOGIN_FAILURES_SQL = text(
+    "DELETE FROM ops_login_failure WHERE last_failed_at < now() - interval '1 day'"
+)
 
 
 @dataclass(frozen=True)
@@ -49,18 +54,21 @@ class MaintenanceResult:
     partitions_dropped: int
     default_rows_deleted: int
     status_reports_deleted: int
+    login_failures_deleted: int
 
 
 def maintain(connection: Connection, *, ahead_days: int, retention_days: int) -> MaintenanceResult:
     """Create the coming days' ping partitions and drop those past retention, and delete the
-    rows past retention that wait in the default partition and the status reports past it."""
+    rows past retention that wait in the default partition, the status reports past it, and
+    the failed logins of addresses that have not failed for a day."""
     keep = {"keep_days": retention_days}
     connection.execute(MAINTENANCE_LOCK_SQL)
     created = connection.execute(ENSURE_SQL, {"ahead": ahead_days}).scalar_one()
     dropped = connection.execute(RETENTION_SQL, keep).scalar_one()
     deleted = connection.execute(DEFAULT_RETENTION_SQL, keep).rowcount
     reports = connection.execute(STATUS_RETENTION_SQL, keep).rowcount
-    return MaintenanceResult(int(created), int(dropped), int(deleted), int(reports))
+    logins = connection.execute(LOGIN_FAILURES_SQL).rowcount
+    return MaintenanceResult(int(created), int(dropped), int(deleted), int(reports), int(logins))
 
 
 async def maintain_async(

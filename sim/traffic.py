@@ -26,7 +26,6 @@ from sim.drives import Drive
 
 FloatArray = NDArray[np.float64]
 
-# Speed at which congestion waves travel upstream on I-24 (15 km/h).
 # INRIX: one reading per segment every 60 s, about 3 minutes late, segments of about 0.5 mile.
 INRIX_PERIOD_S = 60.0
 INRIX_LATENCY_S = 180.0

@@ -74,8 +74,14 @@ class PingSpool:
         (self._backlog,) = self._db.execute("SELECT count(*) FROM ping").fetchone()
 
     def close(self) -> None:
-        """Close the file."""
+        """Write what is held in memory if the disk takes it now, say what it did not take
+        (those pings end with the agent), and close the file."""
         with self._lock:
+            if self._unwritten and not self._write_held():
+                log.warning(
+                    "ping spool closed with %d pings the disk did not take: lost",
+                    len(self._unwritten),
+                )
             self._db.close()
 
     def add(self, ping: Mapping[str, Any]) -> None:
@@ -87,37 +93,42 @@ class PingSpool:
             if len(self._unwritten) > MAX_UNWRITTEN:
                 self._unwritten.popleft()
                 self._unwritten_dropped += 1
-            try:
-                with self._transaction():
-                    self._db.executemany(
-                        "INSERT INTO ping (body) VALUES (?)", [(b,) for b in self._unwritten]
-                    )
-                    backlog = self._backlog + len(self._unwritten)
-                    excess = backlog - self.max_rows
-                    if excess > 0:
-                        backlog -= self._db.execute(
-                            "DELETE FROM ping WHERE id IN "
-                            "(SELECT id FROM ping ORDER BY id LIMIT ?)",
-                            (excess,),
-                        ).rowcount
-                        self._bump("dropped", excess)
-                        self._drop_log.warning(
-                            "dropped",
-                            f"ping spool full ({self.max_rows} pings): the oldest dropped unsent "
-                            "(counted in the status report's spool_dropped)",
-                        )
-                    if self._unwritten_dropped:
-                        self._bump("dropped", self._unwritten_dropped)
-            except sqlite3.DatabaseError as error:
-                self._write_log.warning(
-                    type(error).__name__,
-                    f"ping spool cannot write ({error}): {len(self._unwritten)} pings held in "
-                    f"memory (at most {MAX_UNWRITTEN}, then the oldest are dropped and counted)",
+            self._write_held()
+
+    def _write_held(self) -> bool:
+        """Write the pings held in memory (the newest last) in one transaction; False, and
+        still held, when the disk takes none. The caller holds the lock."""
+        try:
+            with self._transaction():
+                self._db.executemany(
+                    "INSERT INTO ping (body) VALUES (?)", [(b,) for b in self._unwritten]
                 )
-                return
-            self._unwritten.clear()
-            self._unwritten_dropped = 0
-            self._backlog = backlog
+                backlog = self._backlog + len(self._unwritten)
+                excess = backlog - self.max_rows
+                if excess > 0:
+                    backlog -= self._db.execute(
+                        "DELETE FROM ping WHERE id IN (SELECT id FROM ping ORDER BY id LIMIT ?)",
+                        (excess,),
+                    ).rowcount
+                    self._bump("dropped", excess)
+                    self._drop_log.warning(
+                        "dropped",
+                        f"ping spool full ({self.max_rows} pings): the oldest dropped unsent "
+                        "(counted in the status report's spool_dropped)",
+                    )
+                if self._unwritten_dropped:
+                    self._bump("dropped", self._unwritten_dropped)
+        except sqlite3.DatabaseError as error:
+            self._write_log.warning(
+                type(error).__name__,
+                f"ping spool cannot write ({error}): {len(self._unwritten)} pings held in "
+                f"memory (at most {MAX_UNWRITTEN}, then the oldest are dropped and counted)",
+            )
+            return False
+        self._unwritten.clear()
+        self._unwritten_dropped = 0
+        self._backlog = backlog
+        return True
 
     @contextmanager
     def _transaction(self) -> Iterator[None]:

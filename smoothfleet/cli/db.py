@@ -270,7 +270,8 @@ def db_maintain() -> None:
         f"ping partitions: {result.partitions_created} created, "
         f"{result.partitions_dropped} dropped (retention {current.ping_retention_days} days), "
         f"{result.default_rows_deleted} older pings deleted from the default partition, "
-        f"{result.status_reports_deleted} status reports past retention deleted"
+        f"{result.status_reports_deleted} status reports past retention deleted, "
+        f"{result.login_failures_deleted} failed logins a day old forgotten"
     )
 
 

@@ -184,3 +184,26 @@ def test_two_passes_at_once_make_each_partition_once_and_both_succeed(
     assert len(outcome) == 1
     assert not isinstance(outcome[0], Exception), outcome[0]
     assert outcome[0].partitions_created == 0
+
+
+def test_the_pass_forgets_failed_logins_of_addresses_quiet_for_a_day(seeded_engine: Engine) -> None:
+    """A guesser rotating addresses adds a row an attempt; an address that has not failed for
+    a day has long stopped waiting (5 min at most), and its row goes."""
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text(
+                "INSERT INTO ops_user (username, password_hash, role) "
+                "VALUES ('admin', 'scrypt$x', 'admin')"
+            )
+        )
+        connection.execute(
+            text(
+                "INSERT INTO ops_login_failure VALUES "
+                "('admin', '203.0.113.1', 9, now() - interval '25 hours'), "
+                "('admin', '203.0.113.2', 3, now() - interval '23 hours')"
+            )
+        )
+        result = maintain(connection, ahead_days=7, retention_days=90)
+        left = connection.execute(text("SELECT client_address FROM ops_login_failure")).scalars()
+        assert list(left) == ["203.0.113.2"]
+    assert result.login_failures_deleted == 1

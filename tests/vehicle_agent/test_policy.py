@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import math
+import pickle
 import zipfile
 from pathlib import Path
 
@@ -429,3 +430,14 @@ def npy_bytes(array: np.ndarray) -> bytes:
     buffer = io.BytesIO()
     np.save(buffer, array)
     return buffer.getvalue()
+
+
+def test_a_policy_error_crosses_a_process_with_its_reason() -> None:
+    """Raised in one of `sim evaluate`'s workers, an error that cannot be rebuilt broke the
+    pool ("A result has failed to un-pickle") instead of naming the policy's fault."""
+    error = pickle.loads(pickle.dumps(PolicyFileError("policy abc", "no layers")))
+    assert (error.label, error.reason, str(error)) == (
+        "policy abc",
+        "no layers",
+        "policy abc: no layers",
+    )

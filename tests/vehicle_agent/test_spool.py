@@ -132,3 +132,24 @@ def test_past_the_memory_bound_the_oldest_held_pings_are_dropped_and_counted(
     assert (spool.backlog(), spool.counter("dropped")) == (5, 4)
     reopened = PingSpool(tmp_path / "spool.sqlite")  # the count was written with them
     assert reopened.counter("dropped") == 4
+
+
+def test_closing_writes_what_is_held_if_it_can_and_says_what_it_could_not(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Held pings vanished at shutdown with no line and no count."""
+    spool = PingSpool(tmp_path / "spool.sqlite")
+    connection = full_disk(spool)
+    for index in range(3):
+        spool.add({"n": index, "pad": "x" * 5000})
+    connection.execute("PRAGMA max_page_count = 1000000")  # space freed before the stop
+    spool.close()
+    assert [ping["n"] for _, ping in PingSpool(tmp_path / "spool.sqlite").oldest(10)] == [0, 1, 2]
+
+    full = PingSpool(tmp_path / "full.sqlite")
+    full_disk(full)
+    for index in range(3):
+        full.add({"n": index, "pad": "x" * 5000})
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        full.close()
+    assert "ping spool closed with 3 pings the disk did not take: lost" in caplog.text

@@ -109,6 +109,10 @@ class PolicyFileError(ValueError):
         self.label = label
         self.reason = reason
 
+    def __reduce__(self) -> tuple[type[PolicyFileError], tuple[str, str]]:
+        # rebuilt from its two parts where it crosses a process (sim evaluate's workers)
+        return (type(self), (self.label, self.reason))
+
 
 def acc_features(
     speed_mps: ArrayLike,
