@@ -238,28 +238,42 @@ def test_a_plan_answer_says_when_the_server_sent_it_by_its_own_clock() -> None:
     assert fetched.served_at is None
 
 
-def test_an_answer_dripped_slower_than_its_deadline_is_a_timeout_at_the_deadline() -> None:
+@pytest.mark.parametrize(
+    ("encoding", "drip"),
+    [
+        (b"", b" " * 20),
+        # a gzip header whose file name never ends: it decodes to nothing while it drips, so a
+        # deadline read from the decoded body was never looked at
+        (b"Content-Encoding: gzip\r\n", b"\x1f\x8b\x08\x08\x00\x00\x00\x00\x00\x03" + b"a" * 20),
+    ],
+    ids=["plain", "gzip-header"],
+)
+def test_an_answer_dripped_slower_than_its_deadline_is_a_timeout_at_the_deadline(
+    encoding: bytes, drip: bytes
+) -> None:
     """httpx's timeout bounds each read: a body dripped a byte every 0.2 s never meets a 1 s
     read timeout, and held the network thread for the whole body (19 s against 3 s in an
-    audit). The answer is read against a deadline of the timeout."""
+    audit). The answer's bytes as they come are read against a deadline of the timeout."""
     listener = socket.create_server(("127.0.0.1", 0))
     port = listener.getsockname()[1]
 
-    def drip() -> None:
+    def serve_drip() -> None:
         connection, _ = listener.accept()
         with connection:
             connection.recv(65536)
             connection.sendall(
-                b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\nContent-Length: 20\r\n\r\n"
+                b"HTTP/1.1 200 OK\r\nContent-Type: application/json\r\n"
+                + encoding
+                + f"Content-Length: {len(drip)}\r\n\r\n".encode()
             )
-            for _ in range(20):
+            for byte in drip:
                 time.sleep(0.2)
                 try:
-                    connection.sendall(b" ")
+                    connection.sendall(bytes([byte]))
                 except OSError:
                     return  # the client gave up
 
-    server = threading.Thread(target=drip, daemon=True)
+    server = threading.Thread(target=serve_drip, daemon=True)
     server.start()
     with httpx.Client(base_url=f"http://127.0.0.1:{port}") as http:
         client = ServerClient(http, "SF-001", "t", 1.0)
