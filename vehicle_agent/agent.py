@@ -103,9 +103,10 @@ STEP_FAILED = "agent step failed"
 # How often the config is re-read (s), and the longest back-off after failures (s).
 CONFIG_REFRESH_S = 60.0
 MAX_BACKOFF_S = 30.0
-# How long the first status report waits for the first config (a config retried with back-off
-# meets it within 1 + 2 + 4 + 8 + 16 s; `_first_status_may_go`).
-FIRST_STATUS_WAIT_S = 30.0
+# How long the first status report waits for the first config (`_first_status_may_go`): a config
+# refused at start is asked again 2, 4, 8 and 16 s after each failure (at 0, 2, 6, 14 and 30 s,
+# each request up to its timeout later), so its fifth try falls inside the wait.
+FIRST_STATUS_WAIT_S = 45.0
 # The longest Retry-After honoured (s): a server asking for more is polled again after this.
 MAX_RETRY_AFTER_S = 300.0
 # Low-pass time constant of the acceleration estimated from the speed (s).

@@ -18,6 +18,7 @@ from tests.planner.facts import INRIX_CODES, inrix_snapshot
 from tests.support.cars import car_served_by
 from tests.support.servers import live_server
 from tests.support.tokens import issue
+from vehicle_agent.agent import FIRST_STATUS_WAIT_S
 from vehicle_agent.engage import Mode
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
@@ -340,7 +341,7 @@ def test_the_first_status_report_waits_for_the_cars_first_config(
 ) -> None:
     """Sent before the config, the first report said the agent ran no controller, and the
     fleet page held that red for a whole hold period: at a demo's start half the fleet read
-    "not cleared" while every car drove. It waits (at most 30 s) for the config and a control
+    "not cleared" while every car drove. It waits (at most 45 s) for the config and a control
     pass with it."""
     token = issue(seeded_engine, "vehicle", "SF-001")
     with (
@@ -360,3 +361,33 @@ def test_the_first_status_report_waits_for_the_cars_first_config(
         ).all()
     assert reports
     assert reports[0] == (r.agent.config.controller.name, r.agent.config.config_version)
+
+
+def test_a_car_that_gets_no_config_reports_so_once_its_wait_is_over(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The first report's wait for a config is bounded: a car that never gets one says so."""
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base, transport=FirstConfigsRefused(1000)) as http,
+        car_served_by(http, "SF-001", token, tmp_path, dbc_cache) as r,
+    ):
+        r.run(FIRST_STATUS_WAIT_S - 1.0, network=True)
+        assert not status_rows(seeded_engine)
+        r.run(2.0, network=True)
+        assert r.agent.config is None
+    assert status_rows(seeded_engine) == [(None, None)]
+
+
+def status_rows(engine: Engine) -> list[tuple[str | None, int | None]]:
+    with engine.connect() as connection:
+        return [
+            (controller, version)
+            for controller, version in connection.execute(
+                text(
+                    "SELECT controller, config_version FROM fact_vehicle_status "
+                    "WHERE vehicle_id = 'SF-001' ORDER BY ts"
+                )
+            )
+        ]
