@@ -203,4 +203,11 @@ async def get_plan_history(
     # one more than asked for tells whether the window held more (the answer said nothing, and
     # a window of more than `limit` planner cycles read as complete)
     runs = await plan_history(session, corridor_id, since, until, status, limit + 1)
-    return PlanHistoryOut(plans=runs[:limit], truncated=len(runs) > limit)
+    if len(runs) <= limit:
+        return PlanHistoryOut(plans=runs, truncated=False)
+    # The next page is asked with `until` = the oldest run's start, and the window ends before
+    # `until`: runs started at the same instant as the first one cut off (the corridors of one
+    # cycle) are left to that page whole, unless the page would keep none.
+    cut_at = runs[limit].started_at
+    page = [run for run in runs[:limit] if run.started_at != cut_at] or runs[:limit]
+    return PlanHistoryOut(plans=page, truncated=True)

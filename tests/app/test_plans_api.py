@@ -333,3 +333,42 @@ def test_a_car_asks_for_the_lane_of_the_config_it_runs(served: Served) -> None:
     assert [lane["lane"] for lane in asked.json()["lanes"]] == [3]
     assert asked.headers["ETag"] != own.headers["ETag"]
     assert served.get(path, role="vehicle", lane=9).status_code == 404
+
+
+def test_paging_the_history_by_until_skips_no_run_started_at_the_cut(
+    served: Served, seeded_engine: Engine
+) -> None:
+    """Runs of one cycle share a start instant; the next page is asked with `until` = the
+    oldest run's start, and the window ends before it: a run sharing the instant of the first
+    one cut off was never returned. Such runs are left to the next page whole."""
+    instant = datetime(2026, 1, 1, 12, 0, tzinfo=UTC)
+    with seeded_engine.begin() as connection:
+        for _ in range(3):
+            connection.execute(
+                text(
+                    "INSERT INTO plan_run (corridor_id, status, algorithm, started_at) "
+                    "VALUES ('I-24-WB', 'skipped', 'kernel_smooth', :at)"
+                ),
+                {"at": instant},
+            )
+        connection.execute(
+            text(
+                "INSERT INTO plan_run (corridor_id, status, algorithm, started_at) "
+                "VALUES ('I-24-WB', 'skipped', 'kernel_smooth', :at)"
+            ),
+            {"at": instant + timedelta(minutes=1)},
+        )
+    window = {"since": "2026-01-01T00:00:00Z", "until": "2026-01-02T00:00:00Z"}
+    seen: list[int] = []
+    until = window["until"]
+    for _ in range(4):
+        page = served.get(
+            "/api/v1/plans", corridor="I-24-WB", since=window["since"], until=until, limit=3
+        ).json()
+        seen += [run["plan_id"] for run in page["plans"]]
+        if not page["truncated"]:
+            break
+        until = page["plans"][-1]["started_at"]
+    everything = served.get("/api/v1/plans", corridor="I-24-WB", **window).json()["plans"]
+    assert sorted(seen) == sorted(run["plan_id"] for run in everything)
+    assert len(everything) == 4
