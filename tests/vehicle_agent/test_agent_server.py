@@ -352,13 +352,7 @@ def test_the_first_status_report_waits_for_the_cars_first_config(
         r.run(12.0, network=True)
         assert r.agent.config is not None
         assert r.agent.stats.server_errors["config"] == 2
-    with seeded_engine.connect() as connection:
-        reports = connection.execute(
-            text(
-                "SELECT controller, config_version FROM fact_vehicle_status "
-                "WHERE vehicle_id = 'SF-001' ORDER BY ts"
-            )
-        ).all()
+    reports = status_rows(seeded_engine)
     assert reports
     assert reports[0] == (r.agent.config.controller.name, r.agent.config.config_version)
 
