@@ -80,6 +80,8 @@ def sessions_waiting_on_a_lock(engine: Engine, within_s: float = 10.0) -> int:
                     text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
                 ).scalar_one()
             )
+            # pg_stat_activity is read once a transaction: a new one sees the sessions as now
+            watcher.rollback()
             if waiting or time.monotonic() > deadline:
                 return waiting
             time.sleep(0.05)
