@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from app.vehicles.schemas import CONTROLLER_ACTUATIONS
 from contract.controllers import CONTROLLER_SCHEMAS, ControllerConfigError, controller_actuations
-from contract.units import MPS_PER_MPH
+from contract.units import MPS_PER_MPH, mps_to_mph
 from vehicle_agent.controllers import (
     CONTROLLERS,
     AccelCommand,
@@ -125,6 +125,24 @@ def test_microaccel_acc_anticipates_a_slowdown_ahead() -> None:
     action = controller.step(observation)
     assert action == AccSetPoint(65, 3)
     assert action.requested_speed_mph == pytest.approx(64.5915, abs=1e-4)  # type: ignore[union-attr]
+
+
+def test_microaccel_acc_anticipates_no_harder_than_its_planned_braking() -> None:
+    """A short look-ahead (0.5 s, 10 m floor: in the params' ranges) onto a plan dropping from
+    30 to 5 m/s 10 m ahead asks a_ahead = (5^2 - 30^2) / (2 * 15) = -29.2 m/s^2; the request is
+    bounded by a_min (-3): 30 - 3 * 2 = 24 m/s = 53.69 mph, not a setting far below the car
+    (a mutant without the bound passed every test)."""
+    profile = TargetProfile(
+        np.array([0.0, 1010.0, 1010.01, 2000.0]), np.array([30.0, 30.0, 5.0, 5.0])
+    )
+    controller = build_controller(
+        "microaccel_acc", "acc", {"lookahead_s": 0.5, "min_lookahead_m": 10.0}
+    )
+    action = controller.step(
+        Observation(0.0, 30.0, 30.0, position_m=1000.0, target=profile, acc_gap_setting=2)
+    )
+    assert ahead_accel(30.0, 5.0, 15.0) == pytest.approx(-875.0 / 30.0)
+    assert action.requested_speed_mph == pytest.approx(mps_to_mph(24.0), abs=1e-6)  # type: ignore[union-attr]
 
 
 def test_microaccel_acc_holds_the_gap_for_the_dwell_time() -> None:
