@@ -6,11 +6,12 @@ A wrong password (or unknown username) counts against the account *from that cli
 checked. A success resets that address's count. Counted per account alone, a stranger's one
 wrong guess every five minutes kept the owner out for good (a security audit); per (account,
 address), the stranger waits and the owner, elsewhere, does not. Guessing from many addresses
-meets the dashboard's per-address limit on each and the account's count (`failed_logins`,
-shown by `smoothfleet users list`), which counts every address's failures since the account's
-last success. A username that is no account is counted and made to wait the same way, in the
-server process's memory: the answers do not tell which usernames exist. With several workers a
-made-up name's count is per worker, so its waits can come later than an account's.
+meets the dashboard's per-address limit on each; it slows nothing more, and shows in the
+account's count (`failed_logins`, `smoothfleet users list`), every address's failures since the
+account's last success. A username that is no account is counted and made to wait the same
+way, in the server process's memory: the answers do not tell which usernames exist. With
+several workers a made-up name's count is per worker, so its waits can come later than an
+account's.
 """
 
 from __future__ import annotations

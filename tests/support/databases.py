@@ -77,7 +77,10 @@ def sessions_waiting_on_a_lock(engine: Engine, within_s: float = 10.0) -> int:
         while True:
             waiting = int(
                 watcher.execute(
-                    text("SELECT count(*) FROM pg_stat_activity WHERE wait_event_type = 'Lock'")
+                    text(
+                        "SELECT count(*) FROM pg_stat_activity "
+                        "WHERE wait_event_type = 'Lock' AND datname = current_database()"
+                    )
                 ).scalar_one()
             )
             # pg_stat_activity is read once a transaction: a new one sees the sessions as now
