@@ -13,7 +13,11 @@ A trained policy has seen the dates it was trained on (a row's `policy_training_
 rows of those dates are used neither to choose nor to score its fuel, throughput and speed, so
 an RL candidate is judged, on either side of a fold, only on drives its weights were not fitted
 to. Its collisions and takeovers count on every drive, those dates too: a policy that crashes
-on its own training drives is not safe for having seen them.
+on its own training drives is not safe for having seen them. Candidates compared with each
+other (`choose`, `candidate_summary`) are all judged on the same drives, those of dates no
+candidate's policy was fitted on (`common_rows`): a mean moves with the drives it is taken over,
+so a candidate judged on all 14 dates and one judged on 7 were not compared on the same traffic
+(docs/simulation/selection-common-drives-preregistered.md).
 
 Pure functions over evaluation rows (`sim.evaluate.Evaluation.rows()` plus a `candidate` key
 and, for a candidate with a trained policy, `policy_training_dates`, ";"-joined).
@@ -62,14 +66,22 @@ class Standing:
 
 
 def standing(
-    candidate: str, rows: Sequence[Row], scenarios: Collection[str] | None = None
+    candidate: str,
+    rows: Sequence[Row],
+    scenarios: Collection[str] | None = None,
+    set_aside_dates: Collection[str] | None = None,
 ) -> Standing:
     """The candidate's shockwave fuel saving and its total shortfall against the aims, on the
-    drives it may be judged on (`unseen_rows`). A collision on any of its drives, a KPI left
+    drives it may be judged on: those not of `set_aside_dates` (default: the dates its own
+    policy was fitted on, `unseen_rows`). A collision on any of its drives, a KPI left
     undefined (the saving itself included), or one of `scenarios` (default: those of its own
     rows) with no drive to judge it on counts UNMET_POINTS: no evidence is no pass."""
     required = {str(row["scenario"]) for row in rows} if scenarios is None else set(scenarios)
-    judged = unseen_rows(rows)
+    judged = (
+        unseen_rows(rows)
+        if set_aside_dates is None
+        else [row for row in rows if date_of(row) not in set_aside_dates]
+    )
     shock = [row for row in judged if row["scenario"] == "shockwave"]
     free = [row for row in judged if row["scenario"] == "freeflow"]
     fuel_saving = measured_mean(shock, "fuel_saving_pct")
@@ -95,14 +107,17 @@ def _fuel_rank(standing: Standing) -> float:
 
 def choose(rows: Sequence[Row]) -> Standing:
     """The best candidate on these rows: the most fuel saved among those meeting the aims, or,
-    when none does, the one that misses them least."""
+    when none does, the one that misses them least. Every candidate is judged on the same
+    drives (`common_rows`: those of dates no candidate's policy was fitted on) and in every
+    scenario any of them was run in."""
     by_candidate: dict[str, list[Row]] = {}
     for row in rows:
         by_candidate.setdefault(str(row["candidate"]), []).append(row)
-    # every candidate is judged in every scenario any of them was run in
     scenarios = {str(row["scenario"]) for row in rows}
+    set_aside = fitted_dates(rows)
     standings = [
-        standing(name, candidate_rows, scenarios) for name, candidate_rows in by_candidate.items()
+        standing(name, candidate_rows, scenarios, set_aside)
+        for name, candidate_rows in by_candidate.items()
     ]
     if not standings:
         raise ValueError("no candidate rows to choose from")
@@ -135,8 +150,25 @@ def fitted_on(row: Row) -> bool:
 
 def unseen_rows(rows: Iterable[Row]) -> list[Row]:
     """The rows whose drive its candidate's policy (if it has one) was not fitted on: the only
-    ones whose fuel, throughput and speed may choose a candidate or score it."""
+    ones whose fuel, throughput and speed may score a candidate."""
     return [row for row in rows if not fitted_on(row)]
+
+
+def fitted_dates(rows: Iterable[Row]) -> set[str]:
+    """Every date some candidate's policy among these rows was fitted on."""
+    return {
+        date
+        for row in rows
+        for date in str(row.get("policy_training_dates") or "").split(";")
+        if date
+    }
+
+
+def common_rows(rows: Sequence[Row]) -> list[Row]:
+    """The rows of the drives every candidate among them may be judged on: of dates no
+    candidate's policy was fitted on. Candidates compared with each other are compared here."""
+    set_aside = fitted_dates(rows)
+    return [row for row in rows if date_of(row) not in set_aside]
 
 
 def check_every_fold_can_choose(date_scenarios: Iterable[tuple[str, str]], folds: int) -> None:
@@ -210,12 +242,14 @@ def held_out_summary(choices: Iterable[FoldChoice]) -> list[dict[str, Any]]:
 def candidate_summary(rows: Sequence[Row]) -> list[dict[str, Any]]:
     """Every candidate on every drive, what each fold chooses from: per candidate the mean KPIs
     on the shockwave and on the freeflow drives. Context for the held-out result, not a result
-    itself (the figures and any choice made from them share their drives). As in `standing`:
-    the KPIs over the drives a candidate may be judged on, collisions and takeovers over all."""
+    itself (the figures and any choice made from them share their drives). As in `choose`:
+    the KPIs over the drives every candidate may be judged on (`common_rows`), collisions and
+    takeovers over all."""
+    common = common_rows(rows)
     summary = []
     for candidate in sorted({str(row["candidate"]) for row in rows}):
         every = [row for row in rows if row["candidate"] == candidate]
-        own = unseen_rows(every)
+        own = [row for row in common if row["candidate"] == candidate]
         shock = [row for row in own if row["scenario"] == "shockwave"]
         free = [row for row in own if row["scenario"] == "freeflow"]
         summary.append(

@@ -190,6 +190,33 @@ def test_a_policy_that_crashes_or_hands_back_on_its_own_training_dates_is_not_sa
     assert (held_out["drives"], held_out["collisions"], held_out["takeovers"]) == (2, 1, 2)
 
 
+def test_candidates_are_compared_on_the_same_drives() -> None:
+    """ "policy" was fitted on 2021-03-08, a date of deep waves where every pair saves much:
+    "steady", judged there too, drew a larger mean from that date's traffic, not from its
+    driving. Compared on the drives both may be judged on, "policy" saves more."""
+    fitted = {"policy_training_dates": "2021-03-08"}
+    rows = [
+        row("policy", "2021-03-08-a", fuel_saving_pct=25.0) | fitted,
+        row("policy", "2021-03-12-a", fuel_saving_pct=6.0) | fitted,
+        row("policy", "2021-03-15-a", fuel_saving_pct=6.0) | fitted,
+        row("steady", "2021-03-08-a", fuel_saving_pct=20.0),
+        row("steady", "2021-03-12-a", fuel_saving_pct=4.0),
+        row("steady", "2021-03-15-a", fuel_saving_pct=4.0),
+    ]
+    chosen = choose(rows)
+    assert chosen.candidate == "policy"
+    assert chosen.fuel_saving_pct == pytest.approx(6.0)
+    # alone, a candidate is still judged on every drive its own policy was not fitted on
+    assert standing("steady", rows[3:]).fuel_saving_pct == pytest.approx(28.0 / 3.0)
+    summary = {line["candidate"]: line for line in candidate_summary(rows)}
+    assert summary["steady"]["shockwave_fuel_saving_pct"] == pytest.approx(4.0)
+    assert summary["policy"]["shockwave_fuel_saving_pct"] == pytest.approx(6.0)
+    # the fold holding out 2021-03-08 compares both on the other two dates
+    [first, *_] = cross_validate(rows, folds=3)
+    assert first.held_out_dates == ("2021-03-08",)
+    assert first.chosen.candidate == "policy"
+
+
 def test_a_candidate_with_no_drive_to_be_judged_on_meets_no_aim() -> None:
     """With its training dates' rows set aside, a policy may have no freeflow drive left (or
     no shockwave drive): it passed those aims on no evidence, ahead of any candidate that
@@ -202,7 +229,9 @@ def test_a_candidate_with_no_drive_to_be_judged_on_meets_no_aim() -> None:
         row("steady", "2021-03-09-a", "freeflow"),
     ]
     assert not standing("policy", rows[:2]).meets_aims
-    assert choose(rows).candidate == "steady"
+    # compared, both are judged on the drives of 2021-03-08 only (the policy was fitted on
+    # 2021-03-09): neither has a freeflow drive there, so neither meets the aims
+    assert not choose(rows).meets_aims
     untested = [row("untested", "2021-03-09-a", "freeflow")]
     assert not standing("untested", untested, {"shockwave", "freeflow"}).meets_aims
     assert choose([*untested, *rows[2:]]).candidate == "steady"
