@@ -165,6 +165,9 @@ class Schedule:
 
     next_s: float = 0.0
     failures: int = 0
+    # The period `next_s` is one of since the last success; None while the job backs off or
+    # waits for the server's Retry-After, whose times are not the period's to move.
+    period_s: float | None = None
 
     def due(self, now: float) -> bool:
         """True when it is time."""
@@ -174,6 +177,7 @@ class Schedule:
         """It worked: next run one period from now."""
         self.failures = 0
         self.next_s = now + period_s
+        self.period_s = period_s
 
     def failed(self, now: float, period_s: float) -> None:
         """It failed: retry after a growing delay, never longer than MAX_BACKOFF_S."""
@@ -181,6 +185,22 @@ class Schedule:
         # failures in a row (8.5 h at the cap) the job was retried on every network pass
         self.failures = min(self.failures + 1, MAX_BACKOFF_DOUBLINGS)
         self.next_s = now + min(period_s * 2 ** (self.failures - 1), MAX_BACKOFF_S)
+        self.period_s = None
+
+    def not_before(self, time_s: float) -> None:
+        """The next run no sooner than `time_s` (a server's Retry-After)."""
+        if time_s > self.next_s:
+            self.next_s = time_s
+            self.period_s = None
+
+    def rebase(self, period_s: float) -> None:
+        """Count the next run from the last success with `period_s`, the config's period now.
+        The next run was set with the period of the config then: a status period cut from
+        600 s to 5 s otherwise waited out the 600 s before the first report at 5 s, and a
+        lengthened one ran once more at the old pace."""
+        if self.period_s is not None and self.period_s != period_s:
+            self.next_s += period_s - self.period_s
+            self.period_s = period_s
 
 
 @dataclass
@@ -290,7 +310,8 @@ class Agent:
         self._status_sent = False
         self._upload_schedule = Schedule()
         self.uplink = PingUplink(spool, clock.now)
-        self._next_ping_s = 0.0
+        # When the last ping was due (its period's slot), None before the first.
+        self._ping_slot_s: float | None = None
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
         self._frames_at_status = (self.started_s, 0)
@@ -608,10 +629,14 @@ class Agent:
         """Spool a ping when one is due; True when one was written."""
         now = self.clock.monotonic()
         period = self.config.ping_period_s if self.config else 1.0
-        if now < self._next_ping_s:
+        # Due one period of the config now after the last ping's slot, so a new period applies
+        # from that slot (a period cut from 60 s to 1 s no longer waits out the 60 s).
+        slot = self._ping_slot_s
+        due = -math.inf if slot is None else slot + period
+        if now < due:
             return False
-        late = now - self._next_ping_s > period  # first ping, or the caller stalled
-        self._next_ping_s = now + period if late else self._next_ping_s + period
+        late = now - due > period  # first ping, or the caller stalled
+        self._ping_slot_s = now if late else due
         ping = self.ping()
         if ping is None:
             return False
@@ -786,9 +811,12 @@ class Agent:
         if self._config_schedule.due(now):
             self._refresh_config(now)
         config = self.config
+        if config is not None:
+            self._plan_schedule.rebase(config.plan_poll_s)
         if config is not None and self._plan_schedule.due(now):
             self._poll_plan(now, config)
         status_period = config.status_period_s if config else 10.0
+        self._status_schedule.rebase(status_period)
         if self._status_schedule.due(now) and self._first_status_may_go(now):
             try:
                 self.server.post_status(self.status_report())
@@ -986,9 +1014,7 @@ class Agent:
 
     def _retry_after(self, now: float, retry_after_s: float) -> None:
         """The next plan poll no sooner than the server asked (bounded by MAX_RETRY_AFTER_S)."""
-        self._plan_schedule.next_s = max(
-            self._plan_schedule.next_s, now + min(retry_after_s, MAX_RETRY_AFTER_S)
-        )
+        self._plan_schedule.not_before(now + min(retry_after_s, MAX_RETRY_AFTER_S))
 
     def upload(self, now: float | None = None) -> int:
         """Send spooled pings (`vehicle_agent.uplink`); returns how many left the spool,

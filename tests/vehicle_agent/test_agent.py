@@ -1183,6 +1183,32 @@ def test_pings_are_spooled_once_a_second(tmp_path: Path, dbc_cache: Path) -> Non
         assert timestamps == sorted(set(timestamps))
 
 
+def test_a_shortened_ping_period_applies_from_the_last_ping(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The next ping was set with the period of the config then: cut from 60 s to 1 s, the car
+    sent its next ping 60 s after the last, not 1 s."""
+    with rig(
+        "toyota_rav4",
+        tmp_path,
+        dbc_cache,
+        controller="microaccel",
+        config_fields={"ping_period_s": 60.0},
+    ) as r:
+        r.run(3.0)
+        assert r.agent.stats.pings_spooled == 1
+        config = r.agent.config
+        assert r.agent.assignment is not None
+        assert config is not None
+        r.agent.configure(
+            config.model_copy(update={"ping_period_s": 1.0}), r.agent.assignment.corridor
+        )
+        r.run(0.2)
+        assert r.agent.stats.pings_spooled == 2  # the last one is over 1 s old: due at once
+        r.run(3.0)
+        assert r.agent.stats.pings_spooled == 5
+
+
 def test_a_reading_outside_the_contract_costs_only_its_field(
     tmp_path: Path, dbc_cache: Path
 ) -> None:

@@ -18,7 +18,7 @@ from tests.planner.facts import INRIX_CODES, inrix_snapshot
 from tests.support.cars import car_served_by
 from tests.support.servers import live_server
 from tests.support.tokens import issue
-from vehicle_agent.agent import FIRST_STATUS_WAIT_S
+from vehicle_agent.agent import CONFIG_REFRESH_S, FIRST_STATUS_WAIT_S
 from vehicle_agent.engage import Mode
 from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
@@ -385,3 +385,32 @@ def status_rows(engine: Engine) -> list[tuple[str | None, int | None]]:
                 )
             )
         ]
+
+
+def test_a_shortened_status_period_applies_from_the_last_report(
+    seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The next report was set with the period of the config then: cut from 600 s to 5 s, the
+    car waited out the 600 s before its first report at 5 s. Now the next report is one new
+    period after the last (so at once, here, when the config refresh reads the new one)."""
+    token = issue(seeded_engine, "vehicle", "SF-001")
+    fast_server = live_server(seeded_database_url, planner_enabled=False, agent_status_period_s=5)
+    with (
+        live_server(seeded_database_url, planner_enabled=False, agent_status_period_s=600) as slow,
+        httpx.Client(base_url=slow) as http,
+        car_served_by(http, "SF-001", token, tmp_path, dbc_cache) as r,
+    ):
+        r.run(2.0, network=True)
+        assert len(status_rows(seeded_engine)) == 1
+        with (
+            fast_server as fast,
+            httpx.Client(base_url=fast) as http_fast,
+        ):
+            # the same database behind a server restarted with a shorter period
+            r.agent.server = ServerClient(http_fast, "SF-001", token)
+            r.run(CONFIG_REFRESH_S + 1.0, network=True)  # the refresh reads the 5 s period
+            assert r.agent.config is not None
+            assert r.agent.config.status_period_s == 5.0
+            assert len(status_rows(seeded_engine)) == 2  # at the refresh, not 600 s on
+            r.run(10.0, network=True)
+    assert len(status_rows(seeded_engine)) == 4  # and every 5 s from there

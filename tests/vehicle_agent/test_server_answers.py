@@ -283,3 +283,21 @@ def test_an_answer_dripped_slower_than_its_deadline_is_a_timeout_at_the_deadline
         assert time.monotonic() - started < 2.0
     server.join(timeout=5)
     listener.close()
+
+
+def test_a_new_period_counts_from_the_last_run_but_never_cuts_a_back_off_or_a_retry_after() -> None:
+    """A schedule is re-based on the config's period now (Agent.network), from the last
+    success; the delays a failure or the server's Retry-After set are not the period's."""
+    schedule = Schedule()
+    schedule.done(100.0, 600.0)
+    schedule.rebase(5.0)
+    assert schedule.next_s == 105.0
+    schedule.rebase(60.0)
+    assert schedule.next_s == 160.0
+    schedule.failed(110.0, 60.0)
+    schedule.rebase(5.0)
+    assert schedule.next_s == 140.0  # MAX_BACKOFF_S after the failure
+    schedule.done(200.0, 5.0)
+    schedule.not_before(260.0)
+    schedule.rebase(1.0)
+    assert schedule.next_s == 260.0
