@@ -121,6 +121,37 @@ def fix_is_current(fix: GpsFix | None, now_s: float) -> bool:
     return fix is not None and fix.has_fix and now_s - fix.time_s <= GPS_MAX_AGE_S
 
 
+# The config's fields whose change leaves how the agent drives the car as it was: the periods
+# of its network and telemetry jobs; `stale_plan_after_s`, which the plan-freshness check
+# reads from the config held at every control pass, so a new value takes effect there on its
+# own (a shorter one that makes the plan stale hands back by that check); the route, a name
+# for the people (the agent reads none: the corridor and lane are what it drives by); `active`
+# and `in_maintenance`, the enabled check's, which hands back by itself with its own reason;
+# and the version. Every other field (the controller, its parameters and policy, the
+# actuation, the corridor, the lane, the car), and any field added later, hands the car back
+# to take over anew: a field forgotten here costs a hand-back, never a controller run on a
+# config it was not built for.
+FIELDS_KEEPING_CONTROL = frozenset(
+    {
+        "ping_period_s",
+        "status_period_s",
+        "plan_poll_s",
+        "stale_plan_after_s",
+        "route",
+        "active",
+        "in_maintenance",
+        "config_version",
+    }
+)
+
+
+def controls_alike(before: VehicleConfig, after: VehicleConfig) -> bool:
+    """Whether the controller built for `before` may go on commanding under `after`: they
+    differ only in FIELDS_KEEPING_CONTROL."""
+    driving = set(VehicleConfig.model_fields) - FIELDS_KEEPING_CONTROL
+    return before.model_dump(include=driving) == after.model_dump(include=driving)
+
+
 @dataclass(frozen=True)
 class Assignment:
     """What the server's config made of this vehicle: ready-to-use objects."""
@@ -374,7 +405,8 @@ class Agent:
                 time_s=now,
                 controller_built=not self._controller_unbuilt,
                 enabled=self._enabled(assignment),
-                assignment_current=self._running is None or self._running is assignment,
+                assignment_current=self._running is None
+                or (assignment is not None and self._running.controller is assignment.controller),
                 can_ok=car_state.valid,
                 acc_engaged=reading is not None and reading.acc_engaged,
                 set_point_reported=self.buttons is None
@@ -912,10 +944,10 @@ class Agent:
         self._config_schedule.done(now, CONFIG_REFRESH_S)
 
     def configure(self, config: VehicleConfig, corridor: CorridorGeometry) -> None:
-        """Adopt a config (building its controller); raises ValueError when it cannot apply to
-        this car (PolicyFileError: the policy it names is not good) and ServerError when the
-        policy it names could not be downloaded. A new lane or corridor drops the plan held for
-        the old one.
+        """Adopt a config (building its controller, unless the one held controls alike:
+        `controls_alike`); raises ValueError when it cannot apply to this car (PolicyFileError:
+        the policy it names is not good) and ServerError when the policy it names could not be
+        downloaded. A new lane or corridor drops the plan held for the old one.
         """
         if config.actuation != self.car.actuation:
             raise ValueError(
@@ -926,10 +958,15 @@ class Agent:
             raise ValueError(
                 f"geometry of {corridor.corridor_id}, config says {config.corridor_id}"
             )
+        previous = self.assignment
+        if previous is not None and controls_alike(previous.config, config):
+            # the controller running goes on (the engage check compares controllers): a new
+            # status period is no reason to hand the car back
+            self.assignment = Assignment(config, corridor, previous.controller)
+            return
         controller = build_controller(
             config.controller.name, config.actuation, self._controller_params(config)
         )
-        previous = self.assignment
         self.assignment = Assignment(config, corridor, controller)
         if (
             previous is None

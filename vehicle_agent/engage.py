@@ -41,9 +41,11 @@ class EngageInputs:
     controller_built: bool
     # Active and not in maintenance: the operator's choice.
     enabled: bool
-    # The controller running is the one of the assignment held: a new config (any field of it)
-    # hands the car back, and the agent takes over anew with the new controller. Reported as
-    # its own reason: it was "not enabled", the operator's choice, which it is not.
+    # The controller running is the one of the assignment held: a new config that changes how
+    # the car is driven (its controller, parameters, policy, actuation, corridor, lane; not a
+    # period: `agent.FIELDS_KEEPING_CONTROL`) hands the car back, and the agent takes over anew
+    # with the new controller. Reported as its own reason: it was "not enabled", the operator's
+    # choice, which it is not.
     assignment_current: bool
     can_ok: bool
     acc_engaged: bool

@@ -1109,20 +1109,81 @@ def test_a_car_moved_to_another_corridor_follows_no_plan_of_the_old_one(
 def test_a_new_config_hands_back_saying_so_not_that_the_operator_disabled_the_car(
     tmp_path: Path, dbc_cache: Path
 ) -> None:
-    """A config whose status period alone changed hands the car back to take over anew with a
-    new controller; the reason (status, log, hand-back counts) said "agent not enabled for this
-    vehicle", the operator's choice, which it was not."""
+    """A config whose controller's parameters changed hands the car back to take over anew with
+    a new controller; the reason (status, log, hand-back counts) said "agent not enabled for
+    this vehicle", the operator's choice, which it was not."""
     with rig("cadillac_xt5", tmp_path, dbc_cache, controller="simple") as r:
         engage_and_settle(r)
         config = r.agent.config
         assert config is not None
         assert r.agent.assignment is not None
         corridor = r.agent.assignment.corridor
-        r.agent.configure(config.model_copy(update={"status_period_s": 20.0}), corridor)
+        controller = config.controller.model_copy(update={"params": {"speed_offset_mph": 2.0}})
+        r.agent.configure(config.model_copy(update={"controller": controller}), corridor)
         r.run(0.1)
         assert r.agent.stats.handbacks == {"a new assignment: taking over anew": 1}
         r.run(5.0, until=lambda: engaged(r))
         assert engaged(r)
+
+
+def test_a_new_config_that_drives_alike_keeps_the_car_and_one_that_does_not_hands_it_back(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """Every new config handed the car back, even one whose status period alone changed: the
+    stock ACC took over for the engage wait on an operator's change of no consequence to the
+    driving. Now only a change of how the car is driven does (`FIELDS_KEEPING_CONTROL`)."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        config = r.agent.config
+        assert config is not None
+        assert r.agent.assignment is not None
+        corridor = r.agent.assignment.corridor
+        controller = r.agent.assignment.controller
+        alike = config.model_copy(
+            update={
+                "ping_period_s": 2.0,
+                "status_period_s": 20.0,
+                "plan_poll_s": 10.0,
+                "stale_plan_after_s": 120.0,
+                "route": "B",
+                "config_version": 2,
+            }
+        )
+        r.agent.configure(alike, corridor)
+        r.run(2.0)
+        assert engaged(r)
+        assert r.agent.stats.handbacks == {}
+        assert r.agent.assignment.controller is controller  # the same controller, its state
+        snapshot = r.agent.snapshot
+        assert snapshot is not None
+        assert snapshot.config_version == 2  # the version held is the one reported
+        tuned = config.controller.model_copy(update={"params": {"k": 0.7}})
+        r.agent.configure(
+            alike.model_copy(update={"controller": tuned, "config_version": 3}), corridor
+        )
+        r.run(0.1)
+        assert not engaged(r)
+        assert r.agent.stats.handbacks == {"a new assignment: taking over anew": 1}
+        r.run(5.0, until=lambda: engaged(r))
+        assert engaged(r)
+        assert r.agent.assignment.controller is not controller
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("assigned_lane", 3), ("active", False), ("in_maintenance", True)]
+)
+def test_a_new_lane_or_the_operator_disabling_the_car_still_hands_it_back(
+    field: str, value: object, tmp_path: Path, dbc_cache: Path
+) -> None:
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel") as r:
+        engage_and_settle(r)
+        config = r.agent.config
+        assert config is not None
+        assert r.agent.assignment is not None
+        r.agent.configure(config.model_copy(update={field: value}), r.agent.assignment.corridor)
+        r.run(0.1)
+        assert not engaged(r)
+        assert sum(r.agent.stats.handbacks.values()) == 1
 
 
 def test_lane_change_recovery_engages_on_a_cut_in_and_releases(
