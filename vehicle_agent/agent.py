@@ -224,6 +224,12 @@ class Schedule:
             self.next_s = time_s
             self.period_s = None
 
+    def bring_forward(self, time_s: float) -> None:
+        """The next run no later than `time_s`: what it does is needed now."""
+        if time_s < self.next_s:
+            self.next_s = time_s
+            self.period_s = None
+
     def rebase(self, period_s: float) -> None:
         """Count the next run from the last success with `period_s`, the config's period now.
         The next run was set with the period of the config then: a status period cut from
@@ -1028,7 +1034,8 @@ class Agent:
     def _poll_plan(self, now: float, config: VehicleConfig) -> None:
         """Poll the plan. Whatever the network does, the held plan is kept and followed until
         its own valid_until (or stale_plan_after_s of age); only the server's explicit "no valid
-        plan" ends it sooner (vehicle_agent/server.py lists every outcome)."""
+        plan" ends it sooner (vehicle_agent/server.py lists every outcome). An answer naming
+        another config version than the one held brings the config refresh forward."""
         assert self.server is not None
         held = self.lane_plan
         try:
@@ -1042,6 +1049,10 @@ class Agent:
                 self._retry_after(now, error.retry_after_s)
             return
         self._plan_schedule.done(now, config.plan_poll_s)
+        if fetched.config_version is not None and fetched.config_version != config.config_version:
+            # The server holds another config for the car (an operator pulled or reassigned
+            # it): read it on the next network pass, not at the refresh up to 60 s away.
+            self._config_schedule.bring_forward(now)
         if isinstance(fetched, NoValidPlan):
             self.lane_plan = None
             if fetched.retry_after_s:

@@ -33,7 +33,7 @@ from pydantic import ValidationError
 
 from contract.corridor import CorridorGeometry
 from contract.errors import NO_VALID_PLAN, ErrorResponse
-from contract.vehicles import PingAnswer, VehicleConfig
+from contract.vehicles import CONFIG_VERSION_HEADER, PingAnswer, VehicleConfig
 from vehicle_agent.plan import Plan, PlanError, parse_plan
 
 
@@ -79,6 +79,11 @@ class RequestRefused(UnexpectedAnswer):
         return self.status == 413
 
 
+# Each outcome of a plan poll carries the vehicle's config version the server named with it
+# (`X-Config-Version`; None from a server that names none): a version other than the one the
+# car runs makes it fetch its config at once.
+
+
 @dataclass(frozen=True)
 class NewPlan:
     """200: a plan (new, or changed since the ETag the car sent), and when the server sent it
@@ -87,11 +92,14 @@ class NewPlan:
     plan: Plan
     etag: str | None
     served_at: datetime | None = None
+    config_version: int | None = None
 
 
 @dataclass(frozen=True)
 class PlanUnchanged:
     """304: the plan held (by its ETag) is still the latest."""
+
+    config_version: int | None = None
 
 
 @dataclass(frozen=True)
@@ -99,6 +107,7 @@ class NoValidPlan:
     """503 `no_valid_plan`: the server holds no valid plan; the car hands back."""
 
     retry_after_s: float | None
+    config_version: int | None = None
 
 
 PlanFetch = NewPlan | PlanUnchanged | NoValidPlan
@@ -122,6 +131,16 @@ def _served_at(response: httpx.Response) -> datetime | None:
     except (TypeError, ValueError, IndexError):
         return None
     return served if served.tzinfo is not None else served.replace(tzinfo=UTC)
+
+
+def _config_version(response: httpx.Response) -> int | None:
+    """The config version the answer names (`X-Config-Version`), or None without a readable
+    one: a positive integer, as `VehicleConfig.config_version`."""
+    value = response.headers.get(CONFIG_VERSION_HEADER, "")
+    if not value.isascii() or not value.isdecimal():
+        return None
+    version = int(value)
+    return version if version >= 1 else None
 
 
 def _error_body(response: httpx.Response) -> ErrorResponse | None:
@@ -246,19 +265,20 @@ class ServerClient:
         headers = {"If-None-Match": etag} if etag else None
         path = f"/api/v1/vehicles/{self.vehicle_id}/plan?lane={lane}"
         response = self._request("GET", path, headers=headers)
+        config_version = _config_version(response)
         if response.status_code == 304:
-            return PlanUnchanged()
+            return PlanUnchanged(config_version)
         if response.status_code == 503:
             body = _error_body(response)
             if body is not None and body.code == NO_VALID_PLAN:
-                return NoValidPlan(_retry_after(response))
+                return NoValidPlan(_retry_after(response), config_version)
         if response.status_code != 200:
             raise self._fail(response, "plan")
         try:
             plan = parse_plan(response.content)
         except PlanError as error:
             raise UnexpectedAnswer(str(error), response.status_code) from None
-        return NewPlan(plan, response.headers.get("ETag"), _served_at(response))
+        return NewPlan(plan, response.headers.get("ETag"), _served_at(response), config_version)
 
     def policy(self, sha256: str) -> bytes:
         """The bytes of the policy file with this sha256 (the caller verifies them before use:

@@ -30,7 +30,7 @@ from app.plans.service import (
 from contract.errors import NO_VALID_PLAN
 from contract.plans import PlanOut
 from contract.values import StorableText, time_text
-from contract.vehicles import VEHICLE_ID_PATTERN
+from contract.vehicles import CONFIG_VERSION_HEADER, VEHICLE_ID_PATTERN
 
 router = APIRouter(prefix="/api/v1", tags=["plans"])
 
@@ -52,7 +52,7 @@ async def _readable_corridor(
     assignment = await vehicle_assignment(session, principal.vehicle_id or "")
     if assignment is None:
         raise HTTPException(403, "this vehicle token's vehicle is no longer on the roster")
-    own = assignment[0]
+    own = assignment.corridor_id
     if corridor_id is not None and corridor_id != own:
         raise HTTPException(403, f"a vehicle token may read only its own corridor's plans ({own})")
     return own
@@ -133,7 +133,21 @@ async def get_latest_plan(
     return await _serve_latest(request, session, readable or corridor, lane)
 
 
-@router.get("/vehicles/{vehicle_id}/plan", responses=PLAN_RESPONSES, response_model=PlanOut)
+_CONFIG_VERSION = {
+    CONFIG_VERSION_HEADER: {
+        "description": "the vehicle's config_version now (a car running another fetches its "
+        "config)",
+        "schema": {"type": "integer"},
+    }
+}
+VEHICLE_PLAN_RESPONSES: dict[int | str, dict[str, Any]] = {
+    **PLAN_RESPONSES,
+    200: {**PLAN_RESPONSES[200], "headers": _CONFIG_VERSION},
+    304: {**PLAN_RESPONSES[304], "headers": _CONFIG_VERSION},
+}
+
+
+@router.get("/vehicles/{vehicle_id}/plan", responses=VEHICLE_PLAN_RESPONSES, response_model=PlanOut)
 async def get_vehicle_plan(
     vehicle_id: Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)],
     request: Request,
@@ -162,10 +176,18 @@ async def get_vehicle_plan(
     if assignment is None:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}")
     held.assignments[vehicle_id] = assignment
-    corridor_id, assigned_lane = assignment
-    return await _serve_latest(
-        request, session, corridor_id, assigned_lane if lane is None else lane
+    answer = await _serve_latest(
+        request,
+        session,
+        assignment.corridor_id,
+        assignment.assigned_lane if lane is None else lane,
     )
+    # Every answer a car gets to its plan poll (a plan, 304, no valid plan) names the version of
+    # its config now: a car running another version fetches its config at once, so an operator
+    # who pulls a car (active false, maintenance) or reassigns it reaches it within a plan poll
+    # rather than at its next full config refresh (60 s).
+    answer.headers[CONFIG_VERSION_HEADER] = str(assignment.config_version)
+    return answer
 
 
 @router.get("/plans", responses=error_responses(401, 403, 404, 503))

@@ -46,6 +46,15 @@ class PlanDocuments:
             self._bodies.popitem(last=False)
 
 
+@dataclass(frozen=True)
+class CurrentAssignment:
+    """Where a vehicle drives, and the version of its config that says so."""
+
+    corridor_id: str
+    assigned_lane: int
+    config_version: int
+
+
 @dataclass
 class HeldPlans:
     """What this process last read for each corridor and vehicle, so it keeps serving plans while
@@ -53,7 +62,7 @@ class HeldPlans:
 
     lanes: dict[str, int] = field(default_factory=dict)
     plans: dict[str, tuple[int, datetime]] = field(default_factory=dict)
-    assignments: dict[str, tuple[str, int]] = field(default_factory=dict)
+    assignments: dict[str, CurrentAssignment] = field(default_factory=dict)
 
     def valid_plan_id(self, corridor_id: str, now: datetime) -> int | None:
         """The corridor's last served plan if it is still valid at `now`."""
@@ -70,15 +79,20 @@ async def corridor_lanes(session: AsyncSession, corridor_id: str) -> int | None:
     return None if lanes is None else int(lanes)
 
 
-async def vehicle_assignment(session: AsyncSession, vehicle_id: str) -> tuple[str, int] | None:
-    """The vehicle's corridor and assigned lane, or None if it is unknown."""
+async def vehicle_assignment(session: AsyncSession, vehicle_id: str) -> CurrentAssignment | None:
+    """The vehicle's corridor, assigned lane and config version, or None if it is unknown."""
     row = (
         await session.execute(
-            text("SELECT corridor_id, assigned_lane FROM dim_vehicle WHERE vehicle_id = :vehicle"),
+            text(
+                "SELECT corridor_id, assigned_lane, config_version FROM dim_vehicle "
+                "WHERE vehicle_id = :vehicle"
+            ),
             {"vehicle": vehicle_id},
         )
     ).first()
-    return None if row is None else (str(row.corridor_id), int(row.assigned_lane))
+    if row is None:
+        return None
+    return CurrentAssignment(str(row.corridor_id), int(row.assigned_lane), int(row.config_version))
 
 
 async def latest_valid_plan(

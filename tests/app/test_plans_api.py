@@ -372,3 +372,43 @@ def test_paging_the_history_by_until_skips_no_run_started_at_the_cut(
     everything = served.get("/api/v1/plans", corridor="I-24-WB", **window).json()["plans"]
     assert sorted(seen) == sorted(run["plan_id"] for run in everything)
     assert len(everything) == 4
+
+
+def test_every_answer_to_a_vehicles_plan_poll_names_its_config_version_now(
+    served: Served, seeded_engine: Engine
+) -> None:
+    """The car's prompt path to a new config (docs/interfaces.md): a plan, a 304 and a "no
+    valid plan" each carry `X-Config-Version`. An operator's SQL that changes what the config
+    says (pulling the car: `is_active`) bumps the version too, once; an API change, which
+    sets its own, is not counted twice."""
+    path = "/api/v1/vehicles/SF-002/plan"
+    plan = served.get(path, role="vehicle")
+    assert plan.status_code == 200
+    assert plan.headers["X-Config-Version"] == "1"
+    with seeded_engine.begin() as connection:
+        connection.execute(
+            text("UPDATE dim_vehicle SET is_active = false WHERE vehicle_id = 'SF-002'")
+        )
+    unchanged = served.client.get(
+        path, headers={**bearer(served.tokens["vehicle"]), "If-None-Match": plan.headers["ETag"]}
+    )
+    assert unchanged.status_code == 304
+    assert unchanged.headers["X-Config-Version"] == "2"
+    operator = issue(seeded_engine, "operator")
+    changed = served.client.put(
+        "/api/v1/vehicles/SF-002/maintenance",
+        json={"in_maintenance": True, "config_version": 2},
+        headers=bearer(operator),
+    )
+    assert changed.status_code == 200, changed.text
+    assert served.get(path, role="vehicle").headers["X-Config-Version"] == "3"
+    with seeded_engine.begin() as connection:
+        # an update that changes nothing the config says is no new version
+        connection.execute(
+            text("UPDATE dim_vehicle SET maintenance_note = 'tyres' WHERE vehicle_id = 'SF-002'")
+        )
+        connection.execute(text("UPDATE plan_run SET valid_until = now()"))
+    none = served.get(path, role="vehicle")
+    assert none.status_code == 503
+    assert none.json()["code"] == "no_valid_plan"
+    assert none.headers["X-Config-Version"] == "3"

@@ -209,8 +209,8 @@ def test_a_lane_change_from_the_operators_never_leaves_the_car_without_its_lanes
             headers={"Authorization": f"Bearer {operator}"},
         )
         assert changed.status_code == 200, changed.text
-        # the server now assigns lane 3; the car polls plans with its own lane until its next
-        # config refresh (60 s), then asks for lane 3
+        # the server now assigns lane 3; the car polls plans with its own lane until it reads
+        # the new config (the next plan answer names its version), then asks for lane 3
         r.run(70.0, network=True)
         config = r.agent.config
         assert config is not None
@@ -414,3 +414,46 @@ def test_a_shortened_status_period_applies_from_the_last_report(
             assert len(status_rows(seeded_engine)) == 2  # at the refresh, not 600 s on
             r.run(10.0, network=True)
     assert len(status_rows(seeded_engine)) == 4  # and every 5 s from there
+
+
+@pytest.mark.parametrize("pulled_by", ["sql", "maintenance"])
+def test_a_car_the_operators_pull_is_handed_back_within_a_plan_poll(
+    pulled_by: str,
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+) -> None:
+    """A car pulled from service (`active` false in SQL, or maintenance through the API) was
+    commanded until its next config refresh, up to 60 s later. The next plan answer names the
+    new config version (at most `plan_poll_s`, 5 s, later) and the car reads its config then."""
+    publish_free_flow_plan(seeded_database_url, seeded_engine)
+    token = issue(seeded_engine, "vehicle", "SF-098")
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        car_served_by(
+            http, "SF-098", token, tmp_path, dbc_cache, make="toyota_rav4", speed_mps=24.0
+        ) as r,
+    ):
+        r.emulator.driver_engage(set_speed_mph=54)
+        r.run(10.0, network=True, until=lambda: r.agent.state.mode is Mode.ENGAGED)
+        assert r.agent.state.mode is Mode.ENGAGED
+        if pulled_by == "sql":
+            with seeded_engine.begin() as connection:
+                connection.execute(
+                    text("UPDATE dim_vehicle SET is_active = false WHERE vehicle_id = 'SF-098'")
+                )
+        else:
+            pulled = http.put(
+                "/api/v1/vehicles/SF-098/maintenance",
+                json={"in_maintenance": True, "note": "pulled"},
+                headers={"Authorization": f"Bearer {issue(seeded_engine, 'operator')}"},
+            )
+            assert pulled.status_code == 200, pulled.text
+        pulled_at = r.clock.monotonic()
+        r.run(30.0, network=True, until=lambda: r.agent.state.mode is not Mode.ENGAGED)
+        assert r.agent.state.reason == "agent not enabled for this vehicle"
+        assert r.clock.monotonic() - pulled_at <= 5.0 + 1.0  # a plan poll and a network pass
+        assert r.agent.config is not None
+        assert r.agent.config.config_version == 2
