@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import math
+from dataclasses import replace
 
 import pytest
 
+from vehicle_agent import engage
 from vehicle_agent.cars import CarReading
 from vehicle_agent.stopping import (
     STOCK_ACC_MAX_BRAKING_MPS2,
@@ -105,3 +108,38 @@ def test_a_car_cutting_in_is_a_new_leader_not_a_braking_one() -> None:
     assert not any(
         check.needs_hand_back(0.1 * k, reading(40.0 - 0.3 * k, 22.0)) for k in range(1, 20)
     )
+
+
+def test_a_stop_need_hovering_at_the_authority_hands_back_once_not_at_every_engage_wait() -> None:
+    """The need near the threshold moves with the radar's range and the leader's estimated
+    braking. Without hysteresis a need wandering 0.1 m/s^2 either side of the accel cars' 3 m/s^2
+    for 1.5 s at a time engaged, handed back and engaged again at every engage wait; now the
+    check passes again only once the need is down to STOP_NEED_RELEASE_SHARE of it."""
+    check = StoppingCheck("accel")
+    # 28 m/s closing at 14 m/s on a leader holding its speed: 14^2 / (2 (gap - 2)) m/s^2
+    below, above = 2.0 + 196.0 / (2 * 2.9), 2.0 + 196.0 / (2 * 3.1)
+    state = engage.INITIAL
+    modes = []
+    for step in range(150):
+        now = 0.1 * step
+        gap = below if int(now / 1.5) % 2 == 0 else above
+        within = not check.needs_hand_back(now, radar(28.0, gap, 14.0))
+        inputs = engage.EngageInputs(
+            **{name: True for name, _ in engage.CHECKS},
+            time_s=now,
+            within_commandable_speed=True,
+            driver_active=False,
+        )
+        state = engage.step(
+            state, replace(inputs, stop_within_authority=within), engage.EngagePolicy()
+        )
+        modes.append(state.mode)
+    takeovers = sum(
+        1
+        for was, now_mode in itertools.pairwise(modes)
+        if now_mode is engage.Mode.ENGAGED and was is not engage.Mode.ENGAGED
+    )
+    assert takeovers == 1
+    assert modes[-1] is engage.Mode.STOCK
+    # well below the threshold, the agent may take over again
+    assert not check.needs_hand_back(15.1, radar(28.0, 2.0 + 196.0 / (2 * 2.3), 14.0))
