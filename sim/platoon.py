@@ -30,6 +30,7 @@ from vehicle_agent.controllers.microaccel import LeadAccelEstimator
 from vehicle_agent.stopping import (
     LEAD_ACCEL_FILTER_S,
     STOCK_ACC_MAX_BRAKING_MPS2,
+    STOP_NEED_RELEASE_SHARE,
     required_braking_mps2,
 )
 
@@ -220,7 +221,8 @@ class HandBack:
     along), braking at most `STOCK_ACC_MAX_BRAKING_MPS2`: the I-24 IDM's acceleration bounded
     below there. Then the driver drives: the IDM human, braking as hard as the stop needs up to
     the tyres' limit (`MAX_BRAKING_MPS2`). The agent takes over again once the stop
-    need has stayed below `release_share` of its authority for `reengage_after_s`: the agent's
+    need has stayed below `release_share` of its authority (the agent's own hysteresis,
+    `vehicle_agent.stopping.STOP_NEED_RELEASE_SHARE`) for `reengage_after_s`: the agent's
     own override hold-off (3 s after the driver's last touch) plus its engage delay (1 s),
     `vehicle_agent.engage.EngagePolicy`. Every hand-back is a takeover in the KPIs. Not
     modelled: the agent also takes over no `accel` car above 75 mph
@@ -234,7 +236,7 @@ class HandBack:
     """
 
     radar_range_m: float = 100.0
-    release_share: float = 0.5
+    release_share: float = STOP_NEED_RELEASE_SHARE
     reengage_after_s: float = 4.0
     reaction_time_s: float = 1.25
 

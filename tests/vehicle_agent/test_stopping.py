@@ -12,6 +12,7 @@ from vehicle_agent import engage
 from vehicle_agent.cars import CarReading
 from vehicle_agent.stopping import (
     STOCK_ACC_MAX_BRAKING_MPS2,
+    STOP_NEED_RELEASE_SHARE,
     StoppingCheck,
     braking_authority_mps2,
     required_braking_mps2,
@@ -141,5 +142,7 @@ def test_a_stop_need_hovering_at_the_authority_hands_back_once_not_at_every_enga
     )
     assert takeovers == 1
     assert modes[-1] is engage.Mode.STOCK
-    # well below the threshold, the agent may take over again
-    assert not check.needs_hand_back(15.1, radar(28.0, 2.0 + 196.0 / (2 * 2.3), 14.0))
+    # above the release share the check still fails; below it the agent may take over again
+    release = STOP_NEED_RELEASE_SHARE * 3.0
+    assert check.needs_hand_back(15.1, radar(28.0, 2.0 + 196.0 / (2 * 1.05 * release), 14.0))
+    assert not check.needs_hand_back(15.2, radar(28.0, 2.0 + 196.0 / (2 * 0.95 * release), 14.0))
