@@ -127,9 +127,12 @@ def _count(outcome: CycleOutcome) -> None:
 def schedule_planner(scheduler: Any, database_url: str, settings: Settings) -> Callable[[], None]:
     """Add the planner to an APScheduler every SMOOTHFLEET_PLANNER_PERIOD_S; returns a cleanup.
 
-    An overrunning cycle is not started twice (max_instances=1) and missed runs collapse into
-    one (coalesce). Replicas each schedule it; the advisory lock and `min_interval_s` (half a
-    period) leave one plan per corridor and period.
+    The first cycle runs as the scheduler starts, not a period later: after a restart the
+    fleet's plan (valid for SMOOTHFLEET_PLAN_VALID_FOR_S) would otherwise age for a whole
+    period more before the next one, and a server started from cold would have none. An
+    overrunning cycle is not started twice (max_instances=1) and missed runs collapse into
+    one (coalesce). Replicas and workers each schedule it, first cycles at once included; the
+    advisory lock and `min_interval_s` (half a period) leave one plan per corridor and period.
     """
     engine = make_sync_engine(
         database_url,
@@ -151,5 +154,6 @@ def schedule_planner(scheduler: Any, database_url: str, settings: Settings) -> C
         max_instances=1,
         coalesce=True,
         misfire_grace_time=int(settings.planner_period_s),
+        next_run_time=datetime.now(UTC),
     )
     return engine.dispose

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import httpx
 import pytest
+from prometheus_client import REGISTRY
 from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
@@ -61,6 +62,33 @@ def test_serve_runs_the_planner_on_its_schedule(
     recent_inrix(seeded_engine)
     with live_server(seeded_database_url, planner_period_s=1):
         wait_for(lambda: ("I-24-WB", "published") in runs(seeded_engine))
+
+
+def busy_cycles(corridor_id: str) -> float:
+    """This process's planner cycles that left the corridor to another planner."""
+    value = REGISTRY.get_sample_value(
+        "smoothfleet_planner_runs_total", {"corridor": corridor_id, "status": "busy"}
+    )
+    return value or 0.0
+
+
+def test_servers_plan_as_they_start_and_two_replicas_publish_one_plan(
+    seeded_database_url: str, seeded_engine: Engine
+) -> None:
+    """The first cycle waited a whole period after a (re)start, so the fleet ran on a plan
+    aging towards `valid_until`, or on none. Two replicas starting together each run their
+    first cycle at once: the advisory lock (or the plan published moments ago) leaves one."""
+    recent_inrix(seeded_engine)
+    busy_before = busy_cycles("I-24-WB")
+    period_s = 120  # the old schedule's first cycle came no sooner
+    started = time.monotonic()
+    with (
+        live_server(seeded_database_url, planner_period_s=period_s, plan_valid_for_s=300),
+        live_server(seeded_database_url, planner_period_s=period_s, plan_valid_for_s=300),
+    ):
+        wait_for(lambda: runs(seeded_engine) and busy_cycles("I-24-WB") == busy_before + 1, 60)
+        assert time.monotonic() - started < period_s
+        assert runs(seeded_engine) == [("I-24-WB", "published")]
 
 
 def test_no_planner_means_no_plans(seeded_database_url: str, seeded_engine: Engine) -> None:
