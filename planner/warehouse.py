@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime, timedelta
 from typing import Any, Literal
@@ -93,6 +93,9 @@ class InrixWindow:
     history: InrixHistory
     ignored: dict[str, int]
     measured_at: list[datetime] = field(default_factory=list)  # the snapshots read, in order
+    # Per snapshot read, the corridor's segments it held no reading of when read (snapshots
+    # read whole are left out): a reading of one stored later must not enter a replay.
+    unread: dict[datetime, list[str]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -158,9 +161,17 @@ def load_inrix(
     params: PlannerParams,
     received_by: datetime,
     measured_at: Collection[datetime] | None = None,
+    unread: Mapping[datetime, Collection[str]] | None = None,
 ) -> InrixWindow:
     """INRIX speeds measured in the history window before `now`, received by `received_by`
-    (and, for a replay, only of the snapshots `measured_at` the cycle read)."""
+    (and, for a replay, only of the snapshots `measured_at` the cycle read, without the
+    segments each held no reading of then: `unread`).
+
+    `received_at` is when the server stored a reading, so none received after `received_by`
+    was there to read; `fetched_at` is not the test: a reading the poller fetched before the
+    cycle and stored after it (its backlog while the database was away) was not read either.
+    A reading received before the read may still commit after it; `measured_at` and `unread`,
+    recorded by the cycle, keep those out of its replay."""
     segments = session.execute(
         text(
             "SELECT xd_code, (start_x_m + end_x_m) / 2 AS center_x_m FROM dim_inrix_segment "
@@ -186,7 +197,17 @@ def load_inrix(
     ).all()
     if measured_at is not None:
         rows = [row for row in rows if row.measured_at in measured_at]
+    if unread is not None:
+        rows = [row for row in rows if row.xd_code not in unread.get(row.measured_at, ())]
     times = sorted({row.measured_at for row in rows})
+    read: dict[datetime, set[str]] = {moment: set() for moment in times}
+    for row in rows:
+        read[row.measured_at].add(row.xd_code)
+    segments_unread = {
+        moment: codes
+        for moment in times
+        if (codes := [code for code in column if code not in read[moment]])
+    }
     snapshot = {moment: index for index, moment in enumerate(times)}
     speeds = np.full((len(times), len(segments)), np.nan)
     unknown = closed = low_score = not_a_number = 0
@@ -215,7 +236,7 @@ def load_inrix(
         "not_a_number": not_a_number,
         "out_of_range": cleaning.out_of_range,
     }
-    return InrixWindow(history, ignored, times)
+    return InrixWindow(history, ignored, times, segments_unread)
 
 
 # Per vehicle, lane and sub-segment of the window (cell = -1: off the corridor, x_m NULL or
@@ -629,6 +650,9 @@ def run_cycle(
         # Exactly which INRIX snapshots the cycle read: one committing just after the read,
         # with received_at before it, must not enter a replay.
         "inrix_measured_at": [_iso(moment) for moment in inrix.measured_at],
+        # ... and, of those, the segments without a reading then: one of them committing
+        # after the read, received before it, must not enter a replay either.
+        "inrix_segments_unread": {_iso(moment): codes for moment, codes in inrix.unread.items()},
         "fleet_observations": FLEET_IN_PLAN_ROWS,
     }
     planner_inputs = PlannerInputs(
@@ -740,6 +764,14 @@ def replay_plan(session: Session, plan_id: int) -> ReplayReport:
             None
             if "inrix_measured_at" not in inputs
             else {datetime.fromisoformat(moment) for moment in inputs["inrix_measured_at"]}
+        ),
+        unread=(
+            None  # a plan stored before 2026-12-05: a reading committed late may enter
+            if "inrix_segments_unread" not in inputs
+            else {
+                datetime.fromisoformat(moment): set(codes)
+                for moment, codes in inputs["inrix_segments_unread"].items()
+            }
         ),
     )
     window_start = datetime.fromisoformat(inputs["ping_window_start"])

@@ -21,17 +21,31 @@ def inrix_snapshot(
     speeds_mps: Sequence[float],
     received_at: datetime | None = None,
     scores: Mapping[str, int] | None = None,
+    fetched_at: datetime | None = None,
     **by_code: float,
 ) -> None:
     """One INRIX minute: a speed per corridor segment in order (overrides by code), with the
     INRIX score of the codes in `scores` (the others send none)."""
     speeds = dict(zip(INRIX_CODES, speeds_mps, strict=True)) | by_code
+    readings(engine, measured_at, speeds, received_at, scores, fetched_at)
+
+
+def readings(
+    engine: Engine,
+    measured_at: datetime,
+    speeds_mps: Mapping[str, float],
+    received_at: datetime | None = None,
+    scores: Mapping[str, int] | None = None,
+    fetched_at: datetime | None = None,
+) -> None:
+    """Some segments' readings of one INRIX minute, by code, stored at `received_at` (the
+    minute itself unless given) from an answer fetched at `fetched_at` (unknown unless given)."""
     with engine.begin() as connection:
         connection.execute(
             text(
                 "INSERT INTO fact_inrix_estimate (corridor_id, xd_code, measured_at, speed_mps, "
-                "received_at, score) "
-                "VALUES (:corridor, :code, :measured_at, :speed, :received_at, :score)"
+                "received_at, fetched_at, score) VALUES (:corridor, :code, :measured_at, "
+                ":speed, :received_at, :fetched_at, :score)"
             ),
             [
                 {
@@ -40,9 +54,10 @@ def inrix_snapshot(
                     "measured_at": measured_at,
                     "speed": speed,
                     "received_at": received_at or measured_at,
+                    "fetched_at": fetched_at,
                     "score": (scores or {}).get(code),
                 }
-                for code, speed in speeds.items()
+                for code, speed in speeds_mps.items()
             ],
         )
 

@@ -22,9 +22,11 @@ from planner.warehouse import (
 )
 from tests.planner.facts import (
     CORRIDOR,
+    INRIX_CODES,
     inrix_snapshot,
     move_to_eastbound,
     pings,
+    readings,
     standing_slowdown,
 )
 
@@ -382,6 +384,34 @@ def test_replay_is_exact_although_pings_and_inrix_of_the_window_arrive_after_the
     assert report.cells == 4 * 158
     assert report.max_difference_mps == 0.0  # bit for bit, not within a tolerance
     assert report.buffer_cells_differing == 0
+
+
+def test_replay_reads_only_the_inrix_the_cycle_could_have_read(seeded_engine: Engine) -> None:
+    """A snapshot the cycle read in part: its other segments' readings were received before the
+    read, in a transaction that committed after it. The replay read them as well (the cycle had
+    recorded which snapshots it read, not which of their segments) and planned a slowdown the
+    cycle never saw. A backlog the poller fetched before the cycle and stored after it was not
+    there to read either: a reading counts by when it was stored, not fetched."""
+    minutes_of_slowdown(seeded_engine, NOW, 3)
+    minute = NOW - timedelta(seconds=60)
+    first, rest = INRIX_CODES[:9], INRIX_CODES[9:]
+    readings(seeded_engine, minute, dict.fromkeys(first, 29.0), NOW - timedelta(seconds=50))
+    outcome = cycle(seeded_engine, NOW, algorithm="kernel_smooth")
+    assert outcome.inputs["inrix_segments_unread"] == {minute.isoformat(): rest}
+    # After the read: the rest of that minute, received 10 s before it, and a whole snapshot
+    # fetched 35 s before it but stored 20 s after it.
+    readings(seeded_engine, minute, dict.fromkeys(rest, 4.0), NOW - timedelta(seconds=10))
+    inrix_snapshot(
+        seeded_engine,
+        NOW - timedelta(seconds=30),
+        [4.0] * len(INRIX_CODES),
+        received_at=NOW + timedelta(seconds=20),
+        fetched_at=NOW - timedelta(seconds=35),
+    )
+    with Session(seeded_engine) as session:
+        report = replay_plan(session, outcome.plan_id or 0)
+    assert report.cells == 4 * 158
+    assert report.max_difference_mps == 0.0
 
 
 def test_replay_without_stored_observations_pools_the_pings(seeded_engine: Engine) -> None:
