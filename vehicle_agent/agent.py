@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import sqlite3
+import threading
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -349,6 +350,10 @@ class Agent:
         self.uplink = PingUplink(spool, clock.now)
         # When the last ping was due (its period's slot), None before the first.
         self._ping_slot_s: float | None = None
+        # Held by an upload for its whole call: the stop closes the spool only once the answer
+        # in flight has been settled in it (`shutdown`).
+        self._upload_lock = threading.Lock()
+        self._stopping = threading.Event()
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
         self._frames_at_status = (self.started_s, 0)
@@ -1072,7 +1077,10 @@ class Agent:
             return 0
         now = self.clock.monotonic() if now is None else now
         try:
-            outcome = self.uplink.upload(self.server)
+            with self._upload_lock:
+                if self._stopping.is_set():
+                    return 0  # the spool is closing or closed
+                outcome = self.uplink.upload(self.server, self._stopping.is_set)
         except (sqlite3.Error, OSError) as spool_error:
             # the spool's disk (full, read-only): what the server took stays spooled and is
             # resent as duplicates later, but not on every network pass (it was: the same
@@ -1120,7 +1128,7 @@ class Agent:
 
     def shutdown(self) -> None:
         """Stop commanding (the stock ACC keeps driving), let go of any held button and close
-        the spool."""
+        the spool once the upload in flight, if any, has its answer (`_settle_uploads`)."""
         now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back("agent stopping")
@@ -1131,4 +1139,31 @@ class Agent:
                 self.buttons.close(SafetyContext(now, self.reader.snapshot(now)))
             except Exception:
                 log.exception("letting go of the buttons failed")
-        self.spool.close()
+        settled = self._settle_uploads()
+        try:
+            self.spool.close()
+        finally:
+            if settled:
+                self._upload_lock.release()
+
+    def _settle_uploads(self) -> bool:
+        """Stop uploads and wait for the answer to the one in flight; True when none is left
+        in flight (the caller then holds `_upload_lock`).
+
+        `run_agent` calls the stop once the network thread has had its time to end, which an
+        upload over a slow uplink can outlast. The spool used to close under it: the server
+        took the pings, the spool could not forget them, and the next start sent them all
+        again. The wait is bounded by what the request may still take: its connection and its
+        answer, each within the client's timeout (`vehicle_agent.server`). Past it the pings'
+        fate is unknown; they stay spooled and go again, which the server counts as duplicates.
+        """
+        self._stopping.set()
+        wait_s = 2 * self.server.timeout_s if self.server is not None else 0.0
+        if self._upload_lock.acquire(timeout=wait_s):
+            return True
+        log.warning(
+            "a ping upload still awaited the server's answer at the stop: its pings stay "
+            "spooled and go again at the next start (the server counts those it took as "
+            "duplicates)"
+        )
+        return False

@@ -69,10 +69,13 @@ class PingUplink:
         self.wall_clock = wall_clock
         self.batch = PingBatchSize()
 
-    def upload(self, server: ServerClient) -> UploadOutcome:
-        """Up to MAX_BATCHES_PER_CALL batches, oldest pings first."""
+    def upload(self, server: ServerClient, stopping: Callable[[], bool]) -> UploadOutcome:
+        """Up to MAX_BATCHES_PER_CALL batches, oldest pings first; no new batch once
+        `stopping()` says the agent stops, which waits only for the batch in flight."""
         outcome = UploadOutcome()
         for _ in range(MAX_BATCHES_PER_CALL):
+            if stopping():
+                break
             batch_size = self.batch.size
             rows = self.spool.oldest(batch_size)
             if not rows:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
+import time
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -14,6 +16,7 @@ from sqlalchemy import Engine, text
 
 from app.core.config import load_settings
 from app.plans.jobs import run_planner
+from sim.emulator.rig import Rig
 from tests.planner.facts import INRIX_CODES, inrix_snapshot
 from tests.support.cars import car_served_by
 from tests.support.servers import live_server
@@ -385,6 +388,117 @@ def status_rows(engine: Engine) -> list[tuple[str | None, int | None]]:
                 )
             )
         ]
+
+
+class PingAnswersLate(httpx.BaseTransport):
+    """The real server, but the answer to a ping upload reaches the car `late_s` after the
+    server committed the pings (a slow uplink); `committed` is set in between."""
+
+    def __init__(self, late_s: float) -> None:
+        self.late_s = late_s
+        self.committed = threading.Event()
+        self.inner = httpx.HTTPTransport()
+
+    def handle_request(self, request: httpx.Request) -> httpx.Response:
+        response = self.inner.handle_request(request)
+        if request.url.path != "/api/v1/pings":
+            return response
+        response.read()
+        self.committed.set()
+        time.sleep(self.late_s)
+        return httpx.Response(response.status_code, json=response.json())
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+def stop_during_an_upload(
+    r: Rig, transport: PingAnswersLate, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The agent stopped (`shutdown`, as `run_agent` calls it once the network thread's join
+    has timed out) while the server has committed an upload and its answer is on the way."""
+    uploading = threading.Thread(target=r.agent.upload)
+    uploading.start()
+    assert transport.committed.wait(timeout=10)
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent"):
+        r.agent.shutdown()
+    uploading.join(timeout=10)
+    assert not uploading.is_alive()
+
+
+def test_pings_the_server_took_while_the_agent_stopped_are_never_sent_again(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A stop that outwaited the network thread closed the spool under its upload: the
+    server's answer came, the spool could not forget the pings, and the next start sent them
+    all again. The stop now waits for the answer of the upload in flight."""
+    token = issue(seeded_engine, "vehicle", "SF-004")
+    spool_path = tmp_path / "spool.sqlite"
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    transport = PingAnswersLate(late_s=0.5)
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base, transport=transport) as http,
+        car_served_by(
+            http, "SF-004", token, tmp_path, dbc_cache, start=start, spool=PingSpool(spool_path)
+        ) as r,
+    ):
+        r.run(4.95)
+        assert r.agent.spool.backlog() == 5
+        stop_during_an_upload(r, transport, caplog)
+        assert r.agent.stats.pings_uploaded == 5
+        assert r.agent.stats.spool_errors == 0
+    assert PingSpool(spool_path).backlog() == 0  # the next start sends none of them again
+    assert len(ping_keys(seeded_engine, "SF-004")) == 5
+    assert "ping spool" not in caplog.text
+
+
+def test_pings_whose_answer_never_came_before_the_stop_are_sent_again_and_stored_once(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The stop waits for an upload's answer only as long as the request may take: past
+    that, the pings' fate is unknown to the car, so they stay spooled and go again at the
+    next start, and the server counts them as duplicates rather than storing them twice."""
+    token = issue(seeded_engine, "vehicle", "SF-005")
+    spool_path = tmp_path / "spool.sqlite"
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    transport = PingAnswersLate(late_s=2.0)
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base, transport=transport) as http,
+        car_served_by(
+            http,
+            "SF-005",
+            token,
+            tmp_path,
+            dbc_cache,
+            start=start,
+            spool=PingSpool(spool_path),
+            timeout_s=0.3,
+        ) as r,
+    ):
+        r.run(4.95)
+        stop_during_an_upload(r, transport, caplog)
+        assert len(ping_keys(seeded_engine, "SF-005")) == 5
+        restarted = PingSpool(spool_path)
+        rows = restarted.oldest(100)
+        assert len(rows) == 5
+        with httpx.Client(base_url=base) as again:
+            answer = ServerClient(again, "SF-005", token).post_pings([ping for _, ping in rows])
+    assert (answer.accepted, answer.duplicates, answer.rejected) == (0, 5, [])
+    assert len(ping_keys(seeded_engine, "SF-005")) == 5
+    assert (
+        "a ping upload still awaited the server's answer at the stop: its pings stay spooled "
+        "and go again at the next start (the server counts those it took as duplicates)"
+    ) in caplog.messages
 
 
 def test_a_shortened_status_period_applies_from_the_last_report(

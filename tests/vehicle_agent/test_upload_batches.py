@@ -186,3 +186,21 @@ def test_a_server_that_refuses_every_ping_whole_empties_no_spool(
             r.agent.upload()
         assert r.agent.spool.backlog() == spooled
         assert r.agent.spool.counter("rejected") == 0
+
+
+def test_an_upload_sends_no_new_batch_once_the_agent_stops(tmp_path: Path, dbc_cache: Path) -> None:
+    """The stop waits for the answer to the batch in flight (`Agent.shutdown`), not for the
+    rest of the call's batches."""
+    batches: list[int] = []
+
+    def server(request: httpx.Request) -> httpx.Response:
+        pings = json.loads(request.content)["pings"]
+        batches.append(len(pings))
+        return httpx.Response(200, json={"accepted": len(pings), "duplicates": 0, "rejected": []})
+
+    with car_answered_by(server, tmp_path, dbc_cache) as r:
+        r.run(30.0)
+        r.agent.uplink.batch = PingBatchSize(10)
+        assert r.agent.server is not None
+        outcome = r.agent.uplink.upload(r.agent.server, stopping=lambda: bool(batches))
+        assert (batches, outcome.uploaded, r.agent.spool.backlog()) == ([10], 10, 20)
