@@ -253,6 +253,9 @@ class AgentStats:
     pings_clock_unset: int = 0
     # Pings the server refused for now (`Rejection.retryable`) and the spool keeps to send again.
     pings_held_back: int = 0
+    # Pings given up, though the server refused them for now, as stamped by a clock that ran
+    # ahead (`uplink.STAMPED_AHEAD_GIVE_UP_S`); also in the spool's `rejected`.
+    pings_stamped_ahead: int = 0
     # Fields left out of a ping or status report because they broke the contract, per message.
     fields_dropped: Counter[str] = field(default_factory=Counter)
     handbacks: Counter[str] = field(default_factory=Counter)
@@ -1093,6 +1096,7 @@ class Agent:
             self._server_failed("pings", error)
         self.stats.pings_uploaded += outcome.uploaded
         self.stats.pings_held_back += outcome.held_back
+        self.stats.pings_stamped_ahead += outcome.stamped_ahead
         if outcome.completed:
             self._upload_schedule.done(now, 1.0)
         else:

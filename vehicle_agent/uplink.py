@@ -32,6 +32,14 @@ MAX_BATCHES_PER_CALL = 5
 # again for this long after its own time, a day's deployment: long enough for an operator to
 # mend the server's clock or add the car to the roster before it is given up.
 RETRYABLE_PING_KEEP_S = 12 * 3600.0
+# A ping the server refused for now that is stamped more than this ahead of the car's own
+# clock (s) was stamped by a clock that ran ahead (a glitch since set right), not refused by
+# a server clock behind: it is given up. Kept, it was never older than RETRYABLE_PING_KEEP_S,
+# so one stamped far ahead stayed spooled for as long and went with every upload, which then
+# backed off. Well above a clock step of NTP's or a GPS receiver's lag, well below the
+# server's default window for a ping ahead (SMOOTHFLEET_PING_MAX_FUTURE_S, 300 s), so a ping
+# that server takes in time is never given up.
+STAMPED_AHEAD_GIVE_UP_S = 60.0
 
 SpoolRows = Sequence[tuple[int, dict[str, Any]]]
 
@@ -40,13 +48,14 @@ SpoolRows = Sequence[tuple[int, dict[str, Any]]]
 class UploadOutcome:
     """What one upload did: pings the server answered for (they left the spool), lone pings
     it refused whole (given up: they left the spool as rejected), pings kept to send again,
-    the errors met on the way, and whether it ended on its own (the spool drained, or the
-    call's batches sent) rather than stopped by the server (a failure, or pings it cannot take
-    yet)."""
+    pings given up as stamped ahead of the car's clock (among those answered for), the errors
+    met on the way, and whether it ended on its own (the spool drained, or the call's batches
+    sent) rather than stopped by the server (a failure, or pings it cannot take yet)."""
 
     uploaded: int = 0
     given_up: int = 0
     held_back: int = 0
+    stamped_ahead: int = 0
     errors: list[ServerError] = field(default_factory=list)
     completed: bool = True
 
@@ -108,7 +117,7 @@ class PingUplink:
 
     def _settle(self, rows: SpoolRows, answer: PingAnswer, outcome: UploadOutcome) -> bool:
         """The answered pings leave the spool but those refused for now; whether any stay."""
-        kept = self._held_back(rows, answer.rejected)
+        kept = self._held_back(rows, answer.rejected, outcome)
         gone = [row_id for row_id, _ in rows if row_id not in kept]
         self.spool.remove(gone, rejected=len(answer.rejected) - len(kept))
         outcome.uploaded += len(gone)
@@ -144,18 +153,38 @@ class PingUplink:
         outcome.given_up += 1
         return True
 
-    def _held_back(self, rows: SpoolRows, rejected: Sequence[Rejection]) -> set[int]:
+    def _held_back(
+        self, rows: SpoolRows, rejected: Sequence[Rejection], outcome: UploadOutcome
+    ) -> set[int]:
         """The spool rows of the pings refused for now and young enough to send again; a
-        final refusal, or a ping older than RETRYABLE_PING_KEEP_S, leaves the spool."""
+        final refusal, a ping older than RETRYABLE_PING_KEEP_S, or one stamped more than
+        STAMPED_AHEAD_GIVE_UP_S ahead of the car's clock (counted in the outcome) leaves the
+        spool."""
         now = self.wall_clock()
         kept: list[tuple[int, object, str]] = []
+        ahead: list[tuple[float, object, str]] = []
         for rejection in rejected:
             row_id, ping = rows[rejection.index]
             ts = ping.get("ts")
-            if rejection.retryable and ping_age_s(ts, now) <= RETRYABLE_PING_KEEP_S:
+            age_s = ping_age_s(ts, now)
+            if rejection.retryable and -age_s > STAMPED_AHEAD_GIVE_UP_S:
+                ahead.append((-age_s, ts, rejection.error))
+            elif rejection.retryable and age_s <= RETRYABLE_PING_KEEP_S:
                 kept.append((row_id, ts, rejection.error))
             else:
                 log.warning("server rejected ping %s: %s", ts, rejection.error)
+        if ahead:
+            # one line a batch: a clock that ran ahead for a minute stamped sixty of them
+            ahead_s, ts, error = max(ahead, key=lambda stamped: stamped[0])
+            log.warning(
+                "gave up %d pings the server refused, stamped up to %.0f s ahead of the car's "
+                "clock (%s: %s): a clock that ran ahead stamped them",
+                len(ahead),
+                ahead_s,
+                ts,
+                error,
+            )
+            outcome.stamped_ahead += len(ahead)
         if kept:
             # one line a retry, not one a ping: a server clock behind refuses every ping, again
             # every back-off, and each line lands on the car's SD card

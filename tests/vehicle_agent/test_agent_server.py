@@ -501,6 +501,49 @@ def test_pings_whose_answer_never_came_before_the_stop_are_sent_again_and_stored
     ) in caplog.messages
 
 
+def test_a_ping_a_clock_glitch_stamped_far_ahead_is_given_up_and_the_pings_around_it_arrive(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The server refuses a ping stamped past its window ahead as retryable (its own clock may
+    be behind), and the car kept such a ping until 12 h after its own time: one a glitch
+    stamped a day ahead stayed spooled for a day and a half, sent again with every upload,
+    each of which then backed off."""
+    token = issue(seeded_engine, "vehicle", "SF-006")
+    start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        car_served_by(http, "SF-006", token, tmp_path, dbc_cache, start=start) as r,
+    ):
+        r.run(2.95)
+        r.clock.step_wall(86_400.0)  # the car's clock jumps a day ahead for a second
+        r.run(1.0)
+        r.clock.step_wall(-86_400.0)  # and is set right
+        r.run(3.0)
+        spooled = [ping["ts"] for _, ping in r.agent.spool.oldest(100)]
+        assert len(spooled) == 7
+        glitch = spooled[3]
+        assert datetime.fromisoformat(glitch) > start + timedelta(days=1)
+        ahead_s = (datetime.fromisoformat(glitch) - r.clock.now()).total_seconds()
+        with caplog.at_level(logging.WARNING, logger="vehicle_agent.uplink"):
+            assert r.agent.upload() == 7
+        assert r.agent.spool.backlog() == 0
+        assert r.agent.spool.counter("rejected") == 1
+        assert r.agent.stats.pings_stamped_ahead == 1
+        assert r.agent.stats.pings_held_back == 0
+        assert [m.message for m in caplog.records if m.name == "vehicle_agent.uplink"] == [
+            f"gave up 1 pings the server refused, stamped up to {ahead_s:.0f} s ahead of the car's "
+            f"clock ({glitch}: ts is more than 300 s in the future): a clock that ran ahead "
+            "stamped them"
+        ]
+    stored = ping_keys(seeded_engine, "SF-006")
+    assert stored == [datetime.fromisoformat(ts) for ts in spooled if ts != glitch]
+
+
 def test_a_shortened_status_period_applies_from_the_last_report(
     seeded_database_url: str, seeded_engine: Engine, tmp_path: Path, dbc_cache: Path
 ) -> None:
