@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import logging
 import signal
-import sqlite3
 import sys
 import threading
 import time
@@ -175,14 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 1
         except KeyboardInterrupt:
             return 0
-        try:
-            spool = PingSpool(settings.spool_file, settings.spool_max_rows)
-        except (OSError, sqlite3.Error) as error:
-            bus.shutdown()
-            sys.stderr.write(
-                f"smoothfleet-agent: cannot open the ping spool {settings.spool_file}: {error}\n"
-            )
-            return 1
+        # a spool file that cannot be opened (a missing or read-only card) holds its pings in
+        # memory and says so in the log (vehicle_agent.spool): the agent still runs the car's
+        # controller and reports its status, the backlog showing the fault
+        spool = PingSpool(settings.spool_file, settings.spool_max_rows)
         board = None
         if settings.button_board:
             lines = board_lines(settings.button_board)

@@ -1307,6 +1307,23 @@ def test_the_status_reports_the_pings_a_full_spool_dropped(tmp_path: Path, dbc_c
         assert status["spool_dropped"] == spool.counter("dropped") >= 5
 
 
+def test_a_car_whose_spool_cannot_be_opened_drives_and_reports_its_backlog(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The agent could not be built without a spool file (the card missing or read-only), so
+    the car drove with no agent at all and reported nothing."""
+    (tmp_path / "card").write_text("")  # where the spool's folder should be
+    spool = PingSpool(tmp_path / "card" / "spool.sqlite")
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="microaccel", spool=spool) as r:
+        engage_and_settle(r)
+        r.run(10.0)
+        assert engaged(r)
+        status = r.agent.status_report()
+        assert status["spool_backlog"] == r.agent.stats.pings_spooled >= 10
+        r.agent.shutdown()
+        assert r.agent.state.mode is Mode.STOCK
+
+
 def test_no_ping_says_a_car_of_unknown_speed_stands(tmp_path: Path, dbc_cache: Path) -> None:
     """With the car's CAN not read and a receiver that reports no speed (gpsd leaves it out of
     a fix it has none for), the ping went out at 0 m/s: to the server, whose traffic estimate

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import configparser
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -20,17 +23,25 @@ from vehicle_agent.settings import (
     setting_names,
 )
 
+AGENT_SCRIPT = Path(sys.executable).parent / "smoothfleet-agent"
+
+
+def agent_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """A bare environment for the agent, keeping PYTHONPATH, where set, so that it runs the
+    code under test rather than the checkout the environment was installed from."""
+    inherited = {name: os.environ[name] for name in ("PYTHONPATH",) if name in os.environ}
+    return {"PATH": "/usr/bin:/bin", **inherited, **(env or {})}
+
 
 def run_agent_cli(
     *args: str, env: dict[str, str] | None = None
 ) -> subprocess.CompletedProcess[str]:
-    script = Path(sys.executable).parent / "smoothfleet-agent"
     return subprocess.run(
-        [str(script), *args],
+        [str(AGENT_SCRIPT), *args],
         capture_output=True,
         text=True,
         timeout=60,
-        env={"PATH": "/usr/bin:/bin", **(env or {})},
+        env=agent_env(env),
     )
 
 
@@ -60,36 +71,56 @@ def test_missing_and_wrong_settings_name_the_variable() -> None:
     )
 
 
+# Settings of an agent with no GPS and no server to reach.
+AGENT_WITHOUT_SERVER = (
+    "--server",
+    "http://127.0.0.1:9",
+    "--token",
+    "abc",
+    "--vehicle-id",
+    "SF-001",
+    "--gps",
+    "none",
+)
+
+
 def run_agent_without_server(
     can: str, spool: Path, env: dict[str, str] | None = None, make: str = "toyota_rav4"
 ) -> subprocess.CompletedProcess[str]:
     """An agent for `make` (a RAV4) on `can` and `spool`, with no GPS and no server to reach."""
     return run_agent_cli(
-        "--server",
-        "http://127.0.0.1:9",
-        "--token",
-        "abc",
-        "--vehicle-id",
-        "SF-001",
+        *AGENT_WITHOUT_SERVER,
         "--make",
         make,
         "--can",
         can,
-        "--gps",
-        "none",
         "--spool",
         str(spool),
         env=env,
     )
 
 
-def test_a_spool_that_cannot_be_created_is_one_line(tmp_path: Path) -> None:
+def test_an_agent_whose_spool_cannot_be_created_runs_and_says_so(tmp_path: Path) -> None:
+    """It refused to start ("cannot open the ping spool", exit 1): a car with a missing or
+    read-only card ran no agent at all. It now runs, its pings held in memory, says so, and
+    stops cleanly on SIGTERM."""
     (tmp_path / "a-file").write_text("")
     spool = tmp_path / "a-file" / "pings.sqlite"
-    result = run_agent_without_server("virtual:spool-test", spool)
-    assert result.returncode == 1
-    assert result.stderr.startswith(f"smoothfleet-agent: cannot open the ping spool {spool}: ")
-    assert "Traceback" not in result.stderr
+    command = [str(AGENT_SCRIPT), *AGENT_WITHOUT_SERVER, "--make", "toyota_rav4"]
+    command += ["--can", "virtual:spool-test", "--spool", str(spool)]
+    with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, env=agent_env()) as agent:
+        assert agent.stderr is not None
+        lines: list[str] = []
+        deadline = time.monotonic() + 60
+        while not any(" agent 0." in line for line in lines) and time.monotonic() < deadline:
+            lines.append(agent.stderr.readline())  # up to "agent VERSION for SF-001 ..."
+        agent.send_signal(signal.SIGTERM)
+        lines += agent.stderr.readlines()
+        assert agent.wait(timeout=30) == 0
+    said = "".join(lines)
+    assert f"WARNING vehicle_agent.spool: ping spool {spool} cannot be opened (" in said
+    assert "pings held in memory (at most 3600, then the oldest are dropped and counted)" in said
+    assert "Traceback" not in said
 
 
 def test_a_dbc_cache_that_cannot_be_written_is_one_line(tmp_path: Path) -> None:

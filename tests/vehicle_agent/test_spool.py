@@ -153,3 +153,32 @@ def test_closing_writes_what_is_held_if_it_can_and_says_what_it_could_not(
     with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
         full.close()
     assert "ping spool closed with 3 pings the disk did not take: lost" in caplog.text
+
+
+def test_a_spool_whose_file_cannot_be_opened_holds_its_pings_in_memory_until_it_can(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A missing or read-only SD card raised here, and the agent refused to start: a car must
+    still drive and hand back. Its pings wait in memory, within a full card's bound, count in
+    the backlog (and past the bound in `dropped`), and are written once the file opens."""
+    monkeypatch.setattr("vehicle_agent.spool.MAX_UNWRITTEN", 5)
+    card = tmp_path / "card"
+    card.write_text("")  # a file where the spool's folder should be: it cannot be made
+    path = card / "spool.sqlite"
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        spool = PingSpool(path)
+        for index in range(8):
+            spool.add({"n": index})
+    assert (spool.backlog(), spool.counter("dropped")) == (5, 3)
+    assert (spool.oldest(10), spool.newest()) == ([], None)  # nothing on disk to send
+    (message,) = caplog.messages  # once a minute at most, not once a ping
+    assert message.startswith(f"ping spool {path} cannot be opened ([Errno 17] File exists")
+    assert message.endswith(
+        "pings held in memory (at most 5, then the oldest are dropped and counted) until it can"
+    )
+    card.unlink()  # the card is back
+    spool.add({"n": 8})
+    assert [ping["n"] for _, ping in spool.oldest(10)] == [4, 5, 6, 7, 8]
+    assert (spool.backlog(), spool.counter("dropped")) == (5, 4)
+    spool.close()
+    assert PingSpool(path).counter("dropped") == 4
