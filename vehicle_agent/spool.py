@@ -12,7 +12,8 @@ A ping the disk cannot take (full, read-only, failing) is held in memory and wri
 the next `add` that can write: it counts in the backlog meanwhile, and once more than
 `MAX_UNWRITTEN` wait the oldest are dropped and counted in `dropped`. Written nowhere, a full SD
 card lost every ping of the drive with nothing counting them (an audit: 30 s engaged on a full
-card, 30 pings gone and `spool_dropped` 0). Held pings are lost if the agent stops first.
+card, 30 pings gone and `spool_dropped` 0). Held pings are lost if the agent stops first,
+logged and counted in `dropped` if the disk takes that much (`close`).
 
 A file that cannot be opened at all (the card missing or read-only, a file where its folder
 should be) is the same fault from the start: the spool holds its pings in memory, within the
@@ -107,15 +108,43 @@ class PingSpool:
 
     def close(self) -> None:
         """Write what is held in memory if the disk takes it now, say what it did not take
-        (those pings end with the agent), and close the file."""
+        (those pings end with the agent) and count it in `dropped` if the disk takes that,
+        and close the file."""
         with self._lock:
             if self._unwritten and not self._write_held():
-                log.warning(
-                    "ping spool closed with %d pings the disk did not take: lost",
-                    len(self._unwritten),
-                )
+                lost = len(self._unwritten)
+                uncounted = lost + self._unwritten_dropped
+                if self._count_dropped(uncounted):
+                    log.warning(
+                        "ping spool closed with %d pings the disk did not take: lost, counted "
+                        "in spool_dropped",
+                        lost,
+                    )
+                else:
+                    log.warning(
+                        "ping spool closed with %d pings the disk did not take: lost, and not "
+                        "counted: spool_dropped misses %d (the disk took not even their count)",
+                        lost,
+                        uncounted,
+                    )
             if self._db is not None:
                 self._db.close()
+
+    def _count_dropped(self, amount: int) -> bool:
+        """Add `amount` to the file's `dropped` in a transaction of its own; False when the
+        disk does not take it or there is no file. A counter is a few bytes, which a card too
+        full for the pings (a megabyte for an hour of them) may still take; uncounted, the
+        pings held in memory at the stop vanished from the status reports' `spool_dropped`,
+        a total since the file was made, which then went back after the next start."""
+        db = self._db
+        if db is None:
+            return False
+        try:
+            with self._transaction(db):
+                self._bump(db, "dropped", amount)
+        except sqlite3.DatabaseError:
+            return False
+        return True
 
     def add(self, ping: Mapping[str, Any]) -> None:
         """Append a ping (committed to disk before returning, or held in memory while the disk

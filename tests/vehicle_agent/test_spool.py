@@ -182,3 +182,36 @@ def test_a_spool_whose_file_cannot_be_opened_holds_its_pings_in_memory_until_it_
     assert (spool.backlog(), spool.counter("dropped")) == (5, 4)
     spool.close()
     assert PingSpool(path).counter("dropped") == 4
+
+
+def test_pings_lost_at_close_are_counted_in_spool_dropped_when_the_disk_takes_the_count(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Held pings the disk did not take at the stop were logged but counted nowhere: the
+    status reports after the next start said nothing of them, and `spool_dropped`, a total
+    since the file was made, went back by the pings the memory's bound had dropped. A card too
+    full for the pings may still take their count, a few bytes."""
+    monkeypatch.setattr("vehicle_agent.spool.MAX_UNWRITTEN", 3)
+    full = PingSpool(tmp_path / "full.sqlite")
+    full_disk(full)
+    for index in range(5):
+        full.add({"n": index, "pad": "x" * 5000})
+    assert (full.backlog(), full.counter("dropped")) == (3, 2)
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        full.close()
+    assert caplog.messages[-1] == (
+        "ping spool closed with 3 pings the disk did not take: lost, counted in spool_dropped"
+    )
+    restarted = PingSpool(tmp_path / "full.sqlite")
+    assert (restarted.backlog(), restarted.counter("dropped")) == (0, 5)
+
+    (tmp_path / "card").write_text("")  # no file at all: not even the count can be kept
+    missing = PingSpool(tmp_path / "card" / "spool.sqlite")
+    for index in range(5):
+        missing.add({"n": index})
+    with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
+        missing.close()
+    assert caplog.messages[-1] == (
+        "ping spool closed with 3 pings the disk did not take: lost, and not counted: "
+        "spool_dropped misses 5 (the disk took not even their count)"
+    )
