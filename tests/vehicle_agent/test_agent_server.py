@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import logging
 import threading
-import time
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -391,12 +390,12 @@ def status_rows(engine: Engine) -> list[tuple[str | None, int | None]]:
 
 
 class PingAnswersLate(httpx.BaseTransport):
-    """The real server, but the answer to a ping upload reaches the car `late_s` after the
-    server committed the pings (a slow uplink); `committed` is set in between."""
+    """The real server, but the answer to a ping upload reaches the car only once `answer` is
+    set, after the server committed the pings (a slow uplink); `committed` is set then."""
 
-    def __init__(self, late_s: float) -> None:
-        self.late_s = late_s
+    def __init__(self) -> None:
         self.committed = threading.Event()
+        self.answer = threading.Event()
         self.inner = httpx.HTTPTransport()
 
     def handle_request(self, request: httpx.Request) -> httpx.Response:
@@ -405,7 +404,7 @@ class PingAnswersLate(httpx.BaseTransport):
             return response
         response.read()
         self.committed.set()
-        time.sleep(self.late_s)
+        self.answer.wait(timeout=30)
         return httpx.Response(response.status_code, json=response.json())
 
     def close(self) -> None:
@@ -413,15 +412,23 @@ class PingAnswersLate(httpx.BaseTransport):
 
 
 def stop_during_an_upload(
-    r: Rig, transport: PingAnswersLate, caplog: pytest.LogCaptureFixture
+    r: Rig,
+    transport: PingAnswersLate,
+    caplog: pytest.LogCaptureFixture,
+    *,
+    answer_after_s: float | None,
 ) -> None:
     """The agent stopped (`shutdown`, as `run_agent` calls it once the network thread's join
-    has timed out) while the server has committed an upload and its answer is on the way."""
+    has timed out) while the server has committed an upload: its answer reaches the car
+    `answer_after_s` into the stop, or (None) only after the stop is over."""
     uploading = threading.Thread(target=r.agent.upload)
     uploading.start()
     assert transport.committed.wait(timeout=10)
+    if answer_after_s is not None:
+        threading.Timer(answer_after_s, transport.answer.set).start()
     with caplog.at_level(logging.WARNING, logger="vehicle_agent"):
         r.agent.shutdown()
+    transport.answer.set()
     uploading.join(timeout=10)
     assert not uploading.is_alive()
 
@@ -439,7 +446,7 @@ def test_pings_the_server_took_while_the_agent_stopped_are_never_sent_again(
     token = issue(seeded_engine, "vehicle", "SF-004")
     spool_path = tmp_path / "spool.sqlite"
     start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
-    transport = PingAnswersLate(late_s=0.5)
+    transport = PingAnswersLate()
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base, transport=transport) as http,
@@ -449,7 +456,7 @@ def test_pings_the_server_took_while_the_agent_stopped_are_never_sent_again(
     ):
         r.run(4.95)
         assert r.agent.spool.backlog() == 5
-        stop_during_an_upload(r, transport, caplog)
+        stop_during_an_upload(r, transport, caplog, answer_after_s=0.5)
         assert r.agent.stats.pings_uploaded == 5
         assert r.agent.stats.spool_errors == 0
     assert PingSpool(spool_path).backlog() == 0  # the next start sends none of them again
@@ -470,7 +477,7 @@ def test_pings_whose_answer_never_came_before_the_stop_are_sent_again_and_stored
     token = issue(seeded_engine, "vehicle", "SF-005")
     spool_path = tmp_path / "spool.sqlite"
     start = datetime.now(UTC).replace(microsecond=0) - timedelta(minutes=5)
-    transport = PingAnswersLate(late_s=2.0)
+    transport = PingAnswersLate()
     with (
         live_server(seeded_database_url, planner_enabled=False) as base,
         httpx.Client(base_url=base, transport=transport) as http,
@@ -482,11 +489,11 @@ def test_pings_whose_answer_never_came_before_the_stop_are_sent_again_and_stored
             dbc_cache,
             start=start,
             spool=PingSpool(spool_path),
-            timeout_s=0.3,
+            timeout_s=1.5,  # the stop waits 3 s for an answer
         ) as r,
     ):
         r.run(4.95)
-        stop_during_an_upload(r, transport, caplog)
+        stop_during_an_upload(r, transport, caplog, answer_after_s=None)
         assert len(ping_keys(seeded_engine, "SF-005")) == 5
         restarted = PingSpool(spool_path)
         rows = restarted.oldest(100)
