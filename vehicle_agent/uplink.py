@@ -34,11 +34,11 @@ MAX_BATCHES_PER_CALL = 5
 RETRYABLE_PING_KEEP_S = 12 * 3600.0
 # A ping the server refused for now that is stamped more than this ahead of the car's own
 # clock (s) was stamped by a clock that ran ahead (a glitch since set right), not refused by
-# a server clock behind: it is given up. Kept, it was never older than RETRYABLE_PING_KEEP_S,
-# so one stamped far ahead stayed spooled for as long and went with every upload, which then
-# backed off. Well above a clock step of NTP's or a GPS receiver's lag, well below the
-# server's default window for a ping ahead (SMOOTHFLEET_PING_MAX_FUTURE_S, 300 s), so a ping
-# that server takes in time is never given up.
+# a server clock behind: it is given up. Kept, it stayed spooled until RETRYABLE_PING_KEEP_S
+# past its own time (a day and a half for one stamped a day ahead, for ever for a year), sent
+# with every upload, which then backed off. Well above a clock step of NTP's or a GPS
+# receiver's lag, and below the server's default window for a ping ahead
+# (SMOOTHFLEET_PING_MAX_FUTURE_S, 300 s): a ping such a server refuses is further ahead still.
 STAMPED_AHEAD_GIVE_UP_S = 60.0
 
 SpoolRows = Sequence[tuple[int, dict[str, Any]]]
