@@ -45,8 +45,20 @@ def run_loop(
     return keeper
 
 
+# How long the stop waits for the control and telemetry loops to finish their step (s): each
+# step takes milliseconds; a loop stuck longer is a fault the stop does not wait out.
+LOOP_JOIN_S = 2.0
+
+
 def run_agent(agent: Agent, stop: threading.Event) -> None:
-    """Run until `stop` is set, then hand the car back and close the spool."""
+    """Run until `stop` is set, then hand the car back and close the spool.
+
+    The car is handed back as soon as the control loop has stopped commanding, not after the
+    network thread: that thread may be inside a request for a whole client timeout, and the
+    stop used to wait for it first (10 s at most) while systemd gives the whole stop 10 s
+    (deploy/smoothfleet-agent.service). `Agent.shutdown` itself waits for the answer to an
+    upload in flight before it closes the spool; the network thread is joined last.
+    """
     threads = [
         threading.Thread(
             target=run_loop,
@@ -70,6 +82,8 @@ def run_agent(agent: Agent, stop: threading.Event) -> None:
     for thread in threads:
         thread.start()
     stop.wait()
-    for thread in threads:
-        thread.join(timeout=10)
+    control, telemetry, network = threads
+    control.join(timeout=LOOP_JOIN_S)
+    telemetry.join(timeout=LOOP_JOIN_S)  # its last ping into the spool before it closes
     agent.shutdown()
+    network.join(timeout=LOOP_JOIN_S)
