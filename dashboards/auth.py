@@ -1,10 +1,20 @@
 """Dashboard sessions: a signed cookie after login, CSRF tokens for every form, role checks.
 
-The cookie holds the username, when it was issued, a random session nonce and a fingerprint of
-the user's password hash, signed with HMAC-SHA256 under a key derived from
-SMOOTHFLEET_SECRET_KEY. Every request reloads the user, so a changed role applies at once and a
-changed password (new fingerprint) ends every old session. Forms carry a CSRF token derived from
-the session nonce; the login form, which has no session yet, uses a double-submit cookie.
+The cookie holds the username, when it was issued, when its user last did something, a random
+session nonce and a fingerprint of the user's password hash, signed with HMAC-SHA256 under a
+key derived from SMOOTHFLEET_SECRET_KEY. Every request reloads the user, so a changed role
+applies at once and a changed password (new fingerprint) ends every old session. Forms carry a
+CSRF token derived from the session nonce; the login form, which has no session yet, uses a
+double-submit cookie.
+
+A session ends `dashboard_session_max_age_s` after its login (12 h) and, since 2026-12-06,
+after `dashboard_session_idle_s` without activity (60 min): a dashboard left open on an
+unattended desk no longer stays an operator's for the rest of the 12 h. Each page the user
+asks for, and each form sent, renews the cookie's time of activity; the refreshes a page's
+script makes on its own (`X-Requested-With: fetch`, the `.../live` parts) do not, or a fleet
+page left open would never be idle. Such a page sends its user to the login form at its first
+refresh after the idle limit. The renewed cookie is added to the response by `SessionRenewal`:
+FastAPI drops the headers a dependency sets when the page returns a response of its own.
 """
 
 from __future__ import annotations
@@ -16,17 +26,22 @@ import json
 import math
 import secrets
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Annotated
 
 from fastapi import Depends, Request, Response
 from sqlalchemy import select
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from app.core.config import Settings
 from app.core.sessions import SessionDep
 from app.models import OpsUser
 
 SESSION_COOKIE = "sf_session"
+# What the dashboard's script sends with the refreshes it makes on its own (static/dashboard.js).
+LIVE_REFRESH_HEADER = ("x-requested-with", "fetch")
+# Where `current_user` leaves the renewed session's Set-Cookie value for `SessionRenewal`.
+RENEWAL_STATE = "session_renewal"
 LOGIN_CSRF_COOKIE = "sf_login_csrf"
 OPERATOR_ROLES = frozenset({"operator", "admin"})
 
@@ -77,23 +92,6 @@ def password_fingerprint(password_hash: str) -> str:
     return hashlib.sha256(password_hash.encode()).hexdigest()[:16]
 
 
-def session_cookie(settings: Settings, username: str, password_hash: str, now: float) -> str:
-    """A signed session cookie value for the user."""
-    payload = json.dumps(
-        {
-            "u": username,
-            # to the millisecond: a logout ends the sessions issued before its instant, and a
-            # login in the same second after it must not read as before it
-            "t": math.floor(now * 1000) / 1000,
-            "n": secrets.token_hex(16),
-            "p": password_fingerprint(password_hash),
-        },
-        separators=(",", ":"),
-    ).encode()
-    encoded = base64.urlsafe_b64encode(payload).decode()
-    return f"{encoded}.{_sign(_key(settings), payload)}"
-
-
 @dataclass(frozen=True)
 class SessionClaims:
     """What a valid cookie says."""
@@ -102,6 +100,39 @@ class SessionClaims:
     issued_at: float
     nonce: str
     fingerprint: str
+    # The user's last activity (a page or a form, not a page's own refresh); cookies issued
+    # before the idle limit existed carry none and read their issue as their last activity.
+    active_at: float
+
+
+def to_the_millisecond(moment: float) -> float:
+    """A cookie's time: a logout ends the sessions issued before its instant, and a login in
+    the same second after it must not read as before it."""
+    return math.floor(moment * 1000) / 1000
+
+
+def new_session(username: str, password_hash: str, now: float) -> SessionClaims:
+    """The claims of a session starting now."""
+    moment = to_the_millisecond(now)
+    return SessionClaims(
+        username, moment, secrets.token_hex(16), password_fingerprint(password_hash), moment
+    )
+
+
+def session_cookie(settings: Settings, claims: SessionClaims) -> str:
+    """The signed cookie value carrying the claims."""
+    payload = json.dumps(
+        {
+            "u": claims.username,
+            "t": claims.issued_at,
+            "n": claims.nonce,
+            "p": claims.fingerprint,
+            "a": claims.active_at,
+        },
+        separators=(",", ":"),
+    ).encode()
+    encoded = base64.urlsafe_b64encode(payload).decode()
+    return f"{encoded}.{_sign(_key(settings), payload)}"
 
 
 def same_secret(expected: str, given: str) -> bool:
@@ -114,7 +145,8 @@ def same_secret(expected: str, given: str) -> bool:
 
 
 def read_session_cookie(settings: Settings, value: str, now: float) -> SessionClaims | None:
-    """The claims of a cookie signed by us and not expired, else None."""
+    """The claims of a cookie signed by us, neither past its age nor idle too long, else
+    None."""
     try:
         encoded, signature = value.split(".", 1)
         payload = base64.urlsafe_b64decode(encoded.encode())
@@ -124,10 +156,19 @@ def read_session_cookie(settings: Settings, value: str, now: float) -> SessionCl
         return None
     try:
         data = json.loads(payload)
-        claims = SessionClaims(str(data["u"]), float(data["t"]), str(data["n"]), str(data["p"]))
-    except (ValueError, KeyError, TypeError):
+        issued_at = float(data["t"])
+        claims = SessionClaims(
+            str(data["u"]),
+            issued_at,
+            str(data["n"]),
+            str(data["p"]),
+            float(data.get("a", issued_at)),
+        )
+    except (ValueError, KeyError, TypeError, AttributeError):
         return None
     if not 0 <= now - claims.issued_at <= settings.dashboard_session_max_age_s:
+        return None
+    if not 0 <= now - claims.active_at <= settings.dashboard_session_idle_s:
         return None
     return claims
 
@@ -146,18 +187,25 @@ def _secure(request: Request) -> bool:
     return request.url.scheme == "https"
 
 
-def set_session(request: Request, response: Response, user: OpsUser) -> None:
-    """Log the user in on this response."""
+def _keep_session(request: Request, response: Response, claims: SessionClaims) -> None:
+    """Set the session cookie on this response, kept by the browser until the session's age
+    runs out (the idle limit is checked by the server, from the claims)."""
     settings = _settings(request)
+    ends_in_s = claims.issued_at + settings.dashboard_session_max_age_s - claims.active_at
     response.set_cookie(
         SESSION_COOKIE,
-        session_cookie(settings, user.username, user.password_hash, time.time()),
-        max_age=int(settings.dashboard_session_max_age_s),
+        session_cookie(settings, claims),
+        max_age=max(0, int(ends_in_s)),
         httponly=True,
         samesite="lax",
         secure=_secure(request),
         path="/",
     )
+
+
+def set_session(request: Request, response: Response, user: OpsUser) -> None:
+    """Log the user in on this response."""
+    _keep_session(request, response, new_session(user.username, user.password_hash, time.time()))
     response.delete_cookie(LOGIN_CSRF_COOKIE, path="/login")
 
 
@@ -203,11 +251,19 @@ def _next_path(request: Request) -> str:
     return path
 
 
+def is_live_refresh(request: Request) -> bool:
+    """Whether the request is a refresh the page's script made on its own (no user's act)."""
+    name, value = LIVE_REFRESH_HEADER
+    return request.headers.get(name) == value
+
+
 async def current_user(request: Request, session: SessionDep) -> PageUser:
-    """The logged-in user; LoginRequired when there is no valid session."""
+    """The logged-in user; LoginRequired when there is no valid session. A request that is no
+    page's own refresh renews the session's time of activity (`SessionRenewal` sends it)."""
     settings = _settings(request)
     value = request.cookies.get(SESSION_COOKIE)
-    claims = read_session_cookie(settings, value, time.time()) if value else None
+    now = time.time()
+    claims = read_session_cookie(settings, value, now) if value else None
     if claims is None:
         raise LoginRequired(_next_path(request))
     user = await session.scalar(select(OpsUser).where(OpsUser.username == claims.username))
@@ -216,6 +272,10 @@ async def current_user(request: Request, session: SessionDep) -> PageUser:
     ended = user.sessions_valid_from
     if ended is not None and claims.issued_at < ended.timestamp():
         raise LoginRequired(_next_path(request))
+    if not is_live_refresh(request):
+        renewal = Response()
+        _keep_session(request, renewal, replace(claims, active_at=to_the_millisecond(now)))
+        setattr(request.state, RENEWAL_STATE, renewal.headers["set-cookie"].encode("latin-1"))
     return PageUser(user.username, user.role, csrf_token(settings, claims.nonce))
 
 
@@ -255,3 +315,30 @@ def safe_next(path: str | None) -> str:
     if path and path.startswith("/") and not path.startswith("//") and "\\" not in path:
         return path
     return "/fleet"
+
+
+class SessionRenewal:
+    """ASGI middleware adding the renewed session cookie `current_user` left on a request to
+    its response, unless the response sets the session cookie itself (a login, a logout:
+    their own cookie must be the browser's last word)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        # the request's state, shared with every layer below (Request.state reads this dict)
+        state = scope.setdefault("state", {})
+
+        async def send_renewed(message: Message) -> None:
+            renewal: bytes | None = state.get(RENEWAL_STATE)
+            if message["type"] == "http.response.start" and renewal is not None:
+                headers = list(message.get("headers", []))
+                own = SESSION_COOKIE.encode() + b"="
+                if not any(k == b"set-cookie" and v.startswith(own) for k, v in headers):
+                    message = {**message, "headers": [*headers, (b"set-cookie", renewal)]}
+            await send(message)
+
+        await self.app(scope, receive, send_renewed)

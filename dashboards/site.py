@@ -18,7 +18,13 @@ from fastapi.responses import JSONResponse, PlainTextResponse, RedirectResponse,
 from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from dashboards.auth import LoginRequired, PageError, navigating_user
+from dashboards.auth import (
+    LoginRequired,
+    PageError,
+    SessionRenewal,
+    is_live_refresh,
+    navigating_user,
+)
 from dashboards.pages import (
     analytics,
     feeds,
@@ -42,11 +48,12 @@ def install(app: FastAPI) -> None:
     """Mount the pages, their static files and their error pages on the app."""
     for pages in PAGES:
         app.include_router(pages.router)
+    app.add_middleware(SessionRenewal)
     app.mount("/static", StaticFiles(directory=DASHBOARD_DIR / "static"), name="static")
 
     async def on_login_required(request: Request, error: Exception) -> Response:
         assert isinstance(error, LoginRequired)
-        if request.headers.get("x-requested-with") == "fetch":
+        if is_live_refresh(request):
             return JSONResponse({"detail": "log in again"}, status_code=401)
         return RedirectResponse(f"/login?next={quote_path(error.next_path)}", status_code=303)
 

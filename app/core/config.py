@@ -154,7 +154,10 @@ class Settings(BaseSettings):
     readiness_agent_version: str | None = None  # the version every car should run (None: any)
 
     # Dashboard
+    # A dashboard session ends this long after its login, and after this long without a page
+    # asked for or a form sent (a page's own refreshes are no activity: dashboards/auth.py).
     dashboard_session_max_age_s: float = Field(43200.0, gt=0)
+    dashboard_session_idle_s: float = Field(3600.0, gt=0)
     dashboard_refresh_s: float = Field(5.0, gt=0)
     # Times people read are shown in the corridor's local time (I-24 runs through Nashville).
     dashboard_timezone: str = "America/Chicago"
