@@ -111,6 +111,13 @@ class PingAnswer(BaseModel):
 
     accepted: int = Field(ge=0)
     duplicates: int = Field(ge=0)
+    conflicts: int = Field(
+        0,
+        ge=0,
+        description="of the duplicates, those that said something else than the ping already "
+        "kept at their vehicle_id and ts (a clock stamping two pings alike): not stored, the "
+        "first kept; absent (an older server): 0",
+    )
     rejected: list[Rejection]
 
 

@@ -106,6 +106,7 @@ async def reply_to_pings(
     answer = {
         "accepted": result.accepted,
         "duplicates": result.duplicates,
+        "conflicts": result.conflicts,
         "rejected": [
             {"index": r.index, "error": r.error, "retryable": r.retryable} for r in result.rejected
         ],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 from dataclasses import dataclass
@@ -13,6 +14,7 @@ from sqlalchemy.ext.asyncio import AsyncEngine
 from app.auth import Principal
 from app.core import metrics
 from app.core.config import Settings
+from app.core.logs import RepeatedMessages
 from app.ingest.directory import FleetDirectoryCache
 from app.ingest.pings import (
     BodyError,
@@ -22,7 +24,10 @@ from app.ingest.pings import (
     check_in_context,
     read_pings,
 )
-from app.ingest.writer import PingWriter, RefusedByDatabase, UnstorableValue
+from app.ingest.writer import PingKey, PingWriter, RefusedByDatabase, UnstorableValue
+
+log = logging.getLogger(__name__)
+log.addFilter(RepeatedMessages())  # a car resending its spool is one line a window
 
 
 class RowsRefused(RuntimeError):
@@ -31,11 +36,29 @@ class RowsRefused(RuntimeError):
 
 @dataclass(frozen=True)
 class IngestResult:
-    """One request's answer: rows committed, duplicates, per-item rejections."""
+    """One request's answer: rows committed, duplicates (of which `conflicts` said something
+    else than the ping kept at their vehicle_id and ts), per-item rejections."""
 
     accepted: int
     duplicates: int
+    conflicts: int
     rejected: list[Rejected]
+
+
+def _log_conflicts(conflicts: tuple[PingKey, ...]) -> None:
+    """A warning per vehicle whose pings reused a stored ping's ts with other content: its clock
+    repeats or jumps back, and what it sent at those instants was not stored."""
+    by_vehicle: dict[str, list[PingKey]] = {}
+    for key in conflicts:
+        by_vehicle.setdefault(key[0], []).append(key)
+    for vehicle_id, keys in by_vehicle.items():
+        log.warning(
+            "vehicle %s sent %d ping(s) at a ts already stored with other content (first %s): "
+            "its clock may repeat or jump back; the stored pings are kept, these are not",
+            vehicle_id,
+            len(keys),
+            min(ts for _, ts in keys).isoformat(),
+        )
 
 
 @dataclass(frozen=True)
@@ -91,7 +114,9 @@ class Ingest:
             metrics.PINGS_DUPLICATE.inc(outcome.duplicates)
         if rejected:
             metrics.PINGS_REJECTED.inc(len(rejected))
-        return IngestResult(outcome.accepted, outcome.duplicates, rejected)
+        if outcome.conflicts:
+            _log_conflicts(outcome.conflicts)
+        return IngestResult(outcome.accepted, outcome.duplicates, len(outcome.conflicts), rejected)
 
 
 @asynccontextmanager

@@ -93,3 +93,25 @@ FROM ping_incoming AS incoming
 LEFT JOIN inserted USING (vehicle_id, ts)
 WHERE inserted.vehicle_id IS NULL
 """
+
+# What a car said in a ping, beside its key: a resend differing in any of these is no resend of
+# the stored ping but another ping at the same (vehicle_id, ts). received_at is the server's and
+# x_m derived from lat/lon, so neither tells the two apart.
+CONTENT_COLUMNS: tuple[tuple[str, str], ...] = tuple(
+    (name, pg_type)
+    for name, pg_type in PING_COLUMNS
+    if name not in ("vehicle_id", "ts", "received_at", "x_m")
+)
+
+# The numbers n of the sent rows whose stored row at the same key says something else, the sent
+# values cast to the columns' types as storing them would (a float4 column's rounding):
+# parameters are one array per column, n first, then vehicle_id, ts and CONTENT_COLUMNS.
+CONFLICTING = f"""
+SELECT sent.n
+FROM unnest($1::int4[], $2::text[], $3::timestamptz[], {
+    ", ".join(f"${number}::{pg_type}[]" for number, (_, pg_type) in enumerate(CONTENT_COLUMNS, 4))
+}) AS sent (n, vehicle_id, ts, {", ".join(name for name, _ in CONTENT_COLUMNS)})
+JOIN fact_vehicle_ping AS stored USING (vehicle_id, ts)
+WHERE ({", ".join(f"stored.{name}" for name, _ in CONTENT_COLUMNS)})
+    IS DISTINCT FROM ({", ".join(f"sent.{name}" for name, _ in CONTENT_COLUMNS)})
+"""

@@ -10,6 +10,9 @@ holds many requests and at low load a lone ping is written at once (no timer add
 Duplicates are counted per request, also across requests of one group: the first occurrence of
 a (vehicle_id, ts) in the group is the one sent to the database, later ones are duplicates at
 once; a sent row the database did not insert (ON CONFLICT DO NOTHING) was already stored.
+A duplicate saying something else than the ping kept (the first in the group, or the stored
+one: app.ingest.sql.CONFLICTING, asked only when a group met stored rows) is a conflict: the
+ping kept stays, and the request learns which of its duplicates conflicted.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from sqlalchemy.ext.asyncio import AsyncConnection, AsyncEngine
 from app.core import metrics
 from app.ingest.pings import PingRow
 from app.ingest.sql import (
+    CONFLICTING,
+    CONTENT_COLUMNS,
     COPY_INCOMING,
     COPY_STORED,
     COPY_TYPES,
@@ -54,6 +59,16 @@ _LANE = PingRow._fields.index("lane")  # x_m follows lane in the table
 SCALAR_MATCH_FIXES = 16
 # Positions of the REAL (float4) columns in a written row (the row number excluded).
 _FLOAT4 = tuple(n for n, (_, pg_type) in enumerate(PING_COLUMNS) if pg_type == "float4")
+# Positions in a PingRow of what the car said beside the key (app.ingest.sql.CONTENT_COLUMNS).
+_CONTENT = tuple(PingRow._fields.index(name) for name, _ in CONTENT_COLUMNS)
+# ... and in a written row (x_m follows lane), key first.
+_WRITTEN_KEY_AND_CONTENT = tuple(
+    n
+    for n, column in enumerate(PING_COLUMNS)
+    if column[0] in ("vehicle_id", "ts") or column in CONTENT_COLUMNS
+)
+
+PingKey = tuple[str, datetime]
 
 
 class WriterStopped(RuntimeError):
@@ -75,10 +90,12 @@ class UnstorableValue(RefusedByDatabase):
 
 @dataclass(frozen=True, slots=True)
 class WriteOutcome:
-    """What happened to one request's rows."""
+    """What happened to one request's rows; `conflicts` are the keys of those duplicates that
+    differ from the ping kept at their (vehicle_id, ts)."""
 
     accepted: int
     duplicates: int
+    conflicts: tuple[PingKey, ...] = ()
 
 
 @dataclass(slots=True)
@@ -212,14 +229,18 @@ class PingWriter:
         sent: list[PingRow] = []
         owner: list[int] = []
         duplicates = [0] * len(group)
-        seen: set[tuple[str, datetime]] = set()
+        conflicts: list[list[PingKey]] = [[] for _ in group]
+        first: dict[PingKey, PingRow] = {}
         for number, submission in enumerate(group):
             for row in submission.rows:
                 key = (row.vehicle_id, row.ts)
-                if key in seen:
+                kept = first.get(key)
+                if kept is not None:
                     duplicates[number] += 1
+                    if _content(kept) != _content(row):
+                        conflicts[number].append(key)
                     continue
-                seen.add(key)
+                first[key] = row
                 sent.append(row)
                 owner.append(number)
         # In key order: two groups holding the same pings (a car resending to another replica,
@@ -242,6 +263,9 @@ class PingWriter:
                 already_stored = await _insert_small(driver, values)
             else:
                 already_stored = await _copy_large(driver, values, pooled.info)
+            conflicting = (
+                await _conflicting(driver, values, already_stored) if already_stored else set()
+            )
         except BaseException:
             with contextlib.suppress(Exception):
                 await connection.invalidate()
@@ -254,9 +278,19 @@ class PingWriter:
         for position, number in enumerate(owner):
             if position in already_stored:
                 duplicates[number] += 1
+                if position in conflicting:
+                    conflicts[number].append((sent[position].vehicle_id, sent[position].ts))
             else:
                 accepted[number] += 1
-        return [WriteOutcome(a, d) for a, d in zip(accepted, duplicates, strict=True)]
+        return [
+            WriteOutcome(a, d, tuple(c))
+            for a, d, c in zip(accepted, duplicates, conflicts, strict=True)
+        ]
+
+
+def _content(row: PingRow) -> tuple[object, ...]:
+    """What the car said in a ping beside its key."""
+    return tuple(row[position] for position in _CONTENT)
 
 
 Values = tuple[object, ...]
@@ -271,16 +305,34 @@ async def _insert_small(driver: psycopg.AsyncConnection[Any], values: Sequence[V
     """
     parameters: list[object] = []
     for row in values:
-        fields = list(row)
-        for position in _FLOAT4:
-            value = fields[position]
-            if isinstance(value, float) and value != 0.0 and abs(value) < NEGLIGIBLE:
-                fields[position] = 0.0
-        parameters.extend(fields)
+        parameters.extend(_as_stored(row))
     async with psycopg.AsyncRawCursor(driver) as cursor:
         await cursor.execute(insert_values(len(values)), parameters)
         inserted = {(vehicle_id, ts) for vehicle_id, ts in await cursor.fetchall()}
     return {n for n, row in enumerate(values) if (row[0], row[1]) not in inserted}
+
+
+def _as_stored(row: Values) -> list[object]:
+    """A written row's values with a float too small for a REAL as 0, as COPY stores it."""
+    fields = list(row)
+    for position in _FLOAT4:
+        value = fields[position]
+        if isinstance(value, float) and value != 0.0 and abs(value) < NEGLIGIBLE:
+            fields[position] = 0.0
+    return fields
+
+
+async def _conflicting(
+    driver: psycopg.AsyncConnection[Any], values: Sequence[Values], already_stored: set[int]
+) -> set[int]:
+    """Of the positions already stored, those whose stored row says something else than the
+    row sent (a car's clock stamping two pings alike); one statement, run only on resends."""
+    positions = sorted(already_stored)
+    rows = [_as_stored(values[position]) for position in positions]
+    columns = [positions, *([row[n] for row in rows] for n in _WRITTEN_KEY_AND_CONTENT)]
+    async with psycopg.AsyncRawCursor(driver) as cursor:
+        await cursor.execute(CONFLICTING, columns)
+        return {n for (n,) in await cursor.fetchall()}
 
 
 async def _copy_large(

@@ -280,6 +280,7 @@ def test_a_late_ping_is_checked_and_placed_on_the_corridor_assigned_at_its_ts(
     assert answer.json() == {
         "accepted": 2,
         "duplicates": 0,
+        "conflicts": 0,
         "rejected": [
             {"index": 1, "error": "lane 4 is outside the 3 lanes of I-24-EB", "retryable": False}
         ],
@@ -327,7 +328,7 @@ def test_a_ping_from_a_newer_assignment_than_ingest_holds_is_judged_on_it(
         answer = api.post("/api/v1/pings", json=after, headers=car)
 
     assert answer.status_code == 200, answer.text
-    assert answer.json() == {"accepted": 1, "duplicates": 0, "rejected": []}
+    assert answer.json() == {"accepted": 1, "duplicates": 0, "conflicts": 0, "rejected": []}
     with seeded_engine.connect() as connection:
         x_m = connection.execute(
             text("SELECT x_m FROM fact_vehicle_ping WHERE vehicle_id = 'SF-001' AND ts = :ts"),

@@ -7,6 +7,7 @@ a vehicle token never stores another vehicle's pings.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from datetime import UTC, datetime, timedelta
@@ -67,7 +68,7 @@ def test_a_ping_is_committed_when_the_answer_arrives(
     after = datetime.now(UTC)
 
     assert answer.status_code == 200
-    assert answer.json() == {"accepted": 1, "duplicates": 0, "rejected": []}
+    assert answer.json() == {"accepted": 1, "duplicates": 0, "conflicts": 0, "rejected": []}
     [row] = stored(seeded_engine)  # read right after the answer: already committed
     assert row["ts"] == ts
     assert before <= row["received_at"] <= after
@@ -119,10 +120,10 @@ def test_a_resent_ping_is_a_duplicate_never_a_second_row(
 ) -> None:
     first, second = ping(), ping()
     answer = api.post("/api/v1/pings", json={"pings": [first, second, first]}, headers=car)
-    assert answer.json() == {"accepted": 2, "duplicates": 1, "rejected": []}
+    assert answer.json() == {"accepted": 2, "duplicates": 1, "conflicts": 0, "rejected": []}
 
     again = api.post("/api/v1/pings", json={"pings": [second, first]}, headers=car)
-    assert again.json() == {"accepted": 0, "duplicates": 2, "rejected": []}
+    assert again.json() == {"accepted": 0, "duplicates": 2, "conflicts": 0, "rejected": []}
     assert len(stored(seeded_engine)) == 2
 
 
@@ -155,7 +156,7 @@ def test_both_ways_of_writing_a_group_store_the_same_row_and_find_the_resent(
 
     answer = api.post("/api/v1/pings", json={"pings": batch}, headers=car)
 
-    assert answer.json() == {"accepted": size - 1, "duplicates": 1, "rejected": []}
+    assert answer.json() == {"accepted": size - 1, "duplicates": 1, "conflicts": 0, "rejected": []}
     rows = stored(seeded_engine)
     assert len(rows) == size
     expected = {**fields, "accel_mps2": 0.0}
@@ -176,6 +177,49 @@ def test_both_ways_of_writing_a_group_store_the_same_row_and_find_the_resent(
             "lead_rel_speed_mps": row["lead_rel_speed_mps"],
             "plan_id": row["plan_id"],
         } == expected
+
+
+@pytest.mark.parametrize("size", [1, SMALL_GROUP_ROWS + 1], ids=["one-statement", "copy"])
+def test_a_resend_saying_something_else_is_a_conflict_logged_and_the_first_kept(
+    api: httpx.Client,
+    car: dict[str, str],
+    seeded_engine: Engine,
+    size: int,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A ping at a stored (vehicle_id, ts) with other content was counted as a plain duplicate
+    and dropped without a word: a car whose clock repeats a second lost pings unseen. Values a
+    REAL rounds (0.12) must not make an identical resend read as a conflict."""
+    first = ping(speed_mps=24.5, accel_mps2=0.12, lead_distance_m=35.1)
+    assert api.post("/api/v1/pings", json=first, headers=car).json()["accepted"] == 1
+    other = {**first, "speed_mps": 3.0}
+    extra = [ping() for _ in range(size - 1)]
+
+    with caplog.at_level(logging.WARNING, logger="app.ingest.service"):
+        resent = api.post("/api/v1/pings", json={"pings": [first, *extra]}, headers=car).json()
+        clashing = api.post("/api/v1/pings", json={"pings": [other, *extra]}, headers=car).json()
+
+    assert (resent["accepted"], resent["duplicates"], resent["conflicts"]) == (size - 1, 1, 0)
+    assert (clashing["accepted"], clashing["duplicates"], clashing["conflicts"]) == (0, size, 1)
+    [kept] = [
+        row for row in stored(seeded_engine) if row["ts"] == datetime.fromisoformat(first["ts"])
+    ]
+    assert kept["speed_mps"] == 24.5
+    [warning] = [r.getMessage() for r in caplog.records if "already stored" in r.getMessage()]
+    assert warning.startswith("vehicle SF-001 sent 1 ping(s) at a ts already stored with other")
+
+
+def test_two_pings_at_one_ts_in_one_batch_are_a_conflict_the_first_stored(
+    api: httpx.Client, car: dict[str, str], seeded_engine: Engine
+) -> None:
+    first = ping(speed_mps=20.0)
+    same, other = dict(first), {**first, "lane": 3}
+
+    answer = api.post("/api/v1/pings", json={"pings": [first, same, other]}, headers=car)
+
+    assert answer.json() == {"accepted": 1, "duplicates": 2, "conflicts": 1, "rejected": []}
+    [row] = stored(seeded_engine)
+    assert row["lane"] is None
 
 
 def test_the_same_ping_in_concurrent_requests_is_stored_once_and_counted_everywhere(
@@ -344,7 +388,7 @@ def test_a_batch_of_1000_fits_and_1001_is_refused_whole(
     assert "at most 1000" in too_many.json()["detail"]
 
     answer = api.post("/api/v1/pings", json={"pings": batch[:1000]}, headers=car)
-    assert answer.json() == {"accepted": 1000, "duplicates": 0, "rejected": []}
+    assert answer.json() == {"accepted": 1000, "duplicates": 0, "conflicts": 0, "rejected": []}
     assert len(stored(seeded_engine)) == 1000
 
 
@@ -462,6 +506,7 @@ def test_pings_of_a_vehicle_just_removed_from_the_roster_are_rejected_per_item(
     assert answer.json() == {
         "accepted": 1,
         "duplicates": 0,
+        "conflicts": 0,
         # retryable: put back on the roster, the car's pings are taken then
         "rejected": [{"index": 1, "error": "unknown vehicle SF-050", "retryable": True}],
     }
