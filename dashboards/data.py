@@ -85,7 +85,7 @@ async def status_history(
 async def vehicle_changes(
     session: AsyncSession, vehicle_id: str, limit: int = 10
 ) -> Sequence[RowMapping]:
-    """The operators' newest changes to the vehicle's assignment and maintenance, newest first
+    """The newest changes to the vehicle's assignment, maintenance and roster row, newest first
     (fact_vehicle_change: who, when, what), each maintenance change with `switched`: whether it
     took the car out or put it back, or only changed the note of a car already so (every save
     is a change: read as a fresh "taken out", a note edited named its editor as the one who

@@ -111,12 +111,13 @@ class VehicleStatus(Base):
 
 
 class VehicleChange(Base):
-    """An operator's change to a vehicle's assignment or maintenance (API or dashboard), with
-    who made it and when: the record of each car's clearing and reassignment."""
+    """A change to a vehicle's assignment or maintenance (API or dashboard), or to its roster
+    row (`vehicles import|add`, migration 0022), with who made it and when: the record of each
+    car's clearing and reassignment, one row per config version a change produced."""
 
     __tablename__ = "fact_vehicle_change"
     __table_args__ = (
-        CheckConstraint("change IN ('assignment', 'maintenance')", name="change_kind"),
+        CheckConstraint("change IN ('assignment', 'maintenance', 'roster')", name="change_kind"),
         {"comment": "One row per operator's change to a vehicle (the config version it produced)."},
     )
 

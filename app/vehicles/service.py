@@ -12,7 +12,7 @@ from sqlalchemy import case, select, tuple_
 from sqlalchemy.dialects.postgresql import insert
 from sqlalchemy.orm import Session
 
-from app.models import Corridor, Policy, Vehicle
+from app.models import Corridor, Policy, Vehicle, VehicleChange
 from app.vehicles.schemas import RosterRow
 from contract.controllers import RL_CONTROLLERS
 from contract.values import first_problem
@@ -129,10 +129,23 @@ def upsert_vehicles(
     label: str | None = "roster",
 ) -> int:
     """Write the rows; existing vehicles are updated or left alone. Returns rows written.
-    `label` names where the rows came from in an error (None: vehicles given one by one)."""
+    `label` names where the rows came from in an error and in the change rows (None: vehicles
+    given one by one).
+
+    An existing vehicle the rows change gets a new config version and, as an assignment
+    through the API does, a fact_vehicle_change row saying who made it and what it set: the
+    vehicle's history has no version without its change."""
     _check_against_corridors(session, rows, label)
     if not rows:
         return 0
+    # Locked until the commit: the versions compared below are the ones this load replaces.
+    versions_before = dict(
+        session.execute(
+            select(Vehicle.vehicle_id, Vehicle.config_version)
+            .where(Vehicle.vehicle_id.in_([row.vehicle_id for row in rows]))
+            .with_for_update()
+        ).all()
+    )
     statement = insert(Vehicle).values([row.model_dump() for row in rows])
     if update_existing:
         names = [name for name in RosterRow.model_fields if name != "vehicle_id"]
@@ -148,8 +161,27 @@ def upsert_vehicles(
         statement = statement.on_conflict_do_update(index_elements=["vehicle_id"], set_=columns)
     else:
         statement = statement.on_conflict_do_nothing(index_elements=["vehicle_id"])
-    result = session.execute(statement.returning(Vehicle.vehicle_id))
-    return len(result.all())
+    written = session.execute(statement.returning(Vehicle.vehicle_id, Vehicle.config_version))
+    versions_after = dict(written.all())
+    changed_by = "command line: vehicles add" if label is None else f"roster import of {label}"
+    for row in rows:
+        before = versions_before.get(row.vehicle_id)
+        after = versions_after.get(row.vehicle_id)
+        if before is not None and after is not None and after != before:
+            session.add(
+                VehicleChange(
+                    vehicle_id=row.vehicle_id,
+                    config_version=after,
+                    changed_by=changed_by,
+                    change="roster",
+                    lane=row.assigned_lane,
+                    route=row.route,
+                    controller_name=row.controller_name,
+                    controller_params=row.controller_params,
+                )
+            )
+    session.flush()
+    return len(versions_after)
 
 
 def list_vehicles(session: Session) -> Iterable[Vehicle]:

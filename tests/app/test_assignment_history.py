@@ -166,6 +166,42 @@ def test_the_roster_import_opens_rows_only_for_what_it_changes(seeded_engine: En
     ]
 
 
+def test_a_reimport_that_changes_a_vehicle_keeps_the_change_with_its_version(
+    seeded_engine: Engine,
+) -> None:
+    """A re-import bumped the config version but wrote no change row: that version had no
+    record, and a controller changed by it was recorded nowhere (this table's history keeps
+    corridor, route and lane only)."""
+    roster = seed_roster()
+    sf001 = next(row for row in roster if row.vehicle_id == "SF-001")
+    params = {"base": {"k": 0.4}}
+    new = sf001.model_copy(update={"vehicle_id": "SF-900", "vin": "JN8BT3BB3PW900000"})
+    with session_scope(seeded_engine) as session:
+        upsert_vehicles(session, roster, update_existing=True, label="fleet.csv")  # no change
+        upsert_vehicles(
+            session,
+            [sf001.model_copy(update={"controller_params": params}), new],
+            update_existing=True,
+            label="fleet.csv",
+        )
+
+    with seeded_engine.connect() as connection:
+        changes = connection.execute(
+            text(
+                "SELECT vehicle_id, config_version, changed_by, change, lane, route, "
+                "controller_name, controller_params FROM fact_vehicle_change"
+            )
+        ).all()
+        version = connection.execute(
+            text("SELECT config_version FROM dim_vehicle WHERE vehicle_id = 'SF-001'")
+        ).scalar_one()
+    assert version == 2
+    # the new vehicle is no change of one, and the unchanged rows are none either
+    assert [tuple(change) for change in changes] == [
+        ("SF-001", 2, "roster import of fleet.csv", "roster", 1, "A", "microaccel_acc", params)
+    ]
+
+
 def test_two_changes_in_one_transaction_keep_the_history_contiguous(
     seeded_engine: Engine,
 ) -> None:
