@@ -112,7 +112,7 @@ class VehicleStatus(Base):
 
 class VehicleChange(Base):
     """A change to a vehicle's assignment or maintenance (API or dashboard), or to its roster
-    row (`vehicles import|add`, migration 0022), with who made it and when: the record of each
+    row (`vehicles import|add`, migration 0023), with who made it and when: the record of each
     car's clearing and reassignment, one row per config version a change produced."""
 
     __tablename__ = "fact_vehicle_change"

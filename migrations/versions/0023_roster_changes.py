@@ -1,7 +1,7 @@
 """A roster load that changes a vehicle is kept in fact_vehicle_change, as an operator's is.
 
-Revision ID: 0022
-Revises: 0021
+Revision ID: 0023
+Revises: 0022
 Create Date: 2026-12-05 19:00:00+00:00
 
 `smoothfleet vehicles import` (and `vehicles add` of an existing id) bumps the config version
@@ -16,8 +16,8 @@ from collections.abc import Sequence
 
 from alembic import op
 
-revision: str = "0022"
-down_revision: str | None = "0021"
+revision: str = "0023"
+down_revision: str | None = "0022"
 branch_labels: str | Sequence[str] | None = None
 depends_on: str | Sequence[str] | None = None
 
