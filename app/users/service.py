@@ -19,6 +19,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
+import math
 import re
 import secrets
 from dataclasses import dataclass
@@ -133,7 +134,10 @@ def wait_before_next_attempt(failures: int) -> float:
     up to the cap."""
     if failures <= FREE_FAILURES:
         return 0.0
-    return float(min(2.0 ** (failures - FREE_FAILURES - 1), LOCKOUT_MAX_S))
+    # the exponent is bounded before the power: 2.0 ** 1100 overflows, and a count that large
+    # (days of one address guessing one account) turned the login into a 500
+    doublings = min(failures - FREE_FAILURES - 1, math.ceil(math.log2(LOCKOUT_MAX_S)))
+    return float(min(2.0**doublings, LOCKOUT_MAX_S))
 
 
 @dataclass(frozen=True)

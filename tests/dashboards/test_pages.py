@@ -194,6 +194,8 @@ def test_a_username_that_is_no_account_waits_as_an_account_does(site: str) -> No
 def test_the_wait_doubles_with_each_failure_up_to_five_minutes() -> None:
     assert [wait_before_next_attempt(n) for n in range(7)] == [0, 0, 0, 1, 2, 4, 8]
     assert wait_before_next_attempt(40) == 300
+    # days of one address failing on one account: the wait, not a 500 (2.0 ** 1100 overflowed)
+    assert wait_before_next_attempt(1_100) == 300
 
 
 def test_a_login_form_without_its_token_is_refused(site: str) -> None:
