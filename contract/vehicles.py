@@ -36,9 +36,10 @@ REPORT_TIME_WINDOW = (
 )
 
 
-# The header of every answer to a vehicle's plan poll (`GET /api/v1/vehicles/{id}/plan`: 200,
-# 304 and 503 `no_valid_plan`) naming the vehicle's `config_version` now: a car running another
-# fetches its config at once instead of at its next refresh (docs/interfaces.md).
+# The header of every answer to a known vehicle's plan poll (`GET /api/v1/vehicles/{id}/plan`:
+# 200, 304, 503 `no_valid_plan` and 404 for a lane its corridor lacks) naming the vehicle's
+# `config_version` now: a car running another fetches its config at once instead of at its
+# next refresh (docs/interfaces.md).
 CONFIG_VERSION_HEADER = "X-Config-Version"
 
 

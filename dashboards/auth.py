@@ -7,7 +7,7 @@ applies at once and a changed password (new fingerprint) ends every old session.
 CSRF token derived from the session nonce; the login form, which has no session yet, uses a
 double-submit cookie.
 
-A session ends `dashboard_session_max_age_s` after its login (12 h) and, since 2026-12-06,
+A session ends `dashboard_session_max_age_s` after its login (12 h) and, since 2026-12-05,
 after `dashboard_session_idle_s` without activity (60 min): a dashboard left open on an
 unattended desk no longer stays an operator's for the rest of the 12 h. Each page the user
 asks for, and each form sent, renews the cookie's time of activity; the refreshes a page's

@@ -144,6 +144,8 @@ VEHICLE_PLAN_RESPONSES: dict[int | str, dict[str, Any]] = {
     **PLAN_RESPONSES,
     200: {**PLAN_RESPONSES[200], "headers": _CONFIG_VERSION},
     304: {**PLAN_RESPONSES[304], "headers": _CONFIG_VERSION},
+    404: {**PLAN_RESPONSES[404], "headers": _CONFIG_VERSION},
+    503: {**PLAN_RESPONSES[503], "headers": _CONFIG_VERSION},
 }
 
 
@@ -176,17 +178,24 @@ async def get_vehicle_plan(
     if assignment is None:
         raise HTTPException(404, f"unknown vehicle {vehicle_id}")
     held.assignments[vehicle_id] = assignment
-    answer = await _serve_latest(
-        request,
-        session,
-        assignment.corridor_id,
-        assignment.assigned_lane if lane is None else lane,
-    )
-    # Every answer a car gets to its plan poll (a plan, 304, no valid plan) names the version of
-    # its config now: a car running another version fetches its config at once, so an operator
-    # who pulls a car (active false, maintenance) or reassigns it reaches it within a plan poll
-    # rather than at its next full config refresh (60 s).
-    answer.headers[CONFIG_VERSION_HEADER] = str(assignment.config_version)
+    # Every answer a car gets to its plan poll once its vehicle is known (a plan, 304, no valid
+    # plan, no such lane) names the version of its config now: a car running another version
+    # fetches its config at once, so an operator who pulls a car (active false, maintenance) or
+    # reassigns it reaches it within a plan poll rather than at its next full config refresh
+    # (60 s). The 404 matters most: a car moved to a corridor without the lane it polls gets
+    # nothing else until that refresh.
+    version = {CONFIG_VERSION_HEADER: str(assignment.config_version)}
+    try:
+        answer = await _serve_latest(
+            request,
+            session,
+            assignment.corridor_id,
+            assignment.assigned_lane if lane is None else lane,
+        )
+    except HTTPException as refusal:
+        refusal.headers = {**(refusal.headers or {}), **version}
+        raise
+    answer.headers.update(version)
     return answer
 
 

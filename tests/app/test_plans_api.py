@@ -377,10 +377,10 @@ def test_paging_the_history_by_until_skips_no_run_started_at_the_cut(
 def test_every_answer_to_a_vehicles_plan_poll_names_its_config_version_now(
     served: Served, seeded_engine: Engine
 ) -> None:
-    """The car's prompt path to a new config (docs/interfaces.md): a plan, a 304 and a "no
-    valid plan" each carry `X-Config-Version`. An operator's SQL that changes what the config
-    says (pulling the car: `is_active`) bumps the version too, once; an API change, which
-    sets its own, is not counted twice."""
+    """The car's prompt path to a new config (docs/interfaces.md): a plan, a 304, a "no
+    valid plan" and a lane the corridor does not have each carry `X-Config-Version`. An
+    operator's SQL that changes what the config says (pulling the car: `is_active`) bumps the
+    version too, once; an API change, which sets its own, is not counted twice."""
     path = "/api/v1/vehicles/SF-002/plan"
     plan = served.get(path, role="vehicle")
     assert plan.status_code == 200
@@ -412,3 +412,7 @@ def test_every_answer_to_a_vehicles_plan_poll_names_its_config_version_now(
     assert none.status_code == 503
     assert none.json()["code"] == "no_valid_plan"
     assert none.headers["X-Config-Version"] == "3"
+    # a car moved to a corridor without the lane it polls is told its new version too
+    no_lane = served.get(path, role="vehicle", lane=9)
+    assert no_lane.status_code == 404, no_lane.text
+    assert no_lane.headers["X-Config-Version"] == "3"
