@@ -171,21 +171,33 @@ def common_rows(rows: Sequence[Row]) -> list[Row]:
     return [row for row in rows if date_of(row) not in set_aside]
 
 
-def check_every_fold_can_choose(date_scenarios: Iterable[tuple[str, str]], folds: int) -> None:
-    """Refuse folds whose training dates hold no shockwave drive: the choice is made on the
-    shockwave drives' fuel saving (`standing`), so such a fold would choose on nothing.
+def check_every_fold_can_choose(
+    date_scenarios: Iterable[tuple[str, str]],
+    folds: int,
+    set_aside_dates: Collection[str] = (),
+) -> None:
+    """Refuse folds whose training dates hold no shockwave drive the candidates may be compared
+    on: the choice is made on the shockwave drives' fuel saving (`standing`) over the dates no
+    candidate's policy was fitted on (`set_aside_dates`, `common_rows`), so such a fold would
+    choose on nothing and report its held-out scores as a result.
 
     `date_scenarios` is each run's (date, scenario); checked before anything is simulated.
     """
     pairs = list(date_scenarios)
     shockwave_dates = {date for date, scenario in pairs if scenario == "shockwave"}
+    comparable = shockwave_dates - set(set_aside_dates)
     for held in held_out_dates((date for date, _ in pairs), folds):
-        if not shockwave_dates - held:
+        if not comparable - held:
             found = (
                 f"the shockwave drives are of {', '.join(sorted(shockwave_dates))}"
                 if shockwave_dates
                 else "no drive is a shockwave one"
             )
+            if shockwave_dates - held:  # there were some, but a policy was fitted on them
+                found += (
+                    f"; a candidate's policy was fitted on "
+                    f"{', '.join(sorted(shockwave_dates - held))}"
+                )
             raise ValueError(
                 f"the fold holding out {', '.join(sorted(held))} keeps no shockwave drive to "
                 f"choose on ({found}): give fewer folds, or drives of more dates with waves"
@@ -197,7 +209,9 @@ def cross_validate(rows: Sequence[Row], folds: int) -> list[FoldChoice]:
 
     The dates are dealt into folds as `sim.folds.date_folds` deals them (`held_out_dates`).
     """
-    check_every_fold_can_choose(((date_of(row), str(row["scenario"])) for row in rows), folds)
+    check_every_fold_can_choose(
+        ((date_of(row), str(row["scenario"])) for row in rows), folds, fitted_dates(rows)
+    )
     result = []
     for held in held_out_dates((date_of(row) for row in rows), folds):
         training = [row for row in rows if date_of(row) not in held]

@@ -259,6 +259,24 @@ def test_a_fold_that_trains_on_no_wave_is_refused() -> None:
     check_every_fold_can_choose([("2021-03-08", "shockwave"), ("2021-03-09", "shockwave")], 2)
 
 
+def test_a_fold_whose_training_dates_a_policy_was_fitted_on_is_refused() -> None:
+    """Candidates are compared on the dates no policy was fitted on: a fold that trains on
+    only such dates has nothing to choose on, and chose by the tie-break with its held-out
+    scores reported as a result (a review's reproduction: `--folds 2` on the committed runs)."""
+    fitted = {"policy_training_dates": "2021-03-09"}
+    rows = [
+        row("policy", "2021-03-08-a", fuel_saving_pct=9.0) | fitted,
+        row("policy", "2021-03-09-a", fuel_saving_pct=9.0) | fitted,
+        row("steady", "2021-03-08-a", fuel_saving_pct=5.0),
+        row("steady", "2021-03-09-a", fuel_saving_pct=5.0),
+    ]
+    with pytest.raises(
+        ValueError,
+        match=r"holding out 2021-03-08 keeps no shockwave drive .*fitted on 2021-03-09",
+    ):
+        cross_validate(rows, folds=2)
+
+
 def test_the_candidate_summary_splits_each_candidate_by_scenario() -> None:
     rows = [
         row("b", "2021-03-08-a", fuel_saving_pct=4.0, distance_lost_m=100.0),
@@ -373,12 +391,16 @@ def test_cli_select_reports_the_folds_the_held_out_drives_and_every_candidate(
         "drives are of 2021-04-05)"
     ) in " ".join(refused.stderr.split())
     assert "Traceback" not in refused.stderr
-    # a planner window the planner would refuse, likewise before any simulation
+    # a planner window the planner would refuse, likewise before any simulation (controllers
+    # without a policy: the shipped policies were fitted on both dates with waves here, which
+    # is refused first, since no fold could compare candidates)
     too_wide = run_cli(
         "sim",
         "select",
         "--drives",
         str(drives),
+        "--controller",
+        "simple:accel",
         "--window",
         "30000",
         "--folds",

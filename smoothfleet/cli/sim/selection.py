@@ -111,7 +111,9 @@ def select_command(
     cases = chosen_cases(["shockwave", "freeflow"], drives)
     try:
         check_every_fold_can_choose(
-            ((drive_date(case.drive), case.scenario) for case in cases), folds
+            ((drive_date(case.drive), case.scenario) for case in cases),
+            folds,
+            set().union(*fitted_dates.values()),
         )
     except ValueError as error:
         raise click.BadParameter(str(error), param_hint="--folds") from None
