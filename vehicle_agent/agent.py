@@ -346,6 +346,9 @@ class Agent:
         self._accel_estimate: tuple[float, float, float] | None = None  # time, speed, accel
         self._located: tuple[GpsFix, CorridorGeometry, float, bool] | None = None
         self._config_schedule = Schedule()
+        # The newest config version a plan answer announced that the refresh was brought forward
+        # for (`_config_announced`).
+        self._config_version_announced = 0
         self._plan_schedule = Schedule()
         self._status_schedule = Schedule()
         self._status_sent = False
@@ -890,6 +893,17 @@ class Agent:
             and snapshot.config_version == config.config_version
         )
 
+    def _config_announced(self, announced: int | None, running: int | None) -> bool:
+        """Whether a plan answer's config version calls for reading the config now: newer than
+        the one the car runs, and newer than any announced before. Once per version: a refresh
+        that then fails backs off as any other (a corridor the server cannot serve yet was read
+        again at every plan poll), and a replica answering from memory during a database outage
+        may name an older version than the car's, which is no news."""
+        if announced is None or announced <= max(running or 0, self._config_version_announced):
+            return False
+        self._config_version_announced = announced
+        return True
+
     def _server_failed(self, what: str, error: ServerError) -> None:
         self.stats.server_errors[what] += 1
         # A token the server refuses needs a person; the other failures pass by themselves.
@@ -1057,8 +1071,8 @@ class Agent:
                 self._retry_after(now, error.retry_after_s)
             return
         self._plan_schedule.done(now, config.plan_poll_s)
-        if fetched.config_version is not None and fetched.config_version != config.config_version:
-            # The server holds another config for the car (an operator pulled or reassigned
+        if self._config_announced(fetched.config_version, config.config_version):
+            # The server holds a newer config for the car (an operator pulled or reassigned
             # it): read it on the next network pass, not at the refresh up to 60 s away.
             self._config_schedule.bring_forward(now)
         if isinstance(fetched, NoValidPlan):

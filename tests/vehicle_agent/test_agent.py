@@ -1407,3 +1407,22 @@ def test_pings_go_on_after_the_wall_clock_steps_back(tmp_path: Path, dbc_cache: 
         r.run(5.0)
         assert r.agent.stats.pings_spooled >= spooled + 4
         assert engaged(r), r.agent.state.reason  # the plan's age is the car's steady clock's
+
+
+def test_a_plan_answer_brings_the_config_forward_once_per_newer_version(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The plan answer's `X-Config-Version` brought the config refresh forward whenever it
+    differed from the car's: a refresh failing for a lasting reason was retried at every plan
+    poll instead of backing off, and a replica answering from memory in a database outage,
+    naming an older version, had the car read its config every 5 s (review)."""
+    with rig(
+        "toyota_rav4", tmp_path, dbc_cache, controller="simple", config_fields={"config_version": 4}
+    ) as r:
+        announced = r.agent._config_announced
+        assert not announced(None, 4)  # an old server names none
+        assert not announced(3, 4)  # older: no news
+        assert not announced(4, 4)
+        assert announced(5, 4)  # newer: read it now
+        assert not announced(5, 4)  # the same news again: the refresh's schedule rules
+        assert announced(6, 4)
