@@ -108,6 +108,11 @@ MAX_BACKOFF_S = 30.0
 # refused at start is asked again 2, 4, 8 and 16 s after each failure (at 0, 2, 6, 14 and 30 s,
 # each request up to its timeout later), so its fifth try falls inside the wait.
 FIRST_STATUS_WAIT_S = 45.0
+# The longest the stop waits for the answer to an upload in flight (s): the request may take
+# twice the HTTP timeout (its connection, then its answer), but systemd gives the whole stop 10 s
+# (deploy/smoothfleet-agent.service), two loop joins (`runner.LOOP_JOIN_S`) and the network
+# thread's join included. Past it the pings stay spooled and go again as duplicates.
+STOP_UPLOAD_WAIT_S = 3.0
 # The longest Retry-After honoured (s): a server asking for more is polled again after this.
 MAX_RETRY_AFTER_S = 300.0
 # Low-pass time constant of the acceleration estimated from the speed (s).
@@ -360,6 +365,8 @@ class Agent:
         # in flight has been settled in it (`shutdown`).
         self._upload_lock = threading.Lock()
         self._stopping = threading.Event()
+        # Set by `shutdown`: no control pass re-engages or sends after it.
+        self._stopped = False
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
         self._frames_at_status = (self.started_s, 0)
@@ -395,6 +402,8 @@ class Agent:
         self._step_failure = None
 
     def _tick(self) -> None:
+        if self._stopped:
+            return
         now = self.clock.monotonic()
         wall = self.clock.now()
         self.stats.ticks += 1
@@ -635,6 +644,8 @@ class Agent:
             self._requested_accel = action.accel_mps2
 
     def _actuate(self, now: float, car_state: CarState, measured_accel: float | None) -> None:
+        if self._stopped:  # a pass that began before the stop sends nothing after it
+            return
         context = SafetyContext(now, car_state, measured_accel)
         if self.buttons is not None:
             held = None
@@ -1146,7 +1157,13 @@ class Agent:
 
     def shutdown(self) -> None:
         """Stop commanding (the stock ACC keeps driving), let go of any held button and close
-        the spool once the upload in flight, if any, has its answer (`_settle_uploads`)."""
+        the spool once the upload in flight, if any, has its answer (`_settle_uploads`).
+
+        Once stopped, a control pass still running (its thread outwaited by the stop: a call
+        blocked past `runner.LOOP_JOIN_S`) neither re-engages nor sends: it would have stepped
+        the engage state on from the state it read before the stop and commanded the car the
+        stop had just handed back."""
+        self._stopped = True
         now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back("agent stopping")
@@ -1176,7 +1193,9 @@ class Agent:
         fate is unknown; they stay spooled and go again, which the server counts as duplicates.
         """
         self._stopping.set()
-        wait_s = 2 * self.server.timeout_s if self.server is not None else 0.0
+        wait_s = (
+            min(2 * self.server.timeout_s, STOP_UPLOAD_WAIT_S) if self.server is not None else 0.0
+        )
         if self._upload_lock.acquire(timeout=wait_s):
             return True
         log.warning(

@@ -48,6 +48,10 @@ def run_loop(
 # How long the stop waits for the control and telemetry loops to finish their step (s): each
 # step takes milliseconds; a loop stuck longer is a fault the stop does not wait out.
 LOOP_JOIN_S = 2.0
+# The network thread's join after the stop (s): the car is handed back and the spool closed by
+# then; this only lets a request that is ending end. With two loop joins and the upload wait
+# (`agent.STOP_UPLOAD_WAIT_S`) the stop stays within systemd's 10 s (`TimeoutStopSec`).
+NETWORK_JOIN_S = 1.0
 
 
 def run_agent(agent: Agent, stop: threading.Event) -> None:
@@ -86,4 +90,4 @@ def run_agent(agent: Agent, stop: threading.Event) -> None:
     control.join(timeout=LOOP_JOIN_S)
     telemetry.join(timeout=LOOP_JOIN_S)  # its last ping into the spool before it closes
     agent.shutdown()
-    network.join(timeout=LOOP_JOIN_S)
+    network.join(timeout=NETWORK_JOIN_S)

@@ -1426,3 +1426,20 @@ def test_a_plan_answer_brings_the_config_forward_once_per_newer_version(
         assert announced(5, 4)  # newer: read it now
         assert not announced(5, 4)  # the same news again: the refresh's schedule rules
         assert announced(6, 4)
+
+
+def test_a_control_pass_after_the_stop_neither_engages_nor_sends(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    """The stop waits 2 s for the control loop (`runner.LOOP_JOIN_S`); a pass blocked longer
+    ran on after the stop had handed the car back, stepped the engage state on from what it
+    read before, and sent: after the stop, passes went on to engage the car again (review)."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        r.agent.shutdown()
+        assert r.agent.state.mode is Mode.STOCK
+        r.run(0.1)  # the car receives what was on the bus at the stop
+        frames = r.emulator.agent_frames
+        r.run(5.0)  # passes as a control thread outwaited by the stop would run them
+        assert r.agent.state.mode is Mode.STOCK
+        assert r.emulator.agent_frames == frames
