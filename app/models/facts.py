@@ -113,7 +113,9 @@ class VehicleStatus(Base):
 class VehicleChange(Base):
     """A change to a vehicle's assignment or maintenance (API or dashboard), or to its roster
     row (`vehicles import|add`, migration 0023), with who made it and when: the record of each
-    car's clearing and reassignment, one row per config version a change produced."""
+    car's clearing and reassignment, one row per config version a change produced through the
+    code. A change made in SQL (pulling a car: `is_active`) gets its version from migration
+    0022's trigger and no row here."""
 
     __tablename__ = "fact_vehicle_change"
     __table_args__ = (

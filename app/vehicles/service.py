@@ -133,8 +133,9 @@ def upsert_vehicles(
     given one by one).
 
     An existing vehicle the rows change gets a new config version and, as an assignment
-    through the API does, a fact_vehicle_change row saying who made it and what it set: the
-    vehicle's history has no version without its change."""
+    through the API does, a fact_vehicle_change row saying who made it and what it set. (A
+    change made in SQL, such as `is_active`, gets its new version from migration 0022's trigger
+    and no row: the one kind of version the history does not explain.)"""
     _check_against_corridors(session, rows, label)
     if not rows:
         return 0
