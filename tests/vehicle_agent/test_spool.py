@@ -11,6 +11,12 @@ import pytest
 from vehicle_agent.spool import PingSpool
 
 
+def spool_messages(caplog: pytest.LogCaptureFixture) -> list[str]:
+    """The spool's own log lines: another test's button deadman timer (a thread) may log into
+    the same capture while this one runs."""
+    return [record.message for record in caplog.records if record.name == "vehicle_agent.spool"]
+
+
 def test_pings_leave_oldest_first_and_only_when_removed(tmp_path: Path) -> None:
     spool = PingSpool(tmp_path / "spool.sqlite")
     for second in range(5):
@@ -32,7 +38,7 @@ def test_the_spool_is_bounded_and_counts_what_it_dropped(
     assert [ping["n"] for _, ping in spool.oldest(10)] == [2, 3, 4]
     assert spool.counter("dropped") == 2
     # said in the car's log (once a minute at most), not only counted in the file
-    assert [record.message for record in caplog.records] == [
+    assert spool_messages(caplog) == [
         "ping spool full (3 pings): the oldest dropped unsent (counted in the status report's "
         "spool_dropped)"
     ]
@@ -107,7 +113,7 @@ def test_pings_a_full_disk_cannot_take_are_held_and_written_in_order_after(
             spool.add({"n": index, "pad": "x" * 500})
     assert spool.backlog() == 31
     assert spool.counter("dropped") == 0
-    assert [record.message for record in caplog.records] == [
+    assert spool_messages(caplog) == [
         "ping spool cannot write (database or disk is full): 1 pings held in memory (at most "
         "3600, then the oldest are dropped and counted)"
     ]
@@ -171,7 +177,7 @@ def test_a_spool_whose_file_cannot_be_opened_holds_its_pings_in_memory_until_it_
             spool.add({"n": index})
     assert (spool.backlog(), spool.counter("dropped")) == (5, 3)
     assert (spool.oldest(10), spool.newest()) == ([], None)  # nothing on disk to send
-    (message,) = caplog.messages  # once a minute at most, not once a ping
+    (message,) = spool_messages(caplog)  # once a minute at most, not once a ping
     assert message.startswith(f"ping spool {path} cannot be opened ([Errno 17] File exists")
     assert message.endswith(
         "pings held in memory (at most 5, then the oldest are dropped and counted) until it can"
@@ -199,7 +205,7 @@ def test_pings_lost_at_close_are_counted_in_spool_dropped_when_the_disk_takes_th
     assert (full.backlog(), full.counter("dropped")) == (3, 2)
     with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
         full.close()
-    assert caplog.messages[-1] == (
+    assert spool_messages(caplog)[-1] == (
         "ping spool closed with 3 pings the disk did not take: lost, counted in spool_dropped"
     )
     restarted = PingSpool(tmp_path / "full.sqlite")
@@ -211,7 +217,7 @@ def test_pings_lost_at_close_are_counted_in_spool_dropped_when_the_disk_takes_th
         missing.add({"n": index})
     with caplog.at_level(logging.WARNING, logger="vehicle_agent.spool"):
         missing.close()
-    assert caplog.messages[-1] == (
+    assert spool_messages(caplog)[-1] == (
         "ping spool closed with 3 pings the disk did not take: lost, and not counted: "
         "spool_dropped misses 5 (the disk took not even their count)"
     )
