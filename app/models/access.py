@@ -71,9 +71,9 @@ class OpsUser(Base):
 
 
 class OpsLoginFailure(Base):
-    """Failed logins of one account from one client address since that address's last success.
+    """Failed logins of one account from one client since that client's last success.
 
-    The wait between attempts is counted per (account, address): counted per account alone, a
+    The wait between attempts is counted per (account, client): counted per account alone, a
     stranger's one wrong guess every five minutes kept the account's owner out for good.
     """
 
@@ -85,6 +85,8 @@ class OpsLoginFailure(Base):
     username: Mapped[str] = mapped_column(
         ForeignKey("ops_user.username", ondelete="CASCADE"), primary_key=True
     )
+    # the client's key (`app.users.client_key`): an IPv4 address or an IPv6 /64, never the
+    # IPv6 address it used, whose rotation within the /64 met a fresh allowance each time
     client_address: Mapped[str] = mapped_column(Text, primary_key=True)
     failures: Mapped[int] = mapped_column(Integer)
     last_failed_at: Mapped[datetime] = mapped_column(DateTime(timezone=True))

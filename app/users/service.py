@@ -1,14 +1,15 @@
 """Dashboard users (table ops_user): salted scrypt passwords and a login that slows down guessing.
 
-A wrong password (or unknown username) counts against the account *from that client address*
-(table ops_login_failure); from the third failure in a row there, that address must wait 1, 2,
-4, ... s (at most LOCKOUT_MAX_S) after its last failure before another attempt from it is even
-checked. A success resets that address's count. Counted per account alone, a stranger's one
-wrong guess every five minutes kept the owner out for good (a security audit); per (account,
-address), the stranger waits and the owner, elsewhere, does not. Guessing from many addresses
-meets the dashboard's per-address limit on each; it slows nothing more, and shows in the
-account's count (`failed_logins`, `smoothfleet users list`), every address's failures since the
-account's last success. A username that is no account is counted and made to wait the same
+A wrong password (or unknown username) counts against the account *from that client* (table
+ops_login_failure), a client being its key from `app.users.client_key`: an IPv4 address or an
+IPv6 /64. From the third failure in a row there, that client must wait 1, 2, 4, ... s (at most
+LOCKOUT_MAX_S) after its last failure before another attempt from it is even checked. A success
+resets that client's count. Counted per account alone, a stranger's one wrong guess every five
+minutes kept the owner out for good (a security audit); per (account, client), the stranger
+waits and the owner, elsewhere, does not. Guessing from many clients meets the dashboard's
+per-client limit on each; it slows nothing more, and shows in the account's count
+(`failed_logins`, `smoothfleet users list`), every client's failures since the account's last
+success. A username that is no account is counted and made to wait the same
 way, in the server process's memory: the answers do not tell which usernames exist. With
 several workers a made-up name's count is per worker, so its waits can come later than an
 account's.
@@ -19,6 +20,7 @@ from __future__ import annotations
 import base64
 import hashlib
 import hmac
+import logging
 import math
 import re
 import secrets
@@ -34,6 +36,8 @@ from sqlalchemy.orm import Session
 
 from app.models import OpsLoginFailure, OpsUser
 
+log = logging.getLogger(__name__)
+
 OpsRole = Literal["viewer", "operator", "admin"]
 OPS_ROLES: tuple[OpsRole, ...] = ("viewer", "operator", "admin")
 USERNAME_PATTERN = re.compile(r"^[A-Za-z0-9_.@-]{1,64}$")
@@ -47,7 +51,7 @@ SCRYPT_P = 1
 SCRYPT_KEY_BYTES = 32
 SALT_BYTES = 16
 
-FREE_FAILURES = 2  # failures before an (account, address) starts waiting between attempts
+FREE_FAILURES = 2  # failures before an (account, client) starts waiting between attempts
 LOCKOUT_MAX_S = 300.0
 
 
@@ -103,7 +107,7 @@ def check_new_user(username: str, role: str, password: str) -> None:
 
 
 def save_user(session: Session, username: str, role: str, password: str) -> bool:
-    """Create the user, or reset its role and password (which ends every address's wait on it:
+    """Create the user, or reset its role and password (which ends every client's wait on it:
     the admin's way to let a user in); True when it was created."""
     check_new_user(username, role, password)
     statement = insert(OpsUser).values(
@@ -130,7 +134,7 @@ def new_password() -> str:
 
 
 def wait_before_next_attempt(failures: int) -> float:
-    """Seconds an address must wait after its last failure on an account: 0, then 1, 2, 4, ...
+    """Seconds a client must wait after its last failure on an account: 0, then 1, 2, 4, ...
     up to the cap."""
     if failures <= FREE_FAILURES:
         return 0.0
@@ -151,7 +155,7 @@ class LoginResult:
 
 WRONG_CREDENTIALS = "Wrong username or password."
 
-# Failures of usernames that are no account, per (username, address) and server process, as an
+# Failures of usernames that are no account, per (username, client) and server process, as an
 # account's are counted in ops_login_failure: if only real accounts slowed down, three bad
 # guesses would tell which usernames exist. Bounded, so guessing many names cannot grow the
 # process: past the bound it starts over.
@@ -162,7 +166,7 @@ _unknown_failures: dict[tuple[str, str], tuple[int, datetime]] = {}
 def _locked_out(
     failures: int, last_failed_at: datetime | None, now: datetime
 ) -> LoginResult | None:
-    """The answer to an attempt made before the account's wait ran out, or None."""
+    """The answer to an attempt made before the client's wait on the account ran out, or None."""
     if last_failed_at is None:
         return None
     unlocks_at = last_failed_at + timedelta(seconds=wait_before_next_attempt(failures))
@@ -177,11 +181,22 @@ def _locked_out(
     )
 
 
+def _log_failure(username: str, client_key: str, failures: int) -> None:
+    """One line per failed login, naming the client by the key it is counted under (an IPv6
+    client's /64, not the address it used this time), so the log reads as the waits do."""
+    log.info(
+        "dashboard login failed: user %r from %s (%d in a row from there)",
+        username,
+        client_key,
+        failures,
+    )
+
+
 async def _unknown_username(
-    username: str, password: str, client_address: str, now: datetime
+    username: str, password: str, client_key: str, now: datetime
 ) -> LoginResult:
     """Answer as for an account: the same scrypt time, the same count, the same waits."""
-    key = (username, client_address)
+    key = (username, client_key)
     failures, last_failed_at = _unknown_failures.get(key, (0, None))
     locked = _locked_out(failures, last_failed_at, now)
     if locked is not None:
@@ -190,24 +205,26 @@ async def _unknown_username(
     if len(_unknown_failures) >= MAX_UNKNOWN_USERNAMES:
         _unknown_failures.clear()
     _unknown_failures[key] = (failures + 1, now)
+    _log_failure(username, client_key, failures + 1)
     return LoginResult(None, WRONG_CREDENTIALS)
 
 
 async def log_in(
-    session: AsyncSession, username: str, password: str, client_address: str, now: datetime
+    session: AsyncSession, username: str, password: str, client_key: str, now: datetime
 ) -> LoginResult:
-    """Check a login from `client_address`; failures are counted and slow that address down on
-    this account (the account's row is locked, so concurrent attempts count one by one)."""
+    """Check a login from the client `client_key` (`app.users.client_key.login_client_key` of
+    its address); failures are counted and slow that client down on this account (the
+    account's row is locked, so concurrent attempts count one by one)."""
     if not USERNAME_PATTERN.match(username):
         # no account has such a name; asked of the database, a NUL in it was PostgreSQL's
         # DataError, which the login form showed as the API's JSON 422
-        return await _unknown_username(username, password, client_address, now)
+        return await _unknown_username(username, password, client_key, now)
     user = await session.scalar(
         select(OpsUser).where(OpsUser.username == username).with_for_update()
     )
     if user is None:
-        return await _unknown_username(username, password, client_address, now)
-    failed = await session.get(OpsLoginFailure, (username, client_address))
+        return await _unknown_username(username, password, client_key, now)
+    failed = await session.get(OpsLoginFailure, (username, client_key))
     if failed is not None:
         locked = _locked_out(failed.failures, failed.last_failed_at, now)
         if locked is not None:
@@ -215,14 +232,14 @@ async def log_in(
     # scrypt takes tens of milliseconds: off the event loop.
     if not await anyio.to_thread.run_sync(verify_password, password, user.password_hash):
         if failed is None:
-            session.add(
-                OpsLoginFailure(
-                    username=username, client_address=client_address, failures=1, last_failed_at=now
-                )
+            failed = OpsLoginFailure(
+                username=username, client_address=client_key, failures=1, last_failed_at=now
             )
+            session.add(failed)
         else:
             failed.failures += 1
             failed.last_failed_at = now
+        _log_failure(username, client_key, failed.failures)
         user.failed_logins += 1
         user.last_failed_at = now
         await session.flush()
@@ -247,3 +264,15 @@ async def end_sessions(session: AsyncSession, username: str, now: datetime) -> N
 def list_users(session: Session) -> list[OpsUser]:
     """Every dashboard user, by name."""
     return list(session.scalars(select(OpsUser).order_by(OpsUser.username)))
+
+
+def list_login_failures(session: Session) -> list[OpsLoginFailure]:
+    """Every (account, client) with failures since its last success, by user and client: who
+    is guessing where, as the waits count it."""
+    return list(
+        session.scalars(
+            select(OpsLoginFailure).order_by(
+                OpsLoginFailure.username, OpsLoginFailure.client_address
+            )
+        )
+    )

@@ -1,5 +1,6 @@
-"""The login form and logout. Login attempts are limited per client address here and per
-(account, address) in `app.users`; a failure says so, and repeated failures must wait.
+"""The login form and logout. Login attempts are limited per client here and per (account,
+client) in `app.users`, a client being its `login_client_key` (an IPv4 address or an IPv6 /64)
+in both; a failure says so, and repeated failures must wait.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from fastapi.responses import HTMLResponse, RedirectResponse, Response
 
 from app.core.ratelimit import RateLimiter, retry_after_header
 from app.core.sessions import SessionDep
+from app.users.client_key import login_client_key
 from app.users.service import end_sessions, log_in
 from dashboards.auth import (
     UserDep,
@@ -57,7 +59,7 @@ def _login_page(request: Request, next_path: str, message: str, status_code: int
 
 
 def _login_limiter(request: Request) -> RateLimiter:
-    """Login attempts per client address (the per-account slowdown is in app.users)."""
+    """Login attempts per client (the per-account slowdown is in app.users)."""
     state = request.app.state
     limiter: RateLimiter | None = getattr(state, "login_rate_limiter", None)
     if limiter is None:
@@ -78,15 +80,17 @@ async def login_submit(
 ) -> Response:
     """Check the password; a failure says so, and repeated failures must wait."""
     check_login_csrf(request, csrf_token)
-    client_address = request.client.host if request.client else ""
-    wait_s = _login_limiter(request).wait_s(client_address)
+    # one key for both limits: an IPv6 client counted by its full address took a fresh
+    # allowance with every address of its /64
+    client_key = login_client_key(request.client.host if request.client else None)
+    wait_s = _login_limiter(request).wait_s(client_key)
     if wait_s:
         response = _login_page(
             request, safe_next(next), "Too many login attempts from here: wait a minute.", 429
         )
         response.headers.update(retry_after_header(wait_s))
         return response
-    result = await log_in(session, username.strip(), password, client_address, datetime.now(UTC))
+    result = await log_in(session, username.strip(), password, client_key, datetime.now(UTC))
     if result.user is None:
         status_code = 429 if result.retry_after_s else 401
         response = _login_page(request, safe_next(next), result.message, status_code)

@@ -8,7 +8,14 @@ import click
 from rich.table import Table
 
 from app.core.db import make_sync_engine, session_scope
-from app.users.service import OPS_ROLES, UserError, check_new_user, list_users, save_user
+from app.users.service import (
+    OPS_ROLES,
+    UserError,
+    check_new_user,
+    list_login_failures,
+    list_users,
+    save_user,
+)
 from smoothfleet.cli.common import CliError, console, database, settings
 
 
@@ -46,7 +53,8 @@ def users_add(username: str, role: str, password_stdin: bool) -> None:
 
 @users.command("list")
 def users_list() -> None:
-    """Show the dashboard users."""
+    """Show the dashboard users, and the clients whose failed logins make them wait: each by
+    the key the wait counts (an IPv4 address or an IPv6 /64), so the list says who waits."""
     with database(settings()) as url, session_scope(make_sync_engine(url)) as session:
         table = Table("user", "role", "last login", "failed logins", "last failed")
         for user in list_users(session):
@@ -55,4 +63,14 @@ def users_list() -> None:
                 user.last_failed_at.isoformat(timespec="seconds") if user.last_failed_at else ""
             )
             table.add_row(user.username, user.role, last, str(user.failed_logins), failed)
+        clients = Table("user", "client (IPv4 address or IPv6 /64)", "failures", "last failed")
+        for failure in list_login_failures(session):
+            clients.add_row(
+                failure.username,
+                failure.client_address,
+                str(failure.failures),
+                failure.last_failed_at.isoformat(timespec="seconds"),
+            )
     console.print(table)
+    if clients.row_count:
+        console.print(clients)

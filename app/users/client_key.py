@@ -1,0 +1,42 @@
+"""Which client a dashboard login attempt counts against: its key in the login limits.
+
+Both login limits (attempts per minute per client, and the wait per (account, client) in
+`ops_login_failure`) count a client by this key, never by the raw address. An IPv6 client is
+counted by its /64: that is one customer's prefix (an ISP hands out a /64 or more, and a host
+picks any address in it, fresh privacy addresses by the hour), so counted by full address a
+guesser took a new address for every attempt and met a fresh allowance each time. An IPv4
+client is counted by its address, and an IPv4-mapped IPv6 address (`::ffff:192.0.2.7`, what a
+dual-stack socket or proxy reports for an IPv4 peer) as that IPv4 address, or one IPv4 client
+would be a whole /64 of one key and its plain-IPv4 self another.
+
+An address that is no IP address (a trusted proxy's `X-Forwarded-For` of `unknown` or any
+text, a client the server was not told of) is counted under one shared key, UNREADABLE_CLIENT:
+kept as sent, such text was a fresh allowance per spelling, and a few kilobytes of it were more
+than PostgreSQL's index on `ops_login_failure` takes, which turned the login into a 503 saying
+the database was unavailable. Those
+clients share one allowance; clients with a readable address never meet it.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+
+IPV6_CLIENT_PREFIX = 64
+# Parenthesised, so no IP address or network is ever written the same way.
+UNREADABLE_CLIENT = "(no IP address)"
+
+
+def login_client_key(address: str | None) -> str:
+    """The key a login attempt from `address` is counted under: `192.0.2.7` for an IPv4
+    client, `2001:db8:1:2::/64` for an IPv6 one, UNREADABLE_CLIENT for anything else."""
+    if not address:
+        return UNREADABLE_CLIENT
+    try:
+        parsed = ipaddress.ip_address(address)
+    except ValueError:
+        return UNREADABLE_CLIENT
+    if isinstance(parsed, ipaddress.IPv4Address):
+        return parsed.compressed
+    if parsed.ipv4_mapped is not None:
+        return parsed.ipv4_mapped.compressed
+    return ipaddress.IPv6Network((parsed, IPV6_CLIENT_PREFIX), strict=False).compressed
