@@ -12,6 +12,7 @@ live part (static/dashboard.js).
 
 from __future__ import annotations
 
+import json
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -60,7 +61,38 @@ def _localtime(context: Context, value: datetime | None) -> str:
     return local_time(value, display_zone(context["request"].app.state.settings))
 
 
+# The roster's fields in the words the vehicle page uses for them, in the roster's column order.
+ROSTER_FIELD_WORDS = {
+    "vin": "VIN",
+    "make": "make",
+    "model": "model",
+    "year": "year",
+    "actuation": "actuation",
+    "corridor_id": "corridor",
+    "route": "route",
+    "assigned_lane": "lane",
+    "controller_name": "controller",
+    "controller_params": "controller parameters",
+}
+
+
+def _roster_value(value: Any) -> str:
+    return json.dumps(value, sort_keys=True) if isinstance(value, dict) else str(value)
+
+
+def roster_changes(changed: dict[str, list[Any]]) -> str:
+    """What a roster import changed, `lane 1 → 3; controller parameters {} → {...}`: the values
+    the row set alone read a change of the parameters, corridor or actuation as none, and a
+    moved lane as the lane it had always had."""
+    return "; ".join(
+        f"{words} {_roster_value(changed[name][0])} → {_roster_value(changed[name][1])}"
+        for name, words in ROSTER_FIELD_WORDS.items()
+        if name in changed
+    )
+
+
 templates.env.filters["mph"] = _mph
+templates.env.filters["roster_changes"] = roster_changes
 templates.env.filters["localtime"] = _localtime
 templates.env.filters["age"] = describe_age
 templates.env.globals["bundled_policy"] = bundled_policy_sha256

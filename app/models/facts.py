@@ -137,6 +137,10 @@ class VehicleChange(Base):
     # what a maintenance change set
     in_maintenance: Mapped[bool | None]
     note: Mapped[str | None] = mapped_column(Text)
+    # what a roster change altered: each roster field it changed, as [before, after] (migration
+    # 0024); the lane, route and controller above are what the row set, which alone read a
+    # change of the parameters, corridor or actuation as no change
+    roster_changed: Mapped[dict[str, list[Any]] | None] = mapped_column(JSONB)
 
 
 class InrixEstimate(Base):

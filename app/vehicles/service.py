@@ -139,17 +139,18 @@ def upsert_vehicles(
     _check_against_corridors(session, rows, label)
     if not rows:
         return 0
-    # Locked until the commit: the versions compared below are the ones this load replaces.
-    versions_before = dict(
-        session.execute(
-            select(Vehicle.vehicle_id, Vehicle.config_version)
-            .where(Vehicle.vehicle_id.in_([row.vehicle_id for row in rows]))
-            .with_for_update()
-        ).all()
-    )
+    names = [name for name in RosterRow.model_fields if name != "vehicle_id"]
+    # Locked until the commit: the versions and fields compared below are the ones this load
+    # replaces.
+    stored = session.execute(
+        select(Vehicle.vehicle_id, Vehicle.config_version, *(getattr(Vehicle, n) for n in names))
+        .where(Vehicle.vehicle_id.in_([row.vehicle_id for row in rows]))
+        .with_for_update()
+    ).all()
+    versions_before = {vehicle.vehicle_id: vehicle.config_version for vehicle in stored}
+    fields_before = {vehicle.vehicle_id: vehicle._mapping for vehicle in stored}
     statement = insert(Vehicle).values([row.model_dump() for row in rows])
     if update_existing:
-        names = [name for name in RosterRow.model_fields if name != "vehicle_id"]
         columns: dict[str, Any] = {name: statement.excluded[name] for name in names}
         # A row that changes what the car is told is a new config, as an assignment through
         # the API is: the version the agent echoes then says whether it has picked it up.
@@ -169,6 +170,8 @@ def upsert_vehicles(
         before = versions_before.get(row.vehicle_id)
         after = versions_after.get(row.vehicle_id)
         if before is not None and after is not None and after != before:
+            was = fields_before[row.vehicle_id]
+            now = row.model_dump()
             session.add(
                 VehicleChange(
                     vehicle_id=row.vehicle_id,
@@ -179,6 +182,9 @@ def upsert_vehicles(
                     route=row.route,
                     controller_name=row.controller_name,
                     controller_params=row.controller_params,
+                    roster_changed={
+                        name: [was[name], now[name]] for name in names if was[name] != now[name]
+                    },
                 )
             )
     session.flush()
