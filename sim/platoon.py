@@ -379,6 +379,22 @@ def simulate_platoon(
     delta_is_four = idm.delta == 4.0
     half_dt2 = 0.5 * dt * dt
     stop_rate = -1.0 / dt
+    # The same constants as operands of the step's numpy calls (`_operand`).
+    max_accel_operand = _operand(amax)
+    inv_v0_operand = _operand(inv_v0)
+    braking_operand = _operand(braking)
+    time_gap_operand = _operand(idm.time_gap_s)
+    min_gap_operand = _operand(idm.min_gap_m)
+    desired_speed_operand = _operand(idm.desired_speed_mps)
+    delta_operand = _operand(idm.delta)
+    half_dt2_operand = _operand(half_dt2)
+    stop_rate_operand = _operand(stop_rate)
+    dt_operand = _operand(dt)
+    length_operand = _operand(vehicle_length_m)
+    min_model_gap_operand = _operand(MIN_MODEL_GAP_M)
+    max_braking_operand = _operand(-MAX_BRAKING_MPS2)
+    zero = _operand(0.0)
+    one = _operand(1.0)
     rng = np.random.default_rng([cut_ins.seed, zlib.crc32(drive.name.encode())] if cut_ins else 0)
     avs = [_AvState(column, policy) for column, policy in zip(av_columns, policies, strict=True)]
     # Each follower's integrated merge hazard, and the exponential draw it must reach.
@@ -391,13 +407,15 @@ def simulate_platoon(
     # hold cars, the rest is room for the next ones.
     used = n
     in_order = True
-    buffers = np.empty((6, n - 1))
+    buffers = np.empty((4, n - 1))
 
     for k in range(steps):
         x = position[k, :used]
         v = speed[k, :used]
-        gap, v_lead, desired, work, accel, limits_work = buffers
-        _gaps_into(gap, v_lead, x, v, lead_of, in_order, vehicle_length_m)
+        # the gaps and lead speeds are computed into this step's rows of their histories
+        gap = gap_history[k, 1:used]
+        v_lead = lead_speed_history[k, 1:used]
+        _gaps_into(gap, v_lead, x, v, lead_of, in_order, length_operand)
         # without room anywhere no clock moves, so none can reach its draw this step
         if cut_ins is not None and cut_ins.invites_any(gap, v[1:]):
             merge_clock[1:] += cut_ins.hazard_per_s(gap, v[1:]) * dt
@@ -422,43 +440,43 @@ def simulate_platoon(
                 merge_clock = np.append(merge_clock, 0.0)
                 merge_threshold = np.append(merge_threshold, rng.exponential())
                 in_order = False
-                buffers = np.empty((6, new))
+                buffers = np.empty((4, new))
                 x = position[k, :used]
                 v = speed[k, :used]
             if merging.size:
-                gap, v_lead, desired, work, accel, limits_work = buffers
-                _gaps_into(gap, v_lead, x, v, lead_of, in_order, vehicle_length_m)
+                gap = gap_history[k, 1:used]
+                v_lead = lead_speed_history[k, 1:used]
+                _gaps_into(gap, v_lead, x, v, lead_of, in_order, length_operand)
+        desired, work, accel, limits_work = buffers
         v_follow = v[1:]
-        gap_history[k, 1:used] = gap
-        lead_speed_history[k, 1:used] = v_lead
         # s* = s0 + v T + max(0, v dv) / (2 sqrt(ab))
         np.subtract(v_follow, v_lead, out=desired)
         desired *= v_follow
-        np.maximum(desired, 0.0, out=desired)
-        desired *= braking
-        np.multiply(v_follow, idm.time_gap_s, out=work)
+        np.maximum(desired, zero, out=desired)
+        desired *= braking_operand
+        np.multiply(v_follow, time_gap_operand, out=work)
         desired += work
-        desired += idm.min_gap_m
+        desired += min_gap_operand
         # (s*/s)^2 with the collision guard of contract.idm
-        np.maximum(gap, MIN_MODEL_GAP_M, out=work)
+        np.maximum(gap, min_model_gap_operand, out=work)
         np.divide(desired, work, out=desired)
         np.multiply(desired, desired, out=desired)
         limits = speed_limit.limits_mps(x[1:]) if speed_limit is not None else None
         # (v/v0)^delta
         if limits is None:
-            np.multiply(v_follow, inv_v0, out=work)
+            np.multiply(v_follow, inv_v0_operand, out=work)
         else:
-            np.minimum(limits, idm.desired_speed_mps, out=limits_work)
+            np.minimum(limits, desired_speed_operand, out=limits_work)
             np.divide(v_follow, limits_work, out=work)
         if delta_is_four:
             np.multiply(work, work, out=work)
             np.multiply(work, work, out=work)
         else:
-            np.power(work, idm.delta, out=work)
+            np.power(work, delta_operand, out=work)
         # a [1 - (v/v0)^delta - (s*/s)^2]
         np.add(work, desired, out=accel)
-        np.subtract(1.0, accel, out=accel)
-        accel *= amax
+        np.subtract(one, accel, out=accel)
+        accel *= max_accel_operand
         for av in avs:
             i = av.column - 1
             own = float(v_follow[i])
@@ -491,19 +509,19 @@ def simulate_platoon(
                 request = min(request, amax * (1.0 - (own / float(limits[i])) ** idm.delta))
             accel[i] = request
         # no harder than the tyres give, and never reverse within the step
-        np.maximum(accel, -MAX_BRAKING_MPS2, out=accel)
-        np.multiply(v_follow, stop_rate, out=work)
+        np.maximum(accel, max_braking_operand, out=accel)
+        np.multiply(v_follow, stop_rate_operand, out=work)
         np.maximum(accel, work, out=accel)
         # ballistic update into the next row (NaN columns of cars not yet merged stay NaN)
         x_next = position[k + 1, 1:used]
-        np.multiply(v_follow, dt, out=x_next)
-        np.multiply(accel, half_dt2, out=work)
+        np.multiply(v_follow, dt_operand, out=x_next)
+        np.multiply(accel, half_dt2_operand, out=work)
         x_next += work
         x_next += x[1:]
         v_next = speed[k + 1, 1:used]
-        np.multiply(accel, dt, out=v_next)
+        np.multiply(accel, dt_operand, out=v_next)
         v_next += v_follow
-        np.maximum(v_next, 0.0, out=v_next)  # v + (-v/dt) dt can round to -1e-16
+        np.maximum(v_next, zero, out=v_next)  # v + (-v/dt) dt can round to -1e-16
     last = position[steps, :used]
     gap_history[steps, 1:used] = last[lead_of[1:]] - last[1:] - vehicle_length_m
     lead_speed_history[steps, 1:used] = speed[steps, lead_of[1:]]
@@ -529,6 +547,14 @@ def simulate_platoon(
     return run
 
 
+def _operand(value: float) -> FloatArray:
+    """`value` as a 0-d float64 array, for a numpy call of the step: numpy 2 converts a Python
+    float operand afresh on every call (about 0.4 us, as long as the operation on 200 cars
+    takes), and takes a 0-d array as it is. It holds the same float64, so every result is the
+    same to the bit."""
+    return np.array(value, dtype=np.float64)
+
+
 def _gaps_into(
     gap: FloatArray,
     lead_speed: FloatArray,
@@ -536,7 +562,7 @@ def _gaps_into(
     speed: FloatArray,
     lead_of: IntArray,
     in_order: bool,
-    vehicle_length_m: float,
+    vehicle_length_m: FloatArray,
 ) -> None:
     """Each follower's bumper-to-bumper gap and its leader's speed, into the step's buffers
     (plain slices while the platoon keeps its order, the cheap case of every step without a
