@@ -111,6 +111,9 @@ class SimulatedPlanner:
     epoch: datetime = datetime(2021, 1, 1, tzinfo=UTC)
     _lane_plan: LanePlan | None = None
     _next_cycle_s: float = -math.inf
+    # The last lookup, for the platoon's other AVs asking at the same step (each would repeat
+    # the same datetime arithmetic and build the same profile).
+    _looked_up: tuple[float, TargetProfile | None] | None = None
 
     @classmethod
     def for_drive(
@@ -141,14 +144,18 @@ class SimulatedPlanner:
         """The plan the AVs hold at `time_s`, looked up as the agent does; None while they hold
         none fresh (the agent's `LanePlan.is_fresh`): before the first plan, or once the last
         was published more than `STALE_PLAN_AFTER_S` ago, when the feed has stopped."""
+        if self._looked_up is not None and self._looked_up[0] == time_s:
+            return self._looked_up[1]
         if time_s >= self._next_cycle_s:
             cycle_s = math.floor(time_s / self.period_s) * self.period_s
             self._run(cycle_s)
             self._next_cycle_s = cycle_s + self.period_s
         wall = self.epoch + timedelta(seconds=time_s)
-        if self._lane_plan is None or not self._lane_plan.is_fresh(wall, STALE_PLAN_AFTER_S):
-            return None
-        return self._lane_plan.profile(wall, DEFAULT_WAVE_SPEED_MPS)
+        profile = None
+        if self._lane_plan is not None and self._lane_plan.is_fresh(wall, STALE_PLAN_AFTER_S):
+            profile = self._lane_plan.profile(wall, DEFAULT_WAVE_SPEED_MPS)
+        self._looked_up = (time_s, profile)
+        return profile
 
     def held_profile(self, time_s: float) -> TargetProfile:
         """`profile`, for a caller that cannot go on without a plan (`NoPlanHeld` if none)."""
