@@ -7,6 +7,8 @@ import socket
 import sqlite3
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import can
@@ -24,12 +26,15 @@ from vehicle_agent.server import ServerClient
 from vehicle_agent.spool import PingSpool
 
 
-def test_threads_control_the_car_spool_pings_and_stop_cleanly(
-    tmp_path: Path, dbc_cache: Path
-) -> None:
+@contextmanager
+def rav4_agent_running(
+    tmp_path: Path, dbc_cache: Path, channel: str, server: ServerClient | None = None
+) -> Iterator[tuple[Agent, CarEmulator, threading.Event]]:
+    """An emulated RAV4 stepping in real time and its agent run by `run_agent` (its three
+    threads), engaged-ready on a uniform plan; the loops stop and are joined on the way out."""
     clock = SystemClock()
-    car_bus = can.Bus(interface="virtual", channel="runner-test")
-    agent_bus = can.Bus(interface="virtual", channel="runner-test")
+    car_bus = can.Bus(interface="virtual", channel=channel)
+    agent_bus = can.Bus(interface="virtual", channel=channel)
     emulator = CarEmulator(
         "toyota_rav4",
         car_bus,
@@ -49,6 +54,7 @@ def test_threads_control_the_car_spool_pings_and_stop_cleanly(
         spool=PingSpool(tmp_path / "spool.sqlite"),
         dbc_cache=dbc_cache,
         engage_policy=EngagePolicy(engage_after_s=0.3),
+        server=server,
     )
     agent.configure(vehicle_config("toyota_rav4", "microaccel"), seed_geometry())
     agent.accept_plan(uniform_plan(25.0, published=clock.now()))
@@ -65,13 +71,23 @@ def test_threads_control_the_car_spool_pings_and_stop_cleanly(
     ]
     for thread in threads:
         thread.start()
-    time.sleep(2.5)
-    engaged = agent.state.mode is Mode.ENGAGED
-    stop.set()
-    for thread in threads:
-        thread.join(timeout=20)
-    car_bus.shutdown()
-    agent_bus.shutdown()
+    try:
+        yield agent, emulator, stop
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join(timeout=30)
+        car_bus.shutdown()
+        agent_bus.shutdown()
+
+
+def test_threads_control_the_car_spool_pings_and_stop_cleanly(
+    tmp_path: Path, dbc_cache: Path
+) -> None:
+    with rav4_agent_running(tmp_path, dbc_cache, "runner-test") as (agent, emulator, stop):
+        time.sleep(2.5)
+        engaged = agent.state.mode is Mode.ENGAGED
+        stop.set()
     assert engaged
     assert agent.stats.ticks > 40  # ~30 Hz for 2.5 s, on a busy machine
     assert emulator.agent_frames > 20  # acceleration requests reached the car
@@ -142,65 +158,23 @@ def test_the_car_is_handed_back_before_a_stuck_request_ends(
     network thread may sit in a request for its whole timeout: the car stayed commanded by a
     stopped agent while systemd's 10 s for the stop ran out. The hand-back now comes as soon as
     the control loop has stopped, while the request is still unanswered."""
-    clock = SystemClock()
-    car_bus = can.Bus(interface="virtual", channel="runner-stuck")
-    agent_bus = can.Bus(interface="virtual", channel="runner-stuck")
-    emulator = CarEmulator(
-        "toyota_rav4",
-        car_bus,
-        speed_mps=25.0,
-        position_m=1000.0,
-        corridor=seed_geometry(),
-        start_s=clock.monotonic(),
-        dbc_cache=dbc_cache,
-    )
-    emulator.driver_engage(set_speed_mph=56)
     silent = SilentServer()
     http = httpx.Client(base_url=silent.url)
-    agent = Agent(
-        vehicle_id="SF-RUN",
-        car=car_for("toyota_rav4"),
-        bus=agent_bus,
-        clock=clock,
-        gps=EmulatorGps(emulator, clock),  # type: ignore[arg-type]
-        spool=PingSpool(tmp_path / "spool.sqlite"),
-        dbc_cache=dbc_cache,
-        engage_policy=EngagePolicy(engage_after_s=0.3),
-        server=ServerClient(http, "SF-RUN", "token", timeout_s=20.0),
-    )
-    agent.configure(vehicle_config("toyota_rav4", "microaccel"), seed_geometry())
-    agent.accept_plan(uniform_plan(25.0, published=clock.now()))
-    stop = threading.Event()
-
-    def car() -> None:
-        while not stop.is_set():
-            emulator.step(time.monotonic())
-            time.sleep(0.005)
-
-    threads = [
-        threading.Thread(target=car, daemon=True),
-        threading.Thread(target=run_agent, args=(agent, stop), daemon=True),
-    ]
-    for thread in threads:
-        thread.start()
+    server = ServerClient(http, "SF-RUN", "token", timeout_s=20.0)
     try:
-        deadline = time.monotonic() + 10.0
-        while agent.state.mode is not Mode.ENGAGED and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert agent.state.mode is Mode.ENGAGED
-        assert silent.accepted.wait(timeout=10)  # the network thread is in its first request
-        stop.set()
-        # the stop may wait for the control and telemetry loops' steps, not for the network
-        handed_back_by = time.monotonic() + 2 * LOOP_JOIN_S + 1.0
-        while agent.state.mode is not Mode.STOCK and time.monotonic() < handed_back_by:
-            time.sleep(0.05)
-        assert agent.state.mode is Mode.STOCK
-        assert silent.open >= 1  # while the request was still unanswered (its timeout is 20 s)
+        with rav4_agent_running(tmp_path, dbc_cache, "runner-stuck", server) as (agent, _, stop):
+            deadline = time.monotonic() + 10.0
+            while agent.state.mode is not Mode.ENGAGED and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert agent.state.mode is Mode.ENGAGED
+            assert silent.accepted.wait(timeout=10)  # the network thread is in its first request
+            stop.set()
+            # the stop may wait for the control and telemetry loops' steps, not for the network
+            handed_back_by = time.monotonic() + 2 * LOOP_JOIN_S + 1.0
+            while agent.state.mode is not Mode.STOCK and time.monotonic() < handed_back_by:
+                time.sleep(0.05)
+            assert agent.state.mode is Mode.STOCK
+            assert silent.open >= 1  # the request still unanswered (its timeout is 20 s)
     finally:
-        stop.set()
         silent.close()
         http.close()
-        for thread in threads:
-            thread.join(timeout=30)
-        car_bus.shutdown()
-        agent_bus.shutdown()
