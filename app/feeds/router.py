@@ -9,12 +9,13 @@ from fastapi import APIRouter, HTTPException, Request
 from app.auth import FeedWriterDep
 from app.core.config import Settings
 from app.core.errors import error_responses
+from app.core.json_keys import RepeatedKeysRefused
 from app.core.sessions import SessionDep
 from app.feeds.inrix import InrixResponse, readings_of
 from app.feeds.schemas import InrixAnswer, RefusedSegment
 from app.feeds.service import SnapshotTimeRefused, refuse_future, store_readings
 
-router = APIRouter(prefix="/api/v1/feeds", tags=["feeds"])
+router = APIRouter(prefix="/api/v1/feeds", tags=["feeds"], route_class=RepeatedKeysRefused)
 
 
 @router.post("/inrix", responses=error_responses(401, 403, 413, 503))

@@ -12,6 +12,7 @@ from fastapi import APIRouter, HTTPException, Path, Query, Request
 from app.auth import OperatorDep, ViewerDep
 from app.core.config import Settings
 from app.core.errors import error_responses
+from app.core.json_keys import RepeatedKeysRefused
 from app.core.sessions import SessionDep
 from app.fleet.readiness import Thresholds
 from app.fleet.schemas import (
@@ -38,7 +39,7 @@ from app.fleet.service import (
 from contract.values import StorableText
 from contract.vehicles import VEHICLE_ID_PATTERN
 
-router = APIRouter(prefix="/api/v1", tags=["operations"])
+router = APIRouter(prefix="/api/v1", tags=["operations"], route_class=RepeatedKeysRefused)
 
 VehicleId = Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)]
 

@@ -18,6 +18,7 @@ import orjson
 from pydantic import ConfigDict, ValidationError
 
 from app.auth import Principal
+from app.core.json_keys import RepeatedKey, refuse_repeated_keys
 from app.ingest.directory import CorridorInfo, FleetDirectory
 from contract.values import first_problem
 from contract.vehicles import MAX_PINGS_PER_BATCH, VEHICLE_ID_PATTERN, Ping, PingBatch
@@ -208,6 +209,10 @@ def read_pings(body: bytes, principal: Principal) -> tuple[list[tuple[int, Ping]
     documented schema); ForeignVehicle when a vehicle token carries another vehicle's ping
     (valid or not).
     """
+    try:
+        refuse_repeated_keys(body)
+    except RepeatedKey as error:
+        raise BodyError(str(error)) from None
     quick = _all_valid(body)
     if quick is not None:
         _refuse_foreign((ping.vehicle_id for ping in quick), principal, len(quick))

@@ -11,6 +11,7 @@ from app.auth import AuthDep, PingWriterDep, Principal, bearer_scheme
 from app.core import metrics
 from app.core.config import Settings
 from app.core.errors import error_responses
+from app.core.json_keys import RepeatedKeysRefused
 from app.core.sessions import SessionDep
 from app.ingest.http import reply_to_pings
 from app.vehicles.reports import store_status, vehicle_config, vehicle_exists
@@ -24,7 +25,7 @@ from contract.vehicles import (
     VehicleStatusReport,
 )
 
-router = APIRouter(prefix="/api/v1", tags=["vehicles"])
+router = APIRouter(prefix="/api/v1", tags=["vehicles"], route_class=RepeatedKeysRefused)
 
 VehicleId = Annotated[str, Path(pattern=VEHICLE_ID_PATTERN)]
 

@@ -121,3 +121,24 @@ def test_a_token_is_named_with_its_article() -> None:
         "an operator token"
     )
     assert CAR.token_words == "a vehicle token"
+
+
+def test_a_ping_naming_a_key_twice_is_refused_naming_it() -> None:
+    """orjson and pydantic keep the last value of a repeated key: a ping with speed_mps twice
+    was stored with the second speed and its sender never told which was dropped."""
+    text = orjson.dumps(base_ping).decode()
+    twice = text[:-1] + ', "speed_mps": 7.5}'
+    with pytest.raises(BodyError, match=r'duplicate key "speed_mps".*ambiguous'):
+        read_pings(twice.encode(), ADMIN)
+    in_a_batch = f'{{"pings": [{text}, {twice}]}}'.encode()
+    with pytest.raises(BodyError, match=r'duplicate key "speed_mps"'):
+        read_pings(in_a_batch, ADMIN)
+    with pytest.raises(BodyError, match=r'duplicate key "pings"'):
+        read_pings(f'{{"pings": [{text}], "pings": []}}'.encode(), ADMIN)
+    # the same key in two objects is no repetition
+    pings, rejected = read_pings(f'{{"pings": [{text}, {text}]}}'.encode(), ADMIN)
+    assert (len(pings), rejected) == (2, [])
+    # a body that is not JSON is still told so by the ping parser, not as a repeated key
+    with pytest.raises(BodyError) as error:
+        read_pings(b'{"vehicle_id": ', ADMIN)
+    assert "duplicate" not in str(error.value)

@@ -268,3 +268,54 @@ def test_a_vehicle_deleted_while_its_report_is_stored_is_404_not_500(
     assert answer.status_code == 404
     assert answer.json() == {"detail": "unknown vehicle SF-050"}
     assert statuses(seeded_engine) == []
+
+
+def test_a_body_naming_a_key_twice_is_refused_on_every_data_endpoint(
+    api: httpx.Client, seeded_engine: Engine
+) -> None:
+    """A status, a ping, an INRIX snapshot or an operator's change with a key named twice was
+    read by its last value and the sender never told; each is a 422 naming the key, and
+    nothing is stored."""
+    car = bearer(issue(seeded_engine, "vehicle", "SF-007"))
+    stamp = report()["ts"]
+    status = f'{{"ts": "{stamp}", "plan_age_s": 3.0, "plan_age_s": 900.0}}'
+    answer = api.post(
+        "/api/v1/vehicles/SF-007/status",
+        content=status,
+        headers={**car, "Content-Type": "application/json"},
+    )
+    assert answer.status_code == 422, answer.text
+    [field] = answer.json()["detail"]
+    assert field["type"] == "json_repeated_key"
+    assert 'duplicate key "plan_age_s"' in field["msg"]
+    assert statuses(seeded_engine) == []
+    ping = (
+        f'{{"vehicle_id": "SF-007", "ts": "{stamp}", "lat": 36.1, "lon": -86.7, '
+        '"speed_mps": 20.0, "speed_mps": 7.5}'
+    )
+    answer = api.post(
+        "/api/v1/pings", content=ping, headers={**car, "Content-Type": "application/json"}
+    )
+    assert answer.status_code == 422, answer.text
+    assert 'duplicate key "speed_mps"' in answer.json()["detail"]
+    feed = bearer(issue(seeded_engine, "feed"))
+    snapshot = '{"docType": "GetSegmentSpeed", "result": {}, "result": {"segmentspeeds": []}}'
+    answer = api.post(
+        "/api/v1/feeds/inrix",
+        content=snapshot,
+        headers={**feed, "Content-Type": "application/json"},
+    )
+    assert answer.status_code == 422, answer.text
+    assert answer.json()["detail"][0]["type"] == "json_repeated_key"
+    operator = bearer(issue(seeded_engine, "operator"))
+    change = '{"in_maintenance": true, "in_maintenance": false, "note": "tyres"}'
+    answer = api.put(
+        "/api/v1/vehicles/SF-007/maintenance",
+        content=change,
+        headers={**operator, "Content-Type": "application/json"},
+    )
+    assert answer.status_code == 422, answer.text
+    assert 'duplicate key "in_maintenance"' in answer.json()["detail"][0]["msg"]
+    # the same report without the repetition is taken
+    clean = {"ts": stamp, "plan_age_s": 3.0}
+    assert api.post("/api/v1/vehicles/SF-007/status", json=clean, headers=car).status_code == 200
