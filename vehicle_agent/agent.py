@@ -62,6 +62,7 @@ from vehicle_agent.server import (
     NewPlan,
     NotAuthorized,
     NoValidPlan,
+    PlanNotServed,
     ServerClient,
     ServerError,
     ServerUnavailable,
@@ -1080,6 +1081,11 @@ class Agent:
             self._plan_schedule.failed(now, config.plan_poll_s)
             if isinstance(error, ServerUnavailable) and error.retry_after_s:
                 self._retry_after(now, error.retry_after_s)
+            if isinstance(error, PlanNotServed) and self._config_announced(
+                error.config_version, config.config_version
+            ):
+                # moved to a corridor without this lane: the new config says where to drive
+                self._config_schedule.bring_forward(now)
             return
         self._plan_schedule.done(now, config.plan_poll_s)
         if self._config_announced(fetched.config_version, config.config_version):

@@ -69,6 +69,16 @@ class UnexpectedAnswer(ServerError):
     """Any other status, or a body that is not what the contract says."""
 
 
+class PlanNotServed(UnexpectedAnswer):
+    """A 404 to the plan poll of a known vehicle: its corridor has no such lane (the car was
+    moved to another corridor). `config_version` is the version the server named with it (the
+    car then reads its new config at once, not at its next refresh)."""
+
+    def __init__(self, message: str, status: int, config_version: int) -> None:
+        super().__init__(message, status)
+        self.config_version = config_version
+
+
 class RequestRefused(UnexpectedAnswer):
     """409, 413 or 422: the server refused this request as a whole, and would refuse the same
     bytes again (`too_large` for 413, the body over a size limit)."""
@@ -272,6 +282,9 @@ class ServerClient:
             body = _error_body(response)
             if body is not None and body.code == NO_VALID_PLAN:
                 return NoValidPlan(_retry_after(response), config_version)
+        if response.status_code == 404 and config_version is not None:
+            failed = self._fail(response, "plan")
+            raise PlanNotServed(str(failed), response.status_code, config_version)
         if response.status_code != 200:
             raise self._fail(response, "plan")
         try:

@@ -621,3 +621,39 @@ def test_a_car_the_operators_pull_is_handed_back_within_a_plan_poll(
         assert r.clock.monotonic() - pulled_at <= 5.0 + 1.0  # a plan poll and a network pass
         assert r.agent.config is not None
         assert r.agent.config.config_version == 2
+
+
+def test_a_car_moved_where_its_lane_is_not_reads_its_new_config_within_a_plan_poll(
+    seeded_database_url: str,
+    seeded_engine: Engine,
+    tmp_path: Path,
+    dbc_cache: Path,
+) -> None:
+    """A car reassigned to a corridor without the lane it polls gets 404 to every plan poll.
+    The server names the new config version on that 404 too, and the agent read it only from
+    the answers it took for success: the car went on following its old plan until its next
+    refresh, up to 60 s (a review's reproduction). Here the corridor loses the car's lane and
+    the car is moved to lane 1 (in SQL, the version bumped by migration 0022's trigger)."""
+    publish_free_flow_plan(seeded_database_url, seeded_engine)
+    token = issue(seeded_engine, "vehicle", "SF-098")  # lane 2
+    with (
+        live_server(seeded_database_url, planner_enabled=False) as base,
+        httpx.Client(base_url=base) as http,
+        car_served_by(
+            http, "SF-098", token, tmp_path, dbc_cache, make="toyota_rav4", speed_mps=24.0
+        ) as r,
+    ):
+        r.run(CONFIG_REFRESH_S / 2, network=True, until=lambda: r.agent.lane_plan is not None)
+        assert r.agent.config is not None
+        assert r.agent.config.assigned_lane == 2
+        with seeded_engine.begin() as connection:
+            connection.execute(
+                text("UPDATE dim_corridor SET lanes = 1 WHERE corridor_id = 'I-24-WB'")
+            )
+            connection.execute(
+                text("UPDATE dim_vehicle SET assigned_lane = 1 WHERE vehicle_id = 'SF-098'")
+            )
+        moved_at = r.clock.monotonic()
+        r.run(30.0, network=True, until=lambda: r.agent.config.assigned_lane == 1)  # type: ignore[union-attr]
+        assert r.agent.config.assigned_lane == 1
+        assert r.clock.monotonic() - moved_at <= 5.0 + 2.0  # a plan poll and a network pass
