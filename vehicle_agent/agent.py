@@ -426,7 +426,7 @@ class Agent:
             and lane_plan.is_fresh(wall, assignment.config.stale_plan_after_s, now)
         )
         previous = self.state
-        self.state = engage.step(
+        state = engage.step(
             previous,
             engage.EngageInputs(
                 time_s=now,
@@ -462,6 +462,11 @@ class Agent:
             ),
             self.engage_policy,
         )
+        if self._stopped:
+            # The stop came while this pass read the car: it handed the car back, and a state
+            # stepped on from the one before it would say (and report) the car engaged again.
+            return
+        self.state = state
         if previous.commanding and not self.state.commanding:
             self._hand_back(self.state.reason)
         if self.state.commanding and not previous.commanding:

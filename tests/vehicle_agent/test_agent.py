@@ -1443,3 +1443,49 @@ def test_a_control_pass_after_the_stop_neither_engages_nor_sends(
         r.run(5.0)  # passes as a control thread outwaited by the stop would run them
         assert r.agent.state.mode is Mode.STOCK
         assert r.emulator.agent_frames == frames
+
+
+def test_a_stop_during_a_control_pass_leaves_the_car_handed_back(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The stop may come from another thread while a pass is reading the car (its thread
+    outwaited by the stop): that pass then stepped the engage state on from the state before
+    the stop, said the car was engaged again, and could send (second review). The stop lands
+    here in the middle of the pass's engage checks, as the other thread would."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        checks = r.agent._enabled
+
+        def stop_meanwhile(assignment: object) -> bool:
+            r.agent.shutdown()
+            return checks(assignment)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(r.agent, "_enabled", stop_meanwhile)
+        admitted = r.agent.safety.sent
+        r.agent.tick()
+        assert r.agent.state.mode is Mode.STOCK
+        assert r.agent.state.reason == "stopped"
+        assert r.agent.safety.sent == admitted  # no frame admitted after the stop
+
+
+def test_a_stop_during_the_controller_step_sends_nothing_after_it(
+    tmp_path: Path, dbc_cache: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same stop landing later in the pass, while the controller steps: the pass had
+    already judged the car engaged, and went on to send the controller's request to the car
+    the stop had just handed back."""
+    with rig("toyota_rav4", tmp_path, dbc_cache, controller="simple") as r:
+        engage_and_settle(r)
+        control = r.agent._control
+        admitted_at_stop: list[int] = []
+
+        def stop_meanwhile(*arguments: object) -> None:
+            r.agent.shutdown()
+            admitted_at_stop.append(r.agent.safety.sent)
+            control(*arguments)  # type: ignore[arg-type]
+
+        monkeypatch.setattr(r.agent, "_control", stop_meanwhile)
+        while not admitted_at_stop:  # until a pass is due to control (every control period)
+            r.clock.advance(1 / 30)
+            r.agent.tick()
+        assert r.agent.safety.sent == admitted_at_stop[0]  # no frame admitted after the stop
