@@ -367,7 +367,7 @@ class Agent:
         self._upload_lock = threading.Lock()
         self._stopping = threading.Event()
         # Set by `shutdown`: no control pass re-engages or sends after it.
-        self._stopped = False
+        self._stopped = threading.Event()
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
         self._frames_at_status = (self.started_s, 0)
@@ -403,7 +403,7 @@ class Agent:
         self._step_failure = None
 
     def _tick(self) -> None:
-        if self._stopped:
+        if self._stopped.is_set():
             return
         now = self.clock.monotonic()
         wall = self.clock.now()
@@ -462,7 +462,7 @@ class Agent:
             ),
             self.engage_policy,
         )
-        if self._stopped:
+        if self._stopped.is_set():  # read again: another thread sets it
             # The stop came while this pass read the car: it handed the car back, and a state
             # stepped on from the one before it would say (and report) the car engaged again.
             return
@@ -650,7 +650,7 @@ class Agent:
             self._requested_accel = action.accel_mps2
 
     def _actuate(self, now: float, car_state: CarState, measured_accel: float | None) -> None:
-        if self._stopped:  # a pass that began before the stop sends nothing after it
+        if self._stopped.is_set():  # a pass that began before the stop sends nothing after it
             return
         context = SafetyContext(now, car_state, measured_accel)
         if self.buttons is not None:
@@ -1174,7 +1174,7 @@ class Agent:
         blocked past `runner.LOOP_JOIN_S`) neither re-engages nor sends: it would have stepped
         the engage state on from the state it read before the stop and commanded the car the
         stop had just handed back."""
-        self._stopped = True
+        self._stopped.set()
         now = self.clock.monotonic()
         if self.state.commanding:
             self._hand_back("agent stopping")
