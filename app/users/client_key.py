@@ -7,7 +7,8 @@ picks any address in it, fresh privacy addresses by the hour), so counted by ful
 guesser took a new address for every attempt and met a fresh allowance each time. An IPv4
 client is counted by its address, and an IPv4-mapped IPv6 address (`::ffff:192.0.2.7`, what a
 dual-stack socket or proxy reports for an IPv4 peer) as that IPv4 address, or one IPv4 client
-would be a whole /64 of one key and its plain-IPv4 self another.
+would be a whole /64 of one key and its plain-IPv4 self another; likewise an IPv4 client
+translated (NAT64's `64:ff9b::/96`) or tunnelled (Teredo) to IPv6.
 
 An address that is no IP address (a trusted proxy's `X-Forwarded-For` of `unknown` or any
 text, a client the server was not told of) is counted under one shared key, UNREADABLE_CLIENT:
@@ -37,6 +38,25 @@ def login_client_key(address: str | None) -> str:
         return UNREADABLE_CLIENT
     if isinstance(parsed, ipaddress.IPv4Address):
         return parsed.compressed
-    if parsed.ipv4_mapped is not None:
-        return parsed.ipv4_mapped.compressed
+    embedded = _embedded_ipv4(parsed)
+    if embedded is not None:
+        return embedded.compressed
     return ipaddress.IPv6Network((parsed, IPV6_CLIENT_PREFIX), strict=False).compressed
+
+
+# RFC 6052's well-known prefix for IPv4 clients translated to IPv6 (NAT64, SIIT-DC).
+NAT64_PREFIX = ipaddress.IPv6Network("64:ff9b::/96")
+
+
+def _embedded_ipv4(address: ipaddress.IPv6Address) -> ipaddress.IPv4Address | None:
+    """The IPv4 client behind an IPv6 address that carries one: IPv4-mapped (`::ffff:a.b.c.d`),
+    translated (RFC 6052's `64:ff9b::/96`) or tunnelled (Teredo, the client's own address).
+    Counted by its /64, every IPv4 client behind one translator or relay was one key, so one
+    stranger's guesses made them all wait (a review)."""
+    if address.ipv4_mapped is not None:
+        return address.ipv4_mapped
+    if address in NAT64_PREFIX:
+        return ipaddress.IPv4Address(int(address) & 0xFFFFFFFF)
+    if address.teredo is not None:
+        return address.teredo[1]
+    return None

@@ -29,6 +29,12 @@ from tests.support.servers import cli_env, live_server, run_cli
         ("2001:db8:bad:2::1", "2001:db8:bad:2::/64"),
         ("::ffff:203.0.113.9", "203.0.113.9"),
         ("::ffff:cb00:7109", "203.0.113.9"),
+        # IPv4 clients translated (NAT64) or tunnelled (Teredo) to IPv6: each its own client,
+        # not one /64 for everyone behind the translator or relay
+        ("64:ff9b::c000:207", "192.0.2.7"),
+        ("64:ff9b::c633:6401", "198.51.100.1"),
+        ("2001:0:4136:e378:8000:63bf:3fff:fdd2", "192.0.2.45"),
+        ("2001:0:4136:e378:8000:63bf:1234:5678", "237.203.169.135"),
         ("::1", "::/64"),
         ("fe80::1%eth0", "fe80::/64"),
     ],
