@@ -21,6 +21,7 @@ from sqlalchemy.exc import TimeoutError as PoolTimeoutError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from app.core.body_limit import BodyTooLarge
+from app.core.json_keys import REPEATED_KEY
 from app.core.logs import RepeatedMessages
 from contract.errors import DATABASE_UNAVAILABLE, ErrorCode, ErrorResponse
 
@@ -198,7 +199,14 @@ def install_error_handlers(app: FastAPI) -> None:
             {"loc": list(item["loc"]), "msg": item["msg"], "type": item["type"]}
             for item in error.errors()
         ]
-        whole_body = next((field for field in fields if field["loc"] == ["body"]), None)
+        whole_body = next(
+            (
+                field
+                for field in fields
+                if field["loc"] == ["body"] and field["type"] != REPEATED_KEY
+            ),
+            None,
+        )
         if whole_body is not None:
             why = _unread_body(request.headers)
             if why is not None:

@@ -12,6 +12,7 @@ The check is one more parse, by jiter (the pydantic team's Rust parser, whose
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Coroutine
 from typing import Any
 
@@ -19,6 +20,10 @@ import jiter
 from fastapi import Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.routing import APIRoute
+from starlette.requests import ClientDisconnect
+
+# The field error's `type` of a body refused for a repeated key.
+REPEATED_KEY = "json_repeated_key"
 
 
 class RepeatedKey(ValueError):
@@ -29,8 +34,10 @@ def refuse_repeated_keys(body: bytes) -> None:
     """RepeatedKey when an object of the JSON `body` names a key twice.
 
     A body that is not JSON at all passes: the endpoint's own parser reports what is wrong with
-    it. The two parses differ in the duplicate check alone, so a body the strict one refuses and
-    the lenient one reads repeats a key.
+    it. The two jiter parses differ in the duplicate check alone, so a body the strict one
+    refuses and the lenient one reads repeats a key. A body jiter cannot read but Python's json
+    can (UTF-16 or a byte-order mark, a lone surrogate, nesting past jiter's depth; orjson and
+    FastAPI read some of them) is checked by json with a hook: rare, so slow is no matter.
     """
     try:
         jiter.from_json(body, catch_duplicate_keys=True)
@@ -38,8 +45,34 @@ def refuse_repeated_keys(body: bytes) -> None:
         try:
             jiter.from_json(body)
         except ValueError:
+            _refuse_repeated_keys_slowly(body)
             return
         raise RepeatedKey(f"{strict}: which value is meant is ambiguous") from None
+
+
+def _object_of_unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """json's `object_pairs_hook`: the object, or RepeatedKey naming the first key it repeats."""
+    document = dict(pairs)
+    if len(document) != len(pairs):
+        seen: set[str] = set()
+        for key, _ in pairs:
+            if key in seen:
+                raise RepeatedKey(
+                    f"duplicate key {json.dumps(key)}: which value is meant is ambiguous"
+                )
+            seen.add(key)
+    return document
+
+
+def _refuse_repeated_keys_slowly(body: bytes) -> None:
+    """RepeatedKey when Python's json reads `body` and an object of it repeats a key; nothing
+    when json cannot read it either (the endpoint's parser then says what is wrong)."""
+    try:
+        json.loads(body, object_pairs_hook=_object_of_unique_keys)
+    except RepeatedKey:
+        raise
+    except (ValueError, RecursionError):
+        return
 
 
 class RepeatedKeysRefused(APIRoute):
@@ -50,14 +83,21 @@ class RepeatedKeysRefused(APIRoute):
         """FastAPI's handler, behind the check of the body's keys."""
         handler = super().get_route_handler()
 
+        takes_body = self.body_field is not None
+
         async def checked_handler(request: Request) -> Response:
-            body = await request.body()  # Starlette keeps it for the handler's own read
-            if body:
+            content_type = request.headers.get("content-type", "")
+            if takes_body and content_type.split(";")[0].strip().endswith("json"):
+                try:
+                    body = await request.body()  # Starlette keeps it for the handler's read
+                except ClientDisconnect:
+                    # FastAPI's own read answers a body cut off as before (no 500)
+                    return await handler(request)
                 try:
                     refuse_repeated_keys(body)
                 except RepeatedKey as error:
                     raise RequestValidationError(
-                        [{"loc": ("body",), "msg": str(error), "type": "json_repeated_key"}]
+                        [{"loc": ("body",), "msg": str(error), "type": REPEATED_KEY}]
                     ) from None
             return await handler(request)
 

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from pydantic import ValidationError
 
 from app.auth import Principal
+from app.core.json_keys import RepeatedKey, refuse_repeated_keys
 from app.ingest.pings import BodyError, ForeignVehicle, read_pings
 from contract.vehicles import Ping
 
@@ -142,3 +143,20 @@ def test_a_ping_naming_a_key_twice_is_refused_naming_it() -> None:
     with pytest.raises(BodyError) as error:
         read_pings(b'{"vehicle_id": ', ADMIN)
     assert "duplicate" not in str(error.value)
+
+
+def test_a_repeated_key_is_refused_in_bodies_jiter_cannot_read() -> None:
+    """jiter reads no byte-order mark, no lone surrogate and nesting only so deep, where orjson
+    or Python's json read them: such a body with a repeated key passed the check and its last
+    value was stored (a review)."""
+    text = orjson.dumps(base_ping).decode()
+    twice = text[:-1] + ', "speed_mps": 7.5'
+    deep = twice + ', "note": ' + "[" * 300 + "]" * 300 + "}"
+    surrogate = twice + ', "note": "\\ud800"}'
+    for body in (deep.encode(), surrogate.encode(), b"\xef\xbb\xbf" + (twice + "}").encode()):
+        with pytest.raises(RepeatedKey, match=r'duplicate key "speed_mps"'):
+            refuse_repeated_keys(body)
+    with pytest.raises(BodyError, match=r'duplicate key "speed_mps"'):
+        read_pings(deep.encode(), ADMIN)
+    refuse_repeated_keys(b"\xef\xbb\xbf" + text.encode())  # no repetition: passes
+    refuse_repeated_keys(b"not json")  # the endpoint's own parser says what is wrong

@@ -319,3 +319,15 @@ def test_a_body_naming_a_key_twice_is_refused_on_every_data_endpoint(
     # the same report without the repetition is taken
     clean = {"ts": stamp, "plan_age_s": 3.0}
     assert api.post("/api/v1/vehicles/SF-007/status", json=clean, headers=car).status_code == 200
+    # only a JSON body an endpoint reads is checked: a GET's stray body is no business of it,
+    # and a body sent as text is told it is not JSON, not that it repeats a key (a review)
+    viewer = bearer(issue(seeded_engine, "viewer"))
+    fleet = api.request("GET", "/api/v1/fleet", content='{"a": 1, "a": 2}', headers=viewer)
+    assert fleet.status_code == 200, fleet.text
+    as_text = api.post(
+        "/api/v1/vehicles/SF-007/status",
+        content=status,
+        headers={**car, "Content-Type": "text/plain"},
+    )
+    assert as_text.status_code == 422
+    assert as_text.json()["detail"][0]["type"] != "json_repeated_key"
