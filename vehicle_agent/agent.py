@@ -365,8 +365,7 @@ class Agent:
         # Held by an upload for its whole call: the stop closes the spool only once the answer
         # in flight has been settled in it (`shutdown`).
         self._upload_lock = threading.Lock()
-        self._stopping = threading.Event()
-        # Set by `shutdown`: no control pass re-engages or sends after it.
+        # Set by `shutdown`: no control pass re-engages or sends after it, and no upload starts.
         self._stopped = threading.Event()
         self._last_ping_ts: datetime | None = None
         self._clock_off = False
@@ -1117,9 +1116,9 @@ class Agent:
         now = self.clock.monotonic() if now is None else now
         try:
             with self._upload_lock:
-                if self._stopping.is_set():
+                if self._stopped.is_set():
                     return 0  # the spool is closing or closed
-                outcome = self.uplink.upload(self.server, self._stopping.is_set)
+                outcome = self.uplink.upload(self.server, self._stopped.is_set)
         except (sqlite3.Error, OSError) as spool_error:
             # the spool's disk (full, read-only): what the server took stays spooled and is
             # resent as duplicates later, but not on every network pass (it was: the same
@@ -1203,7 +1202,6 @@ class Agent:
         answer, each within the client's timeout (`vehicle_agent.server`). Past it the pings'
         fate is unknown; they stay spooled and go again, which the server counts as duplicates.
         """
-        self._stopping.set()
         wait_s = (
             min(2 * self.server.timeout_s, STOP_UPLOAD_WAIT_S) if self.server is not None else 0.0
         )
