@@ -142,10 +142,14 @@ def date_of(row: Row) -> str:
     return str(row["date"])
 
 
+def policy_training_dates(row: Row) -> set[str]:
+    """The dates the row's candidate's trained policy was fitted on (none without a policy)."""
+    return {date for date in str(row.get("policy_training_dates") or "").split(";") if date}
+
+
 def fitted_on(row: Row) -> bool:
     """Whether the row's drive is of a date its candidate's trained policy was fitted on."""
-    dates = str(row.get("policy_training_dates") or "")
-    return date_of(row) in dates.split(";") if dates else False
+    return date_of(row) in policy_training_dates(row)
 
 
 def unseen_rows(rows: Iterable[Row]) -> list[Row]:
@@ -156,12 +160,7 @@ def unseen_rows(rows: Iterable[Row]) -> list[Row]:
 
 def fitted_dates(rows: Iterable[Row]) -> set[str]:
     """Every date some candidate's policy among these rows was fitted on."""
-    return {
-        date
-        for row in rows
-        for date in str(row.get("policy_training_dates") or "").split(";")
-        if date
-    }
+    return set().union(*(policy_training_dates(row) for row in rows))
 
 
 def common_rows(rows: Sequence[Row]) -> list[Row]:
